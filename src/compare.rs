@@ -1,0 +1,149 @@
+//! Errors of a deployment against the desktop pipeline.
+//!
+//! The device is simulated on an sRGB test pixel as: degamma -> inverse device matrix
+//! (giving the sensor RGB the device would have seen) -> emulator. The desktop
+//! pipeline runs on the same pixel in f64. Errors are in output units (1 = full scale)
+//! and reported in 8-bit LSB (x255) and PSNR.
+
+use crate::ccm::{self, Mat3};
+use crate::emulate::{Camera2Device, DeviceModel, Emulator};
+use crate::error::ValidationError;
+use crate::params::Params;
+use crate::pipeline::{degamma, process_f64};
+use crate::targets::camera2::Camera2Values;
+
+/// Running error statistics over pixel channels.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Stats {
+    /// Largest absolute channel difference.
+    pub max_abs: f64,
+    sum_abs: f64,
+    sum_sq: f64,
+    /// Channels compared.
+    pub count: usize,
+}
+
+impl Stats {
+    /// Adds one pixel pair.
+    #[inline]
+    pub fn add(&mut self, a: [f64; 3], b: [f64; 3]) {
+        for k in 0..3 {
+            let d = (a[k] - b[k]).abs();
+            self.max_abs = self.max_abs.max(d);
+            self.sum_abs += d;
+            self.sum_sq += d * d;
+        }
+        self.count += 3;
+    }
+    /// Mean absolute difference.
+    pub fn mean_abs(&self) -> f64 {
+        if self.count == 0 { 0.0 } else { self.sum_abs / self.count as f64 }
+    }
+    /// Max in 8-bit LSB.
+    pub fn max_lsb(&self) -> f64 {
+        self.max_abs * 255.0
+    }
+    /// Mean in 8-bit LSB.
+    pub fn mean_lsb(&self) -> f64 {
+        self.mean_abs() * 255.0
+    }
+    /// PSNR in dB for a peak of 1 (infinite when identical).
+    pub fn psnr(&self) -> f64 {
+        let mse = if self.count == 0 { 0.0 } else { self.sum_sq / self.count as f64 };
+        10.0 * (1.0 / mse).log10()
+    }
+}
+
+/// Every 8-bit grey level, black to white.
+pub fn grey_levels() -> Vec<[u8; 3]> {
+    (0..=255u8).map(|v| [v; 3]).collect()
+}
+
+/// `n` random 8-bit pixels from a seeded SplitMix64 stream (reproducible everywhere).
+pub fn random_pixels(n: usize, seed: u64) -> Vec<[u8; 3]> {
+    let mut s = seed;
+    (0..n)
+        .map(|_| {
+            s = s.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = s;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^= z >> 31;
+            [z as u8, (z >> 8) as u8, (z >> 16) as u8]
+        })
+        .collect()
+}
+
+/// The 8-bit RGB cube sampled every `step` codes per axis (255 always included).
+pub fn code_cube(step: usize) -> Vec<[u8; 3]> {
+    let mut axis: Vec<u8> = (0..=255u32).step_by(step.max(1)).map(|v| v as u8).collect();
+    if *axis.last().unwrap() != 255 {
+        axis.push(255);
+    }
+    let mut out = Vec::with_capacity(axis.len().pow(3));
+    for &r in &axis {
+        for &g in &axis {
+            for &b in &axis {
+                out.push([r, g, b]);
+            }
+        }
+    }
+    out
+}
+
+/// Result of comparing a deployment on a set of pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DeviceError {
+    /// Measured differences.
+    pub stats: Stats,
+    /// A priori bound on |device - desktop| for every sRGB input (output units).
+    pub bound: f64,
+}
+
+/// Simulates a Camera2 device (matrix `device`, sent `values`, HAL `model`) on sRGB
+/// `pixels` and compares it with the desktop pipeline. Fails if `device` is singular
+/// (no sensor RGB can be synthesised).
+pub fn camera2_vs_desktop(params: &Params, device: &Mat3, values: &Camera2Values, model: &DeviceModel, pixels: &[[u8; 3]]) -> Result<DeviceError, ValidationError> {
+    let inv = ccm::inverse(device).ok_or_else(|| ValidationError::Rule {
+        field: "device_ccm".into(),
+        rule: "must be invertible to synthesise sensor RGB from sRGB test images".into(),
+    })?;
+    let dev = Camera2Device::new(values, model);
+    let table: Vec<f64> = (0..=255).map(|c| degamma(c as f64 / 255.0, params.degamma)).collect();
+    let mut stats = Stats::default();
+    for px in pixels {
+        let lin = px.map(|c| table[c as usize]);
+        let sensor = ccm::apply(&inv, lin);
+        let want = process_f64(params, px.map(|c| c as f64 / 255.0));
+        stats.add(dev.sensor_to_output(sensor), want);
+    }
+    // Sensor RGB synthesised from linear sRGB in [0,1]^3 stays within these magnitudes.
+    let range = inv.map(|row| row.iter().map(|v| v.abs()).sum::<f64>());
+    let ideal = ccm::scale(&values.composed, 1.0 / values.scale);
+    let bound = dev.error_bound(&ideal, &params.tone_curve.fold_scale(values.scale), range);
+    Ok(DeviceError { stats, bound })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stats_by_hand() {
+        let mut s = Stats::default();
+        s.add([0.0, 0.5, 1.0], [0.0, 0.25, 1.0]);
+        assert_eq!(s.max_abs, 0.25);
+        assert!((s.mean_abs() - 0.25 / 3.0).abs() < 1e-15);
+        // mse = 0.0625 / 3 -> psnr = 10 log10(48)
+        assert!((s.psnr() - 10.0 * 48f64.log10()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn pixel_sets() {
+        assert_eq!(grey_levels().len(), 256);
+        assert_eq!(code_cube(51).len(), 6 * 6 * 6);
+        assert_eq!(code_cube(100).len(), 4 * 4 * 4);
+        assert_eq!(random_pixels(10, 1), random_pixels(10, 1));
+        assert_ne!(random_pixels(10, 1), random_pixels(10, 2));
+    }
+}

@@ -1,0 +1,225 @@
+//! The CamPro parameter set and its JSON format.
+//!
+//! ```json
+//! { "format": "campro-params", "version": 1,
+//!   "name": "identity", "description": "...",
+//!   "ccm": [[1,0,0],[0,1,0],[0,0,1]],
+//!   "tone_curve": { "y": [0.0, ..., 1.0] },          // x optional: evenly spaced
+//!   "degamma": 2.2,                                   // optional, default 2.2
+//!   "ct_calibration": [ { "ct_kelvin": 2856, "ccm": [[...]] }, ... ],  // optional
+//!   "provenance": { ... free-form ... } }
+//! ```
+//! Unknown fields are rejected; every rule broken is reported with its field path.
+
+use crate::ccm::Mat3;
+use crate::color_temp::CtCcm;
+use crate::error::{check_matrix, check_range, ValidationError};
+use crate::tone_curve::ToneCurve;
+use serde::{Deserialize, Serialize};
+
+/// The `format` tag of a parameter file.
+pub const FORMAT: &str = "campro-params";
+/// The only format version this build reads and writes.
+pub const VERSION: u32 = 1;
+/// Largest |CCM entry| accepted. CamPro clamps to ±5 while training; no ISP register
+/// holds more than ±8. Larger values are a sign of a broken file.
+pub const CCM_LIMIT: f64 = 32.0;
+/// Accepted degamma exponents.
+pub const DEGAMMA_RANGE: (f64, f64) = (0.2, 5.0);
+/// Accepted calibration colour temperatures, kelvin.
+pub const CT_RANGE: (f64, f64) = (1000.0, 40000.0);
+/// Largest parameter file read (bytes); a real one is a few KiB.
+pub const MAX_JSON_BYTES: usize = 4 << 20;
+
+/// A validated CamPro parameter set.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Params {
+    /// Short name, e.g. `identity`.
+    pub name: String,
+    /// What it is and where it came from, for people.
+    pub description: String,
+    /// The optimised colour correction matrix, `out = ccm · in` on linear RGB.
+    pub ccm: Mat3,
+    /// The optimised tone curve applied after the clipped CCM.
+    pub tone_curve: ToneCurve,
+    /// Exponent of the desktop pipeline's degamma `clamp(x^γ, 0, 1)` (paper: 2.2).
+    pub degamma: f64,
+    /// The target device's calibrated CCMs by colour temperature (ascending), if the
+    /// deployment interpolates them (paper appendix); empty otherwise.
+    pub ct_calibration: Vec<CtCcm>,
+    /// Free-form provenance (optimiser config, checkpoint, seed, ...).
+    pub provenance: serde_json::Map<String, serde_json::Value>,
+}
+
+/// Errors reading or checking a parameter set.
+#[derive(Debug, thiserror::Error)]
+pub enum ParamsError {
+    #[error("invalid JSON at {path}: {message}")]
+    Json { path: String, message: String },
+    #[error("invalid parameters: {0}")]
+    Invalid(#[from] ValidationError),
+    #[error("parameter file is {size} bytes; the limit is {limit}")]
+    TooLarge { size: usize, limit: usize },
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CurveJson {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    x: Option<Vec<f64>>,
+    y: Vec<f64>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ParamsJson {
+    format: String,
+    version: u32,
+    #[serde(default)]
+    name: String,
+    #[serde(default)]
+    description: String,
+    ccm: Vec<Vec<f64>>,
+    tone_curve: CurveJson,
+    #[serde(default = "default_degamma")]
+    degamma: f64,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    ct_calibration: Vec<CtCcmJson>,
+    #[serde(default, skip_serializing_if = "serde_json::Map::is_empty")]
+    provenance: serde_json::Map<String, serde_json::Value>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CtCcmJson {
+    ct_kelvin: f64,
+    ccm: Vec<Vec<f64>>,
+}
+
+fn default_degamma() -> f64 {
+    2.2
+}
+
+/// Converts nested JSON rows into a 3x3 matrix, naming `field` when the shape is wrong.
+pub fn matrix_from_rows(field: &str, rows: &[Vec<f64>]) -> Result<Mat3, ValidationError> {
+    if rows.len() != 3 {
+        return Err(ValidationError::WrongLength { field: field.into(), expected: "3 rows".into(), got: rows.len() });
+    }
+    let mut m = [[0.0; 3]; 3];
+    for (i, row) in rows.iter().enumerate() {
+        if row.len() != 3 {
+            return Err(ValidationError::WrongLength { field: format!("{field}[{i}]"), expected: "3".into(), got: row.len() });
+        }
+        m[i].copy_from_slice(row);
+    }
+    Ok(m)
+}
+
+fn rows(m: &Mat3) -> Vec<Vec<f64>> {
+    m.iter().map(|r| r.to_vec()).collect()
+}
+
+impl Params {
+    /// Builds and validates a parameter set (name/description/provenance empty).
+    pub fn new(ccm: Mat3, tone_curve: ToneCurve, degamma: f64) -> Result<Self, ValidationError> {
+        let p = Self {
+            name: String::new(),
+            description: String::new(),
+            ccm,
+            tone_curve,
+            degamma,
+            ct_calibration: Vec::new(),
+            provenance: Default::default(),
+        };
+        p.validate()?;
+        Ok(p)
+    }
+
+    /// The identity parameters: the pipeline returns `clamp(x^γ)` through the
+    /// identity curve, i.e. linear light (k evenly spaced knots).
+    pub fn identity_curve(k: usize) -> Self {
+        Self::new(crate::ccm::IDENTITY, ToneCurve::identity(k), 2.2).expect("identity is valid")
+    }
+
+    /// Checks every rule; the error names the first field that breaks one.
+    pub fn validate(&self) -> Result<(), ValidationError> {
+        check_matrix("ccm", &self.ccm, CCM_LIMIT)?;
+        check_range(|| "degamma".into(), self.degamma, DEGAMMA_RANGE.0, DEGAMMA_RANGE.1)?;
+        crate::color_temp::validate_calibration(&self.ct_calibration).map_err(|e| e.within("ct_calibration"))?;
+        Ok(())
+    }
+
+    /// Parses and validates the JSON format.
+    pub fn from_json(text: &str) -> Result<Self, ParamsError> {
+        if text.len() > MAX_JSON_BYTES {
+            return Err(ParamsError::TooLarge { size: text.len(), limit: MAX_JSON_BYTES });
+        }
+        let de = &mut serde_json::Deserializer::from_str(text);
+        let raw: ParamsJson = serde_path_to_error::deserialize(de).map_err(|e| ParamsError::Json {
+            path: e.path().to_string(),
+            message: e.inner().to_string(),
+        })?;
+        Ok(Self::from_raw(raw)?)
+    }
+
+    /// Reads a parameter file (size-limited) and parses it.
+    pub fn from_file(path: &std::path::Path) -> Result<Self, crate::Error> {
+        let meta = std::fs::metadata(path).map_err(|e| crate::Error::io(path, e))?;
+        if meta.len() > MAX_JSON_BYTES as u64 {
+            return Err(ParamsError::TooLarge { size: meta.len() as usize, limit: MAX_JSON_BYTES }.into());
+        }
+        let text = std::fs::read_to_string(path).map_err(|e| crate::Error::io(path, e))?;
+        Ok(Self::from_json(&text)?)
+    }
+
+    fn from_raw(raw: ParamsJson) -> Result<Self, ValidationError> {
+        if raw.format != FORMAT {
+            return Err(ValidationError::Rule { field: "format".into(), rule: format!("must be \"{FORMAT}\", got \"{}\"", raw.format) });
+        }
+        if raw.version != VERSION {
+            return Err(ValidationError::Rule { field: "version".into(), rule: format!("must be {VERSION} (the only version this build reads), got {}", raw.version) });
+        }
+        let ccm = matrix_from_rows("ccm", &raw.ccm)?;
+        let tone_curve = match raw.tone_curve.x {
+            Some(x) => ToneCurve::new(x, raw.tone_curve.y),
+            None => ToneCurve::uniform(raw.tone_curve.y),
+        }
+        .map_err(|e| e.within("tone_curve"))?;
+        let mut ct_calibration = Vec::with_capacity(raw.ct_calibration.len());
+        for (i, c) in raw.ct_calibration.iter().enumerate() {
+            ct_calibration.push(CtCcm { ct_kelvin: c.ct_kelvin, ccm: matrix_from_rows(&format!("ct_calibration[{i}].ccm"), &c.ccm)? });
+        }
+        let p = Self {
+            name: raw.name,
+            description: raw.description,
+            ccm,
+            tone_curve,
+            degamma: raw.degamma,
+            ct_calibration,
+            provenance: raw.provenance,
+        };
+        p.validate()?;
+        Ok(p)
+    }
+
+    /// The JSON format, pretty-printed. Evenly spaced knot inputs are left out.
+    pub fn to_json(&self) -> String {
+        let raw = ParamsJson {
+            format: FORMAT.into(),
+            version: VERSION,
+            name: self.name.clone(),
+            description: self.description.clone(),
+            ccm: rows(&self.ccm),
+            tone_curve: CurveJson {
+                x: (!self.tone_curve.is_uniform()).then(|| self.tone_curve.x().to_vec()),
+                y: self.tone_curve.y().to_vec(),
+            },
+            degamma: self.degamma,
+            ct_calibration: self.ct_calibration.iter().map(|c| CtCcmJson { ct_kelvin: c.ct_kelvin, ccm: rows(&c.ccm) }).collect(),
+            provenance: self.provenance.clone(),
+        };
+        let mut s = serde_json::to_string_pretty(&raw).expect("plain data serialises");
+        s.push('\n');
+        s
+    }
+}

@@ -22,6 +22,7 @@ pub mod rational;
 pub mod targets;
 pub mod tone_curve;
 
+
 #[cfg(feature = "pt")]
 pub mod import_pt;
 

@@ -45,8 +45,18 @@ pub fn process_f64(p: &Params, rgb: [f64; 3]) -> [f64; 3] {
 /// CamPro's float32 arithmetic on one 8-bit pixel: `x / 255` -> `clamp(x^2.2)` ->
 /// `clamp(torch.mm(ccm, x))` -> `Gamma.forward` (which clamps the index input to
 /// [1e-6, 1 - 1e-6] but interpolates with the unclamped value). Only for uniform knots.
+///
+/// It matches PyTorch bit for bit except where PyTorch's vectorised `pow` is one ulp
+/// off the correctly rounded `powf` used here (about 2% of 8-bit codes); see
+/// [`campro_f32_after_degamma`] and the fixture tests.
 pub fn process_f32_campro(ccm32: &[[f32; 3]; 3], keypoints: &[f32], gamma: f32, rgb8: [u8; 3]) -> [f32; 3] {
     let d = rgb8.map(|c| (c as f32 / 255.0).powf(gamma).clamp(0.0, 1.0));
+    campro_f32_after_degamma(ccm32, keypoints, d)
+}
+
+/// CamPro's float32 CCM (`torch.mm`, products summed left to right) and `Gamma.forward`
+/// on already degamma'd values.
+pub fn campro_f32_after_degamma(ccm32: &[[f32; 3]; 3], keypoints: &[f32], d: [f32; 3]) -> [f32; 3] {
     let n_space = (keypoints.len() - 1) as f32;
     let mut out = [0.0f32; 3];
     for (i, o) in out.iter_mut().enumerate() {

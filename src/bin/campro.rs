@@ -1,1 +1,438 @@
-fn main(){}
+//! `campro`: the desktop command-line tool. It only parses arguments, reads and writes
+//! files and prints; every computation is a call into the `campro` library.
+
+use anyhow::{anyhow, bail, Context, Result};
+use campro::ccm::{self, Mat3};
+use campro::compare::{self, DeviceError};
+use campro::emulate::DeviceModel;
+use campro::pipeline::{Depth, Prepared};
+use campro::targets::camera2::{self, Camera2Values, Options, RationalMode};
+use campro::Params;
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use rayon::prelude::*;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// The bundled default parameter set of `campro demo`.
+const DEFAULT_PARAMS: &str = include_str!("../../params/color-inversion.json");
+
+#[derive(Parser)]
+#[command(name = "campro", version, about = "CamPro anti-facial-recognition ISP parameters: simulate, convert to Camera2, compare")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Check parameter files; prints a summary of each, fails on the first broken rule.
+    Validate {
+        /// Parameter files (JSON, format campro-params v1).
+        #[arg(required = true)]
+        params: Vec<PathBuf>,
+    },
+    /// Convert a CamPro checkpoint (Pipeline.save .pt) to a parameter file.
+    ImportPt {
+        /// The checkpoint.
+        checkpoint: PathBuf,
+        /// Output parameter file.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Overwrite an existing output.
+        #[arg(long)]
+        force: bool,
+    },
+    /// Map parameters onto a camera stack (Camera2: COLOR_CORRECTION_TRANSFORM, TONEMAP_CURVE).
+    Convert {
+        params: PathBuf,
+        #[arg(long, value_enum, default_value_t = Target::Camera2)]
+        target: Target,
+        #[command(flatten)]
+        device: DeviceArgs,
+        #[arg(long, value_enum, default_value_t = Format::Json)]
+        format: Format,
+        /// Write to this file instead of standard output.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        #[arg(long)]
+        force: bool,
+    },
+    /// Run the desktop pipeline on images (files or folders, recursive) into PNGs.
+    Simulate {
+        params: PathBuf,
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// Output folder.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Output bit depth.
+        #[arg(long, value_enum, default_value_t = BitDepth::Eight)]
+        bit_depth: BitDepth,
+        /// Overwrite existing outputs.
+        #[arg(long)]
+        force: bool,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        jobs: Option<usize>,
+    },
+    /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
+    Compare {
+        params: PathBuf,
+        #[command(flatten)]
+        device: DeviceArgs,
+        /// Emulate a HAL that rounds matrix entries to this many fractional bits.
+        #[arg(long)]
+        matrix_frac_bits: Option<u32>,
+        /// Emulate a device LUT of this many evenly spaced entries.
+        #[arg(long)]
+        lut_size: Option<usize>,
+        /// Random pixels to test.
+        #[arg(long, default_value_t = 100_000)]
+        random: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long, value_enum, default_value_t = Report::Text)]
+        format: Report,
+    },
+    /// Run on the bundled default (colour inversion) and a built-in chart: before/after PNGs, Camera2 values, error report.
+    Demo {
+        /// Output folder.
+        #[arg(short, long, default_value = "campro-demo")]
+        output: PathBuf,
+        /// Parameters to use instead of the bundled default.
+        #[arg(long)]
+        params: Option<PathBuf>,
+    },
+}
+
+#[derive(Args, Clone)]
+struct DeviceArgs {
+    /// The device's colour transform, nine numbers row-major (A11 A12 A13 A21 ... A33).
+    #[arg(long, num_args = 9, allow_negative_numbers = true, value_name = "A", conflicts_with = "capture_result")]
+    device_ccm: Option<Vec<f64>>,
+    /// A saved capture result (JSON with colorCorrectionTransform) giving the device transform.
+    #[arg(long)]
+    capture_result: Option<PathBuf>,
+    /// Colour temperature (K) at which to interpolate the parameter file's ct_calibration.
+    #[arg(long, conflicts_with_all = ["device_ccm", "capture_result"])]
+    ct: Option<f64>,
+    /// The device's TONEMAP_MAX_CURVE_POINTS.
+    #[arg(long, default_value_t = camera2::DEFAULT_MAX_CURVE_POINTS)]
+    max_curve_points: usize,
+    /// Rationals: best approximation with denominators up to this.
+    #[arg(long, default_value_t = camera2::DEFAULT_MAX_DENOMINATOR, conflicts_with = "fixed_denominator")]
+    max_denominator: u32,
+    /// Rationals: every entry over this fixed denominator (e.g. 1024) instead.
+    #[arg(long)]
+    fixed_denominator: Option<u32>,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Target {
+    Camera2,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum BitDepth {
+    #[value(name = "8")]
+    Eight,
+    #[value(name = "16")]
+    Sixteen,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Format {
+    Json,
+    Kotlin,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Report {
+    Text,
+    Json,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    if let Err(e) = run(cli) {
+        eprintln!("error: {}", format!("{e:#}").replace('\n', " "));
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.cmd {
+        Cmd::Validate { params } => {
+            for p in params {
+                let v = load_params(&p)?;
+                println!(
+                    "{}: ok ({}: {} knots{}, degamma {}, CCM range [{:.3}, {:.3}], {} CT calibrations)",
+                    p.display(),
+                    if v.name.is_empty() { "unnamed" } else { &v.name },
+                    v.tone_curve.len(),
+                    if v.tone_curve.is_uniform() { " evenly spaced" } else { "" },
+                    v.degamma,
+                    ccm::min_max(&v.ccm).0,
+                    ccm::min_max(&v.ccm).1,
+                    v.ct_calibration.len()
+                );
+            }
+            Ok(())
+        }
+        Cmd::ImportPt { checkpoint, output, force } => {
+            let p = campro::import_pt::read_checkpoint(&checkpoint).map_err(|e| anyhow!("{}: {e}", checkpoint.display()))?;
+            write_atomic(&output, p.to_json().as_bytes(), force)?;
+            eprintln!("wrote {} ({} knots)", output.display(), p.tone_curve.len());
+            Ok(())
+        }
+        Cmd::Convert { params, target: Target::Camera2, device, format, output, force } => {
+            let p = load_params(&params)?;
+            let (m, opts) = device_setup(&p, &device)?;
+            let v = camera2::convert(&p, &m, &opts)?;
+            let text = match format {
+                Format::Json => serde_json::to_string(&v.to_json())? + "\n",
+                Format::Kotlin => v.to_kotlin(),
+            };
+            match output {
+                Some(o) => write_atomic(&o, text.as_bytes(), force),
+                None => {
+                    std::io::stdout().write_all(text.as_bytes())?;
+                    Ok(())
+                }
+            }
+        }
+        Cmd::Simulate { params, inputs, output, bit_depth, force, jobs } => {
+            let p = load_params(&params)?;
+            simulate(&p, &inputs, &output, match bit_depth { BitDepth::Eight => Depth::Eight, BitDepth::Sixteen => Depth::Sixteen }, force, jobs)
+        }
+        Cmd::Compare { params, device, matrix_frac_bits, lut_size, random, seed, format } => {
+            let p = load_params(&params)?;
+            let (m, opts) = device_setup(&p, &device)?;
+            let model = DeviceModel { matrix_frac_bits, lut_size };
+            let v = camera2::convert(&p, &m, &opts)?;
+            let rows = comparison(&p, &m, &v, &model, random, seed)?;
+            match format {
+                Report::Text => print_comparison(&rows),
+                Report::Json => println!("{}", serde_json::to_string_pretty(&comparison_json(&v, &rows))?),
+            }
+            Ok(())
+        }
+        Cmd::Demo { output, params } => demo(&output, params.as_deref()),
+    }
+}
+
+fn load_params(path: &Path) -> Result<Params> {
+    Params::from_file(path).map_err(|e| anyhow!("{}: {e}", path.display()))
+}
+
+/// The device matrix and conversion options from the command line.
+fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
+    let m = if let Some(v) = &d.device_ccm {
+        [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]]
+    } else if let Some(f) = &d.capture_result {
+        let meta = std::fs::metadata(f).with_context(|| f.display().to_string())?;
+        if meta.len() > 1 << 20 {
+            bail!("{}: capture result is {} bytes; the limit is 1 MiB", f.display(), meta.len());
+        }
+        let text = std::fs::read_to_string(f).with_context(|| f.display().to_string())?;
+        camera2::device_transform_from_capture_result(&text).map_err(|e| anyhow!("{}: {e}", f.display()))?
+    } else if let Some(ct) = d.ct {
+        if p.ct_calibration.is_empty() {
+            bail!("--ct needs a parameter file with ct_calibration");
+        }
+        campro::color_temp::interpolate(&p.ct_calibration, ct)?
+    } else {
+        ccm::IDENTITY
+    };
+    let rational = match d.fixed_denominator {
+        Some(den) => RationalMode::Fixed { denominator: den },
+        None => RationalMode::Best { max_denominator: d.max_denominator },
+    };
+    Ok((m, Options { max_curve_points: d.max_curve_points, rational }))
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and a rename,
+/// so a reader never sees a partial file. Refuses to replace `path` unless `force`.
+fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()> {
+    if !force && path.exists() {
+        bail!("{} exists (use --force to overwrite)", path.display());
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
+    let mut tmp = tempfile::Builder::new().prefix(".campro-").suffix(".tmp").tempfile_in(&dir).with_context(|| dir.display().to_string())?;
+    tmp.write_all(bytes)?;
+    tmp.as_file().sync_all()?;
+    if force {
+        tmp.persist(path).map_err(|e| anyhow!("{}: {}", path.display(), e.error))?;
+    } else {
+        tmp.persist_noclobber(path).map_err(|e| anyhow!("{}: {}", path.display(), e.error))?;
+    }
+    Ok(())
+}
+
+const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff"];
+
+/// Every (input file, output file) pair: folders are walked recursively and mirrored.
+fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Vec<(PathBuf, PathBuf)>> {
+    let mut jobs = Vec::new();
+    for input in inputs {
+        if input.is_dir() {
+            for entry in walkdir::WalkDir::new(input).sort_by_file_name() {
+                let entry = entry?;
+                if !entry.file_type().is_file() {
+                    continue;
+                }
+                let rel = entry.path().strip_prefix(input).unwrap();
+                jobs.push((entry.path().to_path_buf(), out.join(rel).with_extension("png")));
+            }
+        } else if input.is_file() {
+            let name = input.file_name().ok_or_else(|| anyhow!("{}: not a file name", input.display()))?;
+            jobs.push((input.clone(), out.join(Path::new(name)).with_extension("png")));
+        } else {
+            bail!("{}: no such file or folder", input.display());
+        }
+    }
+    let mut seen = std::collections::HashSet::new();
+    for (i, o) in &jobs {
+        if !seen.insert(o.clone()) {
+            bail!("two inputs would both be written to {} (the second is {})", o.display(), i.display());
+        }
+    }
+    Ok(jobs)
+}
+
+fn is_image(path: &Path) -> bool {
+    path.extension().and_then(|e| e.to_str()).map(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str())).unwrap_or(false)
+}
+
+fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force: bool, jobs: Option<usize>) -> Result<()> {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs.unwrap_or(0)).build()?;
+    let all = collect_inputs(inputs, out)?;
+    let (images, others): (Vec<_>, Vec<_>) = all.into_iter().partition(|(i, _)| is_image(i));
+    for (i, _) in &others {
+        eprintln!("warning: skipping {} (not a PNG, JPEG or TIFF file)", i.display());
+    }
+    let bar = if images.len() > 4 { indicatif::ProgressBar::new(images.len() as u64) } else { indicatif::ProgressBar::hidden() };
+    bar.set_style(indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta}").unwrap());
+    let prepared8 = Prepared::new(p, Depth::Eight);
+    let prepared16 = Prepared::new(p, Depth::Sixteen);
+    let failed = AtomicUsize::new(0);
+    pool.install(|| {
+        images.par_iter().for_each(|(i, o)| {
+            let r = if !force && o.exists() {
+                Err(anyhow!("{} exists (use --force to overwrite)", o.display()))
+            } else {
+                simulate_one(&prepared8, &prepared16, i, o, depth, force)
+            };
+            if let Err(e) = r {
+                bar.suspend(|| eprintln!("error: {}: {e:#}", i.display()));
+                failed.fetch_add(1, Ordering::Relaxed);
+            }
+            bar.inc(1);
+        })
+    });
+    bar.finish_and_clear();
+    let failed = failed.into_inner();
+    eprintln!("simulated {} of {} images into {}", images.len() - failed, images.len(), out.display());
+    if failed > 0 {
+        bail!("{failed} image(s) failed");
+    }
+    Ok(())
+}
+
+fn simulate_one(p8: &Prepared, p16: &Prepared, input: &Path, output: &Path, depth: Depth, force: bool) -> Result<()> {
+    let reader = image::ImageReader::open(input)?.with_guessed_format()?;
+    let img = reader.decode()?;
+    let (w, h) = (img.width(), img.height());
+    let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
+    let (src, prep): (Vec<u16>, &Prepared) = if sixteen {
+        (img.into_rgb16().into_raw(), p16)
+    } else {
+        (img.into_rgb8().into_raw().into_iter().map(u16::from).collect(), p8)
+    };
+    let mut dst = vec![0u16; src.len()];
+    let row = 3 * w as usize;
+    src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| prep.run(s, d, depth));
+    let png = encode_png(&dst, w, h, depth)?;
+    write_atomic(output, &png, force)
+}
+
+fn encode_png(samples: &[u16], w: u32, h: u32, depth: Depth) -> Result<Vec<u8>> {
+    use image::ImageEncoder;
+    let mut buf = Vec::new();
+    let enc = image::codecs::png::PngEncoder::new(&mut buf);
+    match depth {
+        Depth::Eight => {
+            let bytes: Vec<u8> = samples.iter().map(|&v| v as u8).collect();
+            enc.write_image(&bytes, w, h, image::ExtendedColorType::Rgb8)?
+        }
+        Depth::Sixteen => {
+            let bytes: Vec<u8> = samples.iter().flat_map(|v| v.to_ne_bytes()).collect();
+            enc.write_image(&bytes, w, h, image::ExtendedColorType::Rgb16)?
+        }
+    }
+    Ok(buf)
+}
+
+fn comparison(p: &Params, m: &Mat3, v: &Camera2Values, model: &DeviceModel, random: usize, seed: u64) -> Result<Vec<(String, DeviceError)>> {
+    let chart: Vec<[u8; 3]> = campro::chart::render().chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let sets = [
+        ("every grey level".to_string(), compare::grey_levels()),
+        ("RGB cube, step 5".to_string(), compare::code_cube(5)),
+        (format!("{random} random pixels"), compare::random_pixels(random, seed)),
+        ("built-in chart".to_string(), chart),
+    ];
+    sets.into_iter().map(|(name, px)| Ok((name, compare::camera2_vs_desktop(p, m, v, model, &px)?))).collect()
+}
+
+fn print_comparison(rows: &[(String, DeviceError)]) {
+    println!("{:<22} {:>10} {:>10} {:>10} {:>12}", "pixels", "max LSB", "mean LSB", "PSNR dB", "bound LSB");
+    for (name, e) in rows {
+        println!("{:<22} {:>10.4} {:>10.5} {:>10.2} {:>12.4}", name, e.stats.max_lsb(), e.stats.mean_lsb(), e.stats.psnr(), e.bound * 255.0);
+    }
+}
+
+fn comparison_json(v: &Camera2Values, rows: &[(String, DeviceError)]) -> serde_json::Value {
+    serde_json::json!({
+        "camera2": v.to_json(),
+        "comparison": rows.iter().map(|(n, e)| serde_json::json!({
+            "pixels": n, "count": e.stats.count / 3,
+            "maxLsb": e.stats.max_lsb(), "meanLsb": e.stats.mean_lsb(), "psnrDb": e.stats.psnr(), "boundLsb": e.bound * 255.0,
+        })).collect::<Vec<_>>(),
+    })
+}
+
+fn demo(out: &Path, params: Option<&Path>) -> Result<()> {
+    let p = match params {
+        Some(path) => load_params(path)?,
+        None => Params::from_json(DEFAULT_PARAMS)?,
+    };
+    let chart = campro::chart::render();
+    let (w, h) = (campro::chart::WIDTH, campro::chart::HEIGHT);
+    let src: Vec<u16> = chart.iter().map(|&v| v as u16).collect();
+    let mut dst = vec![0u16; src.len()];
+    Prepared::new(&p, Depth::Eight).run(&src, &mut dst, Depth::Eight);
+    let before = out.join("chart.png");
+    let after = out.join(format!("chart_{}.png", if p.name.is_empty() { "campro" } else { &p.name }));
+    write_atomic(&before, &encode_png(&src, w, h, Depth::Eight)?, true)?;
+    write_atomic(&after, &encode_png(&dst, w, h, Depth::Eight)?, true)?;
+    println!("parameters: {} - {}", p.name, p.description);
+    println!("wrote {} (input) and {} (desktop pipeline output)\n", before.display(), after.display());
+    let v = camera2::convert(&p, &ccm::IDENTITY, &Options::default())?;
+    println!("Camera2 values (device transform: identity; `campro convert --device-ccm ...` for yours):");
+    println!("  COLOR_CORRECTION_TRANSFORM (num/den pairs): {:?}", v.color_correction_transform);
+    let c = &v.tonemap_curve.red;
+    let pts: Vec<String> = c.chunks(2).take(4).map(|p| format!("({:.4}, {:.4})", p[0], p[1])).collect();
+    println!("  TONEMAP_CURVE: {} points per channel: {}, ... ({:.4}, {:.4})", c.len() / 2, pts.join(", "), c[c.len() - 2], c[c.len() - 1]);
+    println!(
+        "  matrix scale {}, rational error {:.2e}, curve error {:.2e}, bound {:.2e} LSB over sensor RGB in [0,1]",
+        v.scale, v.report.matrix_max_abs, v.report.curve_max_abs, v.report.bound_lsb()
+    );
+    println!("\nSimulated device vs desktop pipeline:");
+    print_comparison(&comparison(&p, &ccm::IDENTITY, &v, &DeviceModel::default(), 100_000, 1)?);
+    Ok(())
+}

@@ -1,0 +1,277 @@
+//! The `campro` command line, end to end: outputs, bad input (one-line errors, non-zero
+//! exit, no panic, no partial files), overwrite rules.
+
+mod common;
+
+use assert_cmd::Command;
+use campro::Params;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+fn campro() -> Command {
+    Command::cargo_bin("campro").unwrap()
+}
+
+fn bundled(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("params").join(name)
+}
+
+/// Runs and expects failure with a one-line error that contains `needle`.
+fn fails_with(cmd: &mut Command, needle: &str) {
+    let out = cmd.output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "succeeded; stderr: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    assert!(err.contains(needle), "stderr {err:?} lacks {needle:?}");
+    assert!(!err.contains("Caused by") && !err.contains("backtrace"), "{err}");
+    assert!(err.lines().all(|l| l.starts_with("error") || l.starts_with("warning") || l.starts_with("simulated")), "one line per error: {err}");
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = walk(dir).into_iter().map(|p| p.strip_prefix(dir).unwrap().display().to_string()).collect();
+    v.sort();
+    v
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() { out.extend(walk(&p)) } else { out.push(p) }
+    }
+    out
+}
+
+#[test]
+fn validate_bundled_and_bad_files() {
+    campro().arg("validate").arg(bundled("identity.json")).arg(bundled("color-inversion.json")).assert().success();
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, r#"{"format":"campro-params","version":1,"ccm":[[1,0,0],[0,1,0],[0,0,1]],"tone_curve":{"y":[0,2]}}"#).unwrap();
+    fails_with(campro().arg("validate").arg(&bad), "tone_curve.y[1]");
+    std::fs::write(&bad, "{ not json").unwrap();
+    fails_with(campro().arg("validate").arg(&bad), "invalid JSON");
+    fails_with(campro().arg("validate").arg(dir.path().join("missing.json")), "missing.json");
+}
+
+#[test]
+fn convert_json_has_camera2_keys() {
+    let out = campro().args(["convert", "--target", "camera2", "--device-ccm", "1.78", "-0.62", "-0.16", "-0.28", "1.62", "-0.34", "0.02", "-0.71", "1.69"]).arg(bundled("color-inversion.json")).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let cst: Vec<i64> = v["colorCorrectionTransform"].as_array().unwrap().iter().map(|x| x.as_i64().unwrap()).collect();
+    assert_eq!(cst.len(), 18);
+    // Identity CCM: the device matrix itself, exactly representable.
+    assert_eq!(cst[0] as f64 / cst[1] as f64, 1.78);
+    assert_eq!(cst[14] as f64 / cst[15] as f64, -0.71);
+    for ch in ["red", "green", "blue"] {
+        let c: Vec<f64> = v["tonemapCurve"][ch].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        assert_eq!(c.len(), 64);
+        assert_eq!((c[0], c[1], c[62], c[63]), (0.0, 1.0, 1.0, 0.0));
+    }
+    let kt = campro().args(["convert", "--format", "kotlin"]).arg(bundled("identity.json")).output().unwrap();
+    let kt = String::from_utf8(kt.stdout).unwrap();
+    assert!(kt.contains("ColorSpaceTransform(intArrayOf(1, 1, 0, 1,") && kt.contains("TonemapCurve(campro, campro, campro)"));
+}
+
+#[test]
+fn convert_capture_result_and_bad_device_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let cr = dir.path().join("cr.json");
+    std::fs::write(&cr, r#"{"colorCorrectionTransform": [2,1,0,1,0,1, 0,1,1,1,0,1, 0,1,0,1,1,1]}"#).unwrap();
+    let out = campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&cr).output().unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["colorCorrectionTransform"][0], 2);
+    std::fs::write(&cr, r#"{"colorCorrectionTransform": [1,0]}"#).unwrap();
+    fails_with(campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&cr), "colorCorrectionTransform");
+    fails_with(campro().arg("convert").arg(bundled("identity.json")).args(["--device-ccm", "1", "0", "0", "0", "1", "0", "0", "0", "NaN"]), "device_ccm[2][2]");
+    fails_with(campro().arg("convert").arg(bundled("identity.json")).args(["--max-curve-points", "1"]), "max_curve_points");
+    fails_with(campro().arg("convert").arg(bundled("identity.json")).args(["--ct", "5000"]), "ct_calibration");
+}
+
+#[test]
+fn convert_output_file_is_not_overwritten_without_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = dir.path().join("v.json");
+    std::fs::write(&o, "keep").unwrap();
+    fails_with(campro().arg("convert").arg(bundled("identity.json")).arg("-o").arg(&o), "exists");
+    assert_eq!(std::fs::read_to_string(&o).unwrap(), "keep");
+    campro().arg("convert").arg(bundled("identity.json")).arg("-o").arg(&o).arg("--force").assert().success();
+    assert!(std::fs::read_to_string(&o).unwrap().contains("colorCorrectionTransform"));
+    assert_eq!(files_in(dir.path()), vec!["v.json"], "no temporary files left");
+}
+
+fn write_pt(path: &Path, pkl: &[u8], storages: &[(&str, Vec<u8>)]) {
+    let f = std::fs::File::create(path).unwrap();
+    let mut z = zip::ZipWriter::new(f);
+    let o = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    z.start_file("archive/data.pkl", o).unwrap();
+    z.write_all(pkl).unwrap();
+    z.start_file("archive/byteorder", o).unwrap();
+    z.write_all(b"little").unwrap();
+    for (name, data) in storages {
+        z.start_file(format!("archive/data/{name}"), o).unwrap();
+        z.write_all(data).unwrap();
+    }
+    z.finish().unwrap();
+}
+
+#[test]
+fn import_pt_reads_fixture_and_refuses_hostile_files() {
+    let dir = tempfile::tempdir().unwrap();
+    if let Some(ck) = common::shared("fixtures/campro-pt/params_03_mixed.pt") {
+        let out = dir.path().join("p.json");
+        campro().arg("import-pt").arg(&ck).arg("-o").arg(&out).assert().success();
+        let p = Params::from_file(&out).unwrap();
+        assert_eq!(p, {
+            let mut q = campro::import_pt::read_checkpoint(&ck).unwrap();
+            q.provenance = p.provenance.clone();
+            q
+        });
+        fails_with(campro().arg("import-pt").arg(&ck).arg("-o").arg(&out), "exists");
+
+        // The same checkpoint with its storages tagged for CUDA is read the same way.
+        let mut zin = zip::ZipArchive::new(std::fs::File::open(&ck).unwrap()).unwrap();
+        let mut entries = Vec::new();
+        for i in 0..zin.len() {
+            let mut f = zin.by_index(i).unwrap();
+            let mut b = Vec::new();
+            std::io::Read::read_to_end(&mut f, &mut b).unwrap();
+            entries.push((f.name().to_string(), b));
+        }
+        let cuda = dir.path().join("cuda.pt");
+        let mut z = zip::ZipWriter::new(std::fs::File::create(&cuda).unwrap());
+        let o = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+        for (name, mut b) in entries {
+            if name.ends_with("data.pkl") {
+                let from = b"X\x03\x00\x00\x00cpu";
+                let to = b"X\x06\x00\x00\x00cuda:0";
+                let pos = b.windows(from.len()).position(|w| w == from).unwrap();
+                b.splice(pos..pos + from.len(), to.iter().copied());
+            }
+            z.start_file(name, o).unwrap();
+            z.write_all(&b).unwrap();
+        }
+        z.finish().unwrap();
+        let pc = campro::import_pt::read_checkpoint(&cuda).unwrap();
+        assert_eq!(pc.provenance["device"], "cuda:0");
+        assert_eq!((pc.ccm, pc.tone_curve.clone()), (p.ccm, p.tone_curve.clone()));
+    }
+
+    // A pickle calling os.system must be refused by name, never run.
+    let evil = dir.path().join("evil.pt");
+    write_pt(&evil, b"\x80\x02cos\nsystem\nq\x00X\x05\x00\x00\x00touchq\x01\x85q\x02Rq\x03.", &[]);
+    let out = dir.path().join("evil.json");
+    fails_with(campro().arg("import-pt").arg(&evil).arg("-o").arg(&out), "os.system");
+    assert!(!out.exists());
+
+    // Memo bombs: each BINGET doubles the object.
+    let mut bomb = b"\x80\x02]q\x00".to_vec();
+    for _ in 0..40 {
+        bomb.extend_from_slice(b"h\x00h\x00\x86q\x00");
+    }
+    bomb.push(b'.');
+    write_pt(&evil, &bomb, &[]);
+    fails_with(campro().arg("import-pt").arg(&evil).arg("-o").arg(&out), "copy too much");
+
+    // Not a zip, a truncated zip, a zip without data.pkl.
+    std::fs::write(&evil, b"definitely not a checkpoint").unwrap();
+    fails_with(campro().arg("import-pt").arg(&evil).arg("-o").arg(&out), "zip");
+    write_pt(&evil, b"\x80\x02}q\x00.", &[]);
+    let bytes = std::fs::read(&evil).unwrap();
+    std::fs::write(&evil, &bytes[..bytes.len() / 2]).unwrap();
+    fails_with(campro().arg("import-pt").arg(&evil).arg("-o").arg(&out), "checkpoint");
+    // A pickle that is not a dict of stages.
+    write_pt(&evil, b"\x80\x02]q\x00.", &[]);
+    fails_with(campro().arg("import-pt").arg(&evil).arg("-o").arg(&out), "OrderedDict");
+    assert!(!out.exists());
+}
+
+fn write_png8(path: &Path, w: u32, h: u32, data: &[u8]) {
+    image::save_buffer(path, data, w, h, image::ExtendedColorType::Rgb8).unwrap();
+}
+
+#[test]
+fn simulate_folders_depths_and_bad_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    std::fs::create_dir_all(input.join("sub")).unwrap();
+    let px: Vec<u8> = (0..4 * 3 * 3).map(|i| (i * 7 % 256) as u8).collect();
+    write_png8(&input.join("a.png"), 4, 3, &px);
+    image::save_buffer(input.join("sub/b.jpg"), &px, 4, 3, image::ExtendedColorType::Rgb8).unwrap();
+    let px16: Vec<u16> = (0..4 * 3 * 3).map(|i| (i * 1777 % 65536) as u16).collect();
+    image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(4, 3, px16.clone()).unwrap().save(input.join("sub/c.tif")).unwrap();
+    std::fs::write(input.join("notes.txt"), "hello").unwrap();
+    std::fs::write(input.join("broken.png"), b"\x89PNG\r\n\x1a\n garbage").unwrap();
+    let out = dir.path().join("out");
+    let params = bundled("color-inversion.json");
+
+    let run = campro().arg("simulate").arg(&params).arg(&input).arg("-o").arg(&out).args(["--bit-depth", "16"]).output().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "a corrupt image makes the run fail");
+    assert!(err.contains("notes.txt") && err.contains("warning"), "{err}");
+    assert!(err.contains("broken.png") && !err.contains("panicked"), "{err}");
+    assert_eq!(files_in(&out), vec!["a.png", "sub/b.png", "sub/c.png"], "the good images are written, nothing partial");
+
+    // 16-bit output of an 8-bit PNG: each channel within 0.5 LSB of the f64 pipeline.
+    let p = Params::from_file(&params).unwrap();
+    let got = image::open(out.join("a.png")).unwrap().into_rgb16().into_raw();
+    for (s, d) in px.chunks(3).zip(got.chunks(3)) {
+        let want = campro::pipeline::process_f64(&p, [s[0] as f64 / 255.0, s[1] as f64 / 255.0, s[2] as f64 / 255.0]);
+        for k in 0..3 {
+            assert!((d[k] as f64 - want[k] * 65535.0).abs() <= 0.5 + 1e-9);
+        }
+    }
+    // 16-bit TIFF input is read at 16 bits.
+    let got = image::open(out.join("sub/c.png")).unwrap().into_rgb16().into_raw();
+    for (s, d) in px16.chunks(3).zip(got.chunks(3)) {
+        let want = campro::pipeline::process_f64(&p, [s[0] as f64 / 65535.0, s[1] as f64 / 65535.0, s[2] as f64 / 65535.0]);
+        for k in 0..3 {
+            assert!((d[k] as f64 - want[k] * 65535.0).abs() <= 0.5 + 1e-9);
+        }
+    }
+
+    // Existing outputs are kept without --force, replaced with it.
+    std::fs::remove_file(input.join("broken.png")).unwrap();
+    let before = std::fs::read(out.join("a.png")).unwrap();
+    fails_with(campro().arg("simulate").arg(&params).arg(input.join("a.png")).arg("-o").arg(&out), "exists");
+    assert_eq!(std::fs::read(out.join("a.png")).unwrap(), before);
+    campro().arg("simulate").arg(&params).arg(input.join("a.png")).arg("-o").arg(&out).arg("--force").assert().success();
+    let eight = image::open(out.join("a.png")).unwrap();
+    assert_eq!(eight.color(), image::ColorType::Rgb8);
+    assert_eq!(files_in(&out), vec!["a.png", "sub/b.png", "sub/c.png"]);
+}
+
+#[test]
+fn compare_reports_within_bound() {
+    let out = campro().arg("compare").arg(bundled("color-inversion.json")).args(["--format", "json", "--random", "2000", "--lut-size", "256", "--matrix-frac-bits", "10"]).args(["--device-ccm", "1.78", "-0.62", "-0.16", "-0.28", "1.62", "-0.34", "0.02", "-0.71", "1.69"]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = v["comparison"].as_array().unwrap();
+    assert_eq!(rows.len(), 4);
+    for r in rows {
+        assert!(r["maxLsb"].as_f64().unwrap() <= r["boundLsb"].as_f64().unwrap() + 1e-9, "{r}");
+        assert!(r["maxLsb"].as_f64().unwrap() > 0.0, "a 256-entry LUT and Q10 matrix cost something");
+    }
+    campro().arg("compare").arg(bundled("identity.json")).assert().success().stdout(predicates::str::contains("every grey level"));
+}
+
+#[test]
+fn demo_writes_before_and_after() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    campro().arg("demo").arg("-o").arg(&out).assert().success().stdout(predicates::str::contains("COLOR_CORRECTION_TRANSFORM"));
+    let before = image::open(out.join("chart.png")).unwrap().into_rgb8();
+    let after = image::open(out.join("chart_color-inversion.png")).unwrap().into_rgb8();
+    // Colour inversion: white patch (243) becomes dark, black ramp start becomes white.
+    assert_eq!(before.get_pixel(32, 3 * 64 + 32).0, [243, 243, 242]);
+    assert!(after.get_pixel(32, 3 * 64 + 32).0[0] < 20);
+    assert_eq!(after.get_pixel(0, 4 * 64 + 5).0, [255, 255, 255]);
+}
+
+#[test]
+fn help_for_every_command() {
+    for c in ["validate", "import-pt", "convert", "simulate", "compare", "demo"] {
+        campro().args([c, "--help"]).assert().success();
+    }
+}

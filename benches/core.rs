@@ -1,1 +1,49 @@
-fn main(){}
+//! `cargo bench`: Camera2 conversion per update and the desktop pipeline per frame,
+//! against a plain copy of the same frame measured in the same run.
+
+use campro::ccm;
+use campro::pipeline::{Depth, Prepared};
+use campro::targets::camera2::{convert, Options};
+use campro::{Params, ToneCurve};
+use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
+
+const PHONE: campro::Mat3 = [[1.78, -0.62, -0.16], [-0.28, 1.62, -0.34], [0.02, -0.71, 1.69]];
+
+fn params() -> Params {
+    let ccm = [[1.2101, 0.0430, -0.6679], [-4.3933, 1.1114, -2.2755], [0.2930, 1.3570, 1.3287]];
+    Params::new(ccm, ToneCurve::from_fn(32, |t| ((7.0 * t).sin() * 0.5 + 0.5)), 2.2).unwrap()
+}
+
+fn bench_convert(c: &mut Criterion) {
+    let p = params();
+    let mut g = c.benchmark_group("convert");
+    g.bench_function("camera2 (32 knots, scaled)", |b| b.iter(|| convert(black_box(&p), black_box(&PHONE), &Options::default()).unwrap()));
+    g.bench_function("camera2 (32 knots -> 16 points)", |b| {
+        let o = Options { max_curve_points: 16, ..Options::default() };
+        b.iter(|| convert(black_box(&p), black_box(&PHONE), &o).unwrap())
+    });
+    let id = Params::identity_curve(32);
+    g.bench_function("camera2 (identity)", |b| b.iter(|| convert(black_box(&id), black_box(&ccm::IDENTITY), &Options::default()).unwrap()));
+    g.finish();
+}
+
+fn bench_simulate(c: &mut Criterion) {
+    let p = params();
+    let (w, h) = (1920usize, 1080usize);
+    let src8: Vec<u8> = (0..w * h * 3).map(|i| (i * 2654435761usize >> 13) as u8).collect();
+    let src: Vec<u16> = src8.iter().map(|&v| v as u16).collect();
+    let mut dst = vec![0u16; src.len()];
+    let prep = Prepared::new(&p, Depth::Eight);
+    let mut g = c.benchmark_group("simulate 1080p");
+    g.throughput(Throughput::Elements((w * h) as u64));
+    g.sample_size(10);
+    g.bench_function("copy (baseline)", |b| {
+        let mut out = vec![0u8; src8.len()];
+        b.iter(|| out.copy_from_slice(black_box(&src8)))
+    });
+    g.bench_function("f64 pipeline, degamma table, 1 thread", |b| b.iter(|| prep.run(black_box(&src), &mut dst, Depth::Eight)));
+    g.finish();
+}
+
+criterion_group!(benches, bench_convert, bench_simulate);
+criterion_main!(benches);

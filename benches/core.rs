@@ -2,16 +2,17 @@
 //! against a plain copy of the same frame measured in the same run.
 
 use campro::ccm;
+use std::hint::black_box;
 use campro::pipeline::{Depth, Prepared};
 use campro::targets::camera2::{convert, Options};
 use campro::{Params, ToneCurve};
-use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 const PHONE: campro::Mat3 = [[1.78, -0.62, -0.16], [-0.28, 1.62, -0.34], [0.02, -0.71, 1.69]];
 
 fn params() -> Params {
     let ccm = [[1.2101, 0.0430, -0.6679], [-4.3933, 1.1114, -2.2755], [0.2930, 1.3570, 1.3287]];
-    Params::new(ccm, ToneCurve::from_fn(32, |t| ((7.0 * t).sin() * 0.5 + 0.5)), 2.2).unwrap()
+    Params::new(ccm, ToneCurve::from_fn(32, |t| (7.0 * t).sin() * 0.5 + 0.5), 2.2).unwrap()
 }
 
 fn bench_convert(c: &mut Criterion) {
@@ -30,7 +31,7 @@ fn bench_convert(c: &mut Criterion) {
 fn bench_simulate(c: &mut Criterion) {
     let p = params();
     let (w, h) = (1920usize, 1080usize);
-    let src8: Vec<u8> = (0..w * h * 3).map(|i| (i * 2654435761usize >> 13) as u8).collect();
+    let src8: Vec<u8> = (0..w * h * 3).map(|i| ((i * 2654435761usize) >> 13) as u8).collect();
     let src: Vec<u16> = src8.iter().map(|&v| v as u16).collect();
     let mut dst = vec![0u16; src.len()];
     let prep = Prepared::new(&p, Depth::Eight);

@@ -55,11 +55,12 @@ impl Camera2Device {
     /// and `ideal_curve`, for sensor inputs with |sensor_j| <= `range[j]`:
     /// `|curve - ideal_curve|_inf + L(curve) · max_i Σ_j |ΔM_ij| · range_j`.
     pub fn error_bound(&self, ideal_matrix: &Mat3, ideal_curve: &ToneCurve, range: [f64; 3]) -> f64 {
-        let mut worst: f64 = 0.0;
-        for i in 0..3 {
-            let row: f64 = (0..3).map(|j| (self.matrix[i][j] - ideal_matrix[i][j]).abs() * range[j]).sum();
-            worst = worst.max(row);
-        }
+        let worst = self
+            .matrix
+            .iter()
+            .zip(ideal_matrix)
+            .map(|(got, want)| (0..3).map(|j| (got[j] - want[j]).abs() * range[j]).sum::<f64>())
+            .fold(0.0, f64::max);
         self.curve.max_abs_diff(ideal_curve) + self.curve.max_slope() * worst
     }
 }

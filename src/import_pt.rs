@@ -231,10 +231,8 @@ fn check_globals(o: &Object, at: &str) -> Result<(), CheckpointError> {
     let mut todo = vec![o];
     while let Some(o) = todo.pop() {
         match o {
-            Object::Class { module_name, class_name } => {
-                if !ALLOWED_GLOBALS.iter().any(|(m, c)| m == module_name && c == class_name) {
-                    return Err(CheckpointError::ForbiddenGlobal { module: module_name.clone(), name: class_name.clone() });
-                }
+            Object::Class { module_name, class_name } if !ALLOWED_GLOBALS.iter().any(|(m, c)| m == module_name && c == class_name) => {
+                return Err(CheckpointError::ForbiddenGlobal { module: module_name.clone(), name: class_name.clone() });
             }
             Object::Tuple(v) | Object::List(v) => todo.extend(v.iter()),
             Object::Dict(kv) => {

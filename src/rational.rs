@@ -67,8 +67,7 @@ pub fn best(x: f64, max_den: u64) -> Result<Rational, RationalError> {
         let k_next = a.saturating_mul(k).saturating_add(k_prev);
         if k_next > max_den {
             // Largest semiconvergent that still fits, then keep whichever is closer.
-            if k > 0 {
-                let t = (max_den - k_prev) / k;
+            if let Some(t) = (max_den - k_prev).checked_div(k) {
                 let semi = (t * h + h_prev, t * k + k_prev);
                 best = closer(y0, best, (h, k));
                 best = closer(y0, best, semi);

@@ -242,15 +242,7 @@ impl ToneCurve {
     /// `err[i][j]`: max error of the chord from knot i to knot j over the knots between.
     fn segment_errors(&self) -> Vec<Vec<f64>> {
         let n = self.len();
-        let mut err = vec![vec![0.0; n]; n];
-        for i in 0..n {
-            for j in i + 2..n {
-                let (x0, y0, x1, y1) = (self.x[i], self.y[i], self.x[j], self.y[j]);
-                let slope = (y1 - y0) / (x1 - x0);
-                err[i][j] = (i + 1..j).map(|k| (self.y[k] - (y0 + slope * (self.x[k] - x0))).abs()).fold(0.0, f64::max);
-            }
-        }
-        err
+        (0..n).map(|i| (0..n).map(|j| if j > i + 1 { self.chord_error(i, j) } else { 0.0 }).collect()).collect()
     }
 
     fn greedy(&self, tol: f64) -> Option<Vec<usize>> {

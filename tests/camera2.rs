@@ -62,11 +62,22 @@ fn range_scaling_is_exact() {
     assert!(scaled > 150, "most random ±5 matrices need scaling ({scaled})");
 }
 
+/// The fixtures' test images (random RGB, gradient), when ../shared is present.
+fn fixture_pixels() -> Vec<[u8; 3]> {
+    let mut px = Vec::new();
+    for name in ["image_random.npy", "image_gradient.npy"] {
+        if let Some(path) = common::shared(&format!("fixtures/campro-pt/{name}")) {
+            px.extend(common::npy(&path).1.chunks(3).map(|c| [c[0] as u8, c[1] as u8, c[2] as u8]));
+        }
+    }
+    px
+}
+
 fn check_bound(p: &Params, dev: &Mat3, opts: &Options, model: &DeviceModel) -> (f64, f64) {
     let v = convert(p, dev, opts).unwrap();
     let mut worst = 0.0f64;
     let mut bound = 0.0f64;
-    for px in [grey_levels(), code_cube(15), random_pixels(20_000, 9)] {
+    for px in [grey_levels(), code_cube(15), random_pixels(20_000, 9), fixture_pixels()] {
         let e = camera2_vs_desktop(p, dev, &v, model, &px).unwrap();
         // 1e-12: f64 rounding when synthesising sensor RGB through the inverse matrix.
         assert!(e.stats.max_abs <= e.bound + 1e-12, "{}: measured {} > bound {}", p.name, e.stats.max_abs, e.bound);
@@ -118,7 +129,7 @@ fn bound_holds_for_coarse_devices() {
 
 #[test]
 fn fixed_denominators_cost_more_than_best_rationals() {
-    let p = Params::new([[1.3137, -0.2071, -0.1066], [-0.1777, 1.4142, -0.2365], [0.0123, -0.4567, 1.4444]], ToneCurve::from_fn(32, |t| t.powf(0.45)), 2.2).unwrap();
+    let p = Params::new([[1.3137, -0.2071, -0.1066], [-0.1777, 1.4131, -0.2365], [0.0123, -0.4567, 1.4444]], ToneCurve::from_fn(32, |t| t.powf(0.45)), 2.2).unwrap();
     let best = convert(&p, &PHONE, &Options::default()).unwrap();
     let fixed = convert(&p, &PHONE, &Options { rational: RationalMode::Fixed { denominator: 1024 }, ..Options::default() }).unwrap();
     assert!(best.report.matrix_max_abs <= 0.5 / camera2::DEFAULT_MAX_DENOMINATOR as f64);

@@ -38,12 +38,15 @@ fn checkpoints_import_exactly() {
     }
 }
 
+/// (image name, input pixels, expected outputs)
+type FixtureImage = (String, Vec<[u8; 3]>, Vec<[f64; 3]>);
+
 struct Fixture {
     params: Params,
     ccm32: [[f32; 3]; 3],
     kp32: Vec<f32>,
     /// image name -> (input pixels, expected outputs)
-    images: Vec<(String, Vec<[u8; 3]>, Vec<[f64; 3]>)>,
+    images: Vec<FixtureImage>,
 }
 
 fn load_all() -> Option<Vec<Fixture>> {

@@ -232,78 +232,6 @@ fn to_f32_pairs(c: &ToneCurve) -> Vec<f32> {
     out
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn params(ccm: Mat3, y: Vec<f64>) -> Params {
-        Params::new(ccm, ToneCurve::uniform(y).unwrap(), 2.2).unwrap()
-    }
-
-    #[test]
-    fn identity_maps_to_unit_rationals_and_the_curve_itself() {
-        let p = params(ccm::IDENTITY, vec![0.0, 0.25, 1.0]);
-        let v = convert(&p, &ccm::IDENTITY, &Options::default()).unwrap();
-        assert_eq!(v.color_correction_transform, [1, 1, 0, 1, 0, 1, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1]);
-        assert_eq!(v.tonemap_curve.red, vec![0.0, 0.0, 0.5, 0.25, 1.0, 1.0]);
-        assert_eq!(v.tonemap_curve.red, v.tonemap_curve.blue);
-        assert_eq!(v.scale, 1.0);
-        assert_eq!(v.report.bound, 0.0);
-    }
-
-    #[test]
-    fn composes_ccm_after_device_matrix() {
-        let ccm_opt = [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
-        let dev = [[1.5, -0.25, -0.25], [-0.125, 1.25, -0.125], [0.0, -0.5, 1.5]];
-        let v = convert(&params(ccm_opt, vec![0.0, 1.0]), &dev, &Options::default()).unwrap();
-        // Rows of dev swapped: CCM_opt · M_dev.
-        assert_eq!(v.matrix(), [[-0.125, 1.25, -0.125], [1.5, -0.25, -0.25], [0.0, -0.5, 1.5]]);
-    }
-
-    #[test]
-    fn out_of_range_matrix_is_scaled_and_folded() {
-        let p = params([[4.5, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -2.0]], vec![0.0, 0.7, 0.2, 1.0]);
-        let v = convert(&p, &ccm::IDENTITY, &Options::default()).unwrap();
-        assert_eq!(v.scale, 1.5);
-        let (lo, hi) = ccm::min_max(&v.matrix());
-        assert!(lo >= MATRIX_RANGE.0 && hi <= MATRIX_RANGE.1);
-        // Pin of each knot divided by 1.5, then a flat tail to (1, 1).
-        let x: Vec<f32> = v.tonemap_curve.red.iter().step_by(2).copied().collect();
-        assert_eq!(x, vec![0.0, (1.0f64 / 3.0 / 1.5) as f32, (2.0f64 / 3.0 / 1.5) as f32, (1.0f64 / 1.5) as f32, 1.0]);
-    }
-
-    #[test]
-    fn fixed_denominator_mode() {
-        let p = params([[0.3, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], vec![0.0, 1.0]);
-        let o = Options { rational: RationalMode::Fixed { denominator: 1024 }, ..Options::default() };
-        let v = convert(&p, &ccm::IDENTITY, &o).unwrap();
-        assert_eq!(&v.color_correction_transform[..2], &[307, 1024]);
-        assert!((v.report.matrix_max_abs - (0.3 - 307.0 / 1024.0f64).abs()).abs() < 1e-15);
-    }
-
-    #[test]
-    fn too_many_knots_are_simplified_with_reported_error() {
-        let p = Params::new(ccm::IDENTITY, ToneCurve::from_fn(100, |t| (9.0 * t).sin() * 0.5 + 0.5), 2.2).unwrap();
-        let v = convert(&p, &ccm::IDENTITY, &Options { max_curve_points: 16, ..Options::default() }).unwrap();
-        assert_eq!(v.report.curve_points, 16);
-        assert!(v.report.curve_simplified);
-        let exact = p.tone_curve.max_abs_diff(&v.curve());
-        assert!((exact - v.report.curve_max_abs).abs() < 1e-12 && exact > 0.0);
-    }
-
-    #[test]
-    fn bad_inputs_are_named() {
-        let p = params(ccm::IDENTITY, vec![0.0, 1.0]);
-        let mut dev = ccm::IDENTITY;
-        dev[1][2] = f64::NAN;
-        let e = convert(&p, &dev, &Options::default()).unwrap_err();
-        assert!(e.to_string().contains("device_ccm[1][2]"), "{e}");
-        let e = convert(&p, &ccm::IDENTITY, &Options { max_curve_points: 1, ..Options::default() }).unwrap_err();
-        assert!(e.to_string().contains("max_curve_points"));
-        assert!(matrix_from_rationals(&[1, 0, 0, 1, 0, 1, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1]).is_err());
-    }
-}
-
 impl Camera2Values {
     /// One JSON object: `colorCorrectionTransform` (18 integers), `tonemapCurve`
     /// (`red`, `green`, `blue` flat pair arrays), the request modes, and the report.
@@ -385,5 +313,77 @@ pub fn device_transform_from_capture_result(text: &str) -> Result<Mat3, Validati
             Ok(m)
         }
         n => Err(ValidationError::WrongLength { field: key.into(), expected: "18 integers or 9 numbers".into(), got: n }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params(ccm: Mat3, y: Vec<f64>) -> Params {
+        Params::new(ccm, ToneCurve::uniform(y).unwrap(), 2.2).unwrap()
+    }
+
+    #[test]
+    fn identity_maps_to_unit_rationals_and_the_curve_itself() {
+        let p = params(ccm::IDENTITY, vec![0.0, 0.25, 1.0]);
+        let v = convert(&p, &ccm::IDENTITY, &Options::default()).unwrap();
+        assert_eq!(v.color_correction_transform, [1, 1, 0, 1, 0, 1, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1]);
+        assert_eq!(v.tonemap_curve.red, vec![0.0, 0.0, 0.5, 0.25, 1.0, 1.0]);
+        assert_eq!(v.tonemap_curve.red, v.tonemap_curve.blue);
+        assert_eq!(v.scale, 1.0);
+        assert_eq!(v.report.bound, 0.0);
+    }
+
+    #[test]
+    fn composes_ccm_after_device_matrix() {
+        let ccm_opt = [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+        let dev = [[1.5, -0.25, -0.25], [-0.125, 1.25, -0.125], [0.0, -0.5, 1.5]];
+        let v = convert(&params(ccm_opt, vec![0.0, 1.0]), &dev, &Options::default()).unwrap();
+        // Rows of dev swapped: CCM_opt · M_dev.
+        assert_eq!(v.matrix(), [[-0.125, 1.25, -0.125], [1.5, -0.25, -0.25], [0.0, -0.5, 1.5]]);
+    }
+
+    #[test]
+    fn out_of_range_matrix_is_scaled_and_folded() {
+        let p = params([[4.5, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -2.0]], vec![0.0, 0.7, 0.2, 1.0]);
+        let v = convert(&p, &ccm::IDENTITY, &Options::default()).unwrap();
+        assert_eq!(v.scale, 1.5);
+        let (lo, hi) = ccm::min_max(&v.matrix());
+        assert!(lo >= MATRIX_RANGE.0 && hi <= MATRIX_RANGE.1);
+        // Pin of each knot divided by 1.5, then a flat tail to (1, 1).
+        let x: Vec<f32> = v.tonemap_curve.red.iter().step_by(2).copied().collect();
+        assert_eq!(x, vec![0.0, (1.0f64 / 3.0 / 1.5) as f32, (2.0f64 / 3.0 / 1.5) as f32, (1.0f64 / 1.5) as f32, 1.0]);
+    }
+
+    #[test]
+    fn fixed_denominator_mode() {
+        let p = params([[0.3, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], vec![0.0, 1.0]);
+        let o = Options { rational: RationalMode::Fixed { denominator: 1024 }, ..Options::default() };
+        let v = convert(&p, &ccm::IDENTITY, &o).unwrap();
+        assert_eq!(&v.color_correction_transform[..2], &[307, 1024]);
+        assert!((v.report.matrix_max_abs - (0.3 - 307.0 / 1024.0f64).abs()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn too_many_knots_are_simplified_with_reported_error() {
+        let p = Params::new(ccm::IDENTITY, ToneCurve::from_fn(100, |t| (9.0 * t).sin() * 0.5 + 0.5), 2.2).unwrap();
+        let v = convert(&p, &ccm::IDENTITY, &Options { max_curve_points: 16, ..Options::default() }).unwrap();
+        assert_eq!(v.report.curve_points, 16);
+        assert!(v.report.curve_simplified);
+        let exact = p.tone_curve.max_abs_diff(&v.curve());
+        assert!((exact - v.report.curve_max_abs).abs() < 1e-12 && exact > 0.0);
+    }
+
+    #[test]
+    fn bad_inputs_are_named() {
+        let p = params(ccm::IDENTITY, vec![0.0, 1.0]);
+        let mut dev = ccm::IDENTITY;
+        dev[1][2] = f64::NAN;
+        let e = convert(&p, &dev, &Options::default()).unwrap_err();
+        assert!(e.to_string().contains("device_ccm[1][2]"), "{e}");
+        let e = convert(&p, &ccm::IDENTITY, &Options { max_curve_points: 1, ..Options::default() }).unwrap_err();
+        assert!(e.to_string().contains("max_curve_points"));
+        assert!(matrix_from_rationals(&[1, 0, 0, 1, 0, 1, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1]).is_err());
     }
 }

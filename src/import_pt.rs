@@ -94,7 +94,7 @@ pub fn read_checkpoint_bytes(bytes: &[u8]) -> Result<Params, CheckpointError> {
     };
     let pkl = read_entry(&mut zip, &pkl_name)?;
     let root = unpickle(&pkl)?;
-    check_globals(&root, "<root>")?;
+    check_globals(&root)?;
 
     let stages = match root {
         Object::Dict(kv) => kv,
@@ -227,7 +227,7 @@ fn count_nodes(o: &Object, cap: usize) -> usize {
     n
 }
 
-fn check_globals(o: &Object, at: &str) -> Result<(), CheckpointError> {
+fn check_globals(o: &Object) -> Result<(), CheckpointError> {
     let mut todo = vec![o];
     while let Some(o) = todo.pop() {
         match o {
@@ -249,7 +249,6 @@ fn check_globals(o: &Object, at: &str) -> Result<(), CheckpointError> {
             _ => {}
         }
     }
-    let _ = at;
     Ok(())
 }
 

@@ -105,6 +105,11 @@ impl<'a> Prepared<'a> {
         Self { params, degamma }
     }
 
+    /// The parameters this was prepared for.
+    pub fn params(&self) -> &'a Params {
+        self.params
+    }
+
     /// One pixel given as integer codes, output in [0, 1] (f64, no rounding).
     #[inline]
     pub fn pixel(&self, rgb: [u16; 3]) -> [f64; 3] {

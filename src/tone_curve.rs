@@ -181,15 +181,15 @@ impl ToneCurve {
         }
         // Bisection on the tolerance with a greedy farthest-reach cover.
         let (mut lo, mut hi) = (0.0, 1.0);
-        let mut best = self.greedy(hi).unwrap_or_else(|| vec![0, self.len() - 1]);
+        let mut best = self.greedy(hi);
         for _ in 0..50 {
             let mid = 0.5 * (lo + hi);
-            match self.greedy(mid) {
-                Some(k) if k.len() <= max_points => {
-                    hi = mid;
-                    best = k;
-                }
-                _ => lo = mid,
+            let k = self.greedy(mid);
+            if k.len() <= max_points {
+                hi = mid;
+                best = k;
+            } else {
+                lo = mid;
             }
         }
         let c = self.pick(&best);
@@ -222,7 +222,7 @@ impl ToneCurve {
             keep.reverse();
             return self.subset(&keep, &err);
         }
-        let keep = self.greedy(tol).unwrap_or_else(|| (0..self.len()).collect());
+        let keep = self.greedy(tol);
         let c = self.pick(&keep);
         let e = self.max_abs_diff(&c);
         (c, e)
@@ -245,7 +245,7 @@ impl ToneCurve {
         (0..n).map(|i| (0..n).map(|j| if j > i + 1 { self.chord_error(i, j) } else { 0.0 }).collect()).collect()
     }
 
-    fn greedy(&self, tol: f64) -> Option<Vec<usize>> {
+    fn greedy(&self, tol: f64) -> Vec<usize> {
         let n = self.len();
         let mut keep = vec![0];
         let mut i = 0;
@@ -257,7 +257,7 @@ impl ToneCurve {
             keep.push(j);
             i = j;
         }
-        Some(keep)
+        keep
     }
 
     fn chord_error(&self, i: usize, j: usize) -> f64 {

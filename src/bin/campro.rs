@@ -318,8 +318,9 @@ fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force: boo
     }
     let bar = if images.len() > 4 { indicatif::ProgressBar::new(images.len() as u64) } else { indicatif::ProgressBar::hidden() };
     bar.set_style(indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta}").unwrap());
+    // The 16-bit degamma table (65536 powers) is built only if a 16-bit image turns up.
     let prepared8 = Prepared::new(p, Depth::Eight);
-    let prepared16 = Prepared::new(p, Depth::Sixteen);
+    let prepared16 = std::sync::OnceLock::new();
     let failed = AtomicUsize::new(0);
     pool.install(|| {
         images.par_iter().for_each(|(i, o)| {
@@ -344,13 +345,13 @@ fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force: boo
     Ok(())
 }
 
-fn simulate_one(p8: &Prepared, p16: &Prepared, input: &Path, output: &Path, depth: Depth, force: bool) -> Result<()> {
+fn simulate_one<'a>(p8: &Prepared<'a>, p16: &std::sync::OnceLock<Prepared<'a>>, input: &Path, output: &Path, depth: Depth, force: bool) -> Result<()> {
     let reader = image::ImageReader::open(input)?.with_guessed_format()?;
     let img = reader.decode()?;
     let (w, h) = (img.width(), img.height());
     let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
     let (src, prep): (Vec<u16>, &Prepared) = if sixteen {
-        (img.into_rgb16().into_raw(), p16)
+        (img.into_rgb16().into_raw(), p16.get_or_init(|| Prepared::new(p8.params(), Depth::Sixteen)))
     } else {
         (img.into_rgb8().into_raw().into_iter().map(u16::from).collect(), p8)
     };

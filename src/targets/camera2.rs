@@ -140,7 +140,7 @@ pub fn matrix_from_rationals(v: &[i32; 18]) -> Result<Mat3, ValidationError> {
 
 /// A curve from a flat (Pin, Pout) array as `TonemapCurve` holds it.
 pub fn curve_from_pairs(pairs: &[f32]) -> Result<ToneCurve, ValidationError> {
-    if pairs.len() % 2 != 0 {
+    if !pairs.len().is_multiple_of(2) {
         return Err(ValidationError::WrongLength { field: "tonemapCurve".into(), expected: "an even number (Pin, Pout pairs)".into(), got: pairs.len() });
     }
     let x = pairs.iter().step_by(2).map(|&v| v as f64).collect();

@@ -7,7 +7,7 @@
 
 use crate::ccm::{self, Mat3};
 use crate::pipeline::clip01;
-use crate::targets::camera2::Camera2Values;
+use crate::targets::camera2::{self, Camera2Values};
 use crate::tone_curve::ToneCurve;
 
 /// Something that turns linear sensor RGB into output RGB in [0, 1].
@@ -55,13 +55,7 @@ impl Camera2Device {
     /// and `ideal_curve`, for sensor inputs with |sensor_j| <= `range[j]`:
     /// `|curve - ideal_curve|_inf + L(curve) · max_i Σ_j |ΔM_ij| · range_j`.
     pub fn error_bound(&self, ideal_matrix: &Mat3, ideal_curve: &ToneCurve, range: [f64; 3]) -> f64 {
-        let worst = self
-            .matrix
-            .iter()
-            .zip(ideal_matrix)
-            .map(|(got, want)| (0..3).map(|j| (got[j] - want[j]).abs() * range[j]).sum::<f64>())
-            .fold(0.0, f64::max);
-        self.curve.max_abs_diff(ideal_curve) + self.curve.max_slope() * worst
+        camera2::error_bound(self.curve.max_abs_diff(ideal_curve), self.curve.max_slope(), &self.matrix, ideal_matrix, range)
     }
 }
 

@@ -10,6 +10,7 @@
 //! The default build has no desktop-only dependencies beyond the `cli` feature; with
 //! `--no-default-features` it is the Android core.
 
+pub mod camera_loop;
 pub mod ccm;
 pub mod chart;
 pub mod color_temp;

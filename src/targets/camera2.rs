@@ -18,7 +18,6 @@
 //! maximum difference between the sent (f32, possibly simplified) curve and `curve'`.
 
 use crate::ccm::{self, Mat3};
-use crate::emulate::{Camera2Device, DeviceModel};
 use crate::error::{check_matrix, ValidationError};
 use crate::params::Params;
 use crate::rational::{self, Rational, RationalError};
@@ -157,16 +156,64 @@ pub fn range_scale(m: &Mat3) -> f64 {
 /// Maps CamPro parameters onto Camera2 for a device whose own colour transform is
 /// `device` (sensor RGB -> linear sRGB; identity when the device reports none).
 pub fn convert(params: &Params, device: &Mat3, opts: &Options) -> Result<Camera2Values, ConvertError> {
-    check_matrix("device_ccm", device, crate::params::CCM_LIMIT)?;
+    check_options(opts)?;
+    convert_with(params, device, opts, &mut None)
+}
+
+/// `opts` broken rules, by field.
+pub fn check_options(opts: &Options) -> Result<(), ValidationError> {
     if opts.max_curve_points < 2 {
-        return Err(ValidationError::OutOfRange { field: "max_curve_points".into(), value: opts.max_curve_points as f64, min: 2.0, max: f64::INFINITY }.into());
+        return Err(ValidationError::OutOfRange { field: "max_curve_points".into(), value: opts.max_curve_points as f64, min: 2.0, max: f64::INFINITY });
     }
+    let d = match opts.rational {
+        RationalMode::Best { max_denominator } => ("max_denominator", max_denominator),
+        RationalMode::Fixed { denominator } => ("denominator", denominator),
+    };
+    if d.1 == 0 || d.1 > i32::MAX as u32 {
+        return Err(ValidationError::OutOfRange { field: d.0.into(), value: d.1 as f64, min: 1.0, max: i32::MAX as f64 });
+    }
+    Ok(())
+}
+
+/// The tone-curve half of a conversion. It depends only on the parameters, the range
+/// scale and the point budget, so a camera loop keeps it while the device matrix moves.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CurvePart {
+    /// Range scale folded into the curve.
+    pub scale: f64,
+    /// The point budget it was fitted to.
+    pub max_points: usize,
+    /// Flat f32 (Pin, Pout) pairs as sent.
+    pub pairs: Vec<f32>,
+    /// Exact max |sent - folded| over [0, 1].
+    pub max_abs: f64,
+    /// Whether knots were dropped to fit the budget.
+    pub simplified: bool,
+    /// Largest slope of the sent curve.
+    pub lipschitz: f64,
+}
+
+/// Folds `scale` into the parameters' curve, fits it to `max_points` (optimal knot
+/// subset when it has more) and rounds it to f32 pairs, measuring what that costs.
+pub fn curve_part(params: &Params, scale: f64, max_points: usize) -> CurvePart {
+    let folded = params.tone_curve.fold_scale(scale);
+    let (fitted, simplified) = if folded.len() > max_points { (folded.simplify(max_points).0, true) } else { (folded.clone(), false) };
+    let pairs = to_f32_pairs(&fitted);
+    let sent = curve_from_pairs(&pairs).expect("rounded pairs stay valid");
+    CurvePart { scale, max_points, max_abs: folded.max_abs_diff(&sent), simplified, lipschitz: sent.max_slope(), pairs }
+}
+
+/// [`convert`] reusing `cache` when its scale and point budget still apply (and
+/// refilling it when not). `opts` must have passed [`check_options`].
+pub(crate) fn convert_with(params: &Params, device: &Mat3, opts: &Options, cache: &mut Option<CurvePart>) -> Result<Camera2Values, ConvertError> {
+    check_matrix("device_ccm", device, crate::params::CCM_LIMIT)?;
     let composed = ccm::mul(&params.ccm, device);
     let scale = range_scale(&composed);
     let wanted = ccm::scale(&composed, 1.0 / scale);
 
     let mut cst = [0i32; 18];
     let mut matrix_err: f64 = 0.0;
+    let mut sent = [[0.0; 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
             let x = wanted[i][j];
@@ -177,36 +224,39 @@ pub fn convert(params: &Params, device: &Mat3, opts: &Options) -> Result<Camera2
             .map_err(|source| ConvertError::Rational { row: i, col: j, source })?;
             cst[2 * (3 * i + j)] = r.num;
             cst[2 * (3 * i + j) + 1] = r.den;
-            matrix_err = matrix_err.max((r.to_f64() - x).abs());
+            sent[i][j] = r.to_f64();
+            matrix_err = matrix_err.max((sent[i][j] - x).abs());
         }
     }
 
-    let folded = params.tone_curve.fold_scale(scale);
-    let (fitted, simplified) = if folded.len() > opts.max_curve_points {
-        (folded.simplify(opts.max_curve_points).0, true)
-    } else {
-        (folded.clone(), false)
+    let curve = match cache {
+        Some(c) if c.scale == scale && c.max_points == opts.max_curve_points => c,
+        _ => cache.insert(curve_part(params, scale, opts.max_curve_points)),
     };
-    let pairs = to_f32_pairs(&fitted);
-    let sent = curve_from_pairs(&pairs).expect("rounded pairs stay valid");
-    let mut values = Camera2Values {
+    Ok(Camera2Values {
         color_correction_transform: cst,
-        tonemap_curve: TonemapCurve { red: pairs.clone(), green: pairs.clone(), blue: pairs },
+        tonemap_curve: TonemapCurve { red: curve.pairs.clone(), green: curve.pairs.clone(), blue: curve.pairs.clone() },
         scale,
         composed,
         report: ErrorReport {
             matrix_max_abs: matrix_err,
-            curve_max_abs: folded.max_abs_diff(&sent),
-            curve_points: sent.len(),
-            curve_simplified: simplified,
-            curve_lipschitz: sent.max_slope(),
-            bound: 0.0,
+            curve_max_abs: curve.max_abs,
+            curve_points: curve.pairs.len() / 2,
+            curve_simplified: curve.simplified,
+            curve_lipschitz: curve.lipschitz,
+            // The device applying exactly what it received, over sensor RGB in [0, 1]^3.
+            bound: error_bound(curve.max_abs, curve.lipschitz, &sent, &wanted, [1.0; 3]),
         },
-    };
-    // The device applying exactly what it received, over sensor RGB in [0, 1]^3.
-    let device = Camera2Device::new(&values, &DeviceModel::default());
-    values.report.bound = device.error_bound(&wanted, &folded, [1.0; 3]);
-    Ok(values)
+    })
+}
+
+/// The bound every Camera2 path states: `E_curve + L' · max_i Σ_j |sent_ij - ideal_ij| · range_j`
+/// for sensor inputs with |sensor_j| <= `range[j]`. The device clips to [0, 1] before
+/// the curve (clipping is 1-Lipschitz), so a row error of δ moves the curve's input by at
+/// most δ and its output by at most `L' · δ`.
+pub fn error_bound(curve_max_abs: f64, lipschitz: f64, sent: &Mat3, ideal: &Mat3, range: [f64; 3]) -> f64 {
+    let worst = sent.iter().zip(ideal).map(|(got, want)| (0..3).map(|j| (got[j] - want[j]).abs() * range[j]).sum::<f64>()).fold(0.0, f64::max);
+    curve_max_abs + lipschitz * worst
 }
 
 /// Flat f32 (Pin, Pout) pairs; a knot whose Pin rounds onto the previous one is dropped

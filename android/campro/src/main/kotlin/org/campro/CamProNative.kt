@@ -1,0 +1,53 @@
+package org.campro
+
+/**
+ * The native functions of `libcampro_jni.so` (Rust crate `jni-bridge`). Use them through
+ * [CamProSession], which owns the handle and the output arrays.
+ *
+ * Handles are opaque integers, never addresses: a closed or foreign handle throws
+ * [IllegalStateException]; bad arguments throw [IllegalArgumentException] naming the
+ * argument and the rule; an internal error in the native code arrives as a
+ * [RuntimeException] starting with "campro internal error" and never crashes the process.
+ */
+object CamProNative {
+    /** Index of the report slots every update fills (see `jni-bridge/src/lib.rs`, `report`). */
+    const val REPORT_RECOMPUTED = 0
+    const val REPORT_BOUND = 1
+    const val REPORT_MATRIX_MAX_ABS = 2
+    const val REPORT_CURVE_MAX_ABS = 3
+    const val REPORT_CURVE_LIPSCHITZ = 4
+    const val REPORT_SCALE = 5
+    const val REPORT_CURVE_POINTS = 6
+    const val REPORT_CURVE_SIMPLIFIED = 7
+    const val REPORT_LEN = 8
+
+    /** Index of the readback comparison slots. */
+    const val READBACK_MATRIX_MAX_ABS = 0
+    const val READBACK_CURVE_MAX_ABS = 1
+    const val READBACK_BOUND = 2
+    const val READBACK_LEN = 3
+
+    /** Loads `libcampro_jni.so` from the APK (Android) or `java.library.path`. */
+    fun loadLibrary() = System.loadLibrary("campro_jni")
+
+    /** Loads the library from an absolute path (host tests). */
+    fun load(path: String) = System.load(path)
+
+    @JvmStatic external fun create(paramsJson: String?, maxCurvePoints: Int, maxDenominator: Int, skipTolerance: Double): Long
+    @JvmStatic external fun createFromBytes(paramsJson: ByteArray?, maxCurvePoints: Int, maxDenominator: Int, skipTolerance: Double): Long
+    /** [assetManager] is an `android.content.res.AssetManager`; Android only. */
+    @JvmStatic external fun createFromAsset(assetManager: Any?, path: String?, maxCurvePoints: Int, maxDenominator: Int, skipTolerance: Double): Long
+    @JvmStatic external fun close(handle: Long)
+    @JvmStatic external fun liveHandles(): Int
+    @JvmStatic external fun setMaxCurvePoints(handle: Long, n: Int)
+    @JvmStatic external fun setDngCalibration(handle: Long, illuminant1: Int, forwardMatrix1: IntArray?, illuminant2: Int, forwardMatrix2: IntArray?)
+    @JvmStatic external fun updateFromTransform(handle: Long, deviceTransform: IntArray?, outTransform: IntArray?, outCurve: FloatArray?, outReport: DoubleArray?): Boolean
+    @JvmStatic external fun updateFromColorTemperature(handle: Long, kelvin: Double, outTransform: IntArray?, outCurve: FloatArray?, outReport: DoubleArray?): Boolean
+    @JvmStatic external fun readback(
+        requestedTransform: IntArray?, requestedCurve: FloatArray?, requestedCount: Int,
+        reportedTransform: IntArray?, reportedCurve: FloatArray?, reportedCount: Int,
+        out: DoubleArray?,
+    )
+    /** Panics inside native code on purpose (tests: the panic must arrive as an exception). */
+    @JvmStatic external fun selfTestPanic(message: String?)
+}

@@ -1,0 +1,117 @@
+package org.campro
+
+/**
+ * A CamPro parameter set deployed on one Camera2 camera: load it once, call an update
+ * per frame (or per auto-mode metering result), send [transform] and [curve] when an
+ * update returns `true`. Close it (or use `use {}`) to free the native state.
+ *
+ * Per update nothing is allocated: the native side writes into this object's arrays.
+ * Thread safety: every method is synchronized on the session, so one session may be
+ * shared between the camera callback thread and the UI; the arrays are only consistent
+ * when read under `synchronized(session)` or from the thread that called the update.
+ */
+class CamProSession private constructor(
+    private var handle: Long,
+    maxCurvePoints: Int,
+) : AutoCloseable {
+    /** `COLOR_CORRECTION_TRANSFORM` to send: nine (numerator, denominator) pairs, row-major. */
+    val transform = IntArray(18)
+
+    /** `TONEMAP_CURVE` to send, the same for red, green and blue: [curvePoints] (Pin, Pout) pairs. */
+    var curve = FloatArray(2 * maxCurvePoints)
+        private set
+
+    /** What the last update achieved; slots are `CamProNative.REPORT_*`. */
+    val report = DoubleArray(CamProNative.REPORT_LEN)
+
+    /** The device's `TONEMAP_MAX_CURVE_POINTS` this session fits the curve to. */
+    var maxCurvePoints = maxCurvePoints
+        private set
+
+    /** (Pin, Pout) points per channel in [curve]. */
+    val curvePoints: Int get() = report[CamProNative.REPORT_CURVE_POINTS].toInt()
+
+    /** Guaranteed bound on |device - desktop pipeline| for the last update, output units (1 = full scale). */
+    val bound: Double get() = report[CamProNative.REPORT_BOUND]
+
+    /** [bound] in 8-bit LSB. */
+    val boundLsb: Double get() = bound * 255.0
+
+    val isClosed: Boolean @Synchronized get() = handle == 0L
+
+    /** One frame from the device's own `COLOR_CORRECTION_TRANSFORM` (18 ints, as `ColorSpaceTransform.copyElements` gives). Returns whether the values changed. */
+    @Synchronized
+    fun updateFromTransform(deviceTransform: IntArray): Boolean =
+        CamProNative.updateFromTransform(live(), deviceTransform, transform, curve, report)
+
+    /** One frame from a colour temperature in kelvin (needs [setDngCalibration] or a parameter set with `ct_calibration`). */
+    @Synchronized
+    fun updateFromColorTemperature(kelvin: Double): Boolean =
+        CamProNative.updateFromColorTemperature(live(), kelvin, transform, curve, report)
+
+    /** The device's `TONEMAP_MAX_CURVE_POINTS`; the next update recomputes. */
+    @Synchronized
+    fun setMaxCurvePoints(n: Int) {
+        CamProNative.setMaxCurvePoints(live(), n)
+        if (n != maxCurvePoints) {
+            curve = FloatArray(2 * n)
+            maxCurvePoints = n
+        }
+    }
+
+    /** `SENSOR_REFERENCE_ILLUMINANT1/2` and `SENSOR_FORWARD_MATRIX1/2` (18 ints each). */
+    @Synchronized
+    fun setDngCalibration(illuminant1: Int, forwardMatrix1: IntArray, illuminant2: Int, forwardMatrix2: IntArray) =
+        CamProNative.setDngCalibration(live(), illuminant1, forwardMatrix1, illuminant2, forwardMatrix2)
+
+    /** The curve with exactly [curvePoints] pairs, as `TonemapCurve`'s constructor wants it (allocates; call when an update returned `true`). */
+    @Synchronized
+    fun curveForRequest(): FloatArray = curve.copyOf(2 * curvePoints)
+
+    /** Frees the native state; further calls throw [IllegalStateException]. Idempotent. */
+    @Synchronized
+    override fun close() {
+        if (handle != 0L) {
+            val h = handle
+            handle = 0L
+            CamProNative.close(h)
+        }
+    }
+
+    private fun live(): Long {
+        check(handle != 0L) { "CamProSession is closed" }
+        return handle
+    }
+
+    companion object {
+        /** Android guarantees at least 64 curve points where CONTRAST_CURVE exists. */
+        const val DEFAULT_MAX_CURVE_POINTS = 64
+        /** Denominator bound of the rationals (2^16: entry error <= 7.6e-6). */
+        const val DEFAULT_MAX_DENOMINATOR = 65536
+        /** Extra error a skipped update may cost: a quarter of an 8-bit LSB. */
+        const val DEFAULT_SKIP_TOLERANCE = 0.25 / 255.0
+
+        fun fromJson(
+            json: String,
+            maxCurvePoints: Int = DEFAULT_MAX_CURVE_POINTS,
+            maxDenominator: Int = DEFAULT_MAX_DENOMINATOR,
+            skipTolerance: Double = DEFAULT_SKIP_TOLERANCE,
+        ) = CamProSession(CamProNative.create(json, maxCurvePoints, maxDenominator, skipTolerance), maxCurvePoints)
+
+        fun fromBytes(
+            json: ByteArray,
+            maxCurvePoints: Int = DEFAULT_MAX_CURVE_POINTS,
+            maxDenominator: Int = DEFAULT_MAX_DENOMINATOR,
+            skipTolerance: Double = DEFAULT_SKIP_TOLERANCE,
+        ) = CamProSession(CamProNative.createFromBytes(json, maxCurvePoints, maxDenominator, skipTolerance), maxCurvePoints)
+
+        /** [assetManager]: an `android.content.res.AssetManager` (Android only). */
+        fun fromAsset(
+            assetManager: Any,
+            path: String,
+            maxCurvePoints: Int = DEFAULT_MAX_CURVE_POINTS,
+            maxDenominator: Int = DEFAULT_MAX_DENOMINATOR,
+            skipTolerance: Double = DEFAULT_SKIP_TOLERANCE,
+        ) = CamProSession(CamProNative.createFromAsset(assetManager, path, maxCurvePoints, maxDenominator, skipTolerance), maxCurvePoints)
+    }
+}

@@ -1,0 +1,50 @@
+package org.campro
+
+/**
+ * Whether a camera can run CamPro through Camera2, decided from plain values so the
+ * rule runs (and is tested) off the phone; `org.campro.android.supportOf` reads them
+ * from `CameraCharacteristics`.
+ *
+ * Camera2's rules: `TONEMAP_CURVE` is honoured only in `TONEMAP_MODE_CONTRAST_CURVE`,
+ * which a device lists in `TONEMAP_AVAILABLE_TONE_MAP_MODES` (guaranteed with the
+ * `MANUAL_POST_PROCESSING` capability); `COLOR_CORRECTION_TRANSFORM` is used only with
+ * `COLOR_CORRECTION_MODE_TRANSFORM_MATRIX` *and* `CONTROL_AWB_MODE_OFF`, so AWB must be
+ * switchable off; `TONEMAP_MAX_CURVE_POINTS` bounds the curve (>= 64 when present).
+ */
+object DeviceSupport {
+    /** `CameraMetadata.REQUEST_AVAILABLE_CAPABILITIES_MANUAL_POST_PROCESSING`. */
+    const val CAPABILITY_MANUAL_POST_PROCESSING = 2
+    /** `CameraMetadata.TONEMAP_MODE_CONTRAST_CURVE`. */
+    const val TONEMAP_MODE_CONTRAST_CURVE = 0
+    /** `CameraMetadata.CONTROL_AWB_MODE_OFF`. */
+    const val CONTROL_AWB_MODE_OFF = 0
+
+    sealed class Result {
+        /** CamPro can be deployed; the curve is fitted to [maxCurvePoints]. */
+        data class Supported(val maxCurvePoints: Int, val note: String?) : Result()
+        /** It cannot, for these [reasons] (each one sentence). */
+        data class Unsupported(val reasons: List<String>) : Result()
+    }
+
+    /** Arguments are the characteristics' values, `null` where the device reports none. */
+    fun check(capabilities: IntArray?, toneMapModes: IntArray?, maxCurvePoints: Int?, awbModes: IntArray?): Result {
+        val reasons = mutableListOf<String>()
+        val manualPost = capabilities?.contains(CAPABILITY_MANUAL_POST_PROCESSING) == true
+        if (toneMapModes?.contains(TONEMAP_MODE_CONTRAST_CURVE) != true) {
+            reasons += "the camera has no CONTRAST_CURVE tone-map mode" + if (manualPost) "" else " (no MANUAL_POST_PROCESSING capability)"
+        }
+        if (maxCurvePoints == null || maxCurvePoints < 2) {
+            reasons += "the camera reports no usable TONEMAP_MAX_CURVE_POINTS (${maxCurvePoints ?: "none"})"
+        }
+        if (awbModes?.contains(CONTROL_AWB_MODE_OFF) != true) {
+            reasons += "auto white balance cannot be switched off, so COLOR_CORRECTION_TRANSFORM would be ignored"
+        }
+        if (reasons.isNotEmpty()) return Result.Unsupported(reasons)
+        val note = when {
+            !manualPost -> "no MANUAL_POST_PROCESSING capability: CONTRAST_CURVE is listed but not guaranteed to be exact"
+            maxCurvePoints!! < 64 -> "only $maxCurvePoints curve points: the tone curve is simplified (error reported)"
+            else -> null
+        }
+        return Result.Supported(maxCurvePoints!!, note)
+    }
+}

@@ -1,0 +1,555 @@
+//! `libcampro_jni.so`: the campro core behind native handles, for the Kotlin class
+//! `org.campro.CamProNative` (wrapped by `org.campro.CamProSession`).
+//!
+//! Thin by design: every function parses its arguments, calls the core
+//! ([`campro::camera_loop::Camera2Loop`], [`campro::targets::camera2`]) and copies the
+//! results into caller-provided primitive arrays. Nothing is allocated on the Java heap
+//! per update, and no local reference is created in a loop.
+//!
+//! Errors: bad arguments throw `IllegalArgumentException`, a closed or never-issued
+//! handle (or one left broken by an internal error) `IllegalStateException`, each with a
+//! message naming the argument and the rule. A Rust panic never crosses the boundary: it
+//! is caught and thrown as `RuntimeException("campro internal error: ...")`.
+//!
+//! Threads: handles are process-wide integers, never addresses, so a foreign or stale
+//! value is detected rather than dereferenced. Every handle has its own mutex: calls on
+//! one handle from several threads are serialised (each sees a consistent loop state),
+//! calls on different handles run in parallel. `close` while another thread is inside an
+//! update is safe: the update finishes on its reference and later calls see the handle
+//! closed.
+
+use campro::camera_loop::{Camera2Loop, Update};
+use campro::color_temp::DngCalibration;
+use campro::targets::camera2::{self, ConvertError, Options, RationalMode};
+use campro::{Params, ValidationError};
+use jni::errors::ErrorPolicy;
+use jni::objects::{JByteArray, JClass, JDoubleArray, JFloatArray, JIntArray, JObject, JString};
+use jni::refs::Reference;
+use jni::sys::{jboolean, jdouble, jint, jlong};
+use jni::{jni_str, Env, EnvUnowned};
+use std::collections::HashMap;
+use std::fmt;
+use std::sync::atomic::{AtomicI64, Ordering};
+use std::sync::{Arc, LazyLock, Mutex, MutexGuard};
+
+/// Layout of the `DoubleArray` report every update fills (`CamProNative.REPORT_*`).
+pub mod report {
+    /// 1.0 when the values changed (rebuild the request), else 0.0.
+    pub const RECOMPUTED: usize = 0;
+    /// Guaranteed bound on |device - desktop|, output units (1 = full scale).
+    pub const BOUND: usize = 1;
+    /// Largest rational rounding error over the nine matrix entries.
+    pub const MATRIX_MAX_ABS: usize = 2;
+    /// Max |sent curve - wanted curve| over [0, 1].
+    pub const CURVE_MAX_ABS: usize = 3;
+    /// Largest slope of the sent curve.
+    pub const CURVE_LIPSCHITZ: usize = 4;
+    /// Range scale folded into the curve (>= 1).
+    pub const SCALE: usize = 5;
+    /// (Pin, Pout) points written per channel.
+    pub const CURVE_POINTS: usize = 6;
+    /// 1.0 when knots were dropped to fit the device's point budget.
+    pub const CURVE_SIMPLIFIED: usize = 7;
+    /// Array length.
+    pub const LEN: usize = 8;
+}
+
+/// Layout of the `DoubleArray` the readback comparison fills.
+pub mod readback {
+    pub const MATRIX_MAX_ABS: usize = 0;
+    pub const CURVE_MAX_ABS: usize = 1;
+    pub const BOUND: usize = 2;
+    pub const LEN: usize = 3;
+}
+
+/// Why a native call failed; each kind becomes one Java exception class.
+#[derive(Debug)]
+enum BridgeError {
+    /// `IllegalArgumentException`.
+    Argument(String),
+    /// `IllegalStateException`.
+    State(String),
+    /// A JNI call failed (an exception is usually pending already).
+    Jni(jni::errors::Error),
+}
+
+impl fmt::Display for BridgeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Argument(m) | Self::State(m) => f.write_str(m),
+            Self::Jni(e) => write!(f, "JNI: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for BridgeError {}
+
+impl From<jni::errors::Error> for BridgeError {
+    fn from(e: jni::errors::Error) -> Self {
+        Self::Jni(e)
+    }
+}
+
+impl From<ConvertError> for BridgeError {
+    fn from(e: ConvertError) -> Self {
+        match &e {
+            ConvertError::Invalid(v) if v.field() == "ct_calibration" => Self::State(e.to_string()),
+            _ => Self::Argument(e.to_string()),
+        }
+    }
+}
+
+fn arg(e: ValidationError) -> BridgeError {
+    BridgeError::Argument(e.to_string())
+}
+
+type Result<T> = std::result::Result<T, BridgeError>;
+
+/// Throws the Java exception matching the error; panics become `RuntimeException`.
+struct ThrowJava;
+
+impl<T: Default> ErrorPolicy<T, BridgeError> for ThrowJava {
+    type Captures<'unowned_env_local: 'native_method, 'native_method> = ();
+
+    fn on_error<'unowned_env_local: 'native_method, 'native_method>(env: &mut Env<'unowned_env_local>, _: &mut (), err: BridgeError) -> jni::errors::Result<T> {
+        if env.exception_check() {
+            return Ok(T::default()); // the JNI failure already threw
+        }
+        log::warn!("{err}");
+        let msg = jni::strings::JNIString::new(err.to_string());
+        let _ = match err {
+            BridgeError::Argument(_) => env.throw_new(jni_str!("java/lang/IllegalArgumentException"), msg),
+            BridgeError::State(_) => env.throw_new(jni_str!("java/lang/IllegalStateException"), msg),
+            BridgeError::Jni(_) => env.throw_new(jni_str!("java/lang/RuntimeException"), msg),
+        };
+        Ok(T::default())
+    }
+
+    fn on_panic<'unowned_env_local: 'native_method, 'native_method>(
+        env: &mut Env<'unowned_env_local>,
+        _: &mut (),
+        payload: Box<dyn std::any::Any + Send + 'static>,
+    ) -> jni::errors::Result<T> {
+        let what = match payload.downcast_ref::<&'static str>() {
+            Some(s) => (*s).to_string(),
+            None => payload.downcast_ref::<String>().cloned().unwrap_or_else(|| "non-string panic payload".into()),
+        };
+        // Dropping a payload can itself panic; leak it rather than unwind here.
+        std::mem::forget(payload);
+        log::error!("campro internal error: {what}");
+        if !env.exception_check() {
+            let _ = env.throw_new(jni_str!("java/lang/RuntimeException"), jni::strings::JNIString::new(format!("campro internal error: {what}")));
+        }
+        Ok(T::default())
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// Handles
+
+/// Handles are never reused and start far from small integers and from addresses.
+static NEXT_HANDLE: AtomicI64 = AtomicI64::new(0x4350_0000_0000_0001);
+static HANDLES: LazyLock<Mutex<HashMap<jlong, Arc<Mutex<Camera2Loop>>>>> = LazyLock::new(Default::default);
+
+fn registry() -> MutexGuard<'static, HashMap<jlong, Arc<Mutex<Camera2Loop>>>> {
+    // The registry is only inserted into and removed from; a panic elsewhere cannot
+    // leave it half-updated, so a poisoned lock is still consistent.
+    HANDLES.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+fn register(l: Camera2Loop) -> jlong {
+    let h = NEXT_HANDLE.fetch_add(1, Ordering::Relaxed);
+    registry().insert(h, Arc::new(Mutex::new(l)));
+    h
+}
+
+fn lookup(handle: jlong) -> Result<Arc<Mutex<Camera2Loop>>> {
+    registry().get(&handle).cloned().ok_or_else(|| BridgeError::State(format!("handle {handle:#x} is closed or was never issued by campro")))
+}
+
+fn with_loop<T>(handle: jlong, f: impl FnOnce(&mut Camera2Loop) -> Result<T>) -> Result<T> {
+    let l = lookup(handle)?;
+    let mut guard = l.lock().map_err(|_| BridgeError::State(format!("handle {handle:#x} was left inconsistent by an internal error; close it")))?;
+    f(&mut guard)
+}
+
+// ---------------------------------------------------------------------------------
+// Argument helpers
+
+fn options(max_curve_points: jint, max_denominator: jint) -> Result<Options> {
+    let positive = |name: &str, v: jint| {
+        u32::try_from(v).ok().filter(|&v| v > 0).ok_or_else(|| BridgeError::Argument(format!("{name}: must be positive, got {v}")))
+    };
+    let o = Options {
+        max_curve_points: positive("maxCurvePoints", max_curve_points)? as usize,
+        rational: RationalMode::Best { max_denominator: positive("maxDenominator", max_denominator)? },
+    };
+    camera2::check_options(&o).map_err(arg)?;
+    Ok(o)
+}
+
+fn non_null(name: &str, obj: &impl Reference) -> Result<()> {
+    if obj.is_null() {
+        return Err(BridgeError::Argument(format!("{name}: must not be null")));
+    }
+    Ok(())
+}
+
+fn read_ints<const N: usize>(env: &Env, name: &str, a: &JIntArray) -> Result<[i32; N]> {
+    non_null(name, a)?;
+    let len = a.len(env)?;
+    if len != N {
+        return Err(BridgeError::Argument(format!("{name}: must have {N} elements, got {len}")));
+    }
+    let mut out = [0i32; N];
+    a.get_region(env, 0, &mut out)?;
+    Ok(out)
+}
+
+fn read_floats(env: &Env, name: &str, a: &JFloatArray, count: jint) -> Result<Vec<f32>> {
+    non_null(name, a)?;
+    let len = a.len(env)?;
+    let n = usize::try_from(count).ok().filter(|&n| n <= len).ok_or_else(|| BridgeError::Argument(format!("{name}: count {count} is negative or exceeds the array's {len} elements")))?;
+    let mut out = vec![0f32; n];
+    a.get_region(env, 0, &mut out)?;
+    Ok(out)
+}
+
+fn check_len(env: &Env, name: &str, a: &impl LenOf, min: usize, exact: bool) -> Result<()> {
+    non_null(name, a.obj())?;
+    let len = a.len_of(env)?;
+    if (exact && len != min) || len < min {
+        let rule = if exact { "exactly" } else { "at least" };
+        return Err(BridgeError::Argument(format!("{name}: must have {rule} {min} elements, got {len}")));
+    }
+    Ok(())
+}
+
+/// Array length for the three output array kinds.
+trait LenOf {
+    fn obj(&self) -> &JObject<'_>;
+    fn len_of(&self, env: &Env) -> Result<usize>;
+}
+
+macro_rules! len_of {
+    ($($t:ty),*) => {$(
+        impl LenOf for $t {
+            fn obj(&self) -> &JObject<'_> {
+                self
+            }
+            fn len_of(&self, env: &Env) -> Result<usize> {
+                Ok(self.len(env)?)
+            }
+        }
+    )*};
+}
+len_of!(JIntArray<'_>, JFloatArray<'_>, JDoubleArray<'_>);
+
+fn dng_matrix(env: &Env, name: &str, a: &JIntArray) -> Result<campro::Mat3> {
+    let ints: [i32; 18] = read_ints(env, name, a)?;
+    camera2::matrix_from_rationals(&ints).map_err(|e| arg(e.within(name)))
+}
+
+fn illuminant(name: &str, code: jint) -> Result<u8> {
+    u8::try_from(code).map_err(|_| BridgeError::Argument(format!("{name}: unknown reference illuminant code {code}")))
+}
+
+fn create(bytes: &[u8], max_curve_points: jint, max_denominator: jint, skip_tolerance: jdouble) -> Result<jlong> {
+    let text = std::str::from_utf8(bytes).map_err(|e| BridgeError::Argument(format!("paramsJson: not UTF-8: {e}")))?;
+    let params = Params::from_json(text).map_err(|e| BridgeError::Argument(format!("params: {e}")))?;
+    let l = Camera2Loop::new(params, options(max_curve_points, max_denominator)?, skip_tolerance).map_err(arg)?;
+    log::info!("campro: loaded parameter set '{}'", l.params().name);
+    Ok(register(l))
+}
+
+/// The outputs of one update, checked before the loop state moves.
+struct Outputs<'a, 'local> {
+    transform: &'a JIntArray<'local>,
+    curve: &'a JFloatArray<'local>,
+    report: &'a JDoubleArray<'local>,
+}
+
+impl Outputs<'_, '_> {
+    fn check(&self, env: &Env, max_points: usize) -> Result<()> {
+        check_len(env, "outTransform", self.transform, 18, true)?;
+        check_len(env, "outCurve", self.curve, 2 * max_points, false)?;
+        check_len(env, "outReport", self.report, report::LEN, false)
+    }
+
+    fn write(&self, env: &Env, u: &Update<'_>) -> Result<jboolean> {
+        let v = u.values;
+        let r = &v.report;
+        self.transform.set_region(env, 0, &v.color_correction_transform)?;
+        self.curve.set_region(env, 0, &v.tonemap_curve.red)?;
+        let mut rep = [0f64; report::LEN];
+        rep[report::RECOMPUTED] = u.recomputed as u8 as f64;
+        rep[report::BOUND] = u.bound;
+        rep[report::MATRIX_MAX_ABS] = r.matrix_max_abs;
+        rep[report::CURVE_MAX_ABS] = r.curve_max_abs;
+        rep[report::CURVE_LIPSCHITZ] = r.curve_lipschitz;
+        rep[report::SCALE] = v.scale;
+        rep[report::CURVE_POINTS] = r.curve_points as f64;
+        rep[report::CURVE_SIMPLIFIED] = r.curve_simplified as u8 as f64;
+        self.report.set_region(env, 0, &rep)?;
+        Ok(u.recomputed)
+    }
+}
+
+fn update(env: &Env, handle: jlong, out: Outputs<'_, '_>, step: impl FnOnce(&mut Camera2Loop) -> std::result::Result<Update<'_>, ConvertError>) -> Result<jboolean> {
+    with_loop(handle, |l| {
+        out.check(env, l.options().max_curve_points)?;
+        let u = step(l)?;
+        out.write(env, &u)
+    })
+}
+
+// ---------------------------------------------------------------------------------
+// Native methods of org.campro.CamProNative (all static).
+
+/// `create(paramsJson: String, maxCurvePoints: Int, maxDenominator: Int, skipTolerance: Double): Long`
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_create<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    json: JString<'local>,
+    max_curve_points: jint,
+    max_denominator: jint,
+    skip_tolerance: jdouble,
+) -> jlong {
+    env.with_env(|env| -> Result<jlong> {
+        non_null("paramsJson", &json)?;
+        let text = json.try_to_string(env)?;
+        create(text.as_bytes(), max_curve_points, max_denominator, skip_tolerance)
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// `createFromBytes(paramsJson: ByteArray, ...): Long` (UTF-8 JSON, e.g. a file's bytes).
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_createFromBytes<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    bytes: JByteArray<'local>,
+    max_curve_points: jint,
+    max_denominator: jint,
+    skip_tolerance: jdouble,
+) -> jlong {
+    env.with_env(|env| -> Result<jlong> {
+        non_null("paramsJson", &bytes)?;
+        let len = bytes.len(env)?;
+        if len > campro::params::MAX_JSON_BYTES {
+            return Err(BridgeError::Argument(format!("paramsJson: {len} bytes; the limit is {}", campro::params::MAX_JSON_BYTES)));
+        }
+        let data = env.convert_byte_array(&bytes)?;
+        create(&data, max_curve_points, max_denominator, skip_tolerance)
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// `createFromAsset(assetManager: Any, path: String, ...): Long`: a parameter file from
+/// the APK's assets, read natively through the NDK's AAssetManager. Android only; on
+/// other hosts it throws `IllegalStateException`.
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_createFromAsset<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    asset_manager: JObject<'local>,
+    path: JString<'local>,
+    max_curve_points: jint,
+    max_denominator: jint,
+    skip_tolerance: jdouble,
+) -> jlong {
+    env.with_env(|env| -> Result<jlong> {
+        non_null("assetManager", &asset_manager)?;
+        non_null("path", &path)?;
+        let path = path.try_to_string(env)?;
+        let data = android::read_asset(env, &asset_manager, &path)?;
+        create(&data, max_curve_points, max_denominator, skip_tolerance)
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// `close(handle: Long)`: frees the handle; a closed or unknown handle throws.
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_close<'local>(mut env: EnvUnowned<'local>, _class: JClass<'local>, handle: jlong) {
+    env.with_env(|_env| -> Result<()> {
+        registry().remove(&handle).map(drop).ok_or_else(|| BridgeError::State(format!("handle {handle:#x} is closed or was never issued by campro")))
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// `liveHandles(): Int`: handles created and not yet closed (leak checks).
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_liveHandles<'local>(mut env: EnvUnowned<'local>, _class: JClass<'local>) -> jint {
+    env.with_env(|_env| -> Result<jint> { Ok(registry().len() as jint) }).resolve::<ThrowJava>()
+}
+
+/// `setMaxCurvePoints(handle: Long, n: Int)`: the device's `TONEMAP_MAX_CURVE_POINTS`.
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_setMaxCurvePoints<'local>(mut env: EnvUnowned<'local>, _class: JClass<'local>, handle: jlong, n: jint) {
+    env.with_env(|_env| -> Result<()> {
+        let n = usize::try_from(n).map_err(|_| BridgeError::Argument(format!("maxCurvePoints: must be positive, got {n}")))?;
+        with_loop(handle, |l| l.set_max_curve_points(n).map_err(|e| arg(e.within("maxCurvePoints"))))
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// `setDngCalibration(handle, illuminant1: Int, forwardMatrix1: IntArray(18), illuminant2: Int, forwardMatrix2: IntArray(18))`:
+/// `SENSOR_REFERENCE_ILLUMINANT1/2` and `SENSOR_FORWARD_MATRIX1/2` for [`updateFromColorTemperature`].
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_setDngCalibration<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    handle: jlong,
+    illuminant1: jint,
+    forward_matrix1: JIntArray<'local>,
+    illuminant2: jint,
+    forward_matrix2: JIntArray<'local>,
+) {
+    env.with_env(|env| -> Result<()> {
+        let cal = DngCalibration {
+            illuminant1: illuminant("illuminant1", illuminant1)?,
+            forward_matrix1: dng_matrix(env, "forwardMatrix1", &forward_matrix1)?,
+            illuminant2: illuminant("illuminant2", illuminant2)?,
+            forward_matrix2: dng_matrix(env, "forwardMatrix2", &forward_matrix2)?,
+        };
+        with_loop(handle, |l| l.set_dng_calibration(cal).map_err(arg))
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// `updateFromTransform(handle, deviceTransform: IntArray(18), outTransform: IntArray(18),
+/// outCurve: FloatArray(>= 2 * maxCurvePoints), outReport: DoubleArray(>= REPORT_LEN)): Boolean`:
+/// one frame, from the `COLOR_CORRECTION_TRANSFORM` of an auto-mode `CaptureResult`.
+/// Returns whether the values changed (the request must be rebuilt); the arrays always
+/// hold the values to send.
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_updateFromTransform<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    handle: jlong,
+    device_transform: JIntArray<'local>,
+    out_transform: JIntArray<'local>,
+    out_curve: JFloatArray<'local>,
+    out_report: JDoubleArray<'local>,
+) -> jboolean {
+    env.with_env(|env| -> Result<jboolean> {
+        let ints: [i32; 18] = read_ints(env, "deviceTransform", &device_transform)?;
+        let device = camera2::matrix_from_rationals(&ints).map_err(|e| arg(e.within("deviceTransform")))?;
+        let out = Outputs { transform: &out_transform, curve: &out_curve, report: &out_report };
+        update(env, handle, out, |l| l.update(&device))
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// `updateFromColorTemperature(handle, kelvin: Double, outTransform, outCurve, outReport): Boolean`:
+/// one frame from a colour temperature, through the DNG calibration (if set) or the
+/// parameter set's `ct_calibration`.
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_updateFromColorTemperature<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    handle: jlong,
+    kelvin: jdouble,
+    out_transform: JIntArray<'local>,
+    out_curve: JFloatArray<'local>,
+    out_report: JDoubleArray<'local>,
+) -> jboolean {
+    env.with_env(|env| -> Result<jboolean> {
+        let out = Outputs { transform: &out_transform, curve: &out_curve, report: &out_report };
+        update(env, handle, out, |l| l.update_ct(kelvin))
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// `readback(requestedTransform: IntArray(18), requestedCurve: FloatArray, requestedCount: Int,
+/// reportedTransform: IntArray(18), reportedCurve: FloatArray, reportedCount: Int, out: DoubleArray(>= 3))`:
+/// how far a `CaptureResult`'s transform and curve are from the request (counts are
+/// floats used, i.e. 2 x points).
+#[unsafe(no_mangle)]
+#[allow(clippy::too_many_arguments)]
+pub extern "system" fn Java_org_campro_CamProNative_readback<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    requested_transform: JIntArray<'local>,
+    requested_curve: JFloatArray<'local>,
+    requested_count: jint,
+    reported_transform: JIntArray<'local>,
+    reported_curve: JFloatArray<'local>,
+    reported_count: jint,
+    out: JDoubleArray<'local>,
+) {
+    env.with_env(|env| -> Result<()> {
+        let rt: [i32; 18] = read_ints(env, "requestedTransform", &requested_transform)?;
+        let gt: [i32; 18] = read_ints(env, "reportedTransform", &reported_transform)?;
+        let rc = read_floats(env, "requestedCurve", &requested_curve, requested_count)?;
+        let gc = read_floats(env, "reportedCurve", &reported_curve, reported_count)?;
+        check_len(env, "out", &out, readback::LEN, false)?;
+        let r = camera2::readback(&rt, &rc, &gt, &gc).map_err(arg)?;
+        let mut vals = [0f64; readback::LEN];
+        vals[readback::MATRIX_MAX_ABS] = r.matrix_max_abs;
+        vals[readback::CURVE_MAX_ABS] = r.curve_max_abs;
+        vals[readback::BOUND] = r.bound;
+        out.set_region(env, 0, &vals)?;
+        Ok(())
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// `selfTestPanic(message: String)`: panics inside a native method, so tests can check
+/// that the panic arrives as a `RuntimeException` and the library keeps working.
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_selfTestPanic<'local>(mut env: EnvUnowned<'local>, _class: JClass<'local>, message: JString<'local>) {
+    env.with_env(|env| -> Result<()> {
+        let m = if message.is_null() { "null".to_string() } else { message.try_to_string(env)? };
+        panic!("self-test panic: {m}");
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// Android-only glue: logging to logcat and reading the APK's assets.
+#[cfg(target_os = "android")]
+mod android {
+    use super::{BridgeError, Result};
+    use jni::objects::JObject;
+    use jni::refs::Reference;
+    use jni::Env;
+    use std::ffi::CString;
+    use std::io::Read;
+    use std::ptr::NonNull;
+
+    /// Routes `log` to logcat under the tag `campro` (idempotent).
+    pub fn init_logging() {
+        android_logger::init_once(android_logger::Config::default().with_tag("campro").with_max_level(log::LevelFilter::Info));
+    }
+
+    pub fn read_asset(env: &mut Env, manager: &JObject, path: &str) -> Result<Vec<u8>> {
+        init_logging();
+        // SAFETY: `manager` is a live local reference to an android.content.res.AssetManager
+        // for the duration of this native call, and `env` is this thread's JNIEnv.
+        let raw = unsafe { ndk_sys::AAssetManager_fromJava(env.get_raw() as *mut _, manager.as_raw() as _) };
+        let raw = NonNull::new(raw).ok_or_else(|| BridgeError::Argument("assetManager: not an android.content.res.AssetManager".into()))?;
+        // SAFETY: the pointer came from AAssetManager_fromJava and outlives this call.
+        let mgr = unsafe { ndk::asset::AssetManager::from_ptr(raw) };
+        let c = CString::new(path).map_err(|_| BridgeError::Argument("path: contains a NUL byte".into()))?;
+        let asset = mgr.open(&c).ok_or_else(|| BridgeError::Argument(format!("path: no asset named '{path}'")))?;
+        let limit = campro::params::MAX_JSON_BYTES;
+        if asset.length() > limit {
+            return Err(BridgeError::Argument(format!("path: asset '{path}' is {} bytes; the limit is {limit}", asset.length())));
+        }
+        let mut data = Vec::with_capacity(asset.length());
+        asset.take(limit as u64 + 1).read_to_end(&mut data).map_err(|e| BridgeError::Argument(format!("path: reading '{path}': {e}")))?;
+        Ok(data)
+    }
+}
+
+#[cfg(not(target_os = "android"))]
+mod android {
+    use super::{BridgeError, Result};
+    use jni::objects::JObject;
+    use jni::Env;
+
+    pub fn read_asset(_env: &mut Env, _manager: &JObject, path: &str) -> Result<Vec<u8>> {
+        Err(BridgeError::State(format!("createFromAsset('{path}'): APK assets exist only on Android; use create or createFromBytes")))
+    }
+}

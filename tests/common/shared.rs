@@ -1,0 +1,28 @@
+//! Locating `../shared` (real data and models) for host tests of every workspace crate.
+
+use std::path::PathBuf;
+
+/// The workspace root (the folder holding `Cargo.lock`), from the testing crate's manifest.
+pub fn workspace_root() -> PathBuf {
+    let here = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    here.ancestors().find(|d| d.join("Cargo.lock").exists()).unwrap_or(&here).to_path_buf()
+}
+
+/// `../shared` beside the project (or `$CAMPRO_SHARED`), joined with `rel`, if present.
+/// Absent: prints why the test is skipped and returns `None`; under CI (`CI=true`) a
+/// missing file fails the test instead.
+pub fn shared(rel: &str) -> Option<PathBuf> {
+    let root = std::env::var_os("CAMPRO_SHARED")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace_root().join("../shared"));
+    let p = root.join(rel);
+    if p.exists() {
+        return Some(p);
+    }
+    if std::env::var("CI").map(|v| v == "true").unwrap_or(false) {
+        panic!("CI=true but the shared file {} is missing", p.display());
+    }
+    eprintln!("SKIP: {} not found (set CAMPRO_SHARED to the shared/ folder)", p.display());
+    None
+}
+

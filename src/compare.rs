@@ -91,6 +91,31 @@ pub fn code_cube(step: usize) -> Vec<[u8; 3]> {
     out
 }
 
+/// A `w` x `h` interleaved RGB8 test frame that looks like a photo to a cache: smooth
+/// colour gradients, a few flat regions and fine texture (deterministic).
+pub fn test_frame(w: usize, h: usize) -> Vec<u8> {
+    let mut out = Vec::with_capacity(w * h * 3);
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    for y in 0..h {
+        for x in 0..w {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let noise = ((state >> 59) as i32) - 16; // texture, ±16 codes
+            let (u, v) = (x as f64 / w as f64, y as f64 / h as f64);
+            let flat = (x / 240 + y / 270) % 5 == 0; // flat patches (walls, sky)
+            let base = if flat {
+                [0.8, 0.75, 0.7]
+            } else {
+                [0.5 + 0.4 * (6.0 * u).sin(), 0.5 + 0.4 * (5.0 * v + 1.0).sin(), 0.5 + 0.4 * (4.0 * (u + v)).cos()]
+            };
+            for c in base {
+                let n = if flat { 0 } else { noise };
+                out.push(((c * 255.0) as i32 + n).clamp(0, 255) as u8);
+            }
+        }
+    }
+    out
+}
+
 /// Result of comparing a deployment on a set of pixels.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DeviceError {

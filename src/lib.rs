@@ -17,6 +17,7 @@ pub mod color_temp;
 pub mod compare;
 pub mod emulate;
 pub mod error;
+pub mod lut3d;
 pub mod params;
 pub mod pipeline;
 pub mod rational;

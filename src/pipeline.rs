@@ -13,6 +13,8 @@
 use crate::ccm;
 use crate::params::Params;
 
+pub mod fast;
+
 /// `clamp(x^γ, 0, 1)`; NaN maps to 0.
 #[inline]
 pub fn degamma(x: f64, gamma: f64) -> f64 {

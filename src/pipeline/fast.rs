@@ -1,0 +1,297 @@
+//! Fast paths of the desktop pipeline, each checked against the f64 reference
+//! ([`super::Prepared`]) with a stated error.
+//!
+//! - [`Exact8`]: 8-bit in, 8-bit out, **bit-identical** to the reference's rounded
+//!   output. The matrix is split per input channel into tables of `CCM[:, j] · degamma(x)`
+//!   (f32, three 4-lane loads per pixel); the clipped sum indexes a table of 2^16 cells
+//!   over [0, 1] holding the rounded curve output wherever it is the same for every value
+//!   the cell (widened by the f32 error bound) can hold. Cells where a rounding boundary
+//!   falls inside are marked, and their pixels take the reference path. So the error is
+//!   the reference's own rounding (<= 0.5 LSB); the marked fraction, reported by
+//!   [`Exact8::fallback_fraction`], grows with the curve's slope.
+//! - [`F32Path`]: any depth in and out, in f32: a degamma table over every input code, the
+//!   3x3 matrix, and the curve by exact piecewise-linear interpolation. Its error against
+//!   the reference is stated by [`F32Path::error_bound`] (f32 rounding amplified by the
+//!   curve's slope) plus the output rounding.
+//! - Stage elision ([`Elision`]): an identity matrix skips the matrix, an identity curve
+//!   skips the curve; both are exact.
+
+use super::{degamma, Depth, Prepared};
+use crate::ccm;
+use crate::params::Params;
+use crate::tone_curve::ToneCurve;
+
+/// Cells of [`Exact8`]'s output table over [0, 1] (2^16; the last cell holds t = 1).
+const FINE: usize = 1 << 16;
+/// Marks a cell whose pixels take the reference path.
+const AMBIGUOUS: u16 = 0x100;
+
+/// Round-half-up to an output code, as [`Prepared::run`] does.
+#[inline]
+fn quantize(v: f64, max: f64) -> u16 {
+    (v * max + 0.5) as u16
+}
+
+/// Which stages an image path can skip for a parameter set, exactly.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Elision {
+    /// The CCM is exactly the identity: `clip(CCM · v) = v` for linear v in [0, 1].
+    pub matrix: bool,
+    /// The curve is exactly `y = x` (every knot on the line): interpolation is the identity.
+    pub curve: bool,
+}
+
+impl Elision {
+    pub fn of(p: &Params) -> Self {
+        Self { matrix: p.ccm == ccm::IDENTITY, curve: p.tone_curve.is_identity(0.0) }
+    }
+}
+
+/// 8-bit RGB in, 8-bit RGB out, bit-identical to [`Prepared::run`] with 8-bit output.
+#[derive(Debug, Clone)]
+pub struct Exact8<'a> {
+    reference: Prepared<'a>,
+    /// `terms[256 * j + x] = (CCM[0][j], CCM[1][j], CCM[2][j], 0) · degamma(x / 255)`.
+    terms: Vec<[f32; 4]>,
+    /// FINE + 1 cells: the output code, or [`AMBIGUOUS`].
+    cells: Vec<u16>,
+    ambiguous: usize,
+    elision: Elision,
+}
+
+impl<'a> Exact8<'a> {
+    /// Builds the tables (about a millisecond).
+    pub fn new(params: &'a Params) -> Self {
+        let reference = Prepared::new(params, Depth::Eight);
+        let d: Vec<f64> = (0..256).map(|c| degamma(c as f64 / 255.0, params.degamma)).collect();
+        let m = &params.ccm;
+        let mut terms = vec![[0f32; 4]; 3 * 256];
+        for j in 0..3 {
+            for x in 0..256 {
+                terms[256 * j + x] = [(m[0][j] * d[x]) as f32, (m[1][j] * d[x]) as f32, (m[2][j] * d[x]) as f32, 0.0];
+            }
+        }
+        // |f32 sum - f64 reference sum| <= 3 · 2^-24 · Σ_j |CCM_cj| (one rounding per
+        // term, two per addition, partial sums bounded by the row's absolute sum), plus
+        // the reference's own f64 rounding.
+        let row = m.iter().map(|r| r.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
+        let delta = 3.0 * row * f32::EPSILON as f64 / 2.0 * 1.0000001 + 1e-12;
+        let (cells, ambiguous) = cell_table(&params.tone_curve, delta);
+        Self { reference, terms, cells, ambiguous, elision: Elision::of(params) }
+    }
+
+    /// Fraction of the output table's cells whose pixels take the reference path.
+    pub fn fallback_fraction(&self) -> f64 {
+        self.ambiguous as f64 / self.cells.len() as f64
+    }
+
+    /// Stages this parameter set lets the path skip.
+    pub fn elision(&self) -> Elision {
+        self.elision
+    }
+
+    /// One pixel.
+    #[inline]
+    pub fn pixel(&self, rgb: [u8; 3]) -> [u8; 3] {
+        self.pixel_flagged(rgb).0
+    }
+
+    /// One pixel, and whether it took the reference path.
+    #[inline(always)]
+    fn pixel_flagged(&self, rgb: [u8; 3]) -> ([u8; 3], bool) {
+        let (a, b, c) = (&self.terms[rgb[0] as usize], &self.terms[256 + rgb[1] as usize], &self.terms[512 + rgb[2] as usize]);
+        // Four lanes (the fourth is padding) so the sums, clamps and conversions vectorise.
+        let mut idx = [0i32; 4];
+        for k in 0..4 {
+            idx[k] = ((a[k] + b[k] + c[k]).max(0.0).min(1.0) * FINE as f32) as i32;
+        }
+        let e = [self.cells[idx[0] as usize], self.cells[idx[1] as usize], self.cells[idx[2] as usize]];
+        if (e[0] | e[1] | e[2]) & AMBIGUOUS == 0 {
+            return ([e[0] as u8, e[1] as u8, e[2] as u8], false);
+        }
+        let v = self.reference.pixel(rgb.map(u16::from));
+        (v.map(|x| quantize(x, 255.0) as u8), true)
+    }
+
+    /// Interleaved RGB8 in and out; `src.len() == dst.len()`, a multiple of 3. Returns how
+    /// many pixels took the reference path.
+    pub fn run(&self, src: &[u8], dst: &mut [u8]) -> usize {
+        assert_eq!(src.len(), dst.len(), "source and destination sample counts differ");
+        let mut slow = 0;
+        for (s, d) in src.chunks_exact(3).zip(dst.chunks_exact_mut(3)) {
+            let (o, f) = self.pixel_flagged([s[0], s[1], s[2]]);
+            slow += f as usize;
+            d.copy_from_slice(&o);
+        }
+        slow
+    }
+
+    /// [`Exact8::run`] that reuses the previous output while the input pixel repeats
+    /// (flat regions, clipped highlights): same result, less work on such images.
+    pub fn run_runs(&self, src: &[u8], dst: &mut [u8]) -> usize {
+        assert_eq!(src.len(), dst.len(), "source and destination sample counts differ");
+        let mut slow = 0;
+        let mut last_in = [0u8; 3];
+        let mut last_out = self.pixel(last_in);
+        for (s, d) in src.chunks_exact(3).zip(dst.chunks_exact_mut(3)) {
+            let px = [s[0], s[1], s[2]];
+            if px != last_in {
+                let (o, f) = self.pixel_flagged(px);
+                slow += f as usize;
+                last_in = px;
+                last_out = o;
+            }
+            d.copy_from_slice(&last_out);
+        }
+        slow
+    }
+}
+
+/// The whole pipeline in f32, for any input and output depth.
+#[derive(Debug, Clone)]
+pub struct F32Path {
+    degamma: Vec<f32>,
+    m: [[f32; 3]; 3],
+    /// Segment starts, values and slopes of the curve.
+    x0: Vec<f32>,
+    y0: Vec<f32>,
+    slope: Vec<f32>,
+    /// First segment that can hold a t in each of `GRID` equal cells.
+    first: Vec<u32>,
+    /// Segments per unit when the knots are evenly spaced (index = floor(t · n)).
+    uniform: Option<f32>,
+    elision: Elision,
+    bound: f64,
+}
+
+const GRID: usize = 1024;
+
+impl F32Path {
+    pub fn new(params: &Params, input: Depth) -> Self {
+        let max = input.max();
+        let degamma = (0..=max).map(|c| degamma(c as f64 / max as f64, params.degamma) as f32).collect();
+        let m = params.ccm.map(|r| r.map(|v| v as f32));
+        let c = &params.tone_curve;
+        let (xs, ys) = (c.x(), c.y());
+        let segs = xs.len() - 1;
+        let slope: Vec<f64> = (0..segs).map(|i| (ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i])).collect();
+        let first = (0..GRID)
+            .map(|g| {
+                let t = g as f64 / GRID as f64;
+                (xs.partition_point(|&v| v <= t).saturating_sub(1).min(segs - 1)) as u32
+            })
+            .collect();
+        // Error in output units: the matrix input t carries at most 5u·S (degamma table,
+        // products, two sums; S the largest absolute row sum), amplified by the slope L;
+        // the segment evaluation y0 + s·(t - x0) adds u·(1 + 3L); knot positions rounded to
+        // f32 move segment ends by u, costing u·L. u = 2^-24.
+        let u = f32::EPSILON as f64 / 2.0;
+        let s = params.ccm.iter().map(|r| r.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
+        let l = c.max_slope();
+        let bound = (5.0 * u * s * l + u * (1.0 + 4.0 * l)) * 1.01;
+        Self {
+            degamma,
+            m,
+            x0: xs[..segs].iter().map(|&v| v as f32).collect(),
+            y0: ys[..segs].iter().map(|&v| v as f32).collect(),
+            slope: slope.iter().map(|&v| v as f32).collect(),
+            first,
+            uniform: c.is_uniform().then_some(segs as f32),
+            elision: Elision::of(params),
+            bound,
+        }
+    }
+
+    /// Bound on |this path - reference| before output rounding, output units.
+    pub fn error_bound(&self) -> f64 {
+        self.bound
+    }
+
+    #[inline(always)]
+    fn curve(&self, t: f32) -> f32 {
+        let last = self.x0.len() - 1;
+        let s = if let Some(n) = self.uniform {
+            ((t * n) as i32 as usize).min(last)
+        } else {
+            let mut s = self.first[((t * GRID as f32) as i32 as usize).min(GRID - 1)] as usize;
+            while s < last && t >= self.x0[s + 1] {
+                s += 1;
+            }
+            s
+        };
+        self.y0[s] + self.slope[s] * (t - self.x0[s])
+    }
+
+    /// One pixel of integer codes (clamped to the input depth) to output in [0, 1].
+    #[inline(always)]
+    pub fn pixel(&self, rgb: [u16; 3]) -> [f32; 3] {
+        let top = self.degamma.len() - 1;
+        let d = rgb.map(|c| self.degamma[(c as usize).min(top)]);
+        // (t in [0, 1] after the clamp, so the i32 conversions below cannot saturate.)
+        let lin = if self.elision.matrix {
+            d
+        } else {
+            let m = &self.m;
+            [0, 1, 2].map(|i| (m[i][0] * d[0] + m[i][1] * d[1] + m[i][2] * d[2]).clamp(0.0, 1.0))
+        };
+        if self.elision.curve {
+            lin
+        } else {
+            lin.map(|t| self.curve(t))
+        }
+    }
+
+    /// Interleaved RGB codes in and out, like [`Prepared::run`].
+    pub fn run<S: Copy + Into<u16>, D: TryFrom<u16> + Copy>(&self, src: &[S], dst: &mut [D], out: Depth) {
+        assert_eq!(src.len(), dst.len(), "source and destination sample counts differ");
+        let scale = out.max() as f32;
+        for (s, d) in src.chunks_exact(3).zip(dst.chunks_exact_mut(3)) {
+            let v = self.pixel([s[0].into(), s[1].into(), s[2].into()]);
+            for k in 0..3 {
+                let q = (v[k] * scale + 0.5) as u16;
+                d[k] = D::try_from(q).ok().expect("output depth fits the sample type");
+            }
+        }
+    }
+}
+
+/// For each cell `[k, k+1) / FINE` widened by `delta`: the rounded 8-bit curve output if
+/// it is the same over the whole interval, else [`AMBIGUOUS`]. Returns the table and
+/// the number of ambiguous cells.
+fn cell_table(curve: &ToneCurve, delta: f64) -> (Vec<u16>, usize) {
+    let (xs, n) = (curve.x(), FINE as f64);
+    let mut cells = Vec::with_capacity(FINE + 1);
+    let mut ambiguous = 0;
+    let mut knot = 0; // first knot index with x > lo
+    for k in 0..=FINE {
+        let lo = (k as f64 / n - delta).max(0.0);
+        let hi = ((k + 1) as f64 / n + delta).min(1.0);
+        // Curve values at the interval's ends. At a knot `eval` is exact; elsewhere it is
+        // within a few ulps of the true value, so widen by 1e-15 (f64, values <= 1).
+        let at = |t: f64| {
+            let y = curve.eval(t);
+            let exact = xs.binary_search_by(|v| v.total_cmp(&t)).is_ok();
+            if exact { (y, y) } else { (y - 1e-15, y + 1e-15) }
+        };
+        let (a, b) = (at(lo), at(hi));
+        let (mut ymin, mut ymax) = (a.0.min(b.0), a.1.max(b.1));
+        while knot < xs.len() && xs[knot] <= lo {
+            knot += 1;
+        }
+        let mut i = knot;
+        while i < xs.len() && xs[i] < hi {
+            let y = curve.y()[i];
+            ymin = ymin.min(y);
+            ymax = ymax.max(y);
+            i += 1;
+        }
+        let (qa, qb) = (quantize(ymin, 255.0), quantize(ymax, 255.0));
+        if qa == qb {
+            cells.push(qa);
+        } else {
+            cells.push(AMBIGUOUS);
+            ambiguous += 1;
+        }
+    }
+    (cells, ambiguous)
+}

@@ -1,0 +1,140 @@
+//! Every fast path against the f64 reference, over every 8-bit code triple (2^24) or
+//! dense 16-bit samples, held to its stated error.
+
+use campro::compare::random_pixels;
+use campro::pipeline::fast::{Exact8, F32Path};
+use campro::pipeline::{Depth, Prepared};
+use campro::{Params, ToneCurve};
+
+fn all_triples() -> Vec<u8> {
+    let mut v = Vec::with_capacity(3 << 24);
+    for r in 0..=255u8 {
+        for g in 0..=255u8 {
+            for b in 0..=255u8 {
+                v.extend([r, g, b]);
+            }
+        }
+    }
+    v
+}
+
+fn sets() -> Vec<Params> {
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/params/");
+    let mut v: Vec<Params> = ["identity", "color-inversion", "srgb-passthrough"].iter().map(|n| Params::from_file(std::path::Path::new(&format!("{root}{n}.json"))).unwrap()).collect();
+    // Like the paper's strong checkpoints: entries near ±5, a jagged curve (slopes ~30).
+    let strong = [[1.2101, 0.0430, -4.6679], [-4.3933, 4.1114, -2.2755], [0.2930, -3.3570, 4.9287]];
+    let jag = ToneCurve::uniform((0..32).map(|i| if i % 2 == 0 { 0.05 * (i % 7) as f64 } else { 1.0 - 0.03 * i as f64 }).collect()).unwrap();
+    v.push(Params::new(strong, jag, 2.2).unwrap());
+    // Jumps and plateaus on a non-uniform grid.
+    let steps = ToneCurve::new(vec![0.0, 0.2, 0.2001, 0.5, 0.50001, 1.0], vec![0.0, 0.0, 1.0, 1.0, 0.3, 0.9]).unwrap();
+    v.push(Params::new([[0.9, 0.2, -0.1], [0.1, 0.8, 0.1], [-0.2, 0.1, 1.1]], steps, 2.2).unwrap());
+    v
+}
+
+#[test]
+fn exact8_is_bit_identical_to_the_reference_on_every_code_triple() {
+    let src = all_triples();
+    let src16: Vec<u16> = src.iter().map(|&v| v as u16).collect();
+    let mut want = vec![0u16; src.len()];
+    let mut got = vec![0u8; src.len()];
+    for p in sets() {
+        Prepared::new(&p, Depth::Eight).run(&src16, &mut want, Depth::Eight);
+        let fast = Exact8::new(&p);
+        let slow = fast.run(&src, &mut got);
+        let diff = want.iter().zip(&got).filter(|(a, b)| **a != **b as u16).count();
+        assert_eq!(diff, 0, "{}: {diff} samples differ", p.name);
+        eprintln!("{}: {:.2}% of cells and {:.2}% of pixels took the reference path", p.name, 100.0 * fast.fallback_fraction(), 100.0 * slow as f64 / (1 << 24) as f64);
+    }
+}
+
+#[test]
+fn exact8_falls_back_rarely_for_gentle_curves() {
+    let p = &sets()[1]; // colour inversion: slope up to ~6 near black
+    let f = Exact8::new(p);
+    assert!(f.fallback_fraction() < 0.05, "{}", f.fallback_fraction());
+}
+
+#[test]
+fn f32_path_within_half_an_lsb_plus_its_bound() {
+    let src: Vec<u8> = all_triples().into_iter().step_by(7).collect::<Vec<_>>();
+    let src: Vec<u8> = src[..src.len() / 3 * 3].to_vec();
+    for p in sets() {
+        let reference = Prepared::new(&p, Depth::Eight);
+        let f = F32Path::new(&p, Depth::Eight);
+        let mut worst: f64 = 0.0;
+        for px in src.chunks_exact(3) {
+            let want = reference.pixel([px[0] as u16, px[1] as u16, px[2] as u16]);
+            let got = f.pixel([px[0] as u16, px[1] as u16, px[2] as u16]);
+            for k in 0..3 {
+                worst = worst.max((got[k] as f64 - want[k]).abs());
+            }
+        }
+        assert!(worst <= f.error_bound(), "{}: measured {worst} > bound {}", p.name, f.error_bound());
+        // Rounded to 8 bits: within 0.5 LSB plus the bound.
+        let mut out = vec![0u8; src.len()];
+        f.run(&src, &mut out, Depth::Eight);
+        for (px, o) in src.chunks_exact(3).zip(out.chunks_exact(3)) {
+            let want = reference.pixel([px[0] as u16, px[1] as u16, px[2] as u16]);
+            for k in 0..3 {
+                assert!((o[k] as f64 - want[k] * 255.0).abs() <= 0.5 + f.error_bound() * 255.0 + 1e-9);
+            }
+        }
+    }
+}
+
+#[test]
+fn f32_path_on_16_bit_input() {
+    for p in sets() {
+        let reference = Prepared::new(&p, Depth::Sixteen);
+        let f = F32Path::new(&p, Depth::Sixteen);
+        let px: Vec<u16> = random_pixels(200_000, 9).iter().zip(random_pixels(200_000, 10)).flat_map(|(a, b)| [0, 1, 2].map(|k| (a[k] as u16) << 8 | b[k] as u16)).collect();
+        let mut out = vec![0u16; px.len()];
+        f.run(&px, &mut out, Depth::Sixteen);
+        for (s, o) in px.chunks_exact(3).zip(out.chunks_exact(3)) {
+            let want = reference.pixel([s[0], s[1], s[2]]);
+            for k in 0..3 {
+                let e = (o[k] as f64 - want[k] * 65535.0).abs();
+                assert!(e <= 0.5 + f.error_bound() * 65535.0 + 1e-6, "{}: {e} LSB16", p.name);
+            }
+        }
+    }
+}
+
+#[test]
+fn run_reuse_gives_the_same_image() {
+    let frame = campro::compare::test_frame(640, 360);
+    for p in sets() {
+        let f = Exact8::new(&p);
+        let (mut a, mut b) = (vec![0u8; frame.len()], vec![0u8; frame.len()]);
+        f.run(&frame, &mut a);
+        f.run_runs(&frame, &mut b);
+        assert_eq!(a, b, "{}", p.name);
+    }
+}
+
+#[test]
+fn lut3d_errors_within_their_bound_and_shrink_with_size() {
+    use campro::lut3d::{Interp, Lut3d};
+    let px = campro::compare::random_pixels(300_000, 4);
+    for p in sets().into_iter().take(4) {
+        let reference = Prepared::new(&p, Depth::Eight);
+        let want: Vec<[f64; 3]> = px.iter().map(|c| reference.pixel(c.map(u16::from))).collect();
+        for interp in [Interp::Trilinear, Interp::Tetrahedral] {
+            let mut prev = f64::INFINITY;
+            for n in [17, 33, 65] {
+                let lut = Lut3d::bake(&p, n);
+                let worst = px
+                    .iter()
+                    .zip(&want)
+                    .map(|(c, w)| {
+                        let g = lut.eval(c.map(|v| v as f32 / 255.0), interp);
+                        (0..3).map(|k| (g[k] as f64 - w[k]).abs()).fold(0.0, f64::max)
+                    })
+                    .fold(0.0, f64::max);
+                assert!(worst <= lut.error_bound(), "{} {interp:?} {n}: {worst} > {}", p.name, lut.error_bound());
+                assert!(worst <= prev * 1.05 + 1e-6, "{} {interp:?}: error grew with size ({prev} -> {worst} at {n})", p.name);
+                prev = worst;
+            }
+        }
+    }
+}

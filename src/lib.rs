@@ -21,6 +21,7 @@ pub mod lut3d;
 pub mod params;
 pub mod pipeline;
 pub mod rational;
+pub mod stress;
 pub mod targets;
 pub mod tone_curve;
 

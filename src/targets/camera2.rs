@@ -149,8 +149,22 @@ pub fn curve_from_pairs(pairs: &[f32]) -> Result<ToneCurve, ValidationError> {
 
 /// The smallest `s >= 1` that brings every entry of `m` into [`MATRIX_RANGE`].
 pub fn range_scale(m: &Mat3) -> f64 {
+    range_scale_within(m, 0.0)
+}
+
+/// The smallest `s >= 1` that brings every entry of `m` into [`MATRIX_RANGE`] shrunk by
+/// `margin` at both ends, so that rounding each entry by up to `margin` stays in range.
+pub fn range_scale_within(m: &Mat3, margin: f64) -> f64 {
     let (lo, hi) = ccm::min_max(m);
-    1.0f64.max(hi / MATRIX_RANGE.1).max(lo / MATRIX_RANGE.0)
+    1.0f64.max(hi / (MATRIX_RANGE.1 - margin)).max(lo / (MATRIX_RANGE.0 + margin))
+}
+
+/// Largest rounding error of one matrix entry under `mode`: half a unit of the
+/// (largest) denominator; the best approximation is never worse than the fixed one.
+pub fn rational_error_bound(mode: RationalMode) -> f64 {
+    match mode {
+        RationalMode::Best { max_denominator: d } | RationalMode::Fixed { denominator: d } => 0.5 / d.max(1) as f64,
+    }
 }
 
 /// Maps CamPro parameters onto Camera2 for a device whose own colour transform is
@@ -208,7 +222,9 @@ pub fn curve_part(params: &Params, scale: f64, max_points: usize) -> CurvePart {
 pub(crate) fn convert_with(params: &Params, device: &Mat3, opts: &Options, cache: &mut Option<CurvePart>) -> Result<Camera2Values, ConvertError> {
     check_matrix("device_ccm", device, crate::params::CCM_LIMIT)?;
     let composed = ccm::mul(&params.ccm, device);
-    let scale = range_scale(&composed);
+    // Leave room for the rounding: coarse denominators (say 1/2) could otherwise round an
+    // in-range entry out of Camera2's range.
+    let scale = range_scale_within(&composed, rational_error_bound(opts.rational));
     let wanted = ccm::scale(&composed, 1.0 / scale);
 
     let mut cst = [0i32; 18];
@@ -427,12 +443,14 @@ mod tests {
     fn out_of_range_matrix_is_scaled_and_folded() {
         let p = params([[4.5, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -2.0]], vec![0.0, 0.7, 0.2, 1.0]);
         let v = convert(&p, &ccm::IDENTITY, &Options::default()).unwrap();
-        assert_eq!(v.scale, 1.5);
+        // 4.5 / 3 = 1.5, with room for half a unit of the 2^16 denominator.
+        let s = 4.5 / (3.0 - 0.5 / 65536.0);
+        assert_eq!(v.scale, s);
         let (lo, hi) = ccm::min_max(&v.matrix());
         assert!(lo >= MATRIX_RANGE.0 && hi <= MATRIX_RANGE.1);
-        // Pin of each knot divided by 1.5, then a flat tail to (1, 1).
+        // Pin of each knot divided by s, then a flat tail to (1, 1).
         let x: Vec<f32> = v.tonemap_curve.red.iter().step_by(2).copied().collect();
-        assert_eq!(x, vec![0.0, (1.0f64 / 3.0 / 1.5) as f32, (2.0f64 / 3.0 / 1.5) as f32, (1.0f64 / 1.5) as f32, 1.0]);
+        assert_eq!(x, vec![0.0, (1.0f64 / 3.0 / s) as f32, (2.0f64 / 3.0 / s) as f32, (1.0f64 / s) as f32, 1.0]);
     }
 
     #[test]

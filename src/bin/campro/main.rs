@@ -5,6 +5,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use campro::ccm::{self, Mat3};
 use campro::compare::{self, DeviceError};
 use campro::emulate::DeviceModel;
+use campro::pipeline::fast::Exact8;
 use campro::pipeline::{Depth, Prepared};
 use campro::targets::camera2::{self, Camera2Values, Options, RationalMode};
 use campro::Params;
@@ -15,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// The bundled default parameter set of `campro demo`.
-const DEFAULT_PARAMS: &str = include_str!("../../params/color-inversion.json");
+const DEFAULT_PARAMS: &str = include_str!("../../../params/color-inversion.json");
 
 #[derive(Parser)]
 #[command(name = "campro", version, about = "CamPro anti-facial-recognition ISP parameters: simulate, convert to Camera2, compare")]
@@ -320,6 +321,7 @@ fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force: boo
     bar.set_style(indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta}").unwrap());
     // The 16-bit degamma table (65536 powers) is built only if a 16-bit image turns up.
     let prepared8 = Prepared::new(p, Depth::Eight);
+    let fast8 = Exact8::new(p);
     let prepared16 = std::sync::OnceLock::new();
     let failed = AtomicUsize::new(0);
     pool.install(|| {
@@ -327,7 +329,7 @@ fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force: boo
             let r = if !force && o.exists() {
                 Err(anyhow!("{} exists (use --force to overwrite)", o.display()))
             } else {
-                simulate_one(&prepared8, &prepared16, i, o, depth, force)
+                simulate_one(&fast8, &prepared8, &prepared16, i, o, depth, force)
             };
             if let Err(e) = r {
                 bar.suspend(|| eprintln!("error: {}: {e:#}", i.display()));
@@ -345,18 +347,28 @@ fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force: boo
     Ok(())
 }
 
-fn simulate_one<'a>(p8: &Prepared<'a>, p16: &std::sync::OnceLock<Prepared<'a>>, input: &Path, output: &Path, depth: Depth, force: bool) -> Result<()> {
+fn simulate_one<'a>(fast8: &Exact8<'a>, p8: &Prepared<'a>, p16: &std::sync::OnceLock<Prepared<'a>>, input: &Path, output: &Path, depth: Depth, force: bool) -> Result<()> {
     let reader = image::ImageReader::open(input)?.with_guessed_format()?;
     let img = reader.decode()?;
     let (w, h) = (img.width(), img.height());
     let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
+    let row = 3 * w as usize;
+    if !sixteen && depth == Depth::Eight {
+        // 8 bits in and out: the table path, bit-identical to the reference.
+        let src = img.into_rgb8().into_raw();
+        let mut dst = vec![0u8; src.len()];
+        src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| {
+            fast8.run_runs(s, d);
+        });
+        let wide: Vec<u16> = dst.into_iter().map(u16::from).collect();
+        return write_atomic(output, &encode_png(&wide, w, h, depth)?, force);
+    }
     let (src, prep): (Vec<u16>, &Prepared) = if sixteen {
         (img.into_rgb16().into_raw(), p16.get_or_init(|| Prepared::new(p8.params(), Depth::Sixteen)))
     } else {
         (img.into_rgb8().into_raw().into_iter().map(u16::from).collect(), p8)
     };
     let mut dst = vec![0u16; src.len()];
-    let row = 3 * w as usize;
     src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| prep.run(s, d, depth));
     let png = encode_png(&dst, w, h, depth)?;
     write_atomic(output, &png, force)

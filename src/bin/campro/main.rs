@@ -1,6 +1,8 @@
 //! `campro`: the desktop command-line tool. It only parses arguments, reads and writes
 //! files and prints; every computation is a call into the `campro` library.
 
+mod bench;
+
 use anyhow::{anyhow, bail, Context, Result};
 use campro::ccm::{self, Mat3};
 use campro::compare::{self, DeviceError};
@@ -95,6 +97,24 @@ enum Cmd {
         seed: u64,
         #[arg(long, value_enum, default_value_t = Report::Text)]
         format: Report,
+    },
+    /// Print the run-time-versus-error table (image paths, Camera2 updates, skips) as Markdown.
+    Bench {
+        /// Parameters to use instead of a strong, paper-like set.
+        #[arg(long)]
+        params: Option<PathBuf>,
+        /// Fewer repetitions and a smaller error sample (for CI).
+        #[arg(long)]
+        quick: bool,
+    },
+    /// Randomised numerical soak: adversarial cases checked against every invariant until time runs out.
+    Stress {
+        /// How long to run.
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+        /// First seed (cases use seed, seed+1, ...).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
     },
     /// Run on the bundled default (colour inversion) and a built-in chart: before/after PNGs, Camera2 values, error report.
     Demo {
@@ -220,6 +240,17 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Cmd::Demo { output, params } => demo(&output, params.as_deref()),
+        Cmd::Bench { params, quick } => {
+            let p = match params {
+                Some(path) => load_params(&path)?,
+                None => bench::default_params(),
+            };
+            for line in bench::run(&p, quick) {
+                println!("{line}");
+            }
+            Ok(())
+        }
+        Cmd::Stress { seconds, seed } => stress(seconds, seed),
     }
 }
 
@@ -447,5 +478,24 @@ fn demo(out: &Path, params: Option<&Path>) -> Result<()> {
     );
     println!("\nSimulated device vs desktop pipeline:");
     print_comparison(&comparison(&p, &ccm::IDENTITY, &v, &DeviceModel::default(), 100_000, 1)?);
+    Ok(())
+}
+
+fn stress(seconds: f64, seed: u64) -> Result<()> {
+    if !(seconds.is_finite() && seconds >= 0.0) {
+        bail!("--seconds must be a finite number >= 0, got {seconds}");
+    }
+    let start = std::time::Instant::now();
+    let (mut converted, mut refused) = (0u64, 0u64);
+    let mut s = seed;
+    while start.elapsed().as_secs_f64() < seconds {
+        match campro::stress::check(&campro::stress::random_case(s)) {
+            Ok(campro::stress::Outcome::Converted) => converted += 1,
+            Ok(campro::stress::Outcome::Refused) => refused += 1,
+            Err(e) => bail!("invariant broken after {} cases: {e}", converted + refused),
+        }
+        s = s.wrapping_add(1);
+    }
+    println!("stress: {} cases in {:.1} s (seeds {seed}..{s}): {converted} converted, {refused} refused with a named error, 0 invariants broken", converted + refused, start.elapsed().as_secs_f64());
     Ok(())
 }

@@ -1,0 +1,225 @@
+//! `campro bench`: one table of run time against error for every path and setting,
+//! with the copy baseline measured in the same run. Medians over repeated runs.
+
+use campro::camera_loop::Camera2Loop;
+use campro::ccm::{self, Mat3};
+use campro::color_temp::DngCalibration;
+use campro::compare::{random_pixels, test_frame};
+use campro::lut3d::{Interp, Lut3d};
+use campro::pipeline::fast::{Exact8, F32Path};
+use campro::pipeline::{Depth, Prepared};
+use campro::targets::camera2::{convert, Options, RationalMode};
+use campro::{Params, ToneCurve};
+use rayon::prelude::*;
+use std::hint::black_box;
+use std::time::Instant;
+
+const PHONE: Mat3 = [[1.78, -0.62, -0.16], [-0.28, 1.62, -0.34], [0.02, -0.71, 1.69]];
+
+/// Median seconds of `f` over `runs` runs (after one warm-up).
+fn median(runs: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    let mut t: Vec<f64> = (0..runs)
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    t[t.len() / 2]
+}
+
+/// Median seconds per call of `f`, timed in batches of `batch` calls.
+fn per_call(batch: usize, runs: usize, mut f: impl FnMut()) -> f64 {
+    median(runs, || {
+        for _ in 0..batch {
+            f()
+        }
+    }) / batch as f64
+}
+
+struct Row {
+    group: &'static str,
+    name: String,
+    time: String,
+    max_lsb: f64,
+    mean_lsb: f64,
+    note: String,
+}
+
+fn err8(out: &[u8], want: &[[f64; 3]]) -> (f64, f64) {
+    let (mut max, mut sum) = (0f64, 0f64);
+    for (o, w) in out.chunks_exact(3).zip(want) {
+        for k in 0..3 {
+            let e = (o[k] as f64 - w[k] * 255.0).abs();
+            max = max.max(e);
+            sum += e;
+        }
+    }
+    (max, sum / (3 * want.len()) as f64)
+}
+
+pub fn run(params: &Params, quick: bool) -> Vec<String> {
+    let runs = if quick { 3 } else { 11 };
+    let (w, h) = (1920usize, 1080usize);
+    let frame = test_frame(w, h);
+    let mpx = (w * h) as f64 / 1e6;
+    let mut out = vec![0u8; frame.len()];
+    let mut rows = Vec::new();
+    let ms = |s: f64| format!("{:.2} ms/frame ({:.2} ms/Mpx)", s * 1e3, s * 1e3 / mpx);
+
+    // Error sample: the frame plus random pixels, against the unrounded f64 reference.
+    let mut sample: Vec<u8> = frame.clone();
+    sample.extend(random_pixels(if quick { 100_000 } else { 1_000_000 }, 7).into_iter().flatten());
+    let reference = Prepared::new(params, Depth::Eight);
+    let want: Vec<[f64; 3]> = sample.chunks_exact(3).map(|c| reference.pixel([c[0] as u16, c[1] as u16, c[2] as u16])).collect();
+    let mut sample_out = vec![0u8; sample.len()];
+
+    let copy = median(runs, || out.copy_from_slice(black_box(&frame)));
+    rows.push(Row { group: "image", name: "copy (baseline)".into(), time: ms(copy), max_lsb: 0.0, mean_lsb: 0.0, note: "1.00x".into() });
+    let ratio = |s: f64| format!("{:.1}x copy", s / copy);
+
+    let f16: Vec<u16> = frame.iter().map(|&v| v as u16).collect();
+    let s16: Vec<u16> = sample.iter().map(|&v| v as u16).collect();
+    let mut o16 = vec![0u16; f16.len()];
+    let mut so16 = vec![0u16; s16.len()];
+    let t = median(runs.min(5), || reference.run(black_box(&f16), &mut o16, Depth::Eight));
+    reference.run(&s16, &mut so16, Depth::Eight);
+    let e = err8(&so16.iter().map(|&v| v as u8).collect::<Vec<_>>(), &want);
+    rows.push(Row { group: "image", name: "f64 reference, 1 thread".into(), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: ratio(t) });
+
+    let exact = Exact8::new(params);
+    let t = median(runs, || {
+        exact.run(black_box(&frame), &mut out);
+    });
+    exact.run(&sample, &mut sample_out);
+    let e = err8(&sample_out, &want);
+    let fb = format!("{}, {:.2}% cells to reference", ratio(t), 100.0 * exact.fallback_fraction());
+    rows.push(Row { group: "image", name: "exact 8-bit tables, 1 thread (default)".into(), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: fb });
+    let t = median(runs, || {
+        exact.run_runs(black_box(&frame), &mut out);
+    });
+    rows.push(Row { group: "skip", name: "exact 8-bit + reuse repeated pixels, 1 thread".into(), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: ratio(t) });
+    let f32p = F32Path::new(params, Depth::Eight);
+    let t = median(runs, || f32p.run(black_box(&frame), &mut out, Depth::Eight));
+    f32p.run(&sample, &mut sample_out, Depth::Eight);
+    let e = err8(&sample_out, &want);
+    rows.push(Row { group: "image", name: "f32, 1 thread".into(), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: format!("{}, bound {:.1e} LSB + rounding", ratio(t), f32p.error_bound() * 255.0) });
+
+    // Stage elision: the same output with an exactly-identity CCM, elided or not.
+    let mut id_ccm = params.clone();
+    id_ccm.ccm = ccm::IDENTITY;
+    let mut almost = id_ccm.clone();
+    almost.ccm[2][2] = 1.0 + 1e-15;
+    let (fa, fb2) = (F32Path::new(&id_ccm, Depth::Eight), F32Path::new(&almost, Depth::Eight));
+    let ta = median(runs, || fa.run(black_box(&frame), &mut out, Depth::Eight));
+    let tb = median(runs, || fb2.run(black_box(&frame), &mut out, Depth::Eight));
+    rows.push(Row { group: "skip", name: "f32, identity CCM elided".into(), time: ms(ta), max_lsb: f64::NAN, mean_lsb: f64::NAN, note: format!("vs {} not elided: saves {:.0}%", ms(tb), 100.0 * (1.0 - ta / tb)) });
+
+    for n in [17, 33, 65] {
+        let lut = Lut3d::bake(params, n);
+        for interp in [Interp::Trilinear, Interp::Tetrahedral] {
+            let t = median(runs, || lut.run(black_box(&frame), &mut out, interp));
+            lut.run(&sample, &mut sample_out, interp);
+            let e = err8(&sample_out, &want);
+            rows.push(Row { group: "image", name: format!("3D LUT {n}^3 {interp:?}, 1 thread"), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: ratio(t) });
+        }
+    }
+
+    // Last of the image rows: rayon's workers may spin briefly after it.
+    let threads = rayon::current_num_threads();
+    let row = 3 * w;
+    let t = median(runs, || {
+        frame.par_chunks(row * 16).zip(out.par_chunks_mut(row * 16)).for_each(|(s, d)| {
+            exact.run_runs(s, d);
+        })
+    });
+    rows.push(Row { group: "image", name: format!("exact 8-bit + reuse, {threads} threads (simulate)"), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: ratio(t) });
+
+    // Camera2 updates.
+    let us = |s: f64| format!("{:.3} us/update", s * 1e6);
+    let batch = if quick { 200 } else { 2000 };
+    let t = per_call(batch, runs, || {
+        black_box(convert(black_box(params), black_box(&PHONE), &Options::default()).unwrap());
+    });
+    let v = convert(params, &PHONE, &Options::default()).unwrap();
+    rows.push(Row { group: "camera2", name: "full conversion (compose, scale, rationals, curve, bound)".into(), time: us(t), max_lsb: v.report.bound_lsb(), mean_lsb: f64::NAN, note: "max = stated bound".into() });
+    let mut l = Camera2Loop::new(params.clone(), Options::default(), 0.0).unwrap();
+    let mut other = PHONE;
+    other[0][0] += 0.01;
+    let mut k = 0u64;
+    let t = per_call(batch, runs, || {
+        k += 1;
+        black_box(l.update(if k % 2 == 0 { &PHONE } else { &other }).unwrap().recomputed);
+    });
+    rows.push(Row { group: "camera2", name: "loop update, scene moved (curve half cached)".into(), time: us(t), max_lsb: v.report.bound_lsb(), mean_lsb: f64::NAN, note: String::new() });
+    let mut l = Camera2Loop::new(params.clone(), Options::default(), 0.25 / 255.0).unwrap();
+    l.update(&PHONE).unwrap();
+    let t = per_call(batch * 10, runs, || {
+        black_box(l.update(black_box(&PHONE)).unwrap().recomputed);
+    });
+    rows.push(Row { group: "skip", name: "loop update, scene unchanged (skipped)".into(), time: us(t), max_lsb: v.report.bound_lsb(), mean_lsb: f64::NAN, note: String::new() });
+
+    for d in [16u32, 256, 4096, 1 << 16, 1 << 24] {
+        let o = Options { rational: RationalMode::Best { max_denominator: d }, ..Options::default() };
+        let t = per_call(batch, runs, || {
+            black_box(convert(params, &PHONE, &o).unwrap());
+        });
+        let v = convert(params, &PHONE, &o).unwrap();
+        rows.push(Row { group: "camera2", name: format!("rationals, denominator <= {d}"), time: us(t), max_lsb: v.report.bound_lsb(), mean_lsb: f64::NAN, note: format!("entry error {:.1e}", v.report.matrix_max_abs) });
+    }
+    // Curve budgets on a fine (256-knot) version of the curve.
+    let mut fine = params.clone();
+    fine.tone_curve = params.tone_curve.resample_uniform(256);
+    for pts in [8usize, 16, 32, 64, 256] {
+        let o = Options { max_curve_points: pts, ..Options::default() };
+        let t = per_call(batch / 10 + 1, runs, || {
+            black_box(convert(&fine, &PHONE, &o).unwrap());
+        });
+        let v = convert(&fine, &PHONE, &o).unwrap();
+        rows.push(Row { group: "camera2", name: format!("256-knot curve in {pts} points"), time: us(t), max_lsb: v.report.bound_lsb(), mean_lsb: f64::NAN, note: format!("curve error {:.3} LSB", v.report.curve_max_abs * 255.0) });
+    }
+    for tol_lsb in [0.1, 0.5, 1.0] {
+        let (c, e) = fine.tone_curve.simplify_within(tol_lsb / 255.0);
+        rows.push(Row { group: "skip", name: format!("fewest curve points within {tol_lsb} LSB"), time: "-".into(), max_lsb: e * 255.0, mean_lsb: f64::NAN, note: format!("{} of 256 points", c.len()) });
+    }
+    // Colour temperature drifting 2800 K -> 6500 K over 1000 frames: recomputes saved by
+    // the skip rule and the error it allowed.
+    let fm1 = [[0.6, 0.3, 0.06], [0.25, 0.7, 0.05], [0.03, 0.1, 0.7]];
+    let fm2 = [[0.65, 0.25, 0.07], [0.27, 0.68, 0.05], [0.02, 0.15, 0.65]];
+    let cal = DngCalibration { illuminant1: 17, forward_matrix1: fm1, illuminant2: 21, forward_matrix2: fm2 };
+    let mut jitter = campro::stress::Rng(11);
+    let noise: Vec<f64> = (0..1000).map(|_| jitter.range(-10.0, 10.0)).collect();
+    for (scene, ct_at) in [
+        ("CT drift 2800->6500 K", Box::new(|f: usize| 2800.0 + 3700.0 * f as f64 / 999.0) as Box<dyn Fn(usize) -> f64>),
+        ("CT 5000 K +-10 K estimator jitter", Box::new(|f: usize| 5000.0 + noise[f])),
+    ] {
+        for tol in [0.0, 0.1, 0.25, 1.0] {
+            let mut l = Camera2Loop::new(params.clone(), Options::default(), tol / 255.0).unwrap();
+            l.set_dng_calibration(cal.clone()).unwrap();
+            let mut worst = 0f64;
+            let s = Instant::now();
+            for f in 0..1000 {
+                worst = worst.max(l.update_ct(ct_at(f)).unwrap().bound);
+            }
+            let t = s.elapsed().as_secs_f64() / 1000.0;
+            rows.push(Row { group: "skip", name: format!("{scene}, tolerance {tol} LSB"), time: us(t), max_lsb: worst * 255.0, mean_lsb: f64::NAN, note: format!("{} of 1000 frames recomputed", l.stats().recomputes) });
+        }
+    }
+
+    let mut lines = vec![format!("| group | path / setting | median time | max err (LSB8) | mean err (LSB8) | note |"), "|---|---|---|---|---|---|".to_string()];
+    let f = |v: f64| if v.is_nan() { "-".to_string() } else if v == 0.0 { "0".into() } else if v < 0.01 { format!("{v:.1e}") } else { format!("{v:.3}") };
+    for r in rows {
+        lines.push(format!("| {} | {} | {} | {} | {} | {} |", r.group, r.name, r.time, f(r.max_lsb), f(r.mean_lsb), r.note));
+    }
+    lines
+}
+
+/// The parameter set the table uses by default: like the paper's strong checkpoints.
+pub fn default_params() -> Params {
+    let ccm = [[1.2101, 0.0430, -0.6679], [-4.3933, 1.1114, -2.2755], [0.2930, 1.3570, 1.3287]];
+    let mut p = Params::new(ccm, ToneCurve::from_fn(32, |t| (7.0 * t).sin() * 0.5 + 0.5), 2.2).expect("valid");
+    p.name = "bench".into();
+    p
+}

@@ -130,8 +130,7 @@ fn cases(root: &Path, tmp: &Path) -> (String, usize) {
 #[test]
 fn kotlin_wrapper_through_jni_on_the_host_jvm() {
     let root = shared::workspace_root();
-    let lib = std::env::current_exe().unwrap().parent().unwrap().parent().unwrap().join("libcampro_jni.so");
-    assert!(lib.exists(), "{} missing: cargo builds the cdylib with this crate's tests", lib.display());
+    let tmp = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("jvm-host");
     let java = PathBuf::from("java");
     if !runs(&java) {
         return skip("no `java` on PATH (JDK 17)");
@@ -140,7 +139,20 @@ fn kotlin_wrapper_through_jni_on_the_host_jvm() {
         return skip("no Kotlin compiler: run `npm ci --prefix jni-bridge/jvm-test` or set KOTLINC");
     };
 
-    let tmp = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("jvm-host");
+    // `cargo test` links tests against the rlib only: build the .so itself, as the app
+    // would (this crate alone, so the core has no desktop features), in its own target
+    // folder so it does not wait on the outer cargo's lock.
+    let target = tmp.join("cargo-target");
+    let status = Command::new(env!("CARGO"))
+        .args(["build", "--release", "--lib", "-p", "campro-jni", "--manifest-path"])
+        .arg(root.join("Cargo.toml"))
+        .arg("--target-dir")
+        .arg(&target)
+        .status()
+        .unwrap();
+    assert!(status.success(), "building libcampro_jni.so failed");
+    let lib = target.join("release/libcampro_jni.so");
+    assert!(lib.exists(), "{} missing after the build", lib.display());
     std::fs::create_dir_all(&tmp).unwrap();
     let (text, n) = cases(&root, &tmp);
     let cases_file = tmp.join("cases.txt");

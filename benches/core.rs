@@ -41,7 +41,7 @@ fn bench_convert(c: &mut Criterion) {
         let mut k = 0u32;
         b.iter(|| {
             k += 1;
-            l.update(black_box(if k % 2 == 0 { &PHONE } else { &other })).unwrap().recomputed
+            l.update(black_box(if k.is_multiple_of(2) { &PHONE } else { &other })).unwrap().recomputed
         })
     });
     g.finish();

@@ -102,6 +102,7 @@ impl<'a> Exact8<'a> {
         let (a, b, c) = (&self.terms[rgb[0] as usize], &self.terms[256 + rgb[1] as usize], &self.terms[512 + rgb[2] as usize]);
         // Four lanes (the fourth is padding) so the sums, clamps and conversions vectorise.
         let mut idx = [0i32; 4];
+        #[allow(clippy::manual_clamp)] // max/min vectorise to maxps/minps; no NaN can occur
         for k in 0..4 {
             idx[k] = ((a[k] + b[k] + c[k]).max(0.0).min(1.0) * FINE as f32) as i32;
         }

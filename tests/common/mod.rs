@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 mod shared;
+#[allow(unused_imports)]
 pub use shared::{shared, workspace_root};
 
 /// Reads an .npy array: (shape, values as f64).

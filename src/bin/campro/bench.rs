@@ -151,7 +151,7 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
     let mut k = 0u64;
     let t = per_call(batch, runs, || {
         k += 1;
-        black_box(l.update(if k % 2 == 0 { &PHONE } else { &other }).unwrap().recomputed);
+        black_box(l.update(if k.is_multiple_of(2) { &PHONE } else { &other }).unwrap().recomputed);
     });
     rows.push(Row { group: "camera2", name: "loop update, scene moved (curve half cached)".into(), time: us(t), max_lsb: v.report.bound_lsb(), mean_lsb: f64::NAN, note: String::new() });
     let mut l = Camera2Loop::new(params.clone(), Options::default(), 0.25 / 255.0).unwrap();

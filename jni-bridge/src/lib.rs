@@ -23,7 +23,7 @@ use campro::color_temp::DngCalibration;
 use campro::targets::camera2::{self, ConvertError, Options, RationalMode};
 use campro::{Params, ValidationError};
 use jni::errors::ErrorPolicy;
-use jni::objects::{JByteArray, JClass, JDoubleArray, JFloatArray, JIntArray, JObject, JString};
+use jni::objects::{JByteArray, JClass, JDoubleArray, JFloatArray, JIntArray, JObject, JPrimitiveArray, JString, TypeArray};
 use jni::refs::Reference;
 use jni::sys::{jboolean, jdouble, jint, jlong};
 use jni::{jni_str, Env, EnvUnowned};
@@ -215,35 +215,15 @@ fn read_floats(env: &Env, name: &str, a: &JFloatArray, count: jint) -> Result<Ve
     Ok(out)
 }
 
-fn check_len(env: &Env, name: &str, a: &impl LenOf, min: usize, exact: bool) -> Result<()> {
-    non_null(name, a.obj())?;
-    let len = a.len_of(env)?;
+fn check_len<T: TypeArray>(env: &Env, name: &str, a: &JPrimitiveArray<'_, T>, min: usize, exact: bool) -> Result<()> {
+    non_null(name, &**a)?;
+    let len = a.len(env)?;
     if (exact && len != min) || len < min {
         let rule = if exact { "exactly" } else { "at least" };
         return Err(BridgeError::Argument(format!("{name}: must have {rule} {min} elements, got {len}")));
     }
     Ok(())
 }
-
-/// Array length for the three output array kinds.
-trait LenOf {
-    fn obj(&self) -> &JObject<'_>;
-    fn len_of(&self, env: &Env) -> Result<usize>;
-}
-
-macro_rules! len_of {
-    ($($t:ty),*) => {$(
-        impl LenOf for $t {
-            fn obj(&self) -> &JObject<'_> {
-                self
-            }
-            fn len_of(&self, env: &Env) -> Result<usize> {
-                Ok(self.len(env)?)
-            }
-        }
-    )*};
-}
-len_of!(JIntArray<'_>, JFloatArray<'_>, JDoubleArray<'_>);
 
 fn dng_matrix(env: &Env, name: &str, a: &JIntArray) -> Result<campro::Mat3> {
     let ints: [i32; 18] = read_ints(env, name, a)?;

@@ -56,13 +56,15 @@ fn bench_simulate(c: &mut Criterion) {
     let mut dst8 = vec![0u8; src8.len()];
     let prep = Prepared::new(&p, Depth::Eight);
     let exact = Exact8::new(&p);
+    let scalar = Exact8::new(&p).scalar();
     let f32p = F32Path::new(&p, Depth::Eight);
     let mut g = c.benchmark_group("simulate 1080p");
     g.throughput(Throughput::Elements((w * h) as u64));
     g.sample_size(10);
     g.bench_function("copy (baseline)", |b| b.iter(|| dst8.copy_from_slice(black_box(&src8))));
     g.bench_function("f64 reference, 1 thread", |b| b.iter(|| prep.run(black_box(&src), &mut dst, Depth::Eight)));
-    g.bench_function("exact 8-bit tables, 1 thread", |b| b.iter(|| exact.run(black_box(&src8), &mut dst8)));
+    g.bench_function(format!("exact 8-bit ({:?} engine), 1 thread", exact.engine()), |b| b.iter(|| exact.run(black_box(&src8), &mut dst8)));
+    g.bench_function("exact 8-bit scalar tables, 1 thread", |b| b.iter(|| scalar.run(black_box(&src8), &mut dst8)));
     g.bench_function("f32, 1 thread", |b| b.iter(|| f32p.run(black_box(&src8), &mut dst8, Depth::Eight)));
     g.finish();
 }

@@ -39,11 +39,93 @@ fn exact8_is_bit_identical_to_the_reference_on_every_code_triple() {
     let mut got = vec![0u8; src.len()];
     for p in sets() {
         Prepared::new(&p, Depth::Eight).run(&src16, &mut want, Depth::Eight);
-        let fast = Exact8::new(&p);
-        let slow = fast.run(&src, &mut got);
-        let diff = want.iter().zip(&got).filter(|(a, b)| **a != **b as u16).count();
-        assert_eq!(diff, 0, "{}: {diff} samples differ", p.name);
-        eprintln!("{}: {:.2}% of cells and {:.2}% of pixels took the reference path", p.name, 100.0 * fast.fallback_fraction(), 100.0 * slow as f64 / (1 << 24) as f64);
+        for fast in [Exact8::new(&p), Exact8::new(&p).scalar()] {
+            let fell = fast.run(&src, &mut got);
+            let diff = want.iter().zip(&got).filter(|(a, b)| **a != **b as u16).count();
+            assert_eq!(diff, 0, "{} ({:?}): {diff} samples differ", p.name, fast.engine());
+            let n = (1 << 24) as f64;
+            eprintln!(
+                "{} ({:?}): {:.2}% of pixels flagged to the tables, {:.2}% to the reference ({:.2}% of cells)",
+                p.name,
+                fast.engine(),
+                100.0 * fell.to_tables as f64 / n,
+                100.0 * fell.to_reference as f64 / n,
+                100.0 * fast.fallback_fraction()
+            );
+        }
+    }
+}
+
+fn avx512_cpu() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        ["avx512f", "avx512bw", "avx512dq", "avx512vbmi"].iter().all(|f| match *f {
+            "avx512f" => is_x86_feature_detected!("avx512f"),
+            "avx512bw" => is_x86_feature_detected!("avx512bw"),
+            "avx512dq" => is_x86_feature_detected!("avx512dq"),
+            _ => is_x86_feature_detected!("avx512vbmi"),
+        })
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+#[test]
+fn block_engine_is_chosen_where_it_applies() {
+    use campro::pipeline::fast::Engine;
+    let s = sets();
+    let want = if avx512_cpu() { Engine::Avx512 } else { Engine::Scalar };
+    for p in &s[..4] {
+        assert_eq!(Exact8::new(p).engine(), want, "{}", p.name);
+        assert_eq!(Exact8::new(p).scalar().engine(), Engine::Scalar);
+    }
+    // Non-uniform knots, or more than 32: the scalar tables.
+    assert_eq!(Exact8::new(&s[4]).engine(), Engine::Scalar);
+    let fine = Params::new(campro::ccm::IDENTITY, ToneCurve::from_fn(33, |t| t * t), 2.2).unwrap();
+    assert_eq!(Exact8::new(&fine).engine(), Engine::Scalar);
+}
+
+/// A curve ending exactly on a rounding tie (255 · 0.5 = 127.5) at either end, and a
+/// matrix that clips every pixel at that end: all outputs are the end's code, and the
+/// block engine answers them itself instead of flagging every pixel.
+#[test]
+fn clipped_pixels_at_a_tie_end_stay_in_the_block_engine() {
+    let frame = campro::compare::test_frame(320, 64);
+    let half = |low: bool| ToneCurve::from_fn(32, move |t| if low { 0.5 + 0.3 * t } else { 0.8 - 0.3 * t });
+    let neg = [[-1.0, -0.5, -0.2], [-0.3, -1.0, 0.0], [0.0, -0.2, -1.0]];
+    let big = [[3.0, 2.0, 2.0], [2.0, 3.0, 2.0], [2.0, 2.0, 3.0]];
+    for (name, ccm, low) in [("clip low, y(0) = 0.5", neg, true), ("clip high, y(1) = 0.5", big, false)] {
+        let p = Params::new(ccm, half(low), 2.2).unwrap();
+        let f = Exact8::new(&p);
+        let mut out = vec![0u8; frame.len()];
+        let fell = f.run(&frame, &mut out);
+        let reference = Prepared::new(&p, Depth::Eight);
+        for (s, o) in frame.chunks_exact(3).zip(out.chunks_exact(3)) {
+            let want = reference.pixel([s[0], s[1], s[2]].map(u16::from)).map(|v| (v * 255.0 + 0.5) as u8);
+            assert_eq!(o, want, "{name}: pixel {s:?}");
+        }
+        // Pixels with a zero code in some channel do not clip (0 · anything = 0 is the
+        // boundary itself), so a few may still be flagged.
+        if f.engine() == campro::pipeline::fast::Engine::Avx512 {
+            assert!(fell.to_tables * 100 < frame.len() / 3, "{name}: {} of {} pixels flagged", fell.to_tables, frame.len() / 3);
+        }
+    }
+}
+
+#[test]
+fn block_engine_handles_any_length_and_alignment() {
+    let p = &sets()[3];
+    let f = Exact8::new(p);
+    let reference = Prepared::new(p, Depth::Eight);
+    let px: Vec<u8> = random_pixels(1001, 5).into_iter().flatten().collect();
+    for (start, len) in [(0, 1001), (1, 1000), (7, 64), (3, 63), (0, 0), (5, 129)] {
+        let src = &px[3 * start..3 * (start + len)];
+        let mut out = vec![0u8; src.len()];
+        f.run(src, &mut out);
+        for (s, o) in src.chunks_exact(3).zip(out.chunks_exact(3)) {
+            let want = reference.pixel([s[0], s[1], s[2]].map(u16::from)).map(|v| (v * 255.0 + 0.5) as u8);
+            assert_eq!(o, want, "start {start} len {len}: pixel {s:?}");
+        }
     }
 }
 

@@ -9,12 +9,19 @@
 //!   falls inside are marked, and their pixels take the reference path. So the error is
 //!   the reference's own rounding (<= 0.5 LSB); the marked fraction, reported by
 //!   [`Exact8::fallback_fraction`], grows with the curve's slope.
+//!   On x86-64 CPUs with AVX-512 (F, BW, DQ, VBMI) and a uniform curve of at most 32
+//!   knots, whole blocks of 64 pixels run on the gather-free engine of [`avx512`]
+//!   instead, which flags lanes near a rounding boundary for the reference in the same
+//!   way: still bit-identical. [`Exact8::engine`] says which runs.
 //! - [`F32Path`]: any depth in and out, in f32: a degamma table over every input code, the
 //!   3x3 matrix, and the curve by exact piecewise-linear interpolation. Its error against
 //!   the reference is stated by [`F32Path::error_bound`] (f32 rounding amplified by the
 //!   curve's slope) plus the output rounding.
 //! - Stage elision ([`Elision`]): an identity matrix skips the matrix, an identity curve
 //!   skips the curve; both are exact.
+
+#[cfg(target_arch = "x86_64")]
+mod avx512;
 
 use super::{degamma, Depth, Prepared};
 use crate::ccm;
@@ -57,6 +64,26 @@ pub struct Exact8<'a> {
     cells: Vec<u16>,
     ambiguous: usize,
     elision: Elision,
+    #[cfg(target_arch = "x86_64")]
+    simd: Option<avx512::Kernel>,
+}
+
+/// Pixels of one [`Exact8::run`] that left the block engine.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Fallbacks {
+    /// Flagged by the AVX-512 engine (near a rounding boundary), redone by the tables.
+    pub to_tables: usize,
+    /// Redone by the f64 reference (ambiguous in the tables as well).
+    pub to_reference: usize,
+}
+
+/// Which engine [`Exact8::run`] uses for whole blocks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Engine {
+    /// One pixel at a time through the tables (any CPU, any curve).
+    Scalar,
+    /// 64 pixels per step with AVX-512 (x86-64; uniform curve of <= 32 knots).
+    Avx512,
 }
 
 impl<'a> Exact8<'a> {
@@ -77,7 +104,33 @@ impl<'a> Exact8<'a> {
         let row = m.iter().map(|r| r.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
         let delta = 3.0 * row * f32::EPSILON as f64 / 2.0 * 1.0000001 + 1e-12;
         let (cells, ambiguous) = cell_table(&params.tone_curve, delta);
-        Self { reference, terms, cells, ambiguous, elision: Elision::of(params) }
+        Self {
+            #[cfg(target_arch = "x86_64")]
+            simd: avx512::Kernel::new(params, &d),
+            reference,
+            terms,
+            cells,
+            ambiguous,
+            elision: Elision::of(params),
+        }
+    }
+
+    /// The same path restricted to the scalar engine (for comparisons and tests).
+    pub fn scalar(mut self) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            self.simd = None;
+        }
+        self
+    }
+
+    /// The engine [`Exact8::run`] uses on this CPU for these parameters.
+    pub fn engine(&self) -> Engine {
+        #[cfg(target_arch = "x86_64")]
+        if self.simd.is_some() {
+            return Engine::Avx512;
+        }
+        Engine::Scalar
     }
 
     /// Fraction of the output table's cells whose pixels take the reference path.
@@ -114,17 +167,37 @@ impl<'a> Exact8<'a> {
         (v.map(|x| quantize(x, 255.0) as u8), true)
     }
 
-    /// Interleaved RGB8 in and out; `src.len() == dst.len()`, a multiple of 3. Returns how
-    /// many pixels took the reference path.
-    pub fn run(&self, src: &[u8], dst: &mut [u8]) -> usize {
+    /// Interleaved RGB8 in and out; `src.len() == dst.len()`, a multiple of 3. Uses
+    /// [`Exact8::engine`] for whole blocks; returns how many pixels left it.
+    pub fn run(&self, src: &[u8], dst: &mut [u8]) -> Fallbacks {
         assert_eq!(src.len(), dst.len(), "source and destination sample counts differ");
+        let mut fell = Fallbacks::default();
         let mut slow = 0;
+        #[allow(unused_mut)]
+        let (mut src, mut dst) = (src, dst);
+        #[cfg(target_arch = "x86_64")]
+        if let Some(k) = &self.simd {
+            let whole = src.len() / avx512::BLOCK_BYTES * avx512::BLOCK_BYTES;
+            let mut flagged = Vec::new();
+            k.run(&src[..whole], &mut dst[..whole], &mut flagged);
+            // Flagged pixels take the scalar tables, and the reference where those are
+            // ambiguous too.
+            for &i in &flagged {
+                let px = &src[3 * i..3 * i + 3];
+                let (o, f) = self.pixel_flagged([px[0], px[1], px[2]]);
+                dst[3 * i..3 * i + 3].copy_from_slice(&o);
+                slow += f as usize;
+            }
+            fell.to_tables = flagged.len();
+            (src, dst) = (&src[whole..], &mut dst[whole..]);
+        }
         for (s, d) in src.chunks_exact(3).zip(dst.chunks_exact_mut(3)) {
             let (o, f) = self.pixel_flagged([s[0], s[1], s[2]]);
             slow += f as usize;
             d.copy_from_slice(&o);
         }
-        slow
+        fell.to_reference = slow;
+        fell
     }
 
     /// [`Exact8::run`] that reuses the previous output while the input pixel repeats
@@ -260,39 +333,48 @@ impl F32Path {
 /// it is the same over the whole interval, else [`AMBIGUOUS`]. Returns the table and
 /// the number of ambiguous cells.
 fn cell_table(curve: &ToneCurve, delta: f64) -> (Vec<u16>, usize) {
-    let (xs, n) = (curve.x(), FINE as f64);
+    let n = FINE as f64;
     let mut cells = Vec::with_capacity(FINE + 1);
     let mut ambiguous = 0;
     let mut knot = 0; // first knot index with x > lo
     for k in 0..=FINE {
         let lo = (k as f64 / n - delta).max(0.0);
         let hi = ((k + 1) as f64 / n + delta).min(1.0);
-        // Curve values at the interval's ends. At a knot `eval` is exact; elsewhere it is
-        // within a few ulps of the true value, so widen by 1e-15 (f64, values <= 1).
-        let at = |t: f64| {
-            let y = curve.eval(t);
-            let exact = xs.binary_search_by(|v| v.total_cmp(&t)).is_ok();
-            if exact { (y, y) } else { (y - 1e-15, y + 1e-15) }
-        };
-        let (a, b) = (at(lo), at(hi));
-        let (mut ymin, mut ymax) = (a.0.min(b.0), a.1.max(b.1));
-        while knot < xs.len() && xs[knot] <= lo {
-            knot += 1;
-        }
-        let mut i = knot;
-        while i < xs.len() && xs[i] < hi {
-            let y = curve.y()[i];
-            ymin = ymin.min(y);
-            ymax = ymax.max(y);
-            i += 1;
-        }
-        let (qa, qb) = (quantize(ymin, 255.0), quantize(ymax, 255.0));
-        if qa == qb {
-            cells.push(qa);
-        } else {
-            cells.push(AMBIGUOUS);
-            ambiguous += 1;
+        match constant_code(curve, lo, hi, &mut knot) {
+            Some(q) => cells.push(q),
+            None => {
+                cells.push(AMBIGUOUS);
+                ambiguous += 1;
+            }
         }
     }
     (cells, ambiguous)
+}
+
+/// The reference's rounded 8-bit output if it is the same for every curve input in
+/// `[lo, hi]` (within [0, 1]), else `None`. `knot` is a search hint: the first knot
+/// index with x > lo, or any smaller index (0 is always valid); it is advanced.
+fn constant_code(curve: &ToneCurve, lo: f64, hi: f64, knot: &mut usize) -> Option<u16> {
+    let xs = curve.x();
+    // Curve values at the interval's ends. At a knot `eval` is exact; elsewhere it is
+    // within a few ulps of the true value, so widen by 1e-15 (f64, values <= 1).
+    let at = |t: f64| {
+        let y = curve.eval(t);
+        let exact = xs.binary_search_by(|v| v.total_cmp(&t)).is_ok();
+        if exact { (y, y) } else { (y - 1e-15, y + 1e-15) }
+    };
+    let (a, b) = (at(lo), at(hi));
+    let (mut ymin, mut ymax) = (a.0.min(b.0), a.1.max(b.1));
+    while *knot < xs.len() && xs[*knot] <= lo {
+        *knot += 1;
+    }
+    let mut i = *knot;
+    while i < xs.len() && xs[i] < hi {
+        let y = curve.y()[i];
+        ymin = ymin.min(y);
+        ymax = ymax.max(y);
+        i += 1;
+    }
+    let (qa, qb) = (quantize(ymin, 255.0), quantize(ymax, 255.0));
+    (qa == qb).then_some(qa)
 }

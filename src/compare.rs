@@ -11,6 +11,7 @@ use crate::error::ValidationError;
 use crate::params::Params;
 use crate::pipeline::{degamma, process_f64};
 use crate::targets::camera2::Camera2Values;
+use crate::targets::Feed;
 
 /// Running error statistics over pixel channels.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -129,24 +130,40 @@ pub struct DeviceError {
 /// `pixels` and compares it with the desktop pipeline. Fails if `device` is singular
 /// (no sensor RGB can be synthesised).
 pub fn camera2_vs_desktop(params: &Params, device: &Mat3, values: &Camera2Values, model: &DeviceModel, pixels: &[[u8; 3]]) -> Result<DeviceError, ValidationError> {
-    let inv = ccm::inverse(device).ok_or_else(|| ValidationError::Rule {
-        field: "device_ccm".into(),
-        rule: "must be invertible to synthesise sensor RGB from sRGB test images".into(),
-    })?;
     let dev = Camera2Device::new(values, model);
-    let table: Vec<f64> = (0..=255).map(|c| degamma(c as f64 / 255.0, params.degamma)).collect();
-    let mut stats = Stats::default();
-    for px in pixels {
-        let lin = px.map(|c| table[c as usize]);
-        let sensor = ccm::apply(&inv, lin);
-        let want = process_f64(params, px.map(|c| c as f64 / 255.0));
-        stats.add(dev.sensor_to_output(sensor), want);
-    }
+    let stats = deployment_vs_desktop(params, &Feed::Sensor(*device), &dev, pixels)?;
+    let inv = ccm::inverse(device).expect("checked invertible above");
     // Sensor RGB synthesised from linear sRGB in [0,1]^3 stays within these magnitudes.
     let range = inv.map(|row| row.iter().map(|v| v.abs()).sum::<f64>());
     let ideal = ccm::scale(&values.composed, 1.0 / values.scale);
     let bound = dev.error_bound(&ideal, &params.tone_curve.fold_scale(values.scale), range);
     Ok(DeviceError { stats, bound })
+}
+
+/// Any deployment against the desktop pipeline on sRGB `pixels`. With
+/// [`Feed::Sensor`]`(device)` each pixel becomes the sensor RGB that device would have
+/// seen (`device^-1 · degamma(pixel)`); with [`Feed::Encoded`] the emulator gets the
+/// pixel itself in [0, 1]. Outputs are compared with [`process_f64`]. Fails if the
+/// device is singular.
+pub fn deployment_vs_desktop(params: &Params, feed: &Feed, emulator: &dyn Emulator, pixels: &[[u8; 3]]) -> Result<Stats, ValidationError> {
+    let inv = match feed {
+        Feed::Sensor(device) => Some(ccm::inverse(device).ok_or_else(|| ValidationError::Rule {
+            field: "device_ccm".into(),
+            rule: "must be invertible to synthesise sensor RGB from sRGB test images".into(),
+        })?),
+        Feed::Encoded => None,
+    };
+    let table: Vec<f64> = (0..=255).map(|c| degamma(c as f64 / 255.0, params.degamma)).collect();
+    let mut stats = Stats::default();
+    for px in pixels {
+        let input = match &inv {
+            Some(inv) => ccm::apply(inv, px.map(|c| table[c as usize])),
+            None => px.map(|c| c as f64 / 255.0),
+        };
+        let want = process_f64(params, px.map(|c| c as f64 / 255.0));
+        stats.add(emulator.sensor_to_output(input), want);
+    }
+    Ok(stats)
 }
 
 #[cfg(test)]

@@ -65,3 +65,18 @@ impl Emulator for Camera2Device {
         clip01(ccm::apply(&self.matrix, sensor)).map(|c| self.curve.eval(c))
     }
 }
+
+/// A generic ISP: a matrix on sensor RGB, a clip to [0, 1], a curve. What every
+/// file-based target (Raspberry Pi, Rockchip) applies once its values are read back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Isp {
+    pub matrix: Mat3,
+    pub curve: ToneCurve,
+}
+
+impl Emulator for Isp {
+    #[inline]
+    fn sensor_to_output(&self, sensor: [f64; 3]) -> [f64; 3] {
+        clip01(ccm::apply(&self.matrix, sensor)).map(|c| self.curve.eval(c))
+    }
+}

@@ -46,6 +46,22 @@ impl Lut3d {
         Self { n, data, bound }
     }
 
+    /// A LUT from node values read from a file (red fastest), with no a-priori bound
+    /// (`error_bound` is infinite): its error is what a comparison measures.
+    pub fn from_data(n: usize, data: Vec<[f32; 3]>) -> Result<Self, crate::error::ValidationError> {
+        use crate::error::ValidationError;
+        if !(2..=256).contains(&n) {
+            return Err(ValidationError::OutOfRange { field: "LUT_3D_SIZE".into(), value: n as f64, min: 2.0, max: 256.0 });
+        }
+        if data.len() != n * n * n {
+            return Err(ValidationError::WrongLength { field: "LUT entries".into(), expected: format!("{n}^3 = {}", n * n * n), got: data.len() });
+        }
+        if let Some(v) = data.iter().flatten().find(|v| !v.is_finite()) {
+            return Err(ValidationError::NonFinite { field: "LUT entry".into(), value: *v as f64 });
+        }
+        Ok(Self { n, data, bound: f64::INFINITY })
+    }
+
     /// Points per axis.
     pub fn size(&self) -> usize {
         self.n

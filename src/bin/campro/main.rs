@@ -53,6 +53,8 @@ enum Cmd {
         target: Target,
         #[command(flatten)]
         device: DeviceArgs,
+        #[command(flatten)]
+        files: FileTargetArgs,
         #[arg(long, value_enum, default_value_t = Format::Json)]
         format: Format,
         /// Write to this file instead of standard output.
@@ -82,6 +84,10 @@ enum Cmd {
     /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
     Compare {
         params: PathBuf,
+        #[arg(long, value_enum, default_value_t = Target::Camera2)]
+        target: Target,
+        #[command(flatten)]
+        files: FileTargetArgs,
         #[command(flatten)]
         device: DeviceArgs,
         /// Emulate a HAL that rounds matrix entries to this many fractional bits.
@@ -149,9 +155,93 @@ struct DeviceArgs {
     fixed_denominator: Option<u32>,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum Target {
+    /// Android Camera2: COLOR_CORRECTION_TRANSFORM + TONEMAP_CURVE.
     Camera2,
+    /// Raspberry Pi 4 and earlier: patched libcamera tuning file (--base).
+    RpiVc4,
+    /// Raspberry Pi 5: patched libcamera tuning file (--base).
+    RpiPisp,
+    /// Rockchip RV1109/RV1126: patched rkaiq IQ file (--base).
+    RkaiqIsp20,
+    /// Rockchip ISP3x (RK3568/RK3588 class): patched rkaiq IQ file (--base).
+    RkaiqIsp3x,
+    /// .cube 3D LUT on gamma-encoded RGB (--cube-size).
+    Cube,
+    /// Hald CLUT, 16-bit PPM (--hald-level).
+    Hald,
+    /// libcamera rkisp1 (refused: scalar gamma only).
+    Rkisp1,
+    /// libcamera simple / software ISP (refused: scalar gamma only).
+    Simple,
+    /// Plain V4L2 / UVC webcams (refused: scalar gamma only).
+    Uvc,
+}
+
+impl Target {
+    fn name(self) -> &'static str {
+        match self {
+            Target::Camera2 => "camera2",
+            Target::RpiVc4 => "rpi-vc4",
+            Target::RpiPisp => "rpi-pisp",
+            Target::RkaiqIsp20 => "rkaiq-isp20",
+            Target::RkaiqIsp3x => "rkaiq-isp3x",
+            Target::Cube => "cube",
+            Target::Hald => "hald",
+            Target::Rkisp1 => "rkisp1",
+            Target::Simple => "simple",
+            Target::Uvc => "uvc",
+        }
+    }
+}
+
+/// Options of the file-based targets.
+#[derive(Args, Clone)]
+struct FileTargetArgs {
+    /// The stack's own tuning / IQ file to patch (Raspberry Pi, Rockchip).
+    #[arg(long)]
+    base: Option<PathBuf>,
+    /// Points per axis of a .cube LUT.
+    #[arg(long, default_value_t = 33)]
+    cube_size: usize,
+    /// Hald CLUT level L (an L^3 x L^3 image, L^2 points per axis).
+    #[arg(long, default_value_t = 8)]
+    hald_level: usize,
+}
+
+impl FileTargetArgs {
+    /// The core target for `t`, refusing the stacks that cannot hold a curve.
+    fn target(&self, t: Target) -> Result<Box<dyn campro::targets::Target>> {
+        if let Some(why) = campro::targets::refusal(t.name()) {
+            bail!("{why}");
+        }
+        match t {
+            Target::Cube => {
+                if !(2..=256).contains(&self.cube_size) {
+                    bail!("--cube-size must be in 2..=256, got {}", self.cube_size);
+                }
+                Ok(Box::new(campro::targets::cube::CubeFile { kind: campro::targets::cube::Kind::Cube, size: self.cube_size }))
+            }
+            Target::Hald => {
+                if !(2..=16).contains(&self.hald_level) {
+                    bail!("--hald-level must be in 2..=16, got {}", self.hald_level);
+                }
+                Ok(Box::new(campro::targets::cube::CubeFile::hald(self.hald_level)))
+            }
+            _ => campro::targets::by_name(t.name()).ok_or_else(|| anyhow!("{} is not a file target", t.name())),
+        }
+    }
+
+    /// The base file's text (at most 16 MiB), if given.
+    fn base_text(&self) -> Result<Option<String>> {
+        let Some(f) = &self.base else { return Ok(None) };
+        let meta = std::fs::metadata(f).with_context(|| f.display().to_string())?;
+        if meta.len() > 16 << 20 {
+            bail!("{}: base file is {} bytes; the limit is 16 MiB", f.display(), meta.len());
+        }
+        Ok(Some(std::fs::read_to_string(f).with_context(|| f.display().to_string())?))
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -207,7 +297,54 @@ fn run(cli: Cli) -> Result<()> {
             eprintln!("wrote {} ({} knots)", output.display(), p.tone_curve.len());
             Ok(())
         }
-        Cmd::Convert { params, target: Target::Camera2, device, format, output, force } => {
+        Cmd::Convert { params, target, files, output, force, .. } if target != Target::Camera2 => {
+            let p = load_params(&params)?;
+            let t = files.target(target)?;
+            let bytes = t.export(&p, files.base_text()?.as_deref())?;
+            match output {
+                Some(o) => write_atomic(&o, &bytes, force),
+                None if target == Target::Hald => bail!("a Hald image is binary: pass --output FILE.ppm"),
+                None => {
+                    std::io::stdout().write_all(&bytes)?;
+                    Ok(())
+                }
+            }
+        }
+        Cmd::Compare { params, target, files, random, seed, format, .. } if target != Target::Camera2 => {
+            let p = load_params(&params)?;
+            let t = files.target(target)?;
+            let base = files.base_text()?;
+            let exported = t.export(&p, base.as_deref())?;
+            let conditions = t.emulate(&exported, base.as_deref())?;
+            let chart: Vec<[u8; 3]> = campro::chart::render().chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+            let sets = [("RGB cube, step 5".to_string(), compare::code_cube(5)), (format!("{random} random pixels"), compare::random_pixels(random, seed)), ("built-in chart".to_string(), chart)];
+            let mut rows = Vec::new();
+            for c in &conditions {
+                for (name, px) in &sets {
+                    rows.push((c.label.clone(), name.clone(), compare::deployment_vs_desktop(&p, &c.feed, c.emulator.as_ref(), px)?));
+                }
+            }
+            match format {
+                Report::Text => {
+                    println!("target {} ({} bytes exported)", t.name(), exported.len());
+                    println!("{:<16} {:<22} {:>10} {:>10} {:>10}", "condition", "pixels", "max LSB", "mean LSB", "PSNR dB");
+                    for (c, n, s) in &rows {
+                        println!("{:<16} {:<22} {:>10.4} {:>10.5} {:>10.2}", c, n, s.max_lsb(), s.mean_lsb(), s.psnr());
+                    }
+                }
+                Report::Json => println!(
+                    "{}",
+                    serde_json::to_string_pretty(&serde_json::json!({
+                        "target": t.name(), "exportedBytes": exported.len(),
+                        "comparison": rows.iter().map(|(c, n, s)| serde_json::json!({
+                            "condition": c, "pixels": n, "count": s.count / 3, "maxLsb": s.max_lsb(), "meanLsb": s.mean_lsb(), "psnrDb": s.psnr(),
+                        })).collect::<Vec<_>>(),
+                    }))?
+                ),
+            }
+            Ok(())
+        }
+        Cmd::Convert { params, device, format, output, force, .. } => {
             let p = load_params(&params)?;
             let (m, opts) = device_setup(&p, &device)?;
             let v = camera2::convert(&p, &m, &opts)?;
@@ -227,7 +364,7 @@ fn run(cli: Cli) -> Result<()> {
             let p = load_params(&params)?;
             simulate(&p, &inputs, &output, match bit_depth { BitDepth::Eight => Depth::Eight, BitDepth::Sixteen => Depth::Sixteen }, force, jobs)
         }
-        Cmd::Compare { params, device, matrix_frac_bits, lut_size, random, seed, format } => {
+        Cmd::Compare { params, device, matrix_frac_bits, lut_size, random, seed, format, .. } => {
             let p = load_params(&params)?;
             let (m, opts) = device_setup(&p, &device)?;
             let model = DeviceModel { matrix_frac_bits, lut_size };

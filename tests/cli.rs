@@ -275,3 +275,23 @@ fn help_for_every_command() {
         campro().args([c, "--help"]).assert().success();
     }
 }
+
+#[test]
+fn file_targets_convert_compare_and_refuse() {
+    let dir = tempfile::tempdir().unwrap();
+    let cube = dir.path().join("campro.cube");
+    campro().args(["convert"]).arg(bundled("srgb-passthrough.json")).args(["--target", "cube", "--cube-size", "9", "-o"]).arg(&cube).assert().success();
+    let text = std::fs::read_to_string(&cube).unwrap();
+    assert_eq!(campro::targets::cube::parse_cube(&text).unwrap().size(), 9);
+    let out = campro().args(["compare"]).arg(bundled("srgb-passthrough.json")).args(["--target", "cube", "--random", "500", "--format", "json"]).output().unwrap();
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["target"], "cube");
+    assert_eq!(v["comparison"].as_array().unwrap().len(), 6, "2 interpolations x 3 pixel sets");
+    fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "rkisp1"]), "--target cube");
+    fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "rpi-vc4"]), "--base");
+    fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "hald"]), "binary");
+    // Nothing half-written on a refusal.
+    fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "uvc", "-o"]).arg(dir.path().join("x.json")), "scalar gamma");
+    assert!(!dir.path().join("x.json").exists());
+}

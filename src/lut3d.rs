@@ -41,7 +41,7 @@ impl Lut3d {
                 }
             }
         }
-        let s = params.ccm.iter().map(|r| r.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
+        let s = crate::ccm::norm_inf(&params.ccm);
         let bound = params.degamma.max(1.0) * params.tone_curve.max_slope() * s * step + 1e-7;
         Self { n, data, bound }
     }

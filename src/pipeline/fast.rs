@@ -101,7 +101,7 @@ impl<'a> Exact8<'a> {
         // |f32 sum - f64 reference sum| <= 3 · 2^-24 · Σ_j |CCM_cj| (one rounding per
         // term, two per addition, partial sums bounded by the row's absolute sum), plus
         // the reference's own f64 rounding.
-        let row = m.iter().map(|r| r.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
+        let row = crate::ccm::norm_inf(m);
         let delta = 3.0 * row * f32::EPSILON as f64 / 2.0 * 1.0000001 + 1e-12;
         let (cells, ambiguous) = cell_table(&params.tone_curve, delta);
         Self {
@@ -260,7 +260,7 @@ impl F32Path {
         // the segment evaluation y0 + s·(t - x0) adds u·(1 + 3L); knot positions rounded to
         // f32 move segment ends by u, costing u·L. u = 2^-24.
         let u = f32::EPSILON as f64 / 2.0;
-        let s = params.ccm.iter().map(|r| r.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
+        let s = crate::ccm::norm_inf(&params.ccm);
         let l = c.max_slope();
         let bound = (5.0 * u * s * l + u * (1.0 + 4.0 * l)) * 1.01;
         Self {

@@ -222,11 +222,10 @@ impl Target for Rpi {
             return Err(field("export", "rpi.ccm.ccms", "CT list differs from the base tuning file's"));
         }
         let given = curve_from_points(&ours.gamma, FULL, "rpi.contrast.gamma_curve")?;
-        let curve = if ours.ce_enable.unwrap_or(1) != 0 {
+        if ours.ce_enable.unwrap_or(1) != 0 {
             return Err(field("export", "rpi.contrast.ce_enable", "must be 0: adaptive contrast enhancement would rewrite the curve per frame"));
-        } else {
-            self.hardware_curve(&given)
-        };
+        }
+        let curve = self.hardware_curve(&given);
         let fmt = self.matrix_format();
         Ok(ours
             .ccms

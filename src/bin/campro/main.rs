@@ -316,8 +316,7 @@ fn run(cli: Cli) -> Result<()> {
             let base = files.base_text()?;
             let exported = t.export(&p, base.as_deref())?;
             let conditions = t.emulate(&exported, base.as_deref())?;
-            let chart: Vec<[u8; 3]> = campro::chart::render().chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
-            let sets = [("RGB cube, step 5".to_string(), compare::code_cube(5)), (format!("{random} random pixels"), compare::random_pixels(random, seed)), ("built-in chart".to_string(), chart)];
+            let sets = pixel_sets(random, seed);
             let mut rows = Vec::new();
             for c in &conditions {
                 for (name, px) in &sets {
@@ -561,14 +560,14 @@ fn encode_png(samples: &[u16], w: u32, h: u32, depth: Depth) -> Result<Vec<u8>> 
 }
 
 fn comparison(p: &Params, m: &Mat3, v: &Camera2Values, model: &DeviceModel, random: usize, seed: u64) -> Result<Vec<(String, DeviceError)>> {
+    let sets = std::iter::once(("every grey level".to_string(), compare::grey_levels())).chain(pixel_sets(random, seed));
+    sets.map(|(name, px)| Ok((name, compare::camera2_vs_desktop(p, m, v, model, &px)?))).collect()
+}
+
+/// The test pixels every comparison uses: the RGB cube, random pixels, the chart.
+fn pixel_sets(random: usize, seed: u64) -> [(String, Vec<[u8; 3]>); 3] {
     let chart: Vec<[u8; 3]> = campro::chart::render().chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
-    let sets = [
-        ("every grey level".to_string(), compare::grey_levels()),
-        ("RGB cube, step 5".to_string(), compare::code_cube(5)),
-        (format!("{random} random pixels"), compare::random_pixels(random, seed)),
-        ("built-in chart".to_string(), chart),
-    ];
-    sets.into_iter().map(|(name, px)| Ok((name, compare::camera2_vs_desktop(p, m, v, model, &px)?))).collect()
+    [("RGB cube, step 5".to_string(), compare::code_cube(5)), (format!("{random} random pixels"), compare::random_pixels(random, seed)), ("built-in chart".to_string(), chart)]
 }
 
 fn print_comparison(rows: &[(String, DeviceError)]) {

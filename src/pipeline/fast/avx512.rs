@@ -47,7 +47,7 @@ pub(super) fn supported() -> bool {
 /// Error bound of the engine's value before rounding, in output LSB (see the module doc).
 pub(super) fn error_lsb(params: &Params) -> f64 {
     let u = f32::EPSILON as f64 / 2.0;
-    let s = params.ccm.iter().map(|r| r.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
+    let s = crate::ccm::norm_inf(&params.ccm);
     let l = params.tone_curve.max_slope();
     // 1e-12 · (1 + L·S) covers the f64 reference's own rounding.
     255.0 * (l * 5.0 * u * (s + 1.0) + 3.0 * u) * 1.01 + 1e-12 * (1.0 + l * s) * 255.0
@@ -56,7 +56,7 @@ pub(super) fn error_lsb(params: &Params) -> f64 {
 /// The same bound in curve-input units (the matrix output's error).
 fn position_error(params: &Params) -> f64 {
     let u = f32::EPSILON as f64 / 2.0;
-    let s = params.ccm.iter().map(|r| r.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
+    let s = crate::ccm::norm_inf(&params.ccm);
     5.0 * u * (s + 1.0) * 1.01 + 1e-12 * (1.0 + s)
 }
 

@@ -1,0 +1,29 @@
+//! Errors of the evaluation crate: each names the file or field and the rule it broke.
+
+use std::path::PathBuf;
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum EvalError {
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: {field}: {rule}")]
+    Manifest { path: PathBuf, field: String, rule: String },
+    #[error("model {path}: {message}")]
+    Model { path: PathBuf, message: String },
+    #[error("image {path}: {message}")]
+    Image { path: PathBuf, message: String },
+    #[error("{path}:{line}: {message}")]
+    Data { path: PathBuf, line: usize, message: String },
+    #[error("{0}")]
+    Invalid(String),
+}
+
+impl EvalError {
+    pub fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> Self {
+        let path = path.into();
+        move |source| Self::Io { path, source }
+    }
+}
+
+pub type Result<T> = std::result::Result<T, EvalError>;

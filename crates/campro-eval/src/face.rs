@@ -1,0 +1,182 @@
+//! Faces: YuNet-style detection with 5 landmarks, similarity alignment onto an embedder's
+//! template, and L2-normalised embeddings compared by cosine similarity.
+
+use crate::error::{EvalError, Result};
+use crate::geometry::{self, letterbox, nms, similarity, warp_affine};
+use crate::manifest::Task;
+use crate::model::Model;
+use image::RgbImage;
+
+/// A detected face in image pixels: box `[x0, y0, x1, y1]`, score in [0, 1], landmarks in
+/// the order right eye, left eye, nose tip, right and left mouth corner of the person
+/// (image-left first).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Face {
+    pub bbox: [f32; 4],
+    pub score: f32,
+    pub landmarks: [[f32; 2]; 5],
+}
+
+/// Decodes one stride of a YuNet head (`n = cols · rows` anchors, row-major) into `out`:
+/// score = sqrt(clamp(cls)·clamp(obj)); centre = (col + dx, row + dy)·s; size = exp(dw, dh)·s;
+/// landmark k = (col + kx, row + ky)·s.
+pub fn decode_yunet_stride(stride: usize, cols: usize, cls: &[f32], obj: &[f32], bbox: &[f32], kps: &[f32], threshold: f32, out: &mut Vec<Face>) {
+    let s = stride as f32;
+    for i in 0..cls.len() {
+        let score = (cls[i].clamp(0.0, 1.0) * obj[i].clamp(0.0, 1.0)).sqrt();
+        if score < threshold || !score.is_finite() {
+            continue;
+        }
+        let (col, row) = ((i % cols) as f32, (i / cols) as f32);
+        let b = &bbox[4 * i..4 * i + 4];
+        let (cx, cy) = ((col + b[0]) * s, (row + b[1]) * s);
+        let (w, h) = (b[2].exp() * s, b[3].exp() * s);
+        let k = &kps[10 * i..10 * i + 10];
+        let landmarks = std::array::from_fn(|j| [(col + k[2 * j]) * s, (row + k[2 * j + 1]) * s]);
+        out.push(Face { bbox: [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0], score, landmarks });
+    }
+}
+
+/// A face detector (manifest task `face_detector`).
+pub struct FaceDetector {
+    model: Model,
+    strides: Vec<usize>,
+    threshold: f32,
+    nms_iou: f32,
+}
+
+impl FaceDetector {
+    pub fn new(model: Model) -> Result<Self> {
+        match &model.manifest.task {
+            Task::FaceDetector { strides, score_threshold, nms_iou } => {
+                Ok(Self { strides: strides.clone(), threshold: *score_threshold, nms_iou: *nms_iou, model })
+            }
+            _ => Err(EvalError::Invalid(format!("model {} is not a face_detector", model.manifest.name))),
+        }
+    }
+
+    /// All faces above the threshold, after NMS, in image pixels, best first. The image is
+    /// scaled down to fit the input (never up) and padded with black at the bottom/right.
+    pub fn detect(&self, img: &RgbImage) -> Result<Vec<Face>> {
+        let (iw, ih) = (self.model.manifest.input.width, self.model.manifest.input.height);
+        let scale = (iw as f64 / img.width() as f64).min(ih as f64 / img.height() as f64).min(1.0);
+        let canvas = letterbox(img, iw as u32, ih as u32, scale, 0);
+        let out = self.model.run(&canvas)?;
+        let mut faces = Vec::new();
+        for &s in &self.strides {
+            let (cols, rows) = (iw / s, ih / s);
+            let n = cols * rows;
+            decode_yunet_stride(
+                s,
+                cols,
+                out.get(&format!("cls_{s}"), n)?,
+                out.get(&format!("obj_{s}"), n)?,
+                out.get(&format!("bbox_{s}"), 4 * n)?,
+                out.get(&format!("kps_{s}"), 10 * n)?,
+                self.threshold,
+                &mut faces,
+            );
+        }
+        let boxes: Vec<[f32; 4]> = faces.iter().map(|f| f.bbox).collect();
+        let scores: Vec<f32> = faces.iter().map(|f| f.score).collect();
+        let inv = (1.0 / scale) as f32;
+        Ok(nms(&boxes, &scores, self.nms_iou)
+            .into_iter()
+            .map(|i| {
+                let f = faces[i];
+                Face { bbox: f.bbox.map(|v| v * inv), score: f.score, landmarks: f.landmarks.map(|p| [p[0] * inv, p[1] * inv]) }
+            })
+            .collect())
+    }
+}
+
+/// The face whose box centre is nearest the image centre (LFW centres the named person).
+pub fn central_face(faces: &[Face], width: u32, height: u32) -> Option<Face> {
+    let (cx, cy) = (width as f32 / 2.0, height as f32 / 2.0);
+    let d = |f: &Face| ((f.bbox[0] + f.bbox[2]) / 2.0 - cx).powi(2) + ((f.bbox[1] + f.bbox[3]) / 2.0 - cy).powi(2);
+    faces.iter().copied().min_by(|a, b| d(a).total_cmp(&d(b)))
+}
+
+/// A face embedder (manifest task `face_embedder`).
+pub struct Embedder {
+    model: Model,
+    output: String,
+    template: [[f64; 2]; 5],
+}
+
+impl Embedder {
+    pub fn new(model: Model) -> Result<Self> {
+        match &model.manifest.task {
+            Task::FaceEmbedder { output, template } => {
+                Ok(Self { output: output.clone(), template: template.map(|p| p.map(f64::from)), model })
+            }
+            _ => Err(EvalError::Invalid(format!("model {} is not a face_embedder", model.manifest.name))),
+        }
+    }
+
+    pub fn name(&self) -> &str {
+        &self.model.manifest.name
+    }
+
+    /// The crop this model expects: a similarity transform from `landmarks` onto the
+    /// template, bilinear, black outside.
+    pub fn align(&self, img: &RgbImage, landmarks: &[[f32; 2]; 5]) -> RgbImage {
+        let src = landmarks.map(|p| p.map(f64::from));
+        let m = similarity(&src, &self.template);
+        let (w, h) = (self.model.manifest.input.width as u32, self.model.manifest.input.height as u32);
+        warp_affine(img, &m, w, h).unwrap_or_else(|| RgbImage::new(w, h))
+    }
+
+    /// The L2-normalised embedding of an aligned crop (of the model's input size).
+    pub fn embed(&self, crop: &RgbImage) -> Result<Vec<f32>> {
+        let out = self.model.run(crop)?;
+        let mut v = out.any(&self.output)?.to_vec();
+        let n = v.iter().map(|x| x * x).sum::<f32>().sqrt();
+        if !(n > 0.0 && n.is_finite()) {
+            return Err(EvalError::Model { path: self.model.manifest.file.clone(), message: "embedding has zero or non-finite norm".into() });
+        }
+        v.iter_mut().for_each(|x| *x /= n);
+        Ok(v)
+    }
+}
+
+/// Cosine similarity of two L2-normalised embeddings.
+pub fn cosine(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+pub use geometry::iou;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn yunet_decoding_by_hand() {
+        // Stride 8, a 2x2 grid; anchor 3 is (col 1, row 1).
+        let cls = [0.0, 0.0, 0.0, 0.81];
+        let obj = [1.0, 1.0, 1.0, 1.0];
+        let mut bbox = [0.0f32; 16];
+        bbox[12..16].copy_from_slice(&[0.5, 0.25, 0.0, 2f32.ln()]);
+        let mut kps = [0.0f32; 40];
+        kps[30..40].copy_from_slice(&[0.0, 0.0, 1.0, 0.0, 0.5, 0.5, 0.0, 1.0, 1.0, 1.0]);
+        let mut faces = Vec::new();
+        decode_yunet_stride(8, 2, &cls, &obj, &bbox, &kps, 0.5, &mut faces);
+        assert_eq!(faces.len(), 1);
+        let f = faces[0];
+        assert!((f.score - 0.9).abs() < 1e-6); // sqrt(0.81 · 1)
+        // centre (1.5·8, 1.25·8) = (12, 10); size (8, 16).
+        assert_eq!(f.bbox, [8.0, 2.0, 16.0, 18.0]);
+        assert_eq!(f.landmarks[0], [8.0, 8.0]);
+        assert_eq!(f.landmarks[2], [12.0, 12.0]);
+        assert_eq!(f.landmarks[4], [16.0, 16.0]);
+    }
+
+    #[test]
+    fn central_face_picks_the_middle() {
+        let f = |x: f32| Face { bbox: [x, 40.0, x + 20.0, 60.0], score: 0.9, landmarks: [[0.0; 2]; 5] };
+        let faces = [f(0.0), f(45.0), f(80.0)];
+        assert_eq!(central_face(&faces, 100, 100).unwrap().bbox[0], 45.0);
+        assert!(central_face(&[], 100, 100).is_none());
+    }
+}

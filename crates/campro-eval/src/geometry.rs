@@ -1,0 +1,186 @@
+//! Image geometry: bilinear sampling and resizing, letterboxing, similarity transforms.
+//!
+//! Pixel centres sit at integer coordinates + 0.5 (OpenCV's and PyTorch's
+//! `align_corners = false` convention).
+
+use image::{Rgb, RgbImage};
+
+/// A 2x3 affine map `[a b c; d e f]`: `(x, y) -> (a x + b y + c, d x + e y + f)`.
+pub type Affine = [[f64; 3]; 2];
+
+/// Bilinear sample at continuous pixel coordinates (x, y) (pixel centres at integers),
+/// with `border` outside the image.
+pub fn sample_bilinear(img: &RgbImage, x: f64, y: f64, border: [u8; 3]) -> [f64; 3] {
+    let (w, h) = (img.width() as i64, img.height() as i64);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let px = |xi: i64, yi: i64| -> [f64; 3] {
+        if xi < 0 || yi < 0 || xi >= w || yi >= h {
+            border.map(f64::from)
+        } else {
+            img.get_pixel(xi as u32, yi as u32).0.map(f64::from)
+        }
+    };
+    let (a, b, c, d) = (px(x0, y0), px(x0 + 1, y0), px(x0, y0 + 1), px(x0 + 1, y0 + 1));
+    std::array::from_fn(|k| {
+        let top = a[k] + (b[k] - a[k]) * fx;
+        let bot = c[k] + (d[k] - c[k]) * fx;
+        top + (bot - top) * fy
+    })
+}
+
+fn to_u8(v: f64) -> u8 {
+    v.round().clamp(0.0, 255.0) as u8
+}
+
+/// Resizes with bilinear interpolation and half-pixel centres (as OpenCV's INTER_LINEAR;
+/// edge pixels are replicated).
+pub fn resize_bilinear(img: &RgbImage, width: u32, height: u32) -> RgbImage {
+    let (sx, sy) = (img.width() as f64 / width as f64, img.height() as f64 / height as f64);
+    let (mx, my) = (img.width() as f64 - 1.0, img.height() as f64 - 1.0);
+    RgbImage::from_fn(width, height, |x, y| {
+        let u = ((x as f64 + 0.5) * sx - 0.5).clamp(0.0, mx);
+        let v = ((y as f64 + 0.5) * sy - 0.5).clamp(0.0, my);
+        Rgb(sample_bilinear(img, u, v, [0; 3]).map(to_u8))
+    })
+}
+
+/// Scales `img` by `scale` (bilinear) and places it at the top-left of a `width x height`
+/// canvas filled with `pad`. Returns the canvas; a point of the canvas maps back to the
+/// image by dividing by `scale`.
+pub fn letterbox(img: &RgbImage, width: u32, height: u32, scale: f64, pad: u8) -> RgbImage {
+    let sw = ((img.width() as f64 * scale).round() as u32).clamp(1, width);
+    let sh = ((img.height() as f64 * scale).round() as u32).clamp(1, height);
+    let scaled = if (sw, sh) == img.dimensions() { img.clone() } else { resize_bilinear(img, sw, sh) };
+    let mut canvas = RgbImage::from_pixel(width, height, Rgb([pad; 3]));
+    image::imageops::replace(&mut canvas, &scaled, 0, 0);
+    canvas
+}
+
+/// The least-squares similarity transform (rotation, uniform scale, translation; no
+/// reflection) taking `src` points onto `dst` (Umeyama 1991, closed form in 2-D).
+pub fn similarity(src: &[[f64; 2]], dst: &[[f64; 2]]) -> Affine {
+    let n = src.len() as f64;
+    let mean = |p: &[[f64; 2]]| {
+        let s = p.iter().fold([0.0; 2], |a, q| [a[0] + q[0], a[1] + q[1]]);
+        [s[0] / n, s[1] / n]
+    };
+    let (ms, md) = (mean(src), mean(dst));
+    // With complex numbers z = x + iy: dst ≈ c·src + t, c = Σ conj(s)·d / Σ |s|².
+    let (mut re, mut im, mut ss) = (0.0, 0.0, 0.0);
+    for (s, d) in src.iter().zip(dst) {
+        let (sx, sy) = (s[0] - ms[0], s[1] - ms[1]);
+        let (dx, dy) = (d[0] - md[0], d[1] - md[1]);
+        re += sx * dx + sy * dy;
+        im += sx * dy - sy * dx;
+        ss += sx * sx + sy * sy;
+    }
+    let (a, b) = if ss > 0.0 { (re / ss, im / ss) } else { (1.0, 0.0) };
+    [[a, -b, md[0] - (a * ms[0] - b * ms[1])], [b, a, md[1] - (b * ms[0] + a * ms[1])]]
+}
+
+/// Applies an affine map to a point.
+pub fn apply(m: &Affine, p: [f64; 2]) -> [f64; 2] {
+    [m[0][0] * p[0] + m[0][1] * p[1] + m[0][2], m[1][0] * p[0] + m[1][1] * p[1] + m[1][2]]
+}
+
+/// Inverse of an invertible affine map (None when singular).
+pub fn invert(m: &Affine) -> Option<Affine> {
+    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+    if det.abs() < 1e-12 || !det.is_finite() {
+        return None;
+    }
+    let (a, b, d, e) = (m[1][1] / det, -m[0][1] / det, -m[1][0] / det, m[0][0] / det);
+    Some([[a, b, -(a * m[0][2] + b * m[1][2])], [d, e, -(d * m[0][2] + e * m[1][2])]])
+}
+
+/// Warps `img` into a `width x height` crop: crop pixel p takes the source at `m⁻¹(p)`
+/// (the map is between pixel-index coordinates, as OpenCV's warpAffine), bilinear, black
+/// outside. Returns None when the map is singular.
+pub fn warp_affine(img: &RgbImage, m: &Affine, width: u32, height: u32) -> Option<RgbImage> {
+    let inv = invert(m)?;
+    Some(RgbImage::from_fn(width, height, |x, y| {
+        let [u, v] = apply(&inv, [x as f64, y as f64]);
+        Rgb(sample_bilinear(img, u, v, [0; 3]).map(to_u8))
+    }))
+}
+
+/// Intersection over union of two boxes `[x0, y0, x1, y1]`.
+pub fn iou(a: [f32; 4], b: [f32; 4]) -> f32 {
+    let iw = (a[2].min(b[2]) - a[0].max(b[0])).max(0.0);
+    let ih = (a[3].min(b[3]) - a[1].max(b[1])).max(0.0);
+    let inter = iw * ih;
+    let area = |r: [f32; 4]| (r[2] - r[0]).max(0.0) * (r[3] - r[1]).max(0.0);
+    let union = area(a) + area(b) - inter;
+    if union > 0.0 { inter / union } else { 0.0 }
+}
+
+/// Greedy non-maximum suppression: indices of kept boxes, by descending score.
+pub fn nms(boxes: &[[f32; 4]], scores: &[f32], iou_threshold: f32) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..boxes.len()).collect();
+    order.sort_by(|&i, &j| scores[j].total_cmp(&scores[i]).then(i.cmp(&j)));
+    let mut keep: Vec<usize> = Vec::new();
+    for i in order {
+        if keep.iter().all(|&k| iou(boxes[k], boxes[i]) <= iou_threshold) {
+            keep.push(i);
+        }
+    }
+    keep
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn similarity_recovers_a_known_map() {
+        // Rotation by 30°, scale 1.7, shift (5, -3): src -> dst exactly.
+        let (c, s) = (1.7 * 30f64.to_radians().cos(), 1.7 * 30f64.to_radians().sin());
+        let truth: Affine = [[c, -s, 5.0], [s, c, -3.0]];
+        let src = [[10.0, 20.0], [40.0, 22.0], [25.0, 35.0], [12.0, 50.0], [38.0, 51.0]];
+        let dst: Vec<[f64; 2]> = src.iter().map(|&p| apply(&truth, p)).collect();
+        let m = similarity(&src, &dst);
+        for r in 0..2 {
+            for k in 0..3 {
+                assert!((m[r][k] - truth[r][k]).abs() < 1e-12, "{m:?}");
+            }
+        }
+        let inv = invert(&m).unwrap();
+        let back = apply(&inv, apply(&m, [3.0, 4.0]));
+        assert!((back[0] - 3.0).abs() < 1e-12 && (back[1] - 4.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn similarity_never_reflects() {
+        // A mirrored point set: the best similarity cannot flip, so it is not exact.
+        let src = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]];
+        let dst = [[0.0, 0.0], [-1.0, 0.0], [0.0, 1.0]];
+        let m = similarity(&src, &dst);
+        let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+        assert!(det >= 0.0);
+    }
+
+    #[test]
+    fn iou_and_nms_by_hand() {
+        // Two 2x2 boxes overlapping in a 1x2 strip: IoU = 2 / (4 + 4 − 2) = 1/3.
+        assert!((iou([0., 0., 2., 2.], [1., 0., 3., 2.]) - 1.0 / 3.0).abs() < 1e-7);
+        assert_eq!(iou([0., 0., 1., 1.], [2., 2., 3., 3.]), 0.0);
+        let boxes = [[0., 0., 2., 2.], [1., 0., 3., 2.], [0.1, 0., 2.1, 2.], [5., 5., 6., 6.]];
+        let scores = [0.8, 0.9, 0.7, 0.1];
+        // 1 (0.9) first; 0 overlaps it by 1/3 (kept at 0.5); 2 overlaps 0 by 0.9 (dropped).
+        assert_eq!(nms(&boxes, &scores, 0.5), vec![1, 0, 3]);
+        assert_eq!(nms(&boxes, &scores, 0.3), vec![1, 3]);
+    }
+
+    #[test]
+    fn bilinear_resize_of_a_ramp_is_linear_inside() {
+        // A horizontal ramp 0, 10, ..., 70 upsampled 2x: interior pixels interpolate.
+        let img = RgbImage::from_fn(8, 1, |x, _| Rgb([(x * 10) as u8; 3]));
+        let up = resize_bilinear(&img, 16, 1);
+        // Output x maps to input (x + 0.5)/2 − 0.5: x = 3 -> 1.25 -> 12.5 -> rounds to 13 (half away).
+        assert_eq!(up.get_pixel(3, 0).0[0], 13);
+        assert_eq!(up.get_pixel(0, 0).0[0], 0); // clamped at the edge
+        assert_eq!(up.get_pixel(15, 0).0[0], 70);
+    }
+}

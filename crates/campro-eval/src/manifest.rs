@@ -1,0 +1,160 @@
+//! Model manifests: a small JSON file that says how to feed a model and read its output, so
+//! a user can plug in their own face-recognition or detection model without code changes.
+//!
+//! ```json
+//! { "name": "faceplugin", "file": "faceplugin_fr_feature.onnx",
+//!   "input": { "width": 112, "height": 112, "channels": "rgb",
+//!              "mean": [127, 127, 127], "std": [128, 128, 128] },
+//!   "task": { "kind": "face_embedder", "output": "output",
+//!             "template": [[38.2946, 51.6963], [73.5318, 51.5014], [56.0252, 71.7366],
+//!                          [41.5493, 92.3655], [70.7299, 92.2041]] } }
+//! ```
+//! The network input is `(pixel − mean) / std` per channel (pixels 0..255), NCHW, batch 1.
+
+use crate::error::{EvalError, Result};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// Channel order of the network input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Channels {
+    Rgb,
+    Bgr,
+}
+
+/// The input tensor: `1 x 3 x height x width`, `(pixel − mean[c]) / std[c]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Input {
+    pub width: usize,
+    pub height: usize,
+    pub channels: Channels,
+    #[serde(default)]
+    pub mean: [f32; 3],
+    #[serde(default = "ones")]
+    pub std: [f32; 3],
+}
+
+fn ones() -> [f32; 3] {
+    [1.0; 3]
+}
+
+/// What the model does and how its outputs are decoded.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Task {
+    /// YuNet-style face detector: outputs `cls_s`, `obj_s`, `bbox_s`, `kps_s` per stride.
+    /// The image is scaled down to fit (never up) and padded at the bottom/right with 0.
+    FaceDetector {
+        strides: Vec<usize>,
+        /// Faces with `sqrt(cls·obj)` below this are dropped (0..1).
+        score_threshold: f32,
+        /// Greedy NMS IoU (0..1).
+        nms_iou: f32,
+    },
+    /// YOLOX-style detector: one output `[1, N, 5 + classes]` per anchor
+    /// (x, y, log w, log h, objectness, class probabilities), grids of `strides`, row-major.
+    /// The image is letterboxed to the top-left, padded with `pad_value`.
+    PersonDetector {
+        output: String,
+        strides: Vec<usize>,
+        /// Index of the person class among the class probabilities.
+        class_index: usize,
+        /// Detections with `objectness · p(person)` below this are dropped (0..1).
+        score_threshold: f32,
+        nms_iou: f32,
+        max_detections: usize,
+        #[serde(default = "pad114")]
+        pad_value: u8,
+    },
+    /// Face embedder: the face is aligned by a similarity transform from 5 landmarks
+    /// (right eye, left eye, nose, right and left mouth corner of the person, i.e. image-left
+    /// first) onto `template` (pixels of the input crop); the embedding is L2-normalised.
+    FaceEmbedder { output: String, template: [[f32; 2]; 5] },
+}
+
+fn pad114() -> u8 {
+    114
+}
+
+/// A parsed, validated manifest; `file` is resolved against the models folder.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    pub name: String,
+    pub file: PathBuf,
+    pub input: Input,
+    pub task: Task,
+}
+
+impl Manifest {
+    /// Reads `path`; a relative `file` is looked up in `models_dir`.
+    pub fn load(path: &Path, models_dir: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(EvalError::io(path))?;
+        Self::parse(&text, path, models_dir)
+    }
+
+    /// Parses manifest text (`origin` only names it in errors).
+    pub fn parse(text: &str, origin: &Path, models_dir: &Path) -> Result<Self> {
+        let de = &mut serde_json::Deserializer::from_str(text);
+        let mut m: Manifest = serde_path_to_error::deserialize(de).map_err(|e| EvalError::Manifest {
+            path: origin.into(),
+            field: e.path().to_string(),
+            rule: e.inner().to_string(),
+        })?;
+        if m.file.is_relative() {
+            m.file = models_dir.join(&m.file);
+        }
+        m.validate().map_err(|(field, rule)| EvalError::Manifest { path: origin.into(), field, rule })?;
+        Ok(m)
+    }
+
+    fn validate(&self) -> std::result::Result<(), (String, String)> {
+        let bad = |f: &str, r: &str| Err((f.to_string(), r.to_string()));
+        if self.name.is_empty() {
+            return bad("name", "must not be empty");
+        }
+        let i = &self.input;
+        if !(1..=8192).contains(&i.width) || !(1..=8192).contains(&i.height) {
+            return bad("input", "width and height must be in 1..=8192");
+        }
+        if i.mean.iter().any(|v| !v.is_finite()) {
+            return bad("input.mean", "must be finite");
+        }
+        if i.std.iter().any(|v| !v.is_finite() || *v <= 0.0) {
+            return bad("input.std", "must be finite and > 0");
+        }
+        let unit = |v: f32| (0.0..=1.0).contains(&v);
+        match &self.task {
+            Task::FaceDetector { strides, score_threshold, nms_iou } => {
+                check_strides(strides, i)?;
+                if !unit(*score_threshold) || !unit(*nms_iou) {
+                    return bad("task", "score_threshold and nms_iou must be in [0, 1]");
+                }
+            }
+            Task::PersonDetector { strides, score_threshold, nms_iou, max_detections, .. } => {
+                check_strides(strides, i)?;
+                if !unit(*score_threshold) || !unit(*nms_iou) {
+                    return bad("task", "score_threshold and nms_iou must be in [0, 1]");
+                }
+                if *max_detections == 0 {
+                    return bad("task.max_detections", "must be at least 1");
+                }
+            }
+            Task::FaceEmbedder { template, .. } => {
+                if template.iter().flatten().any(|v| !v.is_finite()) {
+                    return bad("task.template", "must be finite");
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn check_strides(strides: &[usize], i: &Input) -> std::result::Result<(), (String, String)> {
+    if strides.is_empty() || strides.iter().any(|&s| s == 0 || i.width % s != 0 || i.height % s != 0) {
+        return Err(("task.strides".into(), "must be non-empty and divide the input width and height".into()));
+    }
+    Ok(())
+}

@@ -1,0 +1,423 @@
+//! Privacy: closed-set face identification (the paper's protocol, Sec. VI-A) and LFW
+//! verification, raw against protected, for each face-recognition model.
+//!
+//! Identification: identities with ≥ 2 images; per run one random gallery image and a
+//! different random probe image per identity. The gallery (the adversary's) is raw, the
+//! probes are protected. Top-1 and CMC with (a) the nearest gallery embedding by cosine and
+//! (b) a softmax linear classifier trained on the adversary's raw images (every pool image
+//! of each identity except the probe). Two protection orders:
+//! - `paper`: landmarks from the raw photo, the aligned crop is protected (the paper's order);
+//! - `end-to-end`: the whole photo is protected, then the attacker detects and aligns; a
+//!   face not found is not identified, and the detection rate is reported.
+//!
+//! Images whose raw photo has no detectable face are left out (counted), since neither
+//! order can align them.
+
+use crate::data::{read_rgb8, Lfw};
+use crate::error::{EvalError, Result};
+use crate::face::{central_face, cosine, Embedder, Face, FaceDetector};
+use crate::linear::{self, LinearOptions};
+use crate::Condition;
+use indicatif::{ProgressBar, ProgressStyle};
+use ndarray::Array2;
+use rand::seq::{IndexedRandom, SliceRandom};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+/// Settings of a privacy evaluation.
+#[derive(Debug, Clone, Serialize)]
+pub struct PrivacyOptions {
+    /// Protocol repetitions (the paper: 10).
+    pub runs: usize,
+    pub seed: u64,
+    /// Images kept per identity (drawn once, seeded); gallery, probe and the linear
+    /// classifier's training images come from this pool. At least 2.
+    pub pool: usize,
+    /// Use only this many identities (seeded choice), for quick looks.
+    pub limit: Option<usize>,
+    /// Ranks reported on the CMC curve.
+    pub cmc_ranks: usize,
+    pub linear: LinearOptions,
+    /// Run LFW verification on `pairs.txt`.
+    pub verification: bool,
+    /// Use at most this many pairs of each kind per fold.
+    pub pairs_per_fold: Option<usize>,
+}
+
+impl Default for PrivacyOptions {
+    fn default() -> Self {
+        Self { runs: 10, seed: 0, pool: 6, limit: None, cmc_ranks: 20, linear: LinearOptions::default(), verification: true, pairs_per_fold: None }
+    }
+}
+
+/// Protection order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Order {
+    Paper,
+    EndToEnd,
+}
+
+impl Order {
+    pub fn name(self) -> &'static str {
+        match self {
+            Order::Paper => "paper",
+            Order::EndToEnd => "end-to-end",
+        }
+    }
+}
+
+/// One row of identification results.
+#[derive(Debug, Clone, Serialize)]
+pub struct IdentRow {
+    pub condition: String,
+    pub order: Order,
+    pub model: String,
+    pub classifier: &'static str,
+    pub top1_mean: f64,
+    pub top1_std: f64,
+    /// Mean over runs of P(rank ≤ k), k = 1..=cmc_ranks.
+    pub cmc: Vec<f64>,
+    /// End-to-end only: share of probe photos in which the attacker found a face.
+    pub detection_rate: Option<f64>,
+}
+
+/// One row of verification results.
+#[derive(Debug, Clone, Serialize)]
+pub struct VerifRow {
+    pub condition: String,
+    pub model: String,
+    /// 10-fold accuracy (threshold chosen on the other nine folds).
+    pub accuracy_mean: f64,
+    pub accuracy_std: f64,
+    /// True accepts at the threshold where at most 1e-3 of the different pairs pass (pooled;
+    /// with fewer than 1000 different pairs that is no false accept at all).
+    pub tar_at_far_1e3: f64,
+    pub pairs: usize,
+}
+
+/// Everything a privacy evaluation measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct PrivacyReport {
+    pub options: PrivacyOptions,
+    pub identities: usize,
+    pub images: usize,
+    /// Pool images left out because no face was found in the raw photo.
+    pub raw_undetected: usize,
+    pub pairs_skipped_absent: usize,
+    pub pairs_skipped_undetected: usize,
+    pub identification: Vec<IdentRow>,
+    pub verification: Vec<VerifRow>,
+    pub seconds: f64,
+}
+
+/// The face models of an evaluation.
+pub struct FaceModels {
+    pub detector: FaceDetector,
+    pub embedders: Vec<Embedder>,
+}
+
+/// Per image, per condition: the probe embeddings per model for each order.
+#[derive(Default, Clone)]
+struct Protected {
+    paper: Vec<Vec<f32>>,
+    /// None when the attacker found no face in the protected photo.
+    e2e: Option<Vec<Vec<f32>>>,
+}
+
+struct Record {
+    raw: Vec<Vec<f32>>,
+    prot: Vec<Protected>,
+}
+
+fn progress(len: usize, what: &str) -> ProgressBar {
+    let pb = ProgressBar::new(len as u64);
+    pb.set_style(ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {elapsed_precise} eta {eta}").unwrap().progress_chars("=> "));
+    pb.set_message(what.to_string());
+    pb
+}
+
+/// Embeds one photo under every condition. Returns None when the raw photo has no face.
+fn embed_photo(path: &PathBuf, m: &FaceModels, conds: &[Condition], e2e: bool) -> Result<Option<Record>> {
+    let img = read_rgb8(path)?;
+    let Some(face) = central_face(&m.detector.detect(&img)?, img.width(), img.height()) else { return Ok(None) };
+    let crops: Vec<_> = m.embedders.iter().map(|e| e.align(&img, &face.landmarks)).collect();
+    let raw: Vec<Vec<f32>> = m.embedders.iter().zip(&crops).map(|(e, c)| e.embed(c)).collect::<Result<_>>()?;
+    let mut prot = Vec::with_capacity(conds.len());
+    for c in conds {
+        let Some(p) = &c.protect else {
+            prot.push(Protected { paper: raw.clone(), e2e: Some(raw.clone()) });
+            continue;
+        };
+        let paper = m.embedders.iter().zip(&crops).map(|(e, crop)| e.embed(&p(crop))).collect::<Result<_>>()?;
+        let e2e = if e2e {
+            let pimg = p(&img);
+            let found: Option<Face> = central_face(&m.detector.detect(&pimg)?, pimg.width(), pimg.height());
+            match found {
+                Some(f) => Some(m.embedders.iter().map(|e| e.embed(&e.align(&pimg, &f.landmarks))).collect::<Result<_>>()?),
+                None => None,
+            }
+        } else {
+            None
+        };
+        prot.push(Protected { paper, e2e });
+    }
+    Ok(Some(Record { raw, prot }))
+}
+
+fn mean_std(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let var = if v.len() > 1 { v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0) } else { 0.0 };
+    (m, var.sqrt())
+}
+
+/// 1-based rank of `truth` among `scores` (ties counted in its favour).
+pub fn rank_of(scores: &[f32], truth: usize) -> usize {
+    let t = scores[truth];
+    1 + scores.iter().filter(|&&s| s > t).count()
+}
+
+/// Runs the identification protocol (and verification) on LFW.
+pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &PrivacyOptions) -> Result<PrivacyReport> {
+    if o.pool < 2 || o.runs == 0 {
+        return Err(EvalError::Invalid("privacy: --pool must be ≥ 2 and --runs ≥ 1".into()));
+    }
+    let start = std::time::Instant::now();
+    let mut rng = ChaCha8Rng::seed_from_u64(o.seed);
+    let mut ids: Vec<(&String, &Vec<PathBuf>)> = lfw.people.iter().filter(|(_, v)| v.len() >= 2).collect();
+    if let Some(l) = o.limit {
+        ids.shuffle(&mut rng);
+        ids.truncate(l);
+        ids.sort();
+    }
+    let pools: Vec<Vec<PathBuf>> = ids.iter().map(|(_, v)| v.choose_multiple(&mut rng, o.pool.min(v.len())).cloned().collect()).collect();
+    // Verification pairs (optionally capped per fold and kind).
+    let (mut pairs, absent) = if o.verification { lfw.pairs()? } else { (Vec::new(), 0) };
+    if let Some(cap) = o.pairs_per_fold {
+        let mut seen: HashMap<(usize, bool), usize> = HashMap::new();
+        pairs.retain(|p| {
+            let n = seen.entry((p.fold, p.same)).or_default();
+            *n += 1;
+            *n <= cap
+        });
+    }
+    // Every photo to embed; end-to-end only for the identification pools.
+    let mut todo: HashMap<PathBuf, bool> = HashMap::new();
+    for p in pools.iter().flatten() {
+        todo.insert(p.clone(), true);
+    }
+    for p in &pairs {
+        todo.entry(p.a.clone()).or_insert(false);
+        todo.entry(p.b.clone()).or_insert(false);
+    }
+    let mut todo: Vec<(PathBuf, bool)> = todo.into_iter().collect();
+    todo.sort();
+    let pb = progress(todo.len(), "privacy: embedding faces");
+    let records: Mutex<HashMap<PathBuf, Record>> = Mutex::new(HashMap::new());
+    todo.par_iter().try_for_each(|(path, e2e)| -> Result<()> {
+        if let Some(r) = embed_photo(path, models, conds, *e2e)? {
+            records.lock().unwrap().insert(path.clone(), r);
+        }
+        pb.inc(1);
+        Ok(())
+    })?;
+    pb.finish_and_clear();
+    let records = records.into_inner().unwrap();
+    let raw_undetected = pools.iter().flatten().filter(|p| !records.contains_key(*p)).count();
+    // Identities usable: ≥ 2 pool images with a raw face.
+    let usable: Vec<Vec<&Record>> =
+        pools.iter().map(|p| p.iter().filter_map(|x| records.get(x)).collect::<Vec<_>>()).filter(|v| v.len() >= 2).collect();
+    let classes = usable.len();
+    let nm = models.embedders.len();
+    let orders = [Order::Paper, Order::EndToEnd];
+    // results[(cond, order, model, classifier)] = per-run (top1, cmc, detection rate)
+    type Key = (usize, usize, usize, usize);
+    let mut per_run: HashMap<Key, Vec<(f64, Vec<f64>, f64)>> = HashMap::new();
+    let pbr = progress(o.runs, "privacy: identification runs");
+    for run in 0..o.runs {
+        let mut rng = ChaCha8Rng::seed_from_u64(o.seed.wrapping_add(1 + run as u64));
+        let picks: Vec<(usize, usize)> = usable
+            .iter()
+            .map(|v| {
+                let g = rand::Rng::random_range(&mut rng, 0..v.len());
+                let mut p = rand::Rng::random_range(&mut rng, 0..v.len() - 1);
+                if p >= g {
+                    p += 1;
+                }
+                (g, p)
+            })
+            .collect();
+        for mi in 0..nm {
+            let dim = usable[0][0].raw[mi].len();
+            let gallery = Array2::from_shape_fn((classes, dim), |(c, k)| usable[c][picks[c].0].raw[mi][k]);
+            // The linear classifier's training set: every usable raw image but the probe.
+            let mut xs = Vec::new();
+            let mut ys = Vec::new();
+            for (c, v) in usable.iter().enumerate() {
+                for (j, r) in v.iter().enumerate() {
+                    if j != picks[c].1 {
+                        xs.extend_from_slice(&r.raw[mi]);
+                        ys.push(c);
+                    }
+                }
+            }
+            let x = Array2::from_shape_vec((ys.len(), dim), xs).expect("rows of equal length");
+            let lin = linear::train(&x, &ys, classes, &o.linear);
+            for ci in 0..conds.len() {
+                for (oi, &order) in orders.iter().enumerate() {
+                    let mut ranks: [Vec<usize>; 2] = [Vec::new(), Vec::new()];
+                    let mut found = 0usize;
+                    for c in 0..classes {
+                        let rec = usable[c][picks[c].1];
+                        let probe = match order {
+                            Order::Paper => Some(&rec.prot[ci].paper[mi]),
+                            Order::EndToEnd => rec.prot[ci].e2e.as_ref().map(|e| &e[mi]),
+                        };
+                        let Some(q) = probe else {
+                            ranks[0].push(usize::MAX);
+                            ranks[1].push(usize::MAX);
+                            continue;
+                        };
+                        found += 1;
+                        let near: Vec<f32> = gallery.rows().into_iter().map(|g| cosine(g.as_slice().unwrap(), q)).collect();
+                        ranks[0].push(rank_of(&near, c));
+                        ranks[1].push(rank_of(&lin.scores(q), c));
+                    }
+                    for (k, r) in ranks.iter().enumerate() {
+                        let cmc: Vec<f64> = (1..=o.cmc_ranks).map(|n| r.iter().filter(|&&x| x <= n).count() as f64 / classes as f64).collect();
+                        per_run.entry((ci, oi, mi, k)).or_default().push((cmc[0], cmc, found as f64 / classes as f64));
+                    }
+                }
+            }
+        }
+        pbr.inc(1);
+    }
+    pbr.finish_and_clear();
+    let mut identification = Vec::new();
+    for ci in 0..conds.len() {
+        for (oi, &order) in orders.iter().enumerate() {
+            for (mi, e) in models.embedders.iter().enumerate() {
+                for (k, cls) in ["nearest", "linear"].iter().enumerate() {
+                    let v = &per_run[&(ci, oi, mi, k)];
+                    let (top1_mean, top1_std) = mean_std(&v.iter().map(|r| r.0).collect::<Vec<_>>());
+                    let cmc = (0..o.cmc_ranks).map(|i| v.iter().map(|r| r.1[i]).sum::<f64>() / v.len() as f64).collect();
+                    let det = v.iter().map(|r| r.2).sum::<f64>() / v.len() as f64;
+                    identification.push(IdentRow {
+                        condition: conds[ci].name.clone(),
+                        order,
+                        model: e.name().to_string(),
+                        classifier: cls,
+                        top1_mean,
+                        top1_std,
+                        cmc,
+                        detection_rate: (order == Order::EndToEnd).then_some(det),
+                    });
+                }
+            }
+        }
+    }
+    // Verification: the first photo raw (enrolled), the second protected (paper order).
+    let mut verification = Vec::new();
+    let usable_pairs: Vec<_> = pairs.iter().filter(|p| records.contains_key(&p.a) && records.contains_key(&p.b)).collect();
+    if o.verification {
+        for (ci, c) in conds.iter().enumerate() {
+            for (mi, e) in models.embedders.iter().enumerate() {
+                let scored: Vec<(usize, bool, f32)> = usable_pairs
+                    .iter()
+                    .map(|p| (p.fold, p.same, cosine(&records[&p.a].raw[mi], &records[&p.b].prot[ci].paper[mi])))
+                    .collect();
+                let (accuracy_mean, accuracy_std) = mean_std(&kfold_accuracy(&scored));
+                verification.push(VerifRow {
+                    condition: c.name.clone(),
+                    model: e.name().to_string(),
+                    accuracy_mean,
+                    accuracy_std,
+                    tar_at_far_1e3: tar_at_far(&scored, 1e-3),
+                    pairs: scored.len(),
+                });
+            }
+        }
+    }
+    Ok(PrivacyReport {
+        options: o.clone(),
+        identities: classes,
+        images: usable.iter().map(Vec::len).sum(),
+        raw_undetected,
+        pairs_skipped_absent: absent,
+        pairs_skipped_undetected: pairs.len() - usable_pairs.len(),
+        identification,
+        verification,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Accuracy of "same iff score > t" on `pairs`.
+fn accuracy_at(pairs: &[&(usize, bool, f32)], t: f32) -> f64 {
+    pairs.iter().filter(|p| (p.2 > t) == p.1).count() as f64 / pairs.len().max(1) as f64
+}
+
+/// Per-fold accuracies: each fold is scored at the threshold that maximises accuracy on the
+/// other folds (candidates: every training score and −∞; among equally good ones the largest).
+pub fn kfold_accuracy(scored: &[(usize, bool, f32)]) -> Vec<f64> {
+    let mut folds: Vec<usize> = scored.iter().map(|s| s.0).collect();
+    folds.sort();
+    folds.dedup();
+    folds
+        .iter()
+        .map(|&f| {
+            let train: Vec<_> = scored.iter().filter(|s| s.0 != f).collect();
+            let test: Vec<_> = scored.iter().filter(|s| s.0 == f).collect();
+            let mut cands: Vec<f32> = train.iter().map(|s| s.2).collect();
+            cands.push(f32::NEG_INFINITY);
+            let best = cands.iter().copied().max_by(|&a, &b| accuracy_at(&train, a).total_cmp(&accuracy_at(&train, b)).then(a.total_cmp(&b))).unwrap();
+            accuracy_at(&test, best)
+        })
+        .collect()
+}
+
+/// True-accept rate at the smallest threshold where the false-accept share is ≤ `far`.
+pub fn tar_at_far(scored: &[(usize, bool, f32)], far: f64) -> f64 {
+    let mut neg: Vec<f32> = scored.iter().filter(|s| !s.1).map(|s| s.2).collect();
+    let pos: Vec<f32> = scored.iter().filter(|s| s.1).map(|s| s.2).collect();
+    if neg.is_empty() || pos.is_empty() {
+        return f64::NAN;
+    }
+    neg.sort_by(|a, b| b.total_cmp(a));
+    let allowed = (far * neg.len() as f64).floor() as usize; // false accepts allowed
+    let t = neg[allowed.min(neg.len() - 1)];
+    pos.iter().filter(|&&s| s > t).count() as f64 / pos.len() as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranks_by_hand() {
+        assert_eq!(rank_of(&[0.1, 0.9, 0.5], 1), 1);
+        assert_eq!(rank_of(&[0.1, 0.9, 0.5], 0), 3);
+        assert_eq!(rank_of(&[0.5, 0.5], 1), 1); // ties in its favour
+    }
+
+    #[test]
+    fn kfold_and_tar_by_hand() {
+        // Two folds. Fold 0: same 0.9, 0.8; different 0.2, 0.85. Fold 1: same 0.7, 0.6;
+        // different 0.1, 0.3.
+        let s = [(0, true, 0.9), (0, true, 0.8), (0, false, 0.2), (0, false, 0.85), (1, true, 0.7), (1, true, 0.6), (1, false, 0.1), (1, false, 0.3)];
+        // Fold 0 is scored at fold 1's best threshold, 0.3 (the only perfect candidate):
+        // 0.9, 0.8 pass, 0.2 is rejected, 0.85 wrongly passes: 3/4.
+        // Fold 1 at fold 0's: candidates 0.85 and 0.2 both give 3/4 there; the largest wins,
+        // 0.85, which rejects 0.7 and 0.6 wrongly and 0.1, 0.3 rightly: 2/4.
+        assert_eq!(kfold_accuracy(&s), vec![0.75, 0.5]);
+        // TAR at FAR ≤ 1/4 (4 negatives, 1 allowed): threshold at the 2nd highest negative
+        // 0.3 -> positives above: 0.9, 0.8, 0.7, 0.6 = 1.0. At FAR 0: threshold 0.85 -> 1/4.
+        assert_eq!(tar_at_far(&s, 0.25), 1.0);
+        assert_eq!(tar_at_far(&s, 0.0), 0.25);
+    }
+}

@@ -2,6 +2,7 @@
 //! files and prints; every computation is a call into the `campro` library.
 
 mod bench;
+mod eval;
 
 use anyhow::{anyhow, bail, Context, Result};
 use campro::ccm::{self, Mat3};
@@ -121,6 +122,11 @@ enum Cmd {
         /// First seed (cases use seed, seed+1, ...).
         #[arg(long, default_value_t = 0)]
         seed: u64,
+    },
+    /// Evaluate privacy (face recognition), utility (person detection) and image quality with real models.
+    Eval {
+        #[command(subcommand)]
+        what: eval::EvalCmd,
     },
     /// Run on the bundled default (colour inversion) and a built-in chart: before/after PNGs, Camera2 values, error report.
     Demo {
@@ -274,6 +280,7 @@ fn main() {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
+        Cmd::Eval { what } => eval::run(what),
         Cmd::Validate { params } => {
             for p in params {
                 let v = load_params(&p)?;

@@ -1,0 +1,258 @@
+//! `campro eval privacy|utility|quality|all`: the paper's evaluation with real models
+//! (campro-eval), with CamPro parameter sets run through the exact 8-bit pipeline.
+
+use anyhow::{anyhow, bail, Context, Result};
+use campro::pipeline::fast::Exact8;
+use campro::Params;
+use campro_eval::baselines::Baseline;
+use campro_eval::face::{Embedder, FaceDetector};
+use campro_eval::manifest::Manifest;
+use campro_eval::model::Model;
+use campro_eval::person::PersonDetector;
+use campro_eval::privacy::{FaceModels, PrivacyOptions};
+use campro_eval::utility::UtilityOptions;
+use campro_eval::{data, privacy, quality, report, utility, Condition};
+use clap::{Args, Subcommand};
+use image::RgbImage;
+use std::path::{Path, PathBuf};
+
+/// The shipped manifests (files resolved against `--models`).
+const BUNDLED: [(&str, &str); 4] = [
+    ("yunet", include_str!("../../../crates/campro-eval/models/yunet.json")),
+    ("yolox-nano", include_str!("../../../crates/campro-eval/models/yolox_nano.json")),
+    ("faceplugin", include_str!("../../../crates/campro-eval/models/faceplugin.json")),
+    ("mobilefacenet-casia", include_str!("../../../crates/campro-eval/models/mobilefacenet_casia.json")),
+];
+
+#[derive(Subcommand)]
+pub enum EvalCmd {
+    /// Face identification (closed set, 10 runs, nearest + linear, both protection orders) and LFW verification.
+    Privacy {
+        #[command(flatten)]
+        common: Common,
+        #[command(flatten)]
+        p: PrivacyArgs,
+    },
+    /// Person detection on COCO: AP, AP@0.5, AP@0.75, precision / recall / F1.
+    Utility {
+        #[command(flatten)]
+        common: Common,
+        #[command(flatten)]
+        u: UtilityArgs,
+    },
+    /// RMSE, PSNR, SSIM, MS-SSIM of protected against raw images.
+    Quality {
+        #[command(flatten)]
+        common: Common,
+        /// Images to score (default: the COCO person images).
+        #[arg(long)]
+        images: Option<PathBuf>,
+    },
+    /// All three plus report.md with the privacy-utility trade-off plot.
+    All {
+        #[command(flatten)]
+        common: Common,
+        #[command(flatten)]
+        p: PrivacyArgs,
+        #[command(flatten)]
+        u: UtilityArgs,
+    },
+}
+
+#[derive(Args)]
+pub struct Common {
+    /// CamPro parameter sets to evaluate (raw images are always included).
+    params: Vec<PathBuf>,
+    /// Baselines: lowres-S or defocus-K-SIGMA (repeatable).
+    #[arg(long = "baseline", value_name = "B")]
+    baselines: Vec<Baseline>,
+    /// Add the paper's seven baselines (lowres 4/8/16, defocus 9/3, 13/5, 15/7, 25/7).
+    #[arg(long)]
+    paper_baselines: bool,
+    /// The shared data folder (default: $CAMPRO_SHARED or ../shared).
+    #[arg(long)]
+    shared: Option<PathBuf>,
+    /// Folder of the model files (default: SHARED/models).
+    #[arg(long)]
+    models: Option<PathBuf>,
+    /// Use only the first N (images, or identities for privacy): quick looks and CI.
+    #[arg(long)]
+    limit: Option<usize>,
+    /// Output folder for the CSV, JSON, SVG and Markdown reports.
+    #[arg(short, long, default_value = "campro-eval")]
+    output: PathBuf,
+}
+
+#[derive(Args)]
+pub struct PrivacyArgs {
+    /// LFW folder (default: SHARED/data/lfw).
+    #[arg(long)]
+    lfw: Option<PathBuf>,
+    /// Face detector: a bundled name or a manifest file.
+    #[arg(long, default_value = "yunet")]
+    face_detector: String,
+    /// Face recognition models: bundled names or manifest files (repeatable).
+    #[arg(long = "face-model", default_values_t = ["faceplugin".to_string(), "mobilefacenet-casia".to_string()])]
+    face_models: Vec<String>,
+    #[arg(long, default_value_t = 10)]
+    runs: usize,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Photos kept per identity (gallery, probe and the linear classifier's training photos).
+    #[arg(long, default_value_t = 6)]
+    pool: usize,
+    /// Skip the pairs.txt verification.
+    #[arg(long)]
+    no_verification: bool,
+    /// Verification pairs of each kind per fold (default: all 300).
+    #[arg(long)]
+    pairs_per_fold: Option<usize>,
+}
+
+#[derive(Args)]
+pub struct UtilityArgs {
+    /// COCO person folder (default: SHARED/data/coco-person).
+    #[arg(long)]
+    coco: Option<PathBuf>,
+    /// Person detector: a bundled name or a manifest file.
+    #[arg(long, default_value = "yolox-nano")]
+    person_detector: String,
+    /// Confidence for precision / recall / F1.
+    #[arg(long, default_value_t = 0.25)]
+    confidence: f64,
+}
+
+impl Common {
+    fn shared(&self) -> PathBuf {
+        self.shared.clone().or_else(|| std::env::var_os("CAMPRO_SHARED").map(PathBuf::from)).unwrap_or_else(|| PathBuf::from("../shared"))
+    }
+
+    fn models_dir(&self) -> PathBuf {
+        self.models.clone().unwrap_or_else(|| self.shared().join("models"))
+    }
+
+    /// Raw, then each parameter set, then the baselines.
+    fn conditions(&self) -> Result<Vec<Condition>> {
+        let mut c = vec![Condition::raw()];
+        for path in &self.params {
+            let p = Params::from_file(path).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+            let name = path.file_stem().map_or("params".into(), |s| s.to_string_lossy().into_owned());
+            if c.iter().any(|x| x.name == name) {
+                bail!("{}: two parameter sets are named {name:?}", path.display());
+            }
+            c.push(params_condition(name, p));
+        }
+        let mut b = self.baselines.clone();
+        if self.paper_baselines {
+            b.extend(Baseline::paper());
+        }
+        for x in b {
+            if !c.iter().any(|y| y.name == x.to_string()) {
+                c.push(Condition::baseline(x));
+            }
+        }
+        Ok(c)
+    }
+}
+
+/// A parameter set as a protection: the exact 8-bit desktop pipeline (bit-identical to the
+/// f64 reference rounded to 8 bits).
+pub fn params_condition(name: String, p: Params) -> Condition {
+    let p: &'static Params = Box::leak(Box::new(p));
+    let fast = Exact8::new(p);
+    Condition::new(name, move |img: &RgbImage| {
+        let mut out = RgbImage::new(img.width(), img.height());
+        fast.run(img.as_raw(), &mut out);
+        out
+    })
+}
+
+fn manifest(name_or_path: &str, models: &Path) -> Result<Manifest> {
+    if let Some((n, text)) = BUNDLED.iter().find(|(n, _)| *n == name_or_path) {
+        return Ok(Manifest::parse(text, Path::new(&format!("bundled manifest {n}")), models)?);
+    }
+    let p = Path::new(name_or_path);
+    if !p.is_file() {
+        bail!("{name_or_path:?} is neither a bundled model ({}) nor a manifest file", BUNDLED.map(|b| b.0).join(", "));
+    }
+    Ok(Manifest::load(p, models)?)
+}
+
+fn load(name: &str, models: &Path) -> Result<Model> {
+    let m = manifest(name, models)?;
+    eprintln!("loading {} ({})", m.name, m.file.display());
+    Ok(Model::load(m)?)
+}
+
+fn face_models(a: &PrivacyArgs, models: &Path) -> Result<FaceModels> {
+    Ok(FaceModels {
+        detector: FaceDetector::new(load(&a.face_detector, models)?)?,
+        embedders: a.face_models.iter().map(|n| Ok(Embedder::new(load(n, models)?)?)).collect::<Result<_>>()?,
+    })
+}
+
+fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<privacy::PrivacyReport> {
+    let lfw_dir = a.lfw.clone().unwrap_or_else(|| c.shared().join("data/lfw"));
+    let lfw = data::Lfw::open(&lfw_dir).with_context(|| "reading LFW (set --lfw or --shared)")?;
+    let fm = face_models(a, &c.models_dir())?;
+    let o = PrivacyOptions {
+        runs: a.runs,
+        seed: a.seed,
+        pool: a.pool,
+        limit: c.limit,
+        verification: !a.no_verification,
+        pairs_per_fold: a.pairs_per_fold.or(c.limit.map(|l| l.div_ceil(10).max(1))),
+        ..Default::default()
+    };
+    let r = privacy::evaluate(&lfw, &fm, conds, &o)?;
+    report::write_privacy(&r, &c.output)?;
+    eprintln!("privacy: {} identities, {:.0} s -> {}", r.identities, r.seconds, c.output.join("privacy.md").display());
+    Ok(r)
+}
+
+fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utility::UtilityReport> {
+    let coco_dir = a.coco.clone().unwrap_or_else(|| c.shared().join("data/coco-person"));
+    let images = data::coco_person(&coco_dir).with_context(|| "reading the COCO person set (set --coco or --shared)")?;
+    let model = load(&a.person_detector, &c.models_dir())?;
+    let name = model.manifest.name.clone();
+    let det = PersonDetector::new(model)?;
+    let o = UtilityOptions { limit: c.limit, confidence: a.confidence };
+    let r = utility::evaluate(&images, &det, &name, conds, &o)?;
+    report::write_utility(&r, &c.output)?;
+    eprintln!("utility: {} images, {:.0} s -> {}", r.images, r.seconds, c.output.join("utility.md").display());
+    Ok(r)
+}
+
+fn run_quality(c: &Common, images: Option<&Path>, conds: &[Condition]) -> Result<quality::QualityReport> {
+    let dir = images.map(Path::to_path_buf).unwrap_or_else(|| c.shared().join("data/coco-person/images"));
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .with_context(|| format!("{}: cannot list images", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| ["jpg", "jpeg", "png"].iter().any(|e| x.eq_ignore_ascii_case(e))))
+        .collect();
+    paths.sort();
+    if paths.is_empty() {
+        bail!("{}: no JPEG or PNG images", dir.display());
+    }
+    let r = quality::evaluate(&paths, conds, c.limit)?;
+    report::write_quality(&r, &c.output)?;
+    eprintln!("quality: {} images, {:.0} s -> {}", r.images, r.seconds, c.output.join("quality.md").display());
+    Ok(r)
+}
+
+pub fn run(cmd: EvalCmd) -> Result<()> {
+    match cmd {
+        EvalCmd::Privacy { common, p } => run_privacy(&common, &p, &common.conditions()?).map(drop),
+        EvalCmd::Utility { common, u } => run_utility(&common, &u, &common.conditions()?).map(drop),
+        EvalCmd::Quality { common, images } => run_quality(&common, images.as_deref(), &common.conditions()?).map(drop),
+        EvalCmd::All { common, p, u } => {
+            let conds = common.conditions()?;
+            let q = run_quality(&common, None, &conds)?;
+            let ur = run_utility(&common, &u, &conds)?;
+            let pr = run_privacy(&common, &p, &conds)?;
+            report::write_summary(&pr, &ur, &q, &common.output)?;
+            eprintln!("report: {}", common.output.join("report.md").display());
+            Ok(())
+        }
+    }
+}

@@ -295,3 +295,61 @@ fn file_targets_convert_compare_and_refuse() {
     fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "uvc", "-o"]).arg(dir.path().join("x.json")), "scalar gamma");
     assert!(!dir.path().join("x.json").exists());
 }
+
+/// `eval all` on a few images and identities: every report is written, laid out as stated.
+#[test]
+fn eval_all_with_a_limit_writes_every_report() {
+    let Some(models) = common::shared("models/yunet_s_640_640.onnx") else { return };
+    let Some(_) = common::shared("data/lfw/pairs.txt") else { return };
+    let Some(_) = common::shared("data/coco-person/instances_person.json") else { return };
+    let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ev");
+    campro()
+        .args(["eval", "all"])
+        .arg(bundled("identity.json"))
+        .arg(bundled("color-inversion.json"))
+        .args(["--baseline", "lowres-8", "--limit", "4", "--runs", "2", "--shared"])
+        .arg(&shared)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    for f in ["privacy.csv", "privacy.md", "verification.csv", "cmc.svg", "utility.csv", "quality.csv", "report.md", "tradeoff.svg"] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let csv = |name: &str| -> Vec<Vec<String>> {
+        std::fs::read_to_string(out.join(name)).unwrap().lines().map(|l| l.split(',').map(String::from).collect()).collect()
+    };
+    // Table I layout: dataset, order, image type, classifier, one column per model, average.
+    let p = csv("privacy.csv");
+    assert_eq!(p[0].join(","), "dataset,order,image_type,classifier,faceplugin,mobilefacenet-casia,average");
+    assert_eq!(p.len(), 1 + 2 * 4 * 2, "2 orders x 4 image types x 2 classifiers");
+    for row in &p[1..] {
+        let v: Vec<f64> = row[4..].iter().map(|x| x.parse().unwrap()).collect();
+        assert!(v.iter().all(|x| (0.0..=100.0).contains(x)));
+        assert!((v[2] - (v[0] + v[1]) / 2.0).abs() < 0.01, "average column: {row:?}");
+        if row[2] == "raw" {
+            assert!(v[2] >= 75.0, "raw faces of 4 identities are recognised: {row:?}");
+        }
+    }
+    let u = csv("utility.csv");
+    assert_eq!(u.len(), 1 + 4);
+    assert_eq!(u[1][0], "raw");
+    // Quality compares protected images with raw: no raw row.
+    let q = csv("quality.csv");
+    assert_eq!(q.iter().skip(1).map(|r| r[0].as_str()).collect::<Vec<_>>(), ["identity", "color-inversion", "lowres-8"]);
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.contains("tradeoff.svg") && report.contains("| lowres-8 |"));
+}
+
+#[test]
+fn eval_refuses_bad_arguments_clearly() {
+    let out = campro().args(["eval", "quality", "--baseline", "lowres-0"]).output().unwrap();
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("expected lowres-S (S ≥ 1)"));
+    fails_with(campro().args(["eval", "quality", "--shared", "/nonexistent-shared"]), "/nonexistent-shared/data/coco-person/images");
+    fails_with(campro().args(["eval", "utility", "--person-detector", "nosuchmodel", "--shared", "/nonexistent-shared"]), "reading the COCO person set");
+    let Some(_) = common::shared("data/coco-person/instances_person.json") else { return };
+    let shared = common::shared("").unwrap();
+    fails_with(campro().args(["eval", "utility", "--person-detector", "nosuchmodel", "--shared"]).arg(&shared), "neither a bundled model");
+}

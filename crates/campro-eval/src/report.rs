@@ -18,7 +18,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(EvalError::io(dir))?;
     let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(EvalError::io(dir))?;
     tmp.write_all(bytes).map_err(EvalError::io(path))?;
-    tmp.persist(path).map_err(|e| EvalError::Io { path: path.into(), source: e.error })?;
+    tmp.persist(path).map_err(|e| EvalError::Io { path: path.into(), error: e.error })?;
     Ok(())
 }
 

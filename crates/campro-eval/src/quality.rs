@@ -113,40 +113,49 @@ fn halve(p: &Plane) -> Plane {
 
 /// SSIM (mean over channels). Both sides must be ≥ 11 px.
 pub fn ssim(a: &RgbImage, b: &RgbImage) -> f64 {
-    assert_eq!(a.dimensions(), b.dimensions());
-    assert!(a.width() >= 11 && a.height() >= 11, "SSIM needs at least 11x11");
-    let (pa, pb) = (planes(a), planes(b));
-    (0..3).map(|c| ssim_cs(&pa[c], &pb[c]).0).sum::<f64>() / 3.0
+    ssim_and_ms_ssim(a, b).0
 }
 
 /// MS-SSIM (mean over channels), or None below [`MS_SSIM_MIN_SIDE`]. Negative
-/// contrast-structure terms are clamped at 0 (as pytorch-msssim) so the power is defined.
+/// contrast-structure terms are clamped at 0 (as pytorch-msssim and TensorFlow) so the power
+/// is defined.
 pub fn ms_ssim(a: &RgbImage, b: &RgbImage) -> Option<f64> {
+    ssim_and_ms_ssim(a, b).1
+}
+
+/// Both, sharing the first scale (the full-resolution SSIM is MS-SSIM's scale 1).
+fn ssim_and_ms_ssim(a: &RgbImage, b: &RgbImage) -> (f64, Option<f64>) {
     assert_eq!(a.dimensions(), b.dimensions());
-    if a.width().min(a.height()) < MS_SSIM_MIN_SIDE {
-        return None;
-    }
+    assert!(a.width() >= 11 && a.height() >= 11, "SSIM needs at least 11x11");
+    let multi = a.width().min(a.height()) >= MS_SSIM_MIN_SIDE;
     let (pa, pb) = (planes(a), planes(b));
-    let mut total = 0.0;
+    let (mut ssim, mut ms) = (0.0, 0.0);
     for c in 0..3 {
         let (mut x, mut y) = (pa[c].clone(), pb[c].clone());
         let mut v = 1.0;
         for (k, w) in MS_SSIM_WEIGHTS.iter().enumerate() {
             let (s, cs) = ssim_cs(&x, &y);
+            if k == 0 {
+                ssim += s;
+                if !multi {
+                    break;
+                }
+            }
             v *= if k == 4 { s.max(0.0).powf(*w) } else { cs.max(0.0).powf(*w) };
             if k < 4 {
                 x = halve(&x);
                 y = halve(&y);
             }
         }
-        total += v;
+        ms += v;
     }
-    Some(total / 3.0)
+    (ssim / 3.0, multi.then_some(ms / 3.0))
 }
 
 /// All four metrics.
 pub fn quality(a: &RgbImage, b: &RgbImage) -> Quality {
-    Quality { rmse: rmse(a, b), psnr: psnr(a, b), ssim: ssim(a, b), ms_ssim: ms_ssim(a, b) }
+    let (ssim, ms_ssim) = ssim_and_ms_ssim(a, b);
+    Quality { rmse: rmse(a, b), psnr: psnr(a, b), ssim, ms_ssim }
 }
 
 /// Mean metrics of one condition over a set of images (PSNR: mean of per-image dB, identical

@@ -1,0 +1,13 @@
+//! campro-train: CamPro's adversarial optimiser (the paper's Sec. IV-C, Algorithm 1) on
+//! candle, kept out of the Android core.
+//!
+//! - [`camera`]: the differentiable camera (degamma, CCM, tone curve), the same maths as
+//!   campro's desktop pipeline;
+//! - [`mobilefacenet`]: the white-box attacker backbone, loaded from its PyTorch checkpoint
+//!   ([`torch_legacy`]);
+
+pub mod camera;
+pub mod mobilefacenet;
+pub mod torch_legacy;
+
+pub use candle_core::{Device, Tensor};

@@ -1,0 +1,181 @@
+//! MobileFaceNet (Chen et al. 2018) as in Xiaoccer/MobileFaceNet_Pytorch, the white-box
+//! attacker backbone: 112x96 RGB input `(x − 127.5) / 128`, 128-d embedding. Weights and
+//! batch-norm statistics come from its PyTorch checkpoint, names unchanged, into a
+//! [`VarMap`] so the attacker can be trained.
+//!
+//! Depthwise convolutions are written as nine shifted multiply-adds over all channels at
+//! once: candle runs a grouped convolution as one convolution per group, which is hundreds
+//! of tiny kernels per layer here.
+
+use crate::torch_legacy::{read_state_dict, TorchError};
+use candle_core::{DType, Device, ModuleT, Result, Tensor, D};
+use candle_nn::{BatchNorm, BatchNormConfig, VarBuilder, VarMap};
+use std::path::Path;
+
+/// Bottleneck settings (expansion t, output channels c, repeats n, first stride s).
+const SETTINGS: [(usize, usize, usize, usize); 5] = [(2, 64, 5, 2), (4, 128, 1, 2), (2, 128, 6, 1), (4, 128, 1, 2), (2, 128, 2, 1)];
+
+/// Input size (height, width).
+pub const INPUT: (usize, usize) = (112, 96);
+/// Embedding size.
+pub const EMBEDDING: usize = 128;
+
+/// Depthwise convolution: `x` (B, C, H, W), `w` (C, 1, kh, kw), zero padding `pad`.
+pub fn depthwise(x: &Tensor, w: &Tensor, stride: usize, pad: usize) -> Result<Tensor> {
+    let (_, c, h, wd) = x.dims4()?;
+    let (_, _, kh, kw) = w.dims4()?;
+    let xp = if pad > 0 { x.pad_with_zeros(2, pad, pad)?.pad_with_zeros(3, pad, pad)? } else { x.clone() };
+    let (oh, ow) = (h + 2 * pad - kh + 1, wd + 2 * pad - kw + 1);
+    let mut acc: Option<Tensor> = None;
+    for ky in 0..kh {
+        for kx in 0..kw {
+            let tap = w.narrow(2, ky, 1)?.narrow(3, kx, 1)?.reshape((1, c, 1, 1))?;
+            let term = xp.narrow(2, ky, oh)?.narrow(3, kx, ow)?.broadcast_mul(&tap)?;
+            acc = Some(match acc {
+                None => term,
+                Some(a) => (a + term)?,
+            });
+        }
+    }
+    let full = acc.expect("kernel is at least 1x1");
+    if stride == 1 {
+        return Ok(full);
+    }
+    subsample(&subsample(&full, 2, stride)?, 3, stride)
+}
+
+/// Every `s`-th element along `dim`, from 0.
+fn subsample(x: &Tensor, dim: usize, s: usize) -> Result<Tensor> {
+    let n = x.dim(dim)?;
+    let m = n.div_ceil(s);
+    let x = if m * s > n { x.pad_with_zeros(dim, 0, m * s - n)? } else { x.clone() };
+    let mut dims = x.dims().to_vec();
+    dims[dim] = m;
+    dims.insert(dim + 1, s);
+    x.reshape(dims)?.narrow(dim + 1, 0, 1)?.squeeze(dim + 1)
+}
+
+/// PReLU with one slope per channel (`a` of shape (C,)).
+fn prelu(x: &Tensor, a: &Tensor) -> Result<Tensor> {
+    let a = a.reshape((1, a.dim(0)?, 1, 1))?;
+    x.relu()? - x.neg()?.relu()?.broadcast_mul(&a)?
+}
+
+/// Convolution (no bias) + batch norm (+ PReLU).
+struct ConvBlock {
+    w: Tensor,
+    stride: usize,
+    pad: usize,
+    depthwise: bool,
+    bn: BatchNorm,
+    prelu: Option<Tensor>,
+}
+
+impl ConvBlock {
+    #[allow(clippy::too_many_arguments)]
+    fn new(vb: &VarBuilder, cin: usize, cout: usize, k: (usize, usize), stride: usize, pad: usize, depthwise: bool, linear: bool, names: (&str, &str, &str)) -> Result<Self> {
+        let w = if depthwise { vb.get((cout, 1, k.0, k.1), names.0)? } else { vb.get((cout, cin, k.0, k.1), names.0)? };
+        let bn = candle_nn::batch_norm(cout, BatchNormConfig { eps: 1e-5, remove_mean: true, affine: true, momentum: 0.1 }, vb.pp(names.1))?;
+        let prelu = if linear { None } else { Some(vb.get(cout, names.2)?) };
+        Ok(Self { w, stride, pad, depthwise, bn, prelu })
+    }
+
+    fn forward(&self, x: &Tensor, train: bool) -> Result<Tensor> {
+        let y = if self.depthwise { depthwise(x, &self.w, self.stride, self.pad)? } else { x.conv2d(&self.w, self.pad, self.stride, 1, 1)? };
+        let y = self.bn.forward_t(&y, train)?;
+        match &self.prelu {
+            Some(a) => prelu(&y, a),
+            None => Ok(y),
+        }
+    }
+}
+
+struct Bottleneck {
+    expand: ConvBlock,
+    dw: ConvBlock,
+    project: ConvBlock,
+    residual: bool,
+}
+
+/// The network; its parameters live in the [`VarMap`] it was built from.
+pub struct MobileFaceNet {
+    conv1: ConvBlock,
+    dw_conv1: ConvBlock,
+    blocks: Vec<Bottleneck>,
+    conv2: ConvBlock,
+    linear7: ConvBlock,
+    linear1: ConvBlock,
+}
+
+impl MobileFaceNet {
+    /// Builds the network over `vb` (fresh variables, or ones already loaded).
+    pub fn new(vb: VarBuilder) -> Result<Self> {
+        let std = ("conv.weight", "bn", "prelu.weight");
+        let conv1 = ConvBlock::new(&vb.pp("conv1"), 3, 64, (3, 3), 2, 1, false, false, std)?;
+        let dw_conv1 = ConvBlock::new(&vb.pp("dw_conv1"), 64, 64, (3, 3), 1, 1, true, false, std)?;
+        let mut blocks = Vec::new();
+        let mut cin = 64;
+        for (t, c, n, s) in SETTINGS {
+            for i in 0..n {
+                let stride = if i == 0 { s } else { 1 };
+                let vb = vb.pp(format!("blocks.{}.conv", blocks.len()));
+                let hid = cin * t;
+                blocks.push(Bottleneck {
+                    expand: ConvBlock::new(&vb, cin, hid, (1, 1), 1, 0, false, false, ("0.weight", "1", "2.weight"))?,
+                    dw: ConvBlock::new(&vb, hid, hid, (3, 3), stride, 1, true, false, ("3.weight", "4", "5.weight"))?,
+                    project: ConvBlock::new(&vb, hid, c, (1, 1), 1, 0, false, true, ("6.weight", "7", ""))?,
+                    residual: stride == 1 && cin == c,
+                });
+                cin = c;
+            }
+        }
+        let conv2 = ConvBlock::new(&vb.pp("conv2"), 128, 512, (1, 1), 1, 0, false, false, std)?;
+        let linear7 = ConvBlock::new(&vb.pp("linear7"), 512, 512, (7, 6), 1, 0, true, true, std)?;
+        let linear1 = ConvBlock::new(&vb.pp("linear1"), 512, 128, (1, 1), 1, 0, false, true, std)?;
+        Ok(Self { conv1, dw_conv1, blocks, conv2, linear7, linear1 })
+    }
+
+    /// Loads the checkpoint (`net_state_dict` of a legacy `torch.save`) into a new VarMap.
+    pub fn from_checkpoint(path: &Path, device: &Device) -> std::result::Result<(Self, VarMap), TorchError> {
+        let sd = read_state_dict(path, Some("net_state_dict"))?;
+        let bad = |e: candle_core::Error| TorchError::Format { path: path.display().to_string(), message: e.to_string() };
+        let vm = VarMap::new();
+        let net = Self::new(VarBuilder::from_varmap(&vm, DType::F32, device)).map_err(bad)?;
+        let vars = vm.data().lock().expect("var map lock");
+        for (name, var) in vars.iter() {
+            let t = sd.get(name).ok_or_else(|| TorchError::Format { path: path.display().to_string(), message: format!("{name} missing from the checkpoint") })?;
+            if t.dims() != var.dims() {
+                return Err(TorchError::Format { path: path.display().to_string(), message: format!("{name}: shape {:?}, expected {:?}", t.dims(), var.dims()) });
+            }
+            var.set(&t.to_device(device).map_err(bad)?).map_err(bad)?;
+        }
+        drop(vars);
+        Ok((net, vm))
+    }
+
+    /// Embeddings (B, 128) of normalised faces (B, 3, 112, 96); `train` uses and updates
+    /// the batch statistics.
+    pub fn forward_t(&self, x: &Tensor, train: bool) -> Result<Tensor> {
+        let mut x = self.conv1.forward(x, train)?;
+        x = self.dw_conv1.forward(&x, train)?;
+        for b in &self.blocks {
+            let y = b.project.forward(&b.dw.forward(&b.expand.forward(&x, train)?, train)?, train)?;
+            x = if b.residual { (x + y)? } else { y };
+        }
+        x = self.conv2.forward(&x, train)?;
+        x = self.linear7.forward(&x, train)?;
+        x = self.linear1.forward(&x, train)?;
+        x.flatten_from(1)
+    }
+}
+
+/// `(x − 127.5) / 128` for x in 0..255, or `(255·x − 127.5) / 128` for x in [0, 1].
+pub fn normalise_unit(x: &Tensor) -> Result<Tensor> {
+    x.affine(255.0 / 128.0, -127.5 / 128.0)
+}
+
+/// L2-normalised rows.
+pub fn l2_normalise(x: &Tensor) -> Result<Tensor> {
+    let n = x.sqr()?.sum_keepdim(D::Minus1)?.sqrt()?.clamp(1e-12, f64::INFINITY)?;
+    x.broadcast_div(&n)
+}

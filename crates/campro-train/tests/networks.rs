@@ -1,0 +1,137 @@
+//! The trainable networks against independent implementations: MobileFaceNet from its
+//! PyTorch checkpoint against the ONNX export run by tract; the depthwise convolution
+//! against candle's grouped convolution; the camera against campro's f64 pipeline.
+
+#[path = "../../../tests/common/shared.rs"]
+mod shared;
+
+use campro_train::camera::Camera;
+use campro_train::mobilefacenet::{depthwise, normalise_unit, MobileFaceNet};
+use candle_core::{DType, Device, Tensor};
+use std::path::Path;
+
+fn rng_tensor(shape: &[usize], seed: u64) -> Tensor {
+    let n: usize = shape.iter().product();
+    let mut s = seed;
+    let v: Vec<f32> = (0..n)
+        .map(|_| {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        })
+        .collect();
+    Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
+}
+
+fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
+    (a - b).unwrap().abs().unwrap().flatten_all().unwrap().max(0).unwrap().to_scalar().unwrap()
+}
+
+#[test]
+fn depthwise_matches_grouped_convolution() {
+    for (h, w, stride, k) in [(9, 7, 1, 3), (10, 8, 2, 3), (9, 9, 2, 3), (7, 6, 1, 1)] {
+        let x = rng_tensor(&[2, 5, h, w], 1);
+        let wt = rng_tensor(&[5, 1, k, k], 2);
+        let pad = k / 2;
+        let want = x.conv2d(&wt, pad, stride, 1, 5).unwrap();
+        let got = depthwise(&x, &wt, stride, pad).unwrap();
+        assert_eq!(got.dims(), want.dims(), "{h}x{w} stride {stride}");
+        assert!(max_abs(&got, &want) < 1e-5, "{h}x{w} stride {stride}: {}", max_abs(&got, &want));
+    }
+    // The 7x6 "linear" depthwise of MobileFaceNet: a per-channel weighted sum.
+    let x = rng_tensor(&[1, 4, 7, 6], 3);
+    let wt = rng_tensor(&[4, 1, 7, 6], 4);
+    let got = depthwise(&x, &wt, 1, 0).unwrap();
+    let want = x.broadcast_mul(&wt.reshape((1, 4, 7, 6)).unwrap()).unwrap().sum((2, 3)).unwrap();
+    assert!(max_abs(&got.flatten_from(1).unwrap(), &want) < 1e-5);
+}
+
+#[test]
+fn camera_matches_the_desktop_pipeline() {
+    let params = campro::Params::from_file(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../params/color-inversion.json")).unwrap();
+    // A CCM with negative and > 1 entries, so the clip is exercised.
+    let ccm = [[1.4, -0.3, -0.1], [-0.2, 1.3, -0.1], [0.05, -0.5, 1.45]];
+    let curve: Vec<f64> = params.tone_curve.y().to_vec();
+    let cam = Camera::from_values(ccm, &curve, 2.2, &Device::Cpu).unwrap();
+    let mut p = params.clone();
+    p.ccm = ccm;
+    let x = ((rng_tensor(&[1, 3, 40, 50], 7) + 1.0).unwrap() * 0.5).unwrap();
+    let got: Vec<f32> = cam.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let xs: Vec<f32> = x.flatten_all().unwrap().to_vec1().unwrap();
+    let n = 40 * 50;
+    let mut worst = 0f64;
+    for i in 0..n {
+        let rgb = [xs[i] as f64, xs[n + i] as f64, xs[2 * n + i] as f64];
+        let want = campro::pipeline::process_f64(&p, rgb);
+        for c in 0..3 {
+            worst = worst.max((got[c * n + i] as f64 - want[c]).abs());
+        }
+    }
+    // f32 throughout: a few ulps of 1 after pow, a 3-term dot product and the interpolation.
+    assert!(worst < 2e-6, "worst {worst}");
+}
+
+#[test]
+fn camera_gradients_by_hand() {
+    // One pixel, identity CCM, k = 5 knots: linear value 0.3 sits in segment 1 (0.25..0.5)
+    // at fraction 0.2, so d out / d curve = (0, 0.8, 0.2, 0, 0) and d out / d y = 4·(c2 − c1).
+    let dev = Device::Cpu;
+    let curve = [0.0, 0.1, 0.9, 0.95, 1.0];
+    let cam = Camera::from_values([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], &curve, 2.2, &dev).unwrap();
+    let lin = Tensor::new(&[0.3f32, 0.3, 0.3], &dev).unwrap().reshape((1, 3, 1, 1)).unwrap();
+    let out = cam.forward_linear(&lin).unwrap();
+    let r: Vec<f32> = out.flatten_all().unwrap().to_vec1().unwrap();
+    assert!((r[0] - (0.8 * 0.1 + 0.2 * 0.9)).abs() < 1e-6);
+    // Loss = red output only.
+    let loss = out.narrow(1, 0, 1).unwrap().sum_all().unwrap();
+    let g = loss.backward().unwrap();
+    let gc: Vec<f32> = g.get(cam.curve.as_tensor()).unwrap().to_vec1().unwrap();
+    for (a, b) in gc.iter().zip([0.0, 0.8, 0.2, 0.0, 0.0]) {
+        assert!((a - b).abs() < 1e-6, "{gc:?}");
+    }
+    // d red / d ccm[0][j] = slope · lin[j] = 4·(0.9 − 0.1)·0.3 for every j; other rows 0.
+    let gm: Vec<Vec<f32>> = g.get(cam.ccm.as_tensor()).unwrap().to_vec2().unwrap();
+    for j in 0..3 {
+        assert!((gm[0][j] - 4.0 * 0.8 * 0.3).abs() < 1e-5, "{gm:?}");
+        assert_eq!(gm[1][j], 0.0);
+    }
+    // A clipped value passes no gradient to the CCM.
+    let lin = Tensor::new(&[1.0f32, 1.0, 1.0], &dev).unwrap().reshape((1, 3, 1, 1)).unwrap();
+    let cam2 = Camera::from_values([[2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], &curve, 2.2, &dev).unwrap();
+    let g = cam2.forward_linear(&lin).unwrap().narrow(1, 0, 1).unwrap().sum_all().unwrap().backward().unwrap();
+    let gm: Vec<Vec<f32>> = g.get(cam2.ccm.as_tensor()).unwrap().to_vec2().unwrap();
+    assert_eq!(gm[0], vec![0.0; 3]);
+    // project() clamps into the ranges.
+    let cam3 = Camera::from_values([[9.0, -7.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], &[-0.5, 0.5, 1.5], 2.2, &dev).unwrap();
+    cam3.project().unwrap();
+    assert_eq!(cam3.ccm_values().unwrap()[0], [5.0, -5.0, 0.0]);
+    assert_eq!(cam3.curve_values().unwrap(), vec![0.0, 0.5, 1.0]);
+}
+
+#[test]
+fn mobilefacenet_checkpoint_matches_the_onnx_export() {
+    let Some(ckpt) = shared::shared("models/mobilefacenet_casia_068.ckpt") else { return };
+    let Some(face) = shared::shared("data/lfw/images_deepfunneled/Colin_Powell/Colin_Powell_0001.jpg") else { return };
+    let models = ckpt.parent().unwrap();
+    let (net, vars) = MobileFaceNet::from_checkpoint(&ckpt, &Device::Cpu).unwrap();
+    // Every float tensor of the checkpoint is a variable of the network, and nothing else.
+    let sd = campro_train::torch_legacy::read_state_dict(&ckpt, Some("net_state_dict")).unwrap();
+    assert_eq!(vars.all_vars().len(), sd.len());
+    // Align with the evaluation's own detector and template, then embed both ways.
+    let manifests = Path::new(env!("CARGO_MANIFEST_DIR")).join("../campro-eval/models");
+    let load = |n: &str| campro_eval::model::Model::load(campro_eval::manifest::Manifest::load(&manifests.join(n), models).unwrap()).unwrap();
+    let det = campro_eval::face::FaceDetector::new(load("yunet.json")).unwrap();
+    let emb = campro_eval::face::Embedder::new(load("mobilefacenet_casia.json")).unwrap();
+    let img = campro_eval::data::read_rgb8(&face).unwrap();
+    let f = campro_eval::face::central_face(&det.detect(&img).unwrap(), 250, 250).unwrap();
+    let crop = emb.align(&img, &f.landmarks);
+    let want = emb.embed(&crop).unwrap();
+    let x = Tensor::from_vec(crop.as_raw().iter().map(|&v| v as f32 / 255.0).collect::<Vec<_>>(), (1, 112, 96, 3), &Device::Cpu).unwrap().permute((0, 3, 1, 2)).unwrap();
+    let e = net.forward_t(&normalise_unit(&x).unwrap(), false).unwrap();
+    let e = campro_train::mobilefacenet::l2_normalise(&e).unwrap();
+    let got: Vec<f32> = e.flatten_all().unwrap().to_vec1().unwrap();
+    let cos: f32 = got.iter().zip(&want).map(|(a, b)| a * b).sum();
+    let worst = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    // Batch norm folded into the ONNX convolutions changes only float rounding.
+    assert!(cos > 0.99999 && worst < 1e-3, "cosine {cos}, worst {worst}");
+    assert_eq!(e.dtype(), DType::F32);
+}

@@ -7,6 +7,7 @@
 //!   ([`torch_legacy`]);
 
 pub mod camera;
+pub mod dwconv;
 pub mod mobilefacenet;
 pub mod torch_legacy;
 

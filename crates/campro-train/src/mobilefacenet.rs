@@ -3,13 +3,14 @@
 //! batch-norm statistics come from its PyTorch checkpoint, names unchanged, into a
 //! [`VarMap`] so the attacker can be trained.
 //!
-//! Depthwise convolutions are written as nine shifted multiply-adds over all channels at
-//! once: candle runs a grouped convolution as one convolution per group, which is hundreds
-//! of tiny kernels per layer here.
+//! Convolutions are written with matrix products and shifted multiply-adds ([`dense`],
+//! [`depthwise`]): candle runs a grouped convolution as one convolution per group (hundreds
+//! of tiny kernels per layer here) and its CPU convolution backward is a naive loop.
 
+pub use crate::dwconv::depthwise;
 use crate::torch_legacy::{read_state_dict, TorchError};
-use candle_core::{DType, Device, ModuleT, Result, Tensor, D};
-use candle_nn::{BatchNorm, BatchNormConfig, VarBuilder, VarMap};
+use candle_core::{DType, Device, Result, Tensor, Var, D};
+use candle_nn::{VarBuilder, VarMap};
 use std::path::Path;
 
 /// Bottleneck settings (expansion t, output channels c, repeats n, first stride s).
@@ -20,24 +21,28 @@ pub const INPUT: (usize, usize) = (112, 96);
 /// Embedding size.
 pub const EMBEDDING: usize = 128;
 
-/// Depthwise convolution: `x` (B, C, H, W), `w` (C, 1, kh, kw), zero padding `pad`.
-pub fn depthwise(x: &Tensor, w: &Tensor, stride: usize, pad: usize) -> Result<Tensor> {
-    let (_, c, h, wd) = x.dims4()?;
-    let (_, _, kh, kw) = w.dims4()?;
+/// Dense convolution `x` (B, Cin, H, W) with `w` (Cout, Cin, kh, kw), zero padding `pad`,
+/// written as one matrix product per kernel tap (a 1x1 convolution is one product). candle's
+/// CPU convolution backward runs a naive transposed convolution; matrix products keep both
+/// directions on its GEMM.
+pub fn dense(x: &Tensor, w: &Tensor, stride: usize, pad: usize) -> Result<Tensor> {
+    let (b, cin, h, wd) = x.dims4()?;
+    let (cout, _, kh, kw) = w.dims4()?;
     let xp = if pad > 0 { x.pad_with_zeros(2, pad, pad)?.pad_with_zeros(3, pad, pad)? } else { x.clone() };
     let (oh, ow) = (h + 2 * pad - kh + 1, wd + 2 * pad - kw + 1);
     let mut acc: Option<Tensor> = None;
     for ky in 0..kh {
         for kx in 0..kw {
-            let tap = w.narrow(2, ky, 1)?.narrow(3, kx, 1)?.reshape((1, c, 1, 1))?;
-            let term = xp.narrow(2, ky, oh)?.narrow(3, kx, ow)?.broadcast_mul(&tap)?;
+            let tap = w.narrow(2, ky, 1)?.narrow(3, kx, 1)?.reshape((cout, cin))?;
+            let win = if kh == 1 && kw == 1 { xp.clone() } else { xp.narrow(2, ky, oh)?.narrow(3, kx, ow)?.contiguous()? };
+            let term = tap.broadcast_matmul(&win.reshape((b, cin, oh * ow))?)?;
             acc = Some(match acc {
                 None => term,
                 Some(a) => (a + term)?,
             });
         }
     }
-    let full = acc.expect("kernel is at least 1x1");
+    let full = acc.expect("kernel is at least 1x1").reshape((b, cout, oh, ow))?;
     if stride == 1 {
         return Ok(full);
     }
@@ -61,6 +66,51 @@ fn prelu(x: &Tensor, a: &Tensor) -> Result<Tensor> {
     x.relu()? - x.neg()?.relu()?.broadcast_mul(&a)?
 }
 
+/// Batch norm over (B, C, H, W), PyTorch's semantics (eps 1e-5, momentum 0.1, running
+/// variance unbiased). Training normalises by the batch statistics and updates the running
+/// ones; evaluation is one per-channel scale and shift.
+struct BatchNorm {
+    weight: Tensor,
+    bias: Tensor,
+    running_mean: Var,
+    running_var: Var,
+}
+
+impl BatchNorm {
+    const EPS: f64 = 1e-5;
+    const MOMENTUM: f64 = 0.1;
+
+    fn new(vb: VarBuilder, c: usize) -> Result<Self> {
+        Ok(Self {
+            weight: vb.get_with_hints(c, "weight", candle_nn::Init::Const(1.0))?,
+            bias: vb.get_with_hints(c, "bias", candle_nn::Init::Const(0.0))?,
+            running_mean: Var::from_tensor(&vb.get_with_hints(c, "running_mean", candle_nn::Init::Const(0.0))?)?,
+            running_var: Var::from_tensor(&vb.get_with_hints(c, "running_var", candle_nn::Init::Const(1.0))?)?,
+        })
+    }
+
+    fn forward(&self, x: &Tensor, train: bool) -> Result<Tensor> {
+        let c = self.weight.dim(0)?;
+        let shape = (1, c, 1, 1);
+        if !train {
+            let scale = (self.weight.as_ref() / (self.running_var.as_tensor() + Self::EPS)?.sqrt()?)?;
+            let shift = (&self.bias - self.running_mean.as_tensor().mul(&scale)?)?;
+            return x.broadcast_mul(&scale.reshape(shape)?)?.broadcast_add(&shift.reshape(shape)?);
+        }
+        let n = (x.elem_count() / c) as f64;
+        let mean = x.mean_keepdim((0, 2, 3))?;
+        let centred = x.broadcast_sub(&mean)?;
+        let var = centred.sqr()?.mean_keepdim((0, 2, 3))?;
+        let scale = (self.weight.reshape(shape)? / (&var + Self::EPS)?.sqrt()?)?;
+        let y = centred.broadcast_mul(&scale)?.broadcast_add(&self.bias.reshape(shape)?)?;
+        let m = Self::MOMENTUM;
+        let (mean, var) = (mean.detach().flatten_all()?, var.detach().flatten_all()?);
+        self.running_mean.set(&((self.running_mean.as_tensor() * (1.0 - m))? + (mean * m)?)?)?;
+        self.running_var.set(&((self.running_var.as_tensor() * (1.0 - m))? + (var * (m * n / (n - 1.0).max(1.0)))?)?)?;
+        Ok(y)
+    }
+}
+
 /// Convolution (no bias) + batch norm (+ PReLU).
 struct ConvBlock {
     w: Tensor,
@@ -75,14 +125,14 @@ impl ConvBlock {
     #[allow(clippy::too_many_arguments)]
     fn new(vb: &VarBuilder, cin: usize, cout: usize, k: (usize, usize), stride: usize, pad: usize, depthwise: bool, linear: bool, names: (&str, &str, &str)) -> Result<Self> {
         let w = if depthwise { vb.get((cout, 1, k.0, k.1), names.0)? } else { vb.get((cout, cin, k.0, k.1), names.0)? };
-        let bn = candle_nn::batch_norm(cout, BatchNormConfig { eps: 1e-5, remove_mean: true, affine: true, momentum: 0.1 }, vb.pp(names.1))?;
+        let bn = BatchNorm::new(vb.pp(names.1), cout)?;
         let prelu = if linear { None } else { Some(vb.get(cout, names.2)?) };
         Ok(Self { w, stride, pad, depthwise, bn, prelu })
     }
 
     fn forward(&self, x: &Tensor, train: bool) -> Result<Tensor> {
-        let y = if self.depthwise { depthwise(x, &self.w, self.stride, self.pad)? } else { x.conv2d(&self.w, self.pad, self.stride, 1, 1)? };
-        let y = self.bn.forward_t(&y, train)?;
+        let y = if self.depthwise { depthwise(x, &self.w, self.stride, self.pad)? } else { dense(x, &self.w, self.stride, self.pad)? };
+        let y = self.bn.forward(&y, train)?;
         match &self.prelu {
             Some(a) => prelu(&y, a),
             None => Ok(y),

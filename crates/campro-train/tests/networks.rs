@@ -6,7 +6,7 @@
 mod shared;
 
 use campro_train::camera::Camera;
-use campro_train::mobilefacenet::{depthwise, normalise_unit, MobileFaceNet};
+use campro_train::mobilefacenet::{dense, depthwise, normalise_unit, MobileFaceNet};
 use candle_core::{DType, Device, Tensor};
 use std::path::Path;
 
@@ -43,6 +43,34 @@ fn depthwise_matches_grouped_convolution() {
     let got = depthwise(&x, &wt, 1, 0).unwrap();
     let want = x.broadcast_mul(&wt.reshape((1, 4, 7, 6)).unwrap()).unwrap().sum((2, 3)).unwrap();
     assert!(max_abs(&got.flatten_from(1).unwrap(), &want) < 1e-5);
+}
+
+#[test]
+fn depthwise_gradients_match_grouped_convolution() {
+    use candle_core::Var;
+    for (h, w, stride) in [(9, 7, 1), (10, 8, 2), (9, 9, 2)] {
+        let x = Var::from_tensor(&rng_tensor(&[2, 4, h, w], 11)).unwrap();
+        let wt = Var::from_tensor(&rng_tensor(&[4, 1, 3, 3], 12)).unwrap();
+        let r = rng_tensor(&[2, 4, (h - 1) / stride + 1, (w - 1) / stride + 1], 13);
+        let ours = depthwise(&x, &wt, stride, 1).unwrap().mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+        let theirs = x.conv2d(&wt, 1, stride, 1, 4).unwrap().mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+        for v in [x.as_tensor(), wt.as_tensor()] {
+            let (a, b) = (ours.get(v).unwrap(), theirs.get(v).unwrap());
+            assert!(max_abs(a, b) < 1e-4, "{h}x{w} stride {stride}: {}", max_abs(a, b));
+        }
+    }
+}
+
+#[test]
+fn dense_matches_candle_convolution() {
+    for (h, w, stride, k, pad) in [(9, 7, 1, 3, 1), (10, 8, 2, 3, 1), (9, 9, 2, 3, 1), (7, 6, 1, 1, 0), (8, 8, 1, 3, 0)] {
+        let x = rng_tensor(&[2, 3, h, w], 5);
+        let wt = rng_tensor(&[4, 3, k, k], 6);
+        let want = x.conv2d(&wt, pad, stride, 1, 1).unwrap();
+        let got = dense(&x, &wt, stride, pad).unwrap();
+        assert_eq!(got.dims(), want.dims(), "{h}x{w} stride {stride}");
+        assert!(max_abs(&got, &want) < 1e-5, "{h}x{w} stride {stride}: {}", max_abs(&got, &want));
+    }
 }
 
 #[test]

@@ -52,8 +52,12 @@ fn main() -> anyhow::Result<()> {
         let img = cam.forward_linear(&lin)?.detach();
         let logits = head.forward(&l2_normalise(&net.forward_t(&normalise_unit(&img)?, true)?)?)?;
         let l = loss::cross_entropy(&logits, &y)?;
-        sgd.backward_step(&l)?;
+        let tf = t.elapsed();
+        let g = l.backward()?;
+        let tb = t.elapsed();
+        sgd.step(&g)?;
         let ta = t.elapsed();
+        println!("  attacker: forward {:.0} ms, backward {:.0} ms, SGD {:.0} ms", tf.as_secs_f64() * 1e3, (tb - tf).as_secs_f64() * 1e3, (ta - tb).as_secs_f64() * 1e3);
         // Protector: non-saturating privacy loss through the frozen attacker into the camera.
         let t = std::time::Instant::now();
         let img = cam.forward_linear(&lin)?;

@@ -6,6 +6,7 @@
 //! - [`mobilefacenet`]: the white-box attacker backbone, loaded from its PyTorch checkpoint
 //!   ([`torch_legacy`]);
 
+pub mod batchnorm;
 pub mod camera;
 pub mod dwconv;
 pub mod mobilefacenet;

@@ -98,13 +98,9 @@ impl BatchNorm {
             return x.broadcast_mul(&scale.reshape(shape)?)?.broadcast_add(&shift.reshape(shape)?);
         }
         let n = (x.elem_count() / c) as f64;
-        let mean = x.mean_keepdim((0, 2, 3))?;
-        let centred = x.broadcast_sub(&mean)?;
-        let var = centred.sqr()?.mean_keepdim((0, 2, 3))?;
-        let scale = (self.weight.reshape(shape)? / (&var + Self::EPS)?.sqrt()?)?;
-        let y = centred.broadcast_mul(&scale)?.broadcast_add(&self.bias.reshape(shape)?)?;
+        let (y, stats) = crate::batchnorm::batch_norm_train(x, &self.weight, &self.bias, Self::EPS)?;
+        let (mean, var) = (stats.get(0)?, stats.get(1)?);
         let m = Self::MOMENTUM;
-        let (mean, var) = (mean.detach().flatten_all()?, var.detach().flatten_all()?);
         self.running_mean.set(&((self.running_mean.as_tensor() * (1.0 - m))? + (mean * m)?)?)?;
         self.running_var.set(&((self.running_var.as_tensor() * (1.0 - m))? + (var * (m * n / (n - 1.0).max(1.0)))?)?)?;
         Ok(y)

@@ -62,6 +62,36 @@ fn depthwise_gradients_match_grouped_convolution() {
 }
 
 #[test]
+fn fused_batch_norm_matches_generic_ops() {
+    use candle_core::Var;
+    let x = Var::from_tensor(&rng_tensor(&[3, 4, 5, 6], 21).affine(3.0, 1.0).unwrap()).unwrap();
+    let g = Var::from_tensor(&rng_tensor(&[4], 22)).unwrap();
+    let b = Var::from_tensor(&rng_tensor(&[4], 23)).unwrap();
+    let r = rng_tensor(&[3, 4, 5, 6], 24);
+    let (y, stats) = campro_train::batchnorm::batch_norm_train(&x, &g, &b, 1e-5).unwrap();
+    // The textbook expression in generic candle ops.
+    let mean = x.mean_keepdim((0, 2, 3)).unwrap();
+    let c = x.broadcast_sub(&mean).unwrap();
+    let var = c.sqr().unwrap().mean_keepdim((0, 2, 3)).unwrap();
+    let want = c
+        .broadcast_div(&(var.clone() + 1e-5).unwrap().sqrt().unwrap())
+        .unwrap()
+        .broadcast_mul(&g.reshape((1, 4, 1, 1)).unwrap())
+        .unwrap()
+        .broadcast_add(&b.reshape((1, 4, 1, 1)).unwrap())
+        .unwrap();
+    assert!(max_abs(&y, &want) < 1e-5);
+    assert!(max_abs(&stats.get(0).unwrap(), &mean.flatten_all().unwrap()) < 1e-5);
+    assert!(max_abs(&stats.get(1).unwrap(), &var.flatten_all().unwrap()) < 1e-4);
+    let ours = y.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+    let theirs = want.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+    for v in [x.as_tensor(), g.as_tensor(), b.as_tensor()] {
+        let (a, e) = (ours.get(v).unwrap(), theirs.get(v).unwrap());
+        assert!(max_abs(a, e) < 1e-4, "{}", max_abs(a, e));
+    }
+}
+
+#[test]
 fn dense_matches_candle_convolution() {
     for (h, w, stride, k, pad) in [(9, 7, 1, 3, 1), (10, 8, 2, 3, 1), (9, 9, 2, 3, 1), (7, 6, 1, 1, 0), (8, 8, 1, 3, 0)] {
         let x = rng_tensor(&[2, 3, h, w], 5);

@@ -1,0 +1,139 @@
+//! Training-mode batch normalisation over (B, C, H, W) as one candle custom op with a fused
+//! backward (the textbook formulas, per channel, channels in parallel). Built from generic
+//! candle ops, the batch statistics and their gradients cost several full passes and
+//! strided reductions each: most of an attacker step on the CPU.
+
+use candle_core::{CpuStorage, CustomOp1, CustomOp3, Layout, Result, Shape, Tensor};
+use rayon::prelude::*;
+
+fn slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
+    let CpuStorage::F32(v) = s else { candle_core::bail!("batch norm: f32 only") };
+    let Some((a, b)) = l.contiguous_offsets() else { candle_core::bail!("batch norm: contiguous operands only") };
+    Ok(&v[a..b])
+}
+
+fn dims(l: &Layout) -> Result<(usize, usize, usize)> {
+    match l.dims() {
+        &[b, c, h, w] => Ok((b, c, h * w)),
+        d => candle_core::bail!("batch norm: expected (B, C, H, W), got {d:?}"),
+    }
+}
+
+/// Per channel (mean, biased variance), computed in f64: a (2, C) tensor.
+struct Stats;
+
+impl CustomOp1 for Stats {
+    fn name(&self) -> &'static str {
+        "batch-norm-stats"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
+        let (b, c, n) = dims(l)?;
+        let x = slice(s, l)?;
+        let per: Vec<(f32, f32)> = (0..c)
+            .into_par_iter()
+            .map(|ch| {
+                let (mut s1, mut s2) = (0f64, 0f64);
+                for bi in 0..b {
+                    for &v in &x[(bi * c + ch) * n..(bi * c + ch + 1) * n] {
+                        s1 += v as f64;
+                        s2 += (v as f64) * (v as f64);
+                    }
+                }
+                let m = s1 / (b * n) as f64;
+                (m as f32, (s2 / (b * n) as f64 - m * m).max(0.0) as f32)
+            })
+            .collect();
+        let mut out: Vec<f32> = per.iter().map(|p| p.0).collect();
+        out.extend(per.iter().map(|p| p.1));
+        Ok((CpuStorage::F32(out), Shape::from((2, c))))
+    }
+}
+
+/// y = γ (x − μ) / sqrt(σ² + eps) + β with the given batch statistics.
+struct Normalise {
+    eps: f64,
+}
+
+impl Normalise {
+    /// Per channel (mean, 1 / sqrt(var + eps), γ, β).
+    fn coefs(&self, affine: &[f32], stats: &[f32], c: usize) -> Vec<[f32; 4]> {
+        (0..c).map(|ch| [stats[ch], (1.0 / (stats[c + ch] as f64 + self.eps).sqrt()) as f32, affine[ch], affine[c + ch]]).collect()
+    }
+}
+
+impl CustomOp3 for Normalise {
+    fn name(&self) -> &'static str {
+        "batch-norm-train"
+    }
+
+    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout, s3: &CpuStorage, l3: &Layout) -> Result<(CpuStorage, Shape)> {
+        let (_, c, n) = dims(l1)?;
+        let (x, affine, stats) = (slice(s1, l1)?, slice(s2, l2)?, slice(s3, l3)?);
+        if affine.len() != 2 * c || stats.len() != 2 * c {
+            candle_core::bail!("batch norm: affine and stats must be (2, {c})");
+        }
+        let k = self.coefs(affine, stats, c);
+        let mut y = vec![0f32; x.len()];
+        y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(p, (yp, xp))| {
+            let [m, r, g, b] = k[p % c];
+            for (o, &v) in yp.iter_mut().zip(xp) {
+                *o = (v - m) * r * g + b;
+            }
+        });
+        Ok((CpuStorage::F32(y), l1.shape().clone()))
+    }
+
+    fn bwd(&self, x: &Tensor, affine: &Tensor, stats: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
+        let (b, c, h, w) = x.dims4()?;
+        let n = h * w;
+        let total = (b * n) as f32;
+        let xv: Vec<f32> = x.flatten_all()?.to_vec1()?;
+        let gv: Vec<f32> = grad.contiguous()?.flatten_all()?.to_vec1()?;
+        let a: Vec<f32> = affine.flatten_all()?.to_vec1()?;
+        let st: Vec<f32> = stats.flatten_all()?.to_vec1()?;
+        let k = self.coefs(&a, &st, c);
+        // Per channel: Σ dy and Σ dy·x̂.
+        let sums: Vec<(f32, f32)> = (0..c)
+            .into_par_iter()
+            .map(|ch| {
+                let [m, r, _, _] = k[ch];
+                let (mut sd, mut sdx) = (0f64, 0f64);
+                for bi in 0..b {
+                    let o = (bi * c + ch) * n;
+                    for i in o..o + n {
+                        sd += gv[i] as f64;
+                        sdx += (gv[i] * (xv[i] - m) * r) as f64;
+                    }
+                }
+                (sd as f32, sdx as f32)
+            })
+            .collect();
+        // dx = γ r / N · (N dy − Σdy − x̂ Σ(dy x̂)).
+        let mut dx = vec![0f32; xv.len()];
+        dx.par_chunks_mut(n).enumerate().for_each(|(p, d)| {
+            let ch = p % c;
+            let [m, r, g, _] = k[ch];
+            let (sd, sdx) = sums[ch];
+            let o = p * n;
+            for (i, v) in d.iter_mut().enumerate() {
+                let xh = (xv[o + i] - m) * r;
+                *v = g * r / total * (total * gv[o + i] - sd - xh * sdx);
+            }
+        });
+        let mut da: Vec<f32> = sums.iter().map(|s| s.1).collect(); // dγ = Σ dy·x̂
+        da.extend(sums.iter().map(|s| s.0)); // dβ = Σ dy
+        let dev = x.device();
+        Ok((Some(Tensor::from_vec(dx, x.shape(), dev)?), Some(Tensor::from_vec(da, (2, c), dev)?), None))
+    }
+}
+
+/// Training-mode batch norm: returns the output and the batch (mean, biased variance) as a
+/// (2, C) tensor (for the running statistics). Differentiable in `x`, `weight` and `bias`.
+pub fn batch_norm_train(x: &Tensor, weight: &Tensor, bias: &Tensor, eps: f64) -> Result<(Tensor, Tensor)> {
+    let x = x.contiguous()?;
+    let stats = x.apply_op1_no_bwd(&Stats)?;
+    let affine = Tensor::stack(&[weight, bias], 0)?;
+    let y = x.apply_op3(&affine, &stats, Normalise { eps })?;
+    Ok((y, stats))
+}

@@ -8,6 +8,7 @@
 
 pub mod batchnorm;
 pub mod camera;
+pub mod config;
 pub mod dwconv;
 pub mod mobilefacenet;
 pub mod torch_legacy;

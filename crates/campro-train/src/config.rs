@@ -1,0 +1,201 @@
+//! The optimiser's configuration: one TOML file holds every hyper-parameter (paper
+//! defaults), so a run is reproducible from its file and seed. Unknown keys are refused;
+//! each rule names its key.
+
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{path}: {message}")]
+    Parse { path: String, message: String },
+    #[error("{path}: {key}: {rule}")]
+    Rule { path: String, key: String, rule: String },
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    /// Seed of every random choice (data order, splits, initialisation).
+    pub seed: u64,
+    pub camera: CameraConfig,
+    pub attacker: AttackerConfig,
+    pub protector: ProtectorConfig,
+    pub data: DataConfig,
+    pub budget: BudgetConfig,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraConfig {
+    /// Tone-curve knots k (paper: 32).
+    pub knots: usize,
+    /// Degamma exponent (2.2).
+    pub gamma: f64,
+    /// Adam learning rate for the CCM and curve (paper: 1e-3).
+    pub lr: f64,
+}
+
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Head {
+    /// Linear layer + softmax cross-entropy.
+    Softmax,
+    /// Additive angular margin (ArcFace, s = 64, m = 0.5) on normalised features.
+    Arcface,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct AttackerConfig {
+    /// PyTorch checkpoint of the white-box backbone F (MobileFaceNet).
+    pub checkpoint: PathBuf,
+    pub head: Head,
+    /// SGD learning rate for F and H (paper: 0.1).
+    pub lr: f64,
+    /// Head pretraining on raw faces stops at this training accuracy (0..1) ...
+    pub pretrain_accuracy: f64,
+    /// ... or after this many steps.
+    pub pretrain_steps: usize,
+    /// Attacker steps per round (m); 0 with `protector_only`.
+    pub steps_per_round: usize,
+    /// Update the batch-norm statistics in attacker steps (else they stay frozen).
+    pub train_batch_norm: bool,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ProtectorConfig {
+    /// Protector steps per round (n).
+    pub steps_per_round: usize,
+    /// Weight ω of the detection loss (paper: 0.2).
+    pub omega: f64,
+    /// The paper's ablation: no attacker steps after pretraining.
+    pub protector_only: bool,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct DataConfig {
+    /// LFW folder (identities as sub-folders of `images_deepfunneled/`).
+    pub lfw: PathBuf,
+    /// Models folder (YuNet for alignment).
+    pub models: PathBuf,
+    /// Identities with at least this many photos form the proxy head's classes.
+    pub min_images: usize,
+    /// Fraction of those identities held out for validation (never trained on).
+    pub validation_identities: f64,
+    /// Use at most this many identities (tiny runs, CI).
+    pub max_identities: Option<usize>,
+    /// Faces per batch.
+    pub batch: usize,
+    /// Aligned crops are cached here (one file per configuration of the face set).
+    pub cache: PathBuf,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct BudgetConfig {
+    /// Rounds of (m attacker + n protector) steps.
+    pub rounds: usize,
+    /// Stop after this many seconds of training (checkpoint written).
+    pub seconds: f64,
+    /// Write a checkpoint every this many rounds.
+    pub checkpoint_every: usize,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self { seed: 0, camera: Default::default(), attacker: Default::default(), protector: Default::default(), data: Default::default(), budget: Default::default() }
+    }
+}
+impl Default for CameraConfig {
+    fn default() -> Self {
+        Self { knots: 32, gamma: 2.2, lr: 1e-3 }
+    }
+}
+impl Default for AttackerConfig {
+    fn default() -> Self {
+        Self {
+            checkpoint: "../shared/models/mobilefacenet_casia_068.ckpt".into(),
+            head: Head::Softmax,
+            lr: 0.1,
+            pretrain_accuracy: 0.9,
+            pretrain_steps: 500,
+            steps_per_round: 1,
+            train_batch_norm: false,
+        }
+    }
+}
+impl Default for ProtectorConfig {
+    fn default() -> Self {
+        Self { steps_per_round: 1, omega: 0.2, protector_only: false }
+    }
+}
+impl Default for DataConfig {
+    fn default() -> Self {
+        Self {
+            lfw: "../shared/data/lfw".into(),
+            models: "../shared/models".into(),
+            min_images: 5,
+            validation_identities: 0.2,
+            max_identities: None,
+            batch: 16,
+            cache: "target/campro-train-cache".into(),
+        }
+    }
+}
+impl Default for BudgetConfig {
+    fn default() -> Self {
+        Self { rounds: 2000, seconds: 4.0 * 3600.0, checkpoint_every: 100 }
+    }
+}
+
+impl Config {
+    /// Reads and checks a TOML file (missing keys take the paper's defaults).
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let p = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Parse { path: p.clone(), message: e.to_string() })?;
+        Self::parse(&text, &p)
+    }
+
+    pub fn parse(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let c: Config = toml::from_str(text).map_err(|e| ConfigError::Parse { path: origin.into(), message: e.message().to_string() + &span(text, e.span()) })?;
+        c.check().map_err(|(key, rule)| ConfigError::Rule { path: origin.into(), key: key.into(), rule: rule.into() })?;
+        Ok(c)
+    }
+
+    /// Every rule, first broken one reported.
+    pub fn check(&self) -> Result<(), (&'static str, &'static str)> {
+        let finite_pos = |v: f64| v.is_finite() && v > 0.0;
+        let checks: [(bool, &str, &str); 13] = [
+            ((2..=1024).contains(&self.camera.knots), "camera.knots", "must be in 2..=1024"),
+            (self.camera.gamma.is_finite() && (0.2..=5.0).contains(&self.camera.gamma), "camera.gamma", "must be in [0.2, 5]"),
+            (finite_pos(self.camera.lr), "camera.lr", "must be finite and > 0"),
+            (finite_pos(self.attacker.lr), "attacker.lr", "must be finite and > 0"),
+            ((0.0..=1.0).contains(&self.attacker.pretrain_accuracy), "attacker.pretrain_accuracy", "must be in [0, 1]"),
+            (self.protector.steps_per_round >= 1, "protector.steps_per_round", "must be ≥ 1"),
+            (self.protector.omega.is_finite() && self.protector.omega >= 0.0, "protector.omega", "must be finite and ≥ 0"),
+            (self.protector.protector_only || self.attacker.steps_per_round >= 1, "attacker.steps_per_round", "must be ≥ 1 unless protector.protector_only"),
+            (self.data.min_images >= 2, "data.min_images", "must be ≥ 2 (one photo to train on, one to check)"),
+            ((0.0..1.0).contains(&self.data.validation_identities), "data.validation_identities", "must be in [0, 1)"),
+            ((1..=4096).contains(&self.data.batch), "data.batch", "must be in 1..=4096"),
+            (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
+            (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
+        ];
+        match checks.iter().find(|c| !c.0) {
+            Some(&(_, key, rule)) => Err((key, rule)),
+            None => Ok(()),
+        }
+    }
+}
+
+fn span(text: &str, span: Option<std::ops::Range<usize>>) -> String {
+    match span {
+        Some(r) => {
+            let line = text[..r.start.min(text.len())].lines().count().max(1);
+            format!(" (line {line})")
+        }
+        None => String::new(),
+    }
+}

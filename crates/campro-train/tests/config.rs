@@ -1,0 +1,61 @@
+//! The TOML configuration: defaults are the paper's, unknown keys and broken rules are
+//! refused with the key named.
+
+use campro_train::config::{Config, ConfigError, Head};
+
+#[test]
+fn empty_file_gives_the_paper_settings() {
+    let c = Config::parse("", "c.toml").unwrap();
+    assert_eq!((c.camera.knots, c.camera.gamma, c.camera.lr), (32, 2.2, 1e-3));
+    assert_eq!((c.attacker.lr, c.attacker.head), (0.1, Head::Softmax));
+    assert_eq!(c.protector.omega, 0.2);
+    assert!(!c.protector.protector_only);
+}
+
+#[test]
+fn a_full_file_round_trips() {
+    let mut c = Config::default();
+    c.seed = 7;
+    c.protector.omega = 5.0;
+    c.protector.protector_only = true;
+    c.attacker.head = Head::Arcface;
+    c.data.max_identities = Some(10);
+    let text = toml::to_string(&c).unwrap();
+    assert_eq!(Config::parse(&text, "c.toml").unwrap(), c);
+}
+
+fn rule(text: &str) -> (String, String) {
+    match Config::parse(text, "c.toml") {
+        Err(ConfigError::Rule { key, rule, .. }) => (key, rule),
+        other => panic!("expected a rule error, got {other:?}"),
+    }
+}
+
+#[test]
+fn bad_values_name_the_key() {
+    assert_eq!(rule("[camera]\nknots = 1").0, "camera.knots");
+    assert_eq!(rule("[camera]\nlr = nan").0, "camera.lr");
+    assert_eq!(rule("[camera]\nlr = inf").0, "camera.lr");
+    assert_eq!(rule("[protector]\nomega = -1.0").0, "protector.omega");
+    assert_eq!(rule("[attacker]\nsteps_per_round = 0").0, "attacker.steps_per_round");
+    // ... which protector-only allows.
+    assert!(Config::parse("[attacker]\nsteps_per_round = 0\n[protector]\nprotector_only = true", "c.toml").is_ok());
+    assert_eq!(rule("[data]\nvalidation_identities = 1.0").0, "data.validation_identities");
+    assert_eq!(rule("[budget]\nseconds = 0.0").0, "budget.seconds");
+}
+
+#[test]
+fn malformed_files_and_unknown_keys_are_refused() {
+    for (text, needle) in [
+        ("[camera]\nknotz = 3", "unknown field `knotz`"),
+        ("[camera]\nknots = \"many\"", "invalid type"),
+        ("[camera\nknots = 3", "line 1"),
+        ("seed = -1", "invalid value"),
+        ("[attacker]\nhead = \"cosface\"", "unknown variant"),
+    ] {
+        match Config::parse(text, "c.toml") {
+            Err(ConfigError::Parse { message, .. }) => assert!(message.contains(needle), "{text:?}: {message}"),
+            other => panic!("{text:?}: {other:?}"),
+        }
+    }
+}

@@ -62,8 +62,7 @@ fn main() -> anyhow::Result<()> {
         let t = std::time::Instant::now();
         let img = cam.forward_linear(&lin)?;
         let logits = head.forward(&l2_normalise(&net.forward_t(&normalise_unit(&img)?, false)?)?)?;
-        let p = candle_nn::ops::softmax_last_dim(&logits)?.gather(&y.unsqueeze(1)?, 1)?;
-        let lns = (1.0 - p)?.clamp(1e-6f32, 1f32)?.log()?.neg()?.mean_all()?;
+        let lns = campro_train::train::non_saturating_loss(&logits, &y)?;
         let g = lns.backward()?;
         adam.step(&g)?;
         cam.project()?;

@@ -10,7 +10,9 @@ pub mod batchnorm;
 pub mod camera;
 pub mod config;
 pub mod dwconv;
+pub mod faces;
 pub mod mobilefacenet;
 pub mod torch_legacy;
+pub mod train;
 
 pub use candle_core::{Device, Tensor};

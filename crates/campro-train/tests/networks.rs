@@ -193,3 +193,25 @@ fn mobilefacenet_checkpoint_matches_the_onnx_export() {
     assert!(cos > 0.99999 && worst < 1e-3, "cosine {cos}, worst {worst}");
     assert_eq!(e.dtype(), DType::F32);
 }
+
+#[test]
+fn non_saturating_loss_by_hand_and_its_gradient_flows() {
+    use candle_core::Var;
+    // Logits (2, 0, 0), true class 0: p = e²/(e² + 2), −log(1 − p) = log((e² + 2) / 2).
+    let z = Var::from_tensor(&Tensor::new(&[[2f32, 0., 0.]], &Device::Cpu).unwrap()).unwrap();
+    let y = Tensor::new(&[0u32], &Device::Cpu).unwrap();
+    let l = campro_train::train::non_saturating_loss(&z, &y).unwrap();
+    let want = ((2f64.exp() + 2.0) / 2.0).ln();
+    assert!((l.to_scalar::<f32>().unwrap() as f64 - want).abs() < 1e-5);
+    // d/dz = softmax(z) − softmax(z without y): for y: p_y; others: p_j − 1/2.
+    let g = l.backward().unwrap();
+    let gz: Vec<Vec<f32>> = g.get(z.as_tensor()).unwrap().to_vec2().unwrap();
+    let p = 2f64.exp() / (2f64.exp() + 2.0);
+    let q = 1.0 / (2f64.exp() + 2.0);
+    assert!((gz[0][0] as f64 - p).abs() < 1e-5 && (gz[0][1] as f64 - (q - 0.5)).abs() < 1e-5, "{gz:?}");
+    // A confident attacker (p_y = 1 − 1e-13 in f64) still gives a finite loss and gradient.
+    let z = Var::from_tensor(&Tensor::new(&[[40f32, 10., 10.]], &Device::Cpu).unwrap()).unwrap();
+    let l = campro_train::train::non_saturating_loss(&z, &y).unwrap();
+    assert!((l.to_scalar::<f32>().unwrap() - (30.0 - 2f32.ln())).abs() < 1e-3);
+    assert!(l.backward().unwrap().get(z.as_tensor()).is_some());
+}

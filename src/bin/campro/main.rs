@@ -128,6 +128,20 @@ enum Cmd {
         #[command(subcommand)]
         what: eval::EvalCmd,
     },
+    /// Learn CamPro parameters against a face-recognition attacker (Algorithm 1; privacy player).
+    Train {
+        /// TOML configuration (every key optional: the paper's defaults).
+        config: PathBuf,
+        /// The learnt parameter set (JSON, as `convert`, `simulate` and `eval` read it).
+        #[arg(short, long, default_value = "campro-trained.json")]
+        output: PathBuf,
+        /// The training log (CSV, one line per round).
+        #[arg(long)]
+        log: Option<PathBuf>,
+        /// Replace existing output files.
+        #[arg(long)]
+        force: bool,
+    },
     /// Run on the bundled default (colour inversion) and a built-in chart: before/after PNGs, Camera2 values, error report.
     Demo {
         /// Output folder.
@@ -281,6 +295,7 @@ fn main() {
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
         Cmd::Eval { what } => eval::run(what),
+        Cmd::Train { config, output, log, force } => train(&config, &output, log.as_deref(), force),
         Cmd::Validate { params } => {
             for p in params {
                 let v = load_params(&p)?;
@@ -429,6 +444,52 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
 
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename,
 /// so a reader never sees a partial file. Refuses to replace `path` unless `force`.
+fn train(config: &Path, output: &Path, log: Option<&Path>, force: bool) -> Result<()> {
+    let cfg = campro_train::config::Config::load(config)?;
+    for p in std::iter::once(output).chain(log) {
+        if p.exists() && !force {
+            bail!("{} exists (use --force to replace it)", p.display());
+        }
+    }
+    let pb = indicatif::ProgressBar::new(cfg.budget.rounds as u64);
+    pb.set_style(indicatif::ProgressStyle::with_template("train [{bar:30}] round {pos}/{len} {elapsed_precise} eta {eta} {msg}").unwrap().progress_chars("=> "));
+    let out = campro_train::train::run(&cfg, |r| {
+        pb.set_position(r.round as u64);
+        pb.set_message(format!("L_ns {:.4} attacker acc {:.2}", r.privacy_loss, r.attacker_accuracy));
+        if let Some(c) = r.check_accuracy {
+            pb.println(format!("round {}: check accuracy {:.3} (attacker CE {:.3}, L_ns {:.4}, {:.0} s)", r.round, c, r.attacker_ce, r.privacy_loss, r.seconds));
+        }
+    })?;
+    pb.finish_and_clear();
+    if let Some(l) = log {
+        let mut csv = String::from("round,seconds,attacker_ce,attacker_accuracy,privacy_loss,check_accuracy\n");
+        for r in &out.log {
+            csv += &format!("{},{:.3},{:.6},{:.4},{:.6},{}\n", r.round, r.seconds, r.attacker_ce, r.attacker_accuracy, r.privacy_loss, r.check_accuracy.map_or(String::new(), |c| format!("{c:.4}")));
+        }
+        write_atomic(l, csv.as_bytes(), force)?;
+    }
+    let curve = campro::tone_curve::ToneCurve::uniform(out.curve.clone())?;
+    let mut params = Params::new(out.ccm, curve, out.gamma)?;
+    params.name = output.file_stem().map_or("campro-trained".into(), |s| s.to_string_lossy().into_owned());
+    params.description = format!(
+        "learnt by campro train from {} (privacy player{})",
+        config.display(),
+        if cfg.protector.protector_only { ", protector only" } else { "" }
+    );
+    params.provenance = out.provenance.clone();
+    write_atomic(output, params.to_json().as_bytes(), force)?;
+    eprintln!(
+        "trained {} rounds on {} classes ({} faces, {} aside) in {:.0} s -> {}",
+        out.log.last().map_or(0, |r| r.round),
+        out.classes,
+        out.train_faces,
+        out.check_faces,
+        out.seconds,
+        output.display()
+    );
+    Ok(())
+}
+
 fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()> {
     if !force && path.exists() {
         bail!("{} exists (use --force to overwrite)", path.display());

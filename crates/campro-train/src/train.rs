@@ -1,0 +1,242 @@
+//! The alternating optimisation of CamPro's Algorithm 1 (privacy player): pretrain the
+//! attacker's proxy head on raw faces, then per round m attacker steps (cross-entropy on
+//! C(x), camera frozen, F and H updated by SGD) and n protector steps (the non-saturating
+//! privacy loss `−log(1 − p_y)` through the frozen attacker into the camera, Adam, then the
+//! CCM and curve projected into their ranges).
+//!
+//! The utility player (the person detector and ω·L_det) is not built yet: a configuration
+//! with ω > 0 is refused rather than silently trained without it.
+
+use crate::camera::Camera;
+use crate::config::{Config, Head};
+use crate::faces::{FaceSet, Selection};
+use crate::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet, EMBEDDING};
+use candle_core::{DType, Device, Tensor, Var, D};
+use candle_nn::{AdamW, Optimizer, ParamsAdamW, SGD};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use serde::Serialize;
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error(transparent)]
+    Faces(#[from] crate::faces::FacesError),
+    #[error(transparent)]
+    Torch(#[from] crate::torch_legacy::TorchError),
+    #[error("tensor: {0}")]
+    Tensor(#[from] candle_core::Error),
+    #[error("{0}")]
+    Unsupported(String),
+}
+
+/// One line of the training log.
+#[derive(Debug, Clone, Serialize)]
+pub struct LogRow {
+    /// 0 for pretraining steps, then 1, 2, ...
+    pub round: usize,
+    pub seconds: f64,
+    /// Attacker cross-entropy on its last batch.
+    pub attacker_ce: f64,
+    /// Attacker top-1 on its last batch.
+    pub attacker_accuracy: f64,
+    /// Protector loss `−log(1 − p_y)` on its last batch (rounds ≥ 1).
+    pub privacy_loss: f64,
+    /// Top-1 of the attacker on the held-aside photos through the current camera.
+    pub check_accuracy: Option<f64>,
+}
+
+/// The learnt camera (campro's parameter model is built from it by the caller, which keeps
+/// this crate independent of the core) and how it was learnt.
+pub struct Outcome {
+    /// Row-major CCM, entries in [−5, 5].
+    pub ccm: [[f64; 3]; 3],
+    /// Curve outputs at evenly spaced inputs, in [0, 1].
+    pub curve: Vec<f64>,
+    pub gamma: f64,
+    /// Config, data, seed, rounds, final losses, time.
+    pub provenance: serde_json::Map<String, serde_json::Value>,
+    pub log: Vec<LogRow>,
+    pub seconds: f64,
+    pub classes: usize,
+    pub train_faces: usize,
+    pub check_faces: usize,
+}
+
+/// The proxy head H: a linear layer (softmax) or cosine logits with an angular margin
+/// (ArcFace), over L2-normalised embeddings.
+struct ProxyHead {
+    w: Var,
+    b: Option<Var>,
+    kind: Head,
+}
+
+impl ProxyHead {
+    const SCALE: f64 = 16.0;
+
+    /// Starts from the scaled class means of the raw embeddings (a nearest-mean classifier).
+    fn from_means(means: &Tensor, kind: Head) -> candle_core::Result<Self> {
+        let w = Var::from_tensor(&(l2_normalise(means)? * Self::SCALE)?)?;
+        let b = match kind {
+            Head::Softmax => Some(Var::from_tensor(&Tensor::zeros(means.dim(0)?, DType::F32, means.device())?)?),
+            Head::Arcface => None,
+        };
+        Ok(Self { w, b, kind })
+    }
+
+    fn vars(&self) -> Vec<Var> {
+        let mut v = vec![self.w.clone()];
+        v.extend(self.b.clone());
+        v
+    }
+
+    /// Logits (B, classes); with labels, ArcFace adds its margin to the true class.
+    fn logits(&self, e: &Tensor, labels: Option<&Tensor>) -> candle_core::Result<Tensor> {
+        match self.kind {
+            Head::Softmax => e.matmul(&self.w.t()?)?.broadcast_add(self.b.as_ref().expect("softmax head has a bias")),
+            Head::Arcface => {
+                let cos = e.matmul(&l2_normalise(&self.w)?.t()?)?.clamp(-1f32 + 1e-6, 1f32 - 1e-6)?;
+                let Some(y) = labels else { return cos * 64.0 };
+                // cos(θ + m) on the true class, m = 0.5.
+                let (m_cos, m_sin) = (0.5f64.cos(), 0.5f64.sin());
+                let sin = (1.0 - cos.sqr()?)?.sqrt()?;
+                let with_margin = ((&cos * m_cos)? - (sin * m_sin)?)?;
+                let onehot = candle_nn::encoding::one_hot(y.clone(), cos.dim(1)?, 1f32, 0f32)?;
+                let mixed = (onehot.mul(&with_margin)? + (1.0 - &onehot)?.mul(&cos)?)?;
+                mixed * 64.0
+            }
+        }
+    }
+}
+
+/// Row-wise log Σ exp, stable.
+fn logsumexp(z: &Tensor) -> candle_core::Result<Tensor> {
+    let m = z.max_keepdim(D::Minus1)?.detach();
+    (z.broadcast_sub(&m)?.exp()?.sum_keepdim(D::Minus1)?.log()? + m)?.squeeze(D::Minus1)
+}
+
+/// The paper's non-saturating privacy loss `−log(1 − p_y)`, batch mean, computed as
+/// `LSE(z) − LSE(z without the true class)`: exact where `1 − p_y` underflows in f32 (a
+/// confident attacker is where the protector starts).
+pub fn non_saturating_loss(logits: &Tensor, y: &Tensor) -> candle_core::Result<Tensor> {
+    let onehot = candle_nn::encoding::one_hot(y.clone(), logits.dim(1)?, 1f32, 0f32)?;
+    let others = (logits - (onehot * 1e4)?)?;
+    (logsumexp(logits)? - logsumexp(&others)?)?.mean_all()
+}
+
+fn accuracy(logits: &Tensor, y: &Tensor) -> candle_core::Result<f64> {
+    let hit = logits.argmax(D::Minus1)?.eq(y)?.to_dtype(DType::F32)?.mean_all()?;
+    Ok(hit.to_scalar::<f32>()? as f64)
+}
+
+/// Runs the optimisation described by `cfg`; `on_row` sees every log line as it happens.
+pub fn run(cfg: &Config, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, TrainError> {
+    if cfg.protector.omega > 0.0 {
+        return Err(TrainError::Unsupported(format!(
+            "protector.omega = {}: the utility player (person detector, L_det) is not built yet; set protector.omega = 0 to train the privacy player alone",
+            cfg.protector.omega
+        )));
+    }
+    let start = std::time::Instant::now();
+    let dev = Device::Cpu;
+    let sel = Selection {
+        lfw: cfg.data.lfw.clone(),
+        min_images: cfg.data.min_images,
+        validation_identities: cfg.data.validation_identities,
+        max_identities: cfg.data.max_identities,
+        seed: cfg.seed,
+    };
+    let faces = FaceSet::load_or_build(&sel, &cfg.data.models, &cfg.data.cache)?;
+    let (train, check) = faces.split();
+    let classes = faces.classes.len();
+    let (net, net_vars) = MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?;
+    let cam = Camera::identity(cfg.camera.knots, cfg.camera.gamma, &dev)?;
+    let embed = |x: &Tensor, train_bn: bool| -> candle_core::Result<Tensor> { l2_normalise(&net.forward_t(&normalise_unit(x)?, train_bn)?) };
+
+    // H from the class means of the raw training embeddings.
+    let mut sums = vec![vec![0f32; EMBEDDING]; classes];
+    for chunk in train.chunks(64) {
+        let (x, _) = faces.batch(chunk, &dev)?;
+        let e: Vec<Vec<f32>> = embed(&x, false)?.to_vec2()?;
+        for (&i, v) in chunk.iter().zip(e) {
+            sums[faces.labels[i] as usize].iter_mut().zip(v).for_each(|(s, x)| *s += x);
+        }
+    }
+    let means = Tensor::from_vec(sums.concat(), (classes, EMBEDDING), &dev)?;
+    let head = ProxyHead::from_means(&means, cfg.attacker.head)?;
+    let mut attacker_vars = net_vars.all_vars();
+    attacker_vars.extend(head.vars());
+    let mut sgd = SGD::new(attacker_vars, cfg.attacker.lr)?;
+    let mut adam = AdamW::new(cam.vars(), ParamsAdamW { lr: cfg.camera.lr, weight_decay: 0.0, ..Default::default() })?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed);
+    let mut order: Vec<usize> = Vec::new();
+    let mut next_batch = |rng: &mut rand_chacha::ChaCha8Rng| -> Vec<usize> {
+        if order.len() < cfg.data.batch {
+            let mut fresh = train.clone();
+            fresh.shuffle(rng);
+            order.extend(fresh);
+        }
+        order.drain(..cfg.data.batch.min(order.len())).collect()
+    };
+    let check_accuracy = |through_camera: bool| -> candle_core::Result<f64> {
+        let mut hits = 0.0;
+        for chunk in check.chunks(64) {
+            let (x, y) = faces.batch(chunk, &dev)?;
+            let x = if through_camera { cam.forward(&x)? } else { x };
+            hits += accuracy(&head.logits(&embed(&x, false)?, None)?, &y)? * chunk.len() as f64;
+        }
+        Ok(hits / check.len().max(1) as f64)
+    };
+    let attacker_step = |x: &Tensor, y: &Tensor, sgd: &mut SGD| -> candle_core::Result<(f64, f64)> {
+        let logits = head.logits(&embed(x, cfg.attacker.train_batch_norm)?, Some(y))?;
+        let ce = candle_nn::loss::cross_entropy(&logits, y)?;
+        sgd.backward_step(&ce)?;
+        Ok((ce.to_scalar::<f32>()? as f64, accuracy(&logits, y)?))
+    };
+    let mut log = Vec::new();
+    // Pretraining on raw faces until the head reaches the threshold (or the step budget).
+    let (mut ce, mut acc) = (f64::NAN, 0.0);
+    for _ in 0..cfg.attacker.pretrain_steps {
+        let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
+        (ce, acc) = attacker_step(&x, &y, &mut sgd)?;
+        if acc >= cfg.attacker.pretrain_accuracy {
+            break;
+        }
+    }
+    let row = LogRow { round: 0, seconds: start.elapsed().as_secs_f64(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: f64::NAN, check_accuracy: Some(check_accuracy(false)?) };
+    on_row(&row);
+    log.push(row);
+    let m = if cfg.protector.protector_only { 0 } else { cfg.attacker.steps_per_round };
+    for round in 1..=cfg.budget.rounds {
+        for _ in 0..m {
+            let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
+            (ce, acc) = attacker_step(&cam.forward(&x)?.detach(), &y, &mut sgd)?;
+        }
+        let mut lns = f64::NAN;
+        for _ in 0..cfg.protector.steps_per_round {
+            let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
+            let logits = head.logits(&embed(&cam.forward(&x)?, false)?, None)?;
+            let loss = non_saturating_loss(&logits, &y)?;
+            adam.step(&loss.backward()?)?;
+            cam.project()?;
+            lns = loss.to_scalar::<f32>()? as f64;
+        }
+        let last = round == cfg.budget.rounds || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
+        let check_acc = if round % cfg.budget.checkpoint_every == 0 || last { Some(check_accuracy(true)?) } else { None };
+        let row = LogRow { round, seconds: start.elapsed().as_secs_f64(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: lns, check_accuracy: check_acc };
+        on_row(&row);
+        log.push(row);
+        if last {
+            break;
+        }
+    }
+    let prov = serde_json::json!({
+        "optimiser": "campro-train",
+        "config": cfg,
+        "data": { "classes": classes, "train_faces": train.len(), "check_faces": check.len(), "skipped_no_face": faces.skipped, "validation_identities": faces.validation },
+        "rounds": log.last().map_or(0, |r| r.round),
+        "final": log.last(),
+        "seconds": start.elapsed().as_secs_f64(),
+    });
+    let serde_json::Value::Object(provenance) = prov else { unreachable!("a JSON object") };
+    Ok(Outcome { ccm: cam.ccm_values()?, curve: cam.curve_values()?, gamma: cfg.camera.gamma, provenance, log, seconds: start.elapsed().as_secs_f64(), classes, train_faces: train.len(), check_faces: check.len() })
+}

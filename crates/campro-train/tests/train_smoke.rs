@@ -1,0 +1,53 @@
+//! A seconds-long run of the optimiser on a few LFW identities (skipped without ../shared,
+//! required under CI=true): the protector's loss must fall and the frozen attacker's
+//! accuracy through the camera must drop, and the result must be a valid camera.
+
+#[path = "../../../tests/common/shared.rs"]
+mod shared;
+
+use campro_train::config::Config;
+
+#[test]
+fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
+    let Some(ckpt) = shared::shared("models/mobilefacenet_casia_068.ckpt") else { return };
+    let Some(lfw) = shared::shared("data/lfw/pairs.txt") else { return };
+    let cache = tempfile::tempdir().unwrap();
+    let mut c = Config::default();
+    c.seed = 1;
+    c.camera.lr = 0.05;
+    c.attacker.checkpoint = ckpt.clone();
+    c.attacker.pretrain_steps = 3;
+    c.protector.omega = 0.0;
+    c.protector.protector_only = true;
+    c.data.lfw = lfw.parent().unwrap().to_path_buf();
+    c.data.models = ckpt.parent().unwrap().to_path_buf();
+    c.data.max_identities = Some(5);
+    c.data.batch = 8;
+    c.data.cache = cache.path().to_path_buf();
+    c.budget.rounds = 10;
+    c.budget.checkpoint_every = 10;
+    let out = campro_train::train::run(&c, |_| {}).unwrap();
+    let rows = &out.log;
+    assert_eq!(rows.len(), 11, "pretraining row + 10 rounds");
+    let first: f64 = rows[1..4].iter().map(|r| r.privacy_loss).sum::<f64>() / 3.0;
+    let last: f64 = rows[8..].iter().map(|r| r.privacy_loss).sum::<f64>() / 3.0;
+    assert!(last < 0.5 * first, "L_ns {first} -> {last}");
+    let (before, after) = (rows[0].check_accuracy.unwrap(), rows[10].check_accuracy.unwrap());
+    assert!(after < before, "attacker check accuracy {before} -> {after}");
+    assert!(out.ccm.iter().flatten().all(|v| v.abs() <= 5.0) && out.curve.iter().all(|v| (0.0..=1.0).contains(v)));
+    assert_eq!(out.curve.len(), 32);
+    assert_eq!(out.provenance["config"]["seed"], 1);
+    // The face set was cached: a second build reads it back identically.
+    let sel = campro_train::faces::Selection { lfw: c.data.lfw.clone(), min_images: 5, validation_identities: 0.2, max_identities: Some(5), seed: 1 };
+    let a = campro_train::faces::FaceSet::load_or_build(&sel, &c.data.models, cache.path()).unwrap();
+    assert_eq!(std::fs::read_dir(cache.path()).unwrap().count(), 1);
+    assert_eq!((a.classes.len(), a.validation.len()), (4, 1));
+    assert_eq!(a.len(), out.train_faces + out.check_faces);
+}
+
+#[test]
+fn a_detector_weight_is_refused_until_the_utility_player_exists() {
+    let c = Config::default();
+    let err = campro_train::train::run(&c, |_| {}).err().unwrap().to_string();
+    assert!(err.contains("protector.omega") && err.contains("not built yet"), "{err}");
+}

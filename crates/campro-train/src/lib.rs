@@ -8,6 +8,7 @@
 
 pub mod batchnorm;
 pub mod camera;
+pub mod checkpoint;
 pub mod config;
 pub mod dwconv;
 pub mod faces;

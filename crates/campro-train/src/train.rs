@@ -17,8 +17,18 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use serde::Serialize;
 
+/// Where checkpoints go, and which one to resume from.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Written every `budget.checkpoint_every` rounds and at the end.
+    pub checkpoints: Option<std::path::PathBuf>,
+    pub resume: Option<std::path::PathBuf>,
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
+    #[error(transparent)]
+    Checkpoint(#[from] crate::checkpoint::CheckpointError),
     #[error(transparent)]
     Faces(#[from] crate::faces::FacesError),
     #[error(transparent)]
@@ -32,7 +42,7 @@ pub enum TrainError {
 /// One line of the training log.
 #[derive(Debug, Clone, Serialize)]
 pub struct LogRow {
-    /// 0 for pretraining steps, then 1, 2, ...
+    /// 0 for pretraining (or the round resumed from), then 1, 2, ...
     pub round: usize,
     pub seconds: f64,
     /// Attacker cross-entropy on its last batch.
@@ -129,7 +139,7 @@ fn accuracy(logits: &Tensor, y: &Tensor) -> candle_core::Result<f64> {
 }
 
 /// Runs the optimisation described by `cfg`; `on_row` sees every log line as it happens.
-pub fn run(cfg: &Config, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, TrainError> {
+pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, TrainError> {
     if cfg.protector.omega > 0.0 {
         return Err(TrainError::Unsupported(format!(
             "protector.omega = {}: the utility player (person detector, L_det) is not built yet; set protector.omega = 0 to train the privacy player alone",
@@ -163,11 +173,39 @@ pub fn run(cfg: &Config, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, Tra
     }
     let means = Tensor::from_vec(sums.concat(), (classes, EMBEDDING), &dev)?;
     let head = ProxyHead::from_means(&means, cfg.attacker.head)?;
+    // Everything a checkpoint holds, by name.
+    let named = || -> Vec<(String, Var)> {
+        let mut v: Vec<(String, Var)> = net_vars.data().lock().expect("var map lock").iter().map(|(k, v)| (format!("attacker.{k}"), v.clone())).collect();
+        v.push(("camera.ccm".into(), cam.ccm.clone()));
+        v.push(("camera.curve".into(), cam.curve.clone()));
+        v.push(("head.w".into(), head.w.clone()));
+        v.extend(head.b.clone().map(|b| ("head.b".to_string(), b)));
+        v
+    };
+    let mut first_round = 1;
+    if let Some(dir) = &opts.resume {
+        let (tensors, state) = crate::checkpoint::load(dir, &dev)?;
+        if state.classes != faces.classes || state.seed != cfg.seed {
+            return Err(TrainError::Unsupported(format!("{}: checkpoint of another face set or seed: resume with its own configuration", dir.display())));
+        }
+        for (name, var) in named() {
+            let t = tensors.get(&name).ok_or_else(|| TrainError::Unsupported(format!("{}: {name} missing from the checkpoint", dir.display())))?;
+            var.set(t)?;
+        }
+        first_round = state.round + 1;
+    }
+    let save = |round: usize| -> Result<(), TrainError> {
+        let Some(dir) = &opts.checkpoints else { return Ok(()) };
+        let tensors = named().into_iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
+        crate::checkpoint::save(dir, &tensors, &crate::checkpoint::State { round, seed: cfg.seed, classes: faces.classes.clone() })?;
+        Ok(())
+    };
     let mut attacker_vars = net_vars.all_vars();
     attacker_vars.extend(head.vars());
     let mut sgd = SGD::new(attacker_vars, cfg.attacker.lr)?;
     let mut adam = AdamW::new(cam.vars(), ParamsAdamW { lr: cfg.camera.lr, weight_decay: 0.0, ..Default::default() })?;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed);
+    // Reseeded from the round on resume (see `checkpoint`).
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ ((first_round as u64 - 1) << 32));
     let mut order: Vec<usize> = Vec::new();
     let mut next_batch = |rng: &mut rand_chacha::ChaCha8Rng| -> Vec<usize> {
         if order.len() < cfg.data.batch {
@@ -195,18 +233,19 @@ pub fn run(cfg: &Config, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, Tra
     let mut log = Vec::new();
     // Pretraining on raw faces until the head reaches the threshold (or the step budget).
     let (mut ce, mut acc) = (f64::NAN, 0.0);
-    for _ in 0..cfg.attacker.pretrain_steps {
+    let pretrain = if first_round == 1 { cfg.attacker.pretrain_steps } else { 0 };
+    for _ in 0..pretrain {
         let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
         (ce, acc) = attacker_step(&x, &y, &mut sgd)?;
         if acc >= cfg.attacker.pretrain_accuracy {
             break;
         }
     }
-    let row = LogRow { round: 0, seconds: start.elapsed().as_secs_f64(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: f64::NAN, check_accuracy: Some(check_accuracy(false)?) };
+    let row = LogRow { round: first_round - 1, seconds: start.elapsed().as_secs_f64(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: f64::NAN, check_accuracy: Some(check_accuracy(first_round > 1)?) };
     on_row(&row);
     log.push(row);
     let m = if cfg.protector.protector_only { 0 } else { cfg.attacker.steps_per_round };
-    for round in 1..=cfg.budget.rounds {
+    for round in first_round..=cfg.budget.rounds {
         for _ in 0..m {
             let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
             (ce, acc) = attacker_step(&cam.forward(&x)?.detach(), &y, &mut sgd)?;
@@ -221,7 +260,12 @@ pub fn run(cfg: &Config, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, Tra
             lns = loss.to_scalar::<f32>()? as f64;
         }
         let last = round == cfg.budget.rounds || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
-        let check_acc = if round % cfg.budget.checkpoint_every == 0 || last { Some(check_accuracy(true)?) } else { None };
+        let check_acc = if round % cfg.budget.checkpoint_every == 0 || last {
+            save(round)?;
+            Some(check_accuracy(true)?)
+        } else {
+            None
+        };
         let row = LogRow { round, seconds: start.elapsed().as_secs_f64(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: lns, check_accuracy: check_acc };
         on_row(&row);
         log.push(row);
@@ -239,4 +283,30 @@ pub fn run(cfg: &Config, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, Tra
     });
     let serde_json::Value::Object(provenance) = prov else { unreachable!("a JSON object") };
     Ok(Outcome { ccm: cam.ccm_values()?, curve: cam.curve_values()?, gamma: cfg.camera.gamma, provenance, log, seconds: start.elapsed().as_secs_f64(), classes, train_faces: train.len(), check_faces: check.len() })
+}
+
+/// The log as two SVG charts: the losses (attacker cross-entropy, privacy loss) and the
+/// attacker's accuracies (last batch, held-aside photos through the camera), by round.
+pub fn plot_log(log: &[LogRow]) -> (String, String) {
+    use campro_eval::plot::{chart, Series, Style};
+    let series = |name: &str, f: &dyn Fn(&LogRow) -> Option<f64>| Series { name: name.into(), points: log.iter().filter_map(|r| f(r).map(|v| (r.round as f64, v))).collect() };
+    let losses = chart(
+        "campro train: losses",
+        "round",
+        "loss",
+        &[series("attacker CE", &|r| Some(r.attacker_ce)), series("privacy −log(1 − p_y)", &|r| Some(r.privacy_loss))],
+        Style::Lines,
+        None,
+        None,
+    );
+    let acc = chart(
+        "campro train: attacker accuracy",
+        "round",
+        "top-1",
+        &[series("last batch", &|r| Some(r.attacker_accuracy)), series("held-aside, through camera", &|r| r.check_accuracy)],
+        Style::Lines,
+        None,
+        Some((0.0, 1.0)),
+    );
+    (losses, acc)
 }

@@ -26,7 +26,9 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     c.data.cache = cache.path().to_path_buf();
     c.budget.rounds = 10;
     c.budget.checkpoint_every = 10;
-    let out = campro_train::train::run(&c, |_| {}).unwrap();
+    let ckpts = cache.path().join("ckpt");
+    let opts = campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None };
+    let out = campro_train::train::run(&c, &opts, |_| {}).unwrap();
     let rows = &out.log;
     assert_eq!(rows.len(), 11, "pretraining row + 10 rounds");
     let first: f64 = rows[1..4].iter().map(|r| r.privacy_loss).sum::<f64>() / 3.0;
@@ -40,7 +42,20 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     // The face set was cached: a second build reads it back identically.
     let sel = campro_train::faces::Selection { lfw: c.data.lfw.clone(), min_images: 5, validation_identities: 0.2, max_identities: Some(5), seed: 1 };
     let a = campro_train::faces::FaceSet::load_or_build(&sel, &c.data.models, cache.path()).unwrap();
-    assert_eq!(std::fs::read_dir(cache.path()).unwrap().count(), 1);
+    assert_eq!(std::fs::read_dir(cache.path()).unwrap().filter(|e| e.as_ref().unwrap().path().is_file()).count(), 1);
+    // Resuming from the last checkpoint (round 10) for two more rounds starts where it ended:
+    // same camera, so the same held-aside accuracy.
+    c.budget.rounds = 12;
+    let resumed = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts.clone()) }, |_| {}).unwrap();
+    assert_eq!(resumed.log[0].round, 10);
+    assert_eq!(resumed.log[0].check_accuracy, Some(after));
+    assert_eq!(resumed.log.last().unwrap().round, 12);
+    // A checkpoint of another seed is refused.
+    c.seed = 2;
+    let err = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts) }, |_| {}).err().unwrap().to_string();
+    assert!(err.contains("another face set or seed"), "{err}");
+    let (losses, acc) = campro_train::train::plot_log(&out.log);
+    assert!(losses.starts_with("<svg") && losses.contains("privacy") && acc.contains("held-aside"));
     assert_eq!((a.classes.len(), a.validation.len()), (4, 1));
     assert_eq!(a.len(), out.train_faces + out.check_faces);
 }
@@ -48,6 +63,6 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
 #[test]
 fn a_detector_weight_is_refused_until_the_utility_player_exists() {
     let c = Config::default();
-    let err = campro_train::train::run(&c, |_| {}).err().unwrap().to_string();
+    let err = campro_train::train::run(&c, &Default::default(), |_| {}).err().unwrap().to_string();
     assert!(err.contains("protector.omega") && err.contains("not built yet"), "{err}");
 }

@@ -135,9 +135,15 @@ enum Cmd {
         /// The learnt parameter set (JSON, as `convert`, `simulate` and `eval` read it).
         #[arg(short, long, default_value = "campro-trained.json")]
         output: PathBuf,
-        /// The training log (CSV, one line per round).
+        /// The training log (CSV, one line per round), with LOG-losses.svg and LOG-accuracy.svg.
         #[arg(long)]
         log: Option<PathBuf>,
+        /// Checkpoint folder (every budget.checkpoint_every rounds and at the end).
+        #[arg(long)]
+        checkpoints: Option<PathBuf>,
+        /// Resume from this checkpoint folder (same configuration and face set).
+        #[arg(long)]
+        resume: Option<PathBuf>,
         /// Replace existing output files.
         #[arg(long)]
         force: bool,
@@ -295,7 +301,9 @@ fn main() {
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
         Cmd::Eval { what } => eval::run(what),
-        Cmd::Train { config, output, log, force } => train(&config, &output, log.as_deref(), force),
+        Cmd::Train { config, output, log, checkpoints, resume, force } => {
+            train(&config, &output, log.as_deref(), &campro_train::train::RunOptions { checkpoints, resume }, force)
+        }
         Cmd::Validate { params } => {
             for p in params {
                 let v = load_params(&p)?;
@@ -444,7 +452,7 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
 
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename,
 /// so a reader never sees a partial file. Refuses to replace `path` unless `force`.
-fn train(config: &Path, output: &Path, log: Option<&Path>, force: bool) -> Result<()> {
+fn train(config: &Path, output: &Path, log: Option<&Path>, opts: &campro_train::train::RunOptions, force: bool) -> Result<()> {
     let cfg = campro_train::config::Config::load(config)?;
     for p in std::iter::once(output).chain(log) {
         if p.exists() && !force {
@@ -453,7 +461,7 @@ fn train(config: &Path, output: &Path, log: Option<&Path>, force: bool) -> Resul
     }
     let pb = indicatif::ProgressBar::new(cfg.budget.rounds as u64);
     pb.set_style(indicatif::ProgressStyle::with_template("train [{bar:30}] round {pos}/{len} {elapsed_precise} eta {eta} {msg}").unwrap().progress_chars("=> "));
-    let out = campro_train::train::run(&cfg, |r| {
+    let out = campro_train::train::run(&cfg, opts, |r| {
         pb.set_position(r.round as u64);
         pb.set_message(format!("L_ns {:.4} attacker acc {:.2}", r.privacy_loss, r.attacker_accuracy));
         if let Some(c) = r.check_accuracy {
@@ -467,6 +475,10 @@ fn train(config: &Path, output: &Path, log: Option<&Path>, force: bool) -> Resul
             csv += &format!("{},{:.3},{:.6},{:.4},{:.6},{}\n", r.round, r.seconds, r.attacker_ce, r.attacker_accuracy, r.privacy_loss, r.check_accuracy.map_or(String::new(), |c| format!("{c:.4}")));
         }
         write_atomic(l, csv.as_bytes(), force)?;
+        let (losses, acc) = campro_train::train::plot_log(&out.log);
+        let stem = l.with_extension("");
+        write_atomic(&PathBuf::from(format!("{}-losses.svg", stem.display())), losses.as_bytes(), true)?;
+        write_atomic(&PathBuf::from(format!("{}-accuracy.svg", stem.display())), acc.as_bytes(), true)?;
     }
     let curve = campro::tone_curve::ToneCurve::uniform(out.curve.clone())?;
     let mut params = Params::new(out.ccm, curve, out.gamma)?;

@@ -59,3 +59,15 @@ fn malformed_files_and_unknown_keys_are_refused() {
         }
     }
 }
+
+#[test]
+fn shipped_configs_parse() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let mut n = 0;
+    for e in std::fs::read_dir(dir).unwrap() {
+        let c = Config::load(&e.unwrap().path()).unwrap();
+        assert_eq!(c.protector.omega, 0.0, "omega > 0 needs the utility player");
+        n += 1;
+    }
+    assert!(n >= 2);
+}

@@ -465,7 +465,13 @@ fn train(config: &Path, output: &Path, log: Option<&Path>, opts: &campro_train::
         pb.set_position(r.round as u64);
         pb.set_message(format!("L_ns {:.4} attacker acc {:.2}", r.privacy_loss, r.attacker_accuracy));
         if let Some(c) = r.check_accuracy {
-            pb.println(format!("round {}: check accuracy {:.3} (attacker CE {:.3}, L_ns {:.4}, {:.0} s)", r.round, c, r.attacker_ce, r.privacy_loss, r.seconds));
+            let line = format!("round {}: check accuracy {:.3} (attacker CE {:.3}, L_ns {:.4}, {:.0} s)", r.round, c, r.attacker_ce, r.privacy_loss, r.seconds);
+            // A hidden bar (not a terminal: logs, CI) prints nothing: the line goes to stderr.
+            if pb.is_hidden() {
+                eprintln!("{line}");
+            } else {
+                pb.println(line);
+            }
         }
     })?;
     pb.finish_and_clear();

@@ -32,6 +32,25 @@ use image::RgbImage;
 use std::borrow::Cow;
 use std::sync::Arc;
 
+/// Maps `f` over `items` in parallel (rayon) behind a progress bar named `label`; the first
+/// error stops the map.
+pub fn par_map_progress<I: Sync, T: Send>(items: &[I], label: &str, f: impl Fn(&I) -> Result<T> + Sync) -> Result<Vec<T>> {
+    use rayon::prelude::*;
+    let pb = indicatif::ProgressBar::new(items.len() as u64);
+    let style = format!("{label} [{{bar:30}}] {{pos}}/{{len}} {{elapsed_precise}} eta {{eta}}");
+    pb.set_style(indicatif::ProgressStyle::with_template(&style).expect("valid template").progress_chars("=> "));
+    let out = items
+        .par_iter()
+        .map(|i| {
+            let r = f(i);
+            pb.inc(1);
+            r
+        })
+        .collect::<Result<Vec<T>>>();
+    pb.finish_and_clear();
+    out
+}
+
 /// A protection applied to whole 8-bit RGB images (same size out).
 pub type ProtectFn = dyn Fn(&RgbImage) -> RgbImage + Send + Sync;
 

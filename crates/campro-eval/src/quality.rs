@@ -11,7 +11,6 @@ use crate::data::read_rgb8;
 use crate::error::Result;
 use crate::Condition;
 use image::RgbImage;
-use rayon::prelude::*;
 use std::path::PathBuf;
 
 pub const MS_SSIM_WEIGHTS: [f64; 5] = [0.0448, 0.2856, 0.3001, 0.2363, 0.1333];
@@ -183,18 +182,10 @@ pub fn evaluate(paths: &[PathBuf], conds: &[Condition], limit: Option<usize>) ->
     let start = std::time::Instant::now();
     let paths = &paths[..limit.unwrap_or(paths.len()).min(paths.len())];
     let conds: Vec<&Condition> = conds.iter().filter(|c| c.protect.is_some()).collect();
-    let pb = indicatif::ProgressBar::new(paths.len() as u64);
-    pb.set_style(indicatif::ProgressStyle::with_template("quality [{bar:30}] {pos}/{len} {elapsed_precise} eta {eta}").unwrap().progress_chars("=> "));
-    let per: Vec<Vec<Quality>> = paths
-        .par_iter()
-        .map(|p| {
-            let img = read_rgb8(p)?;
-            let q = conds.iter().map(|c| quality(&img, &c.apply(&img))).collect();
-            pb.inc(1);
-            Ok(q)
-        })
-        .collect::<Result<_>>()?;
-    pb.finish_and_clear();
+    let per: Vec<Vec<Quality>> = crate::par_map_progress(paths, "quality", |p| {
+        let img = read_rgb8(p)?;
+        Ok(conds.iter().map(|c| quality(&img, &c.apply(&img))).collect())
+    })?;
     let rows = conds
         .iter()
         .enumerate()

@@ -6,8 +6,6 @@ use crate::data::{read_rgb8, CocoImage};
 use crate::error::Result;
 use crate::person::PersonDetector;
 use crate::Condition;
-use indicatif::{ProgressBar, ProgressStyle};
-use rayon::prelude::*;
 use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize)]
@@ -44,25 +42,17 @@ pub struct UtilityReport {
 pub fn evaluate(images: &[CocoImage], detector: &PersonDetector, name: &str, conds: &[Condition], o: &UtilityOptions) -> Result<UtilityReport> {
     let start = std::time::Instant::now();
     let images = &images[..o.limit.unwrap_or(images.len()).min(images.len())];
-    let pb = ProgressBar::new(images.len() as u64);
-    pb.set_style(ProgressStyle::with_template("utility: detecting people [{bar:30}] {pos}/{len} {elapsed_precise} eta {eta}").unwrap().progress_chars("=> "));
     // dets[i][c]: detections of image i under condition c, as COCO [x, y, w, h].
-    let dets: Vec<Vec<Vec<Scored>>> = images
-        .par_iter()
-        .map(|im| -> Result<Vec<Vec<Scored>>> {
-            let img = read_rgb8(&im.path)?;
-            let out = conds
-                .iter()
-                .map(|c| {
-                    let d = detector.detect(&c.apply(&img))?;
-                    Ok(d.iter().map(|d| Scored { bbox: [d.bbox[0], d.bbox[1], d.bbox[2] - d.bbox[0], d.bbox[3] - d.bbox[1]], score: d.score }).collect())
-                })
-                .collect::<Result<Vec<_>>>()?;
-            pb.inc(1);
-            Ok(out)
-        })
-        .collect::<Result<_>>()?;
-    pb.finish_and_clear();
+    let dets: Vec<Vec<Vec<Scored>>> = crate::par_map_progress(images, "utility: detecting people", |im| {
+        let img = read_rgb8(&im.path)?;
+        conds
+            .iter()
+            .map(|c| {
+                let d = detector.detect(&c.apply(&img))?;
+                Ok(d.iter().map(|d| Scored { bbox: [d.bbox[0], d.bbox[1], d.bbox[2] - d.bbox[0], d.bbox[3] - d.bbox[1]], score: d.score }).collect())
+            })
+            .collect::<Result<Vec<_>>>()
+    })?;
     let rows = conds
         .iter()
         .enumerate()

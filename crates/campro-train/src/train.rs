@@ -37,6 +37,8 @@ pub enum TrainError {
     Tensor(#[from] candle_core::Error),
     #[error("{0}")]
     Unsupported(String),
+    #[error("training diverged: {0}")]
+    Diverged(String),
 }
 
 /// One line of the training log.
@@ -115,6 +117,15 @@ impl ProxyHead {
                 mixed * 64.0
             }
         }
+    }
+}
+
+/// Stops a diverging run at the first non-finite loss, before it reaches the parameters.
+fn finite(what: &str, v: f64) -> Result<(), TrainError> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(TrainError::Diverged(format!("{what} is {v}: lower attacker.backbone_lr / attacker.lr or camera.lr (the last checkpoint is intact)")))
     }
 }
 
@@ -200,9 +211,9 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         crate::checkpoint::save(dir, &tensors, &crate::checkpoint::State { round, seed: cfg.seed, classes: faces.classes.clone() })?;
         Ok(())
     };
-    let mut attacker_vars = net_vars.all_vars();
-    attacker_vars.extend(head.vars());
-    let mut sgd = SGD::new(attacker_vars, cfg.attacker.lr)?;
+    // Two SGD groups: the head at `lr`, the pretrained backbone at `backbone_lr`.
+    let mut sgd = SGD::new(head.vars(), cfg.attacker.lr)?;
+    let mut sgd_backbone = SGD::new(net_vars.all_vars(), cfg.attacker.backbone_lr)?;
     let mut adam = AdamW::new(cam.vars(), ParamsAdamW { lr: cfg.camera.lr, weight_decay: 0.0, ..Default::default() })?;
     // Reseeded from the round on resume (see `checkpoint`).
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ ((first_round as u64 - 1) << 32));
@@ -224,11 +235,15 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         }
         Ok(hits / check.len().max(1) as f64)
     };
-    let attacker_step = |x: &Tensor, y: &Tensor, sgd: &mut SGD| -> candle_core::Result<(f64, f64)> {
+    let attacker_step = |x: &Tensor, y: &Tensor, sgd: &mut SGD, sgd_backbone: &mut SGD| -> Result<(f64, f64), TrainError> {
         let logits = head.logits(&embed(x, cfg.attacker.train_batch_norm)?, Some(y))?;
         let ce = candle_nn::loss::cross_entropy(&logits, y)?;
-        sgd.backward_step(&ce)?;
-        Ok((ce.to_scalar::<f32>()? as f64, accuracy(&logits, y)?))
+        let loss = ce.to_scalar::<f32>()? as f64;
+        finite("attacker cross-entropy", loss)?;
+        let grads = ce.backward()?;
+        sgd.step(&grads)?;
+        sgd_backbone.step(&grads)?;
+        Ok((loss, accuracy(&logits, y)?))
     };
     let mut log = Vec::new();
     // Pretraining on raw faces until the head reaches the threshold (or the step budget).
@@ -236,7 +251,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let pretrain = if first_round == 1 { cfg.attacker.pretrain_steps } else { 0 };
     for _ in 0..pretrain {
         let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
-        (ce, acc) = attacker_step(&x, &y, &mut sgd)?;
+        (ce, acc) = attacker_step(&x, &y, &mut sgd, &mut sgd_backbone)?;
         if acc >= cfg.attacker.pretrain_accuracy {
             break;
         }
@@ -248,16 +263,17 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     for round in first_round..=cfg.budget.rounds {
         for _ in 0..m {
             let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
-            (ce, acc) = attacker_step(&cam.forward(&x)?.detach(), &y, &mut sgd)?;
+            (ce, acc) = attacker_step(&cam.forward(&x)?.detach(), &y, &mut sgd, &mut sgd_backbone)?;
         }
         let mut lns = f64::NAN;
         for _ in 0..cfg.protector.steps_per_round {
             let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
             let logits = head.logits(&embed(&cam.forward(&x)?, false)?, None)?;
             let loss = non_saturating_loss(&logits, &y)?;
+            lns = loss.to_scalar::<f32>()? as f64;
+            finite("privacy loss", lns)?;
             adam.step(&loss.backward()?)?;
             cam.project()?;
-            lns = loss.to_scalar::<f32>()? as f64;
         }
         let last = round == cfg.budget.rounds || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
         let check_acc = if round % cfg.budget.checkpoint_every == 0 || last {

@@ -66,3 +66,25 @@ fn a_detector_weight_is_refused_until_the_utility_player_exists() {
     let err = campro_train::train::run(&c, &Default::default(), |_| {}).err().unwrap().to_string();
     assert!(err.contains("protector.omega") && err.contains("not built yet"), "{err}");
 }
+
+#[test]
+fn a_diverging_run_stops_with_a_named_error_and_no_parameters() {
+    let Some(ckpt) = shared::shared("models/mobilefacenet_casia_068.ckpt") else { return };
+    let Some(lfw) = shared::shared("data/lfw/pairs.txt") else { return };
+    let cache = tempfile::tempdir().unwrap();
+    let mut c = Config::default();
+    c.attacker.checkpoint = ckpt.clone();
+    c.attacker.lr = 1e9;
+    c.attacker.backbone_lr = 1e9;
+    c.attacker.pretrain_steps = 5;
+    c.protector.omega = 0.0;
+    c.data.lfw = lfw.parent().unwrap().to_path_buf();
+    c.data.models = ckpt.parent().unwrap().to_path_buf();
+    c.data.max_identities = Some(5);
+    c.data.batch = 8;
+    c.data.cache = cache.path().to_path_buf();
+    c.budget.rounds = 5;
+    let err = campro_train::train::run(&c, &Default::default(), |_| {}).err().expect("a learning rate of 1e9 diverges");
+    assert!(matches!(err, campro_train::train::TrainError::Diverged(_)), "{err}");
+    assert!(err.to_string().contains("is NaN") || err.to_string().contains("is inf"), "{err}");
+}

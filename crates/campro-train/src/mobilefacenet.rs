@@ -93,8 +93,9 @@ impl BatchNorm {
         let c = self.weight.dim(0)?;
         let shape = (1, c, 1, 1);
         if !train {
-            let scale = (self.weight.as_ref() / (self.running_var.as_tensor() + Self::EPS)?.sqrt()?)?;
-            let shift = (&self.bias - self.running_mean.as_tensor().mul(&scale)?)?;
+            // The running statistics are state, not parameters: no gradient reaches them.
+            let scale = (self.weight.as_ref() / (self.running_var.as_tensor().detach() + Self::EPS)?.sqrt()?)?;
+            let shift = (&self.bias - self.running_mean.as_tensor().detach().mul(&scale)?)?;
             return x.broadcast_mul(&scale.reshape(shape)?)?.broadcast_add(&shift.reshape(shape)?);
         }
         let n = (x.elem_count() / c) as f64;
@@ -197,6 +198,12 @@ impl MobileFaceNet {
         }
         drop(vars);
         Ok((net, vm))
+    }
+
+    /// The trainable variables of `vars` (the map `from_checkpoint` returned): everything but
+    /// the batch-norm running statistics.
+    pub fn trainable(vars: &VarMap) -> Vec<Var> {
+        vars.data().lock().expect("var map lock").iter().filter(|(k, _)| !k.contains("running_")).map(|(_, v)| v.clone()).collect()
     }
 
     /// Embeddings (B, 128) of normalised faces (B, 3, 112, 96); `train` uses and updates

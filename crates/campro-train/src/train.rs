@@ -213,7 +213,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     };
     // Two SGD groups: the head at `lr`, the pretrained backbone at `backbone_lr`.
     let mut sgd = SGD::new(head.vars(), cfg.attacker.lr)?;
-    let mut sgd_backbone = SGD::new(net_vars.all_vars(), cfg.attacker.backbone_lr)?;
+    let mut sgd_backbone = SGD::new(MobileFaceNet::trainable(&net_vars), cfg.attacker.backbone_lr)?;
     let mut adam = AdamW::new(cam.vars(), ParamsAdamW { lr: cfg.camera.lr, weight_decay: 0.0, ..Default::default() })?;
     // Reseeded from the round on resume (see `checkpoint`).
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ ((first_round as u64 - 1) << 32));

@@ -174,6 +174,11 @@ fn mobilefacenet_checkpoint_matches_the_onnx_export() {
     // Every float tensor of the checkpoint is a variable of the network, and nothing else.
     let sd = campro_train::torch_legacy::read_state_dict(&ckpt, Some("net_state_dict")).unwrap();
     assert_eq!(vars.all_vars().len(), sd.len());
+    // The optimiser never sees the running statistics (an SGD step on a running variance
+    // once made it negative and the network NaN).
+    let trainable = MobileFaceNet::trainable(&vars);
+    let stats = sd.keys().filter(|k| k.contains("running_")).count();
+    assert!(stats > 100 && trainable.len() == sd.len() - stats);
     // Align with the evaluation's own detector and template, then embed both ways.
     let manifests = Path::new(env!("CARGO_MANIFEST_DIR")).join("../campro-eval/models");
     let load = |n: &str| campro_eval::model::Model::load(campro_eval::manifest::Manifest::load(&manifests.join(n), models).unwrap()).unwrap();

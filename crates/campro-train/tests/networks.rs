@@ -178,7 +178,8 @@ fn mobilefacenet_checkpoint_matches_the_onnx_export() {
     // once made it negative and the network NaN).
     let trainable = MobileFaceNet::trainable(&vars);
     let stats = sd.keys().filter(|k| k.contains("running_")).count();
-    assert!(stats > 100 && trainable.len() == sd.len() - stats);
+    // 50 batch norms (conv1, dw_conv1, 3 in each of 15 bottlenecks, conv2, linear7, linear1).
+    assert!(stats == 2 * 50 && trainable.len() == sd.len() - stats);
     // Align with the evaluation's own detector and template, then embed both ways.
     let manifests = Path::new(env!("CARGO_MANIFEST_DIR")).join("../campro-eval/models");
     let load = |n: &str| campro_eval::model::Model::load(campro_eval::manifest::Manifest::load(&manifests.join(n), models).unwrap()).unwrap();

@@ -88,3 +88,30 @@ fn a_diverging_run_stops_with_a_named_error_and_no_parameters() {
     assert!(matches!(err, campro_train::train::TrainError::Diverged(_)), "{err}");
     assert!(err.to_string().contains("is NaN") || err.to_string().contains("is inf"), "{err}");
 }
+
+#[test]
+fn attacker_and_protector_alternate_and_the_attacker_loses_ground() {
+    let Some(ckpt) = shared::shared("models/mobilefacenet_casia_068.ckpt") else { return };
+    let Some(lfw) = shared::shared("data/lfw/pairs.txt") else { return };
+    let cache = tempfile::tempdir().unwrap();
+    let mut c = Config::default();
+    c.seed = 1;
+    c.camera.lr = 0.05;
+    c.attacker.checkpoint = ckpt.clone();
+    c.attacker.pretrain_steps = 5;
+    c.protector.omega = 0.0;
+    c.data.lfw = lfw.parent().unwrap().to_path_buf();
+    c.data.models = ckpt.parent().unwrap().to_path_buf();
+    c.data.max_identities = Some(5);
+    c.data.batch = 8;
+    c.data.cache = cache.path().to_path_buf();
+    c.budget.rounds = 8;
+    c.budget.checkpoint_every = 8;
+    let out = campro_train::train::run(&c, &Default::default(), |_| {}).unwrap();
+    let rows = &out.log;
+    assert!(rows[1..].iter().all(|r| r.attacker_ce.is_finite() && r.privacy_loss.is_finite()));
+    // The attacker keeps training on C(x), yet the protector drives its loss up.
+    let (first, last) = (rows[0].attacker_ce, rows[6..].iter().map(|r| r.attacker_ce).fold(0.0, f64::max));
+    assert!(last > 10.0 * first.max(1e-4), "attacker CE {first} -> {last}");
+    assert!(rows[8].privacy_loss < rows[1].privacy_loss);
+}

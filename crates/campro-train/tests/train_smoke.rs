@@ -74,8 +74,9 @@ fn a_diverging_run_stops_with_a_named_error_and_no_parameters() {
     let cache = tempfile::tempdir().unwrap();
     let mut c = Config::default();
     c.attacker.checkpoint = ckpt.clone();
-    c.attacker.lr = 1e9;
-    c.attacker.backbone_lr = 1e9;
+    // Steps that overflow f32: weights reach inf, then inf − inf.
+    c.attacker.lr = 1e36;
+    c.attacker.backbone_lr = 1e36;
     c.attacker.pretrain_steps = 5;
     c.protector.omega = 0.0;
     c.data.lfw = lfw.parent().unwrap().to_path_buf();
@@ -84,7 +85,7 @@ fn a_diverging_run_stops_with_a_named_error_and_no_parameters() {
     c.data.batch = 8;
     c.data.cache = cache.path().to_path_buf();
     c.budget.rounds = 5;
-    let err = campro_train::train::run(&c, &Default::default(), |_| {}).err().expect("a learning rate of 1e9 diverges");
+    let err = campro_train::train::run(&c, &Default::default(), |_| {}).err().expect("a learning rate of 1e36 diverges");
     assert!(matches!(err, campro_train::train::TrainError::Diverged(_)), "{err}");
     assert!(err.to_string().contains("is NaN") || err.to_string().contains("is inf"), "{err}");
 }

@@ -6,24 +6,32 @@
 mod shared;
 
 use campro_train::config::Config;
+use std::path::Path;
 
-#[test]
-fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
-    let Some(ckpt) = shared::shared("models/mobilefacenet_casia_068.ckpt") else { return };
-    let Some(lfw) = shared::shared("data/lfw/pairs.txt") else { return };
-    let cache = tempfile::tempdir().unwrap();
+/// Five LFW identities (four classes, one held out), batch 8, no utility player, caching in
+/// `cache`; None (skipped) without ../shared.
+fn tiny(cache: &Path) -> Option<Config> {
+    let ckpt = shared::shared("models/mobilefacenet_casia_068.ckpt")?;
+    let lfw = shared::shared("data/lfw/pairs.txt")?;
     let mut c = Config::default();
-    c.seed = 1;
-    c.camera.lr = 0.05;
     c.attacker.checkpoint = ckpt.clone();
-    c.attacker.pretrain_steps = 3;
     c.protector.omega = 0.0;
-    c.protector.protector_only = true;
     c.data.lfw = lfw.parent().unwrap().to_path_buf();
     c.data.models = ckpt.parent().unwrap().to_path_buf();
     c.data.max_identities = Some(5);
     c.data.batch = 8;
-    c.data.cache = cache.path().to_path_buf();
+    c.data.cache = cache.to_path_buf();
+    Some(c)
+}
+
+#[test]
+fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
+    let cache = tempfile::tempdir().unwrap();
+    let Some(mut c) = tiny(cache.path()) else { return };
+    c.seed = 1;
+    c.camera.lr = 0.05;
+    c.attacker.pretrain_steps = 3;
+    c.protector.protector_only = true;
     c.budget.rounds = 10;
     c.budget.checkpoint_every = 10;
     let ckpts = cache.path().join("ckpt");
@@ -69,21 +77,12 @@ fn a_detector_weight_is_refused_until_the_utility_player_exists() {
 
 #[test]
 fn a_diverging_run_stops_with_a_named_error_and_no_parameters() {
-    let Some(ckpt) = shared::shared("models/mobilefacenet_casia_068.ckpt") else { return };
-    let Some(lfw) = shared::shared("data/lfw/pairs.txt") else { return };
     let cache = tempfile::tempdir().unwrap();
-    let mut c = Config::default();
-    c.attacker.checkpoint = ckpt.clone();
+    let Some(mut c) = tiny(cache.path()) else { return };
     // Steps that overflow f32: weights reach inf, then inf − inf.
     c.attacker.lr = 1e36;
     c.attacker.backbone_lr = 1e36;
     c.attacker.pretrain_steps = 5;
-    c.protector.omega = 0.0;
-    c.data.lfw = lfw.parent().unwrap().to_path_buf();
-    c.data.models = ckpt.parent().unwrap().to_path_buf();
-    c.data.max_identities = Some(5);
-    c.data.batch = 8;
-    c.data.cache = cache.path().to_path_buf();
     c.budget.rounds = 5;
     let err = campro_train::train::run(&c, &Default::default(), |_| {}).err().expect("a learning rate of 1e36 diverges");
     assert!(matches!(err, campro_train::train::TrainError::Diverged(_)), "{err}");
@@ -92,20 +91,11 @@ fn a_diverging_run_stops_with_a_named_error_and_no_parameters() {
 
 #[test]
 fn attacker_and_protector_alternate_and_the_attacker_loses_ground() {
-    let Some(ckpt) = shared::shared("models/mobilefacenet_casia_068.ckpt") else { return };
-    let Some(lfw) = shared::shared("data/lfw/pairs.txt") else { return };
     let cache = tempfile::tempdir().unwrap();
-    let mut c = Config::default();
+    let Some(mut c) = tiny(cache.path()) else { return };
     c.seed = 1;
     c.camera.lr = 0.05;
-    c.attacker.checkpoint = ckpt.clone();
     c.attacker.pretrain_steps = 5;
-    c.protector.omega = 0.0;
-    c.data.lfw = lfw.parent().unwrap().to_path_buf();
-    c.data.models = ckpt.parent().unwrap().to_path_buf();
-    c.data.max_identities = Some(5);
-    c.data.batch = 8;
-    c.data.cache = cache.path().to_path_buf();
     c.budget.rounds = 8;
     c.budget.checkpoint_every = 8;
     let out = campro_train::train::run(&c, &Default::default(), |_| {}).unwrap();

@@ -89,10 +89,15 @@ pub struct Manifest {
 }
 
 impl Manifest {
-    /// Reads `path`; a relative `file` is looked up in `models_dir`.
+    /// Reads `path`; a relative `file` is looked up beside the manifest first (a model
+    /// written with its manifest, e.g. a fine-tuned detector), then in `models_dir`.
     pub fn load(path: &Path, models_dir: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(EvalError::io(path))?;
-        Self::parse(&text, path, models_dir)
+        let beside = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        match Self::parse(&text, path, beside) {
+            Ok(m) if m.file.is_file() => Ok(m),
+            _ => Self::parse(&text, path, models_dir),
+        }
     }
 
     /// Parses manifest text (`origin` only names it in errors).

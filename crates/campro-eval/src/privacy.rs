@@ -40,6 +40,9 @@ pub struct PrivacyOptions {
     pub pool: usize,
     /// Use only this many identities (seeded choice), for quick looks.
     pub limit: Option<usize>,
+    /// Use only these identities (LFW folder names), e.g. those an optimiser held out of
+    /// training; applied before `limit`. A name LFW lacks is an error.
+    pub identities: Option<Vec<String>>,
     /// Ranks reported on the CMC curve.
     pub cmc_ranks: usize,
     pub linear: LinearOptions,
@@ -51,7 +54,7 @@ pub struct PrivacyOptions {
 
 impl Default for PrivacyOptions {
     fn default() -> Self {
-        Self { runs: 10, seed: 0, pool: 6, limit: None, cmc_ranks: 20, linear: LinearOptions::default(), verification: true, pairs_per_fold: None }
+        Self { runs: 10, seed: 0, pool: 6, limit: None, identities: None, cmc_ranks: 20, linear: LinearOptions::default(), verification: true, pairs_per_fold: None }
     }
 }
 
@@ -191,6 +194,15 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     let start = std::time::Instant::now();
     let mut rng = ChaCha8Rng::seed_from_u64(o.seed);
     let mut ids: Vec<(&String, &Vec<PathBuf>)> = lfw.people.iter().filter(|(_, v)| v.len() >= 2).collect();
+    if let Some(keep) = &o.identities {
+        if let Some(missing) = keep.iter().find(|n| !lfw.people.contains_key(*n)) {
+            return Err(EvalError::Invalid(format!("privacy: identity {missing:?} is not in LFW")));
+        }
+        ids.retain(|(n, _)| keep.contains(n));
+        if ids.is_empty() {
+            return Err(EvalError::Invalid("privacy: none of the given identities has 2 or more photos".into()));
+        }
+    }
     if let Some(l) = o.limit {
         ids.shuffle(&mut rng);
         ids.truncate(l);

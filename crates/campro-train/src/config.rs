@@ -22,6 +22,7 @@ pub struct Config {
     pub attacker: AttackerConfig,
     pub protector: ProtectorConfig,
     pub data: DataConfig,
+    pub detector: DetectorConfig,
     pub budget: BudgetConfig,
 }
 
@@ -97,6 +98,25 @@ pub struct DataConfig {
     pub cache: PathBuf,
 }
 
+/// The utility player P (used when `protector.omega > 0`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct DetectorConfig {
+    /// YOLOX ONNX file (batch-norm folded), fine-tuned from here.
+    pub model: PathBuf,
+    /// COCO person folder (`instances_person.json`, `images/`).
+    pub data: PathBuf,
+    /// Training canvas side in pixels (multiple of 32; the evaluation runs at 416).
+    pub size: usize,
+    /// Images per protector step.
+    pub batch: usize,
+    /// Adam learning rate of the detector (the issue: SGD 1e-4 diverged, Adam 1e-5 trained);
+    /// 0 keeps it frozen.
+    pub lr: f64,
+    /// Use at most this many images (first by COCO id).
+    pub max_images: Option<usize>,
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct BudgetConfig {
@@ -110,7 +130,15 @@ pub struct BudgetConfig {
 
 impl Default for Config {
     fn default() -> Self {
-        Self { seed: 0, camera: Default::default(), attacker: Default::default(), protector: Default::default(), data: Default::default(), budget: Default::default() }
+        Self {
+            seed: 0,
+            camera: Default::default(),
+            attacker: Default::default(),
+            protector: Default::default(),
+            data: Default::default(),
+            detector: Default::default(),
+            budget: Default::default(),
+        }
     }
 }
 impl Default for CameraConfig {
@@ -150,6 +178,11 @@ impl Default for DataConfig {
         }
     }
 }
+impl Default for DetectorConfig {
+    fn default() -> Self {
+        Self { model: "../shared/models/yolox_nano.onnx".into(), data: "../shared/data/coco-person".into(), size: 320, batch: 4, lr: 1e-5, max_images: None }
+    }
+}
 impl Default for BudgetConfig {
     fn default() -> Self {
         Self { rounds: 2000, seconds: 4.0 * 3600.0, checkpoint_every: 100 }
@@ -173,7 +206,7 @@ impl Config {
     /// Every rule, first broken one reported.
     pub fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let finite_pos = |v: f64| v.is_finite() && v > 0.0;
-        let checks: [(bool, &str, &str); 14] = [
+        let checks: [(bool, &str, &str); 17] = [
             ((2..=1024).contains(&self.camera.knots), "camera.knots", "must be in 2..=1024"),
             (self.camera.gamma.is_finite() && (0.2..=5.0).contains(&self.camera.gamma), "camera.gamma", "must be in [0.2, 5]"),
             (finite_pos(self.camera.lr), "camera.lr", "must be finite and > 0"),
@@ -186,6 +219,9 @@ impl Config {
             (self.data.min_images >= 2, "data.min_images", "must be ≥ 2 (one photo to train on, one to check)"),
             ((0.0..1.0).contains(&self.data.validation_identities), "data.validation_identities", "must be in [0, 1)"),
             ((1..=4096).contains(&self.data.batch), "data.batch", "must be in 1..=4096"),
+            (self.detector.size % 32 == 0 && (64..=1024).contains(&self.detector.size), "detector.size", "must be a multiple of 32 in 64..=1024"),
+            ((1..=256).contains(&self.detector.batch), "detector.batch", "must be in 1..=256"),
+            (self.detector.lr.is_finite() && self.detector.lr >= 0.0, "detector.lr", "must be finite and ≥ 0 (0 freezes P)"),
             (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
             (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
         ];

@@ -9,11 +9,14 @@
 pub mod batchnorm;
 pub mod camera;
 pub mod checkpoint;
+pub mod detection;
 pub mod config;
 pub mod dwconv;
 pub mod faces;
 pub mod mobilefacenet;
+pub mod persons;
 pub mod torch_legacy;
 pub mod train;
+pub mod yolox;
 
 pub use candle_core::{Device, Tensor};

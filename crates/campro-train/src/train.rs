@@ -1,16 +1,17 @@
-//! The alternating optimisation of CamPro's Algorithm 1 (privacy player): pretrain the
-//! attacker's proxy head on raw faces, then per round m attacker steps (cross-entropy on
-//! C(x), camera frozen, F and H updated by SGD) and n protector steps (the non-saturating
-//! privacy loss `−log(1 − p_y)` through the frozen attacker into the camera, Adam, then the
-//! CCM and curve projected into their ranges).
-//!
-//! The utility player (the person detector and ω·L_det) is not built yet: a configuration
-//! with ω > 0 is refused rather than silently trained without it.
+//! The alternating optimisation of CamPro's Algorithm 1: pretrain the attacker's proxy head
+//! on raw faces, then per round m attacker steps (cross-entropy on C(x), camera frozen, F and
+//! H updated by SGD) and n protector steps: `L_ns + ω·L_det`, the non-saturating privacy loss
+//! `−log(1 − p_y)` through the frozen attacker plus the detection loss of the person detector
+//! P on C(COCO people) ([`crate::detection`]), into the camera (Adam, then the CCM and curve
+//! projected into their ranges) and into P (Adam, fine-tuned jointly). ω = 0 trains the
+//! privacy player alone and never loads P.
 
 use crate::camera::Camera;
 use crate::config::{Config, Head};
 use crate::faces::{FaceSet, Selection};
 use crate::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet, EMBEDDING};
+use crate::persons::{detector_input, PersonSet};
+use crate::yolox::{Yolox, YoloxError};
 use candle_core::{DType, Device, Tensor, Var, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW, SGD};
 use rand::seq::SliceRandom;
@@ -35,6 +36,10 @@ pub enum TrainError {
     Torch(#[from] crate::torch_legacy::TorchError),
     #[error("tensor: {0}")]
     Tensor(#[from] candle_core::Error),
+    #[error(transparent)]
+    Eval(#[from] campro_eval::EvalError),
+    #[error(transparent)]
+    Detector(#[from] YoloxError),
     #[error("{0}")]
     Unsupported(String),
     #[error("training diverged: {0}")]
@@ -53,6 +58,8 @@ pub struct LogRow {
     pub attacker_accuracy: f64,
     /// Protector loss `−log(1 − p_y)` on its last batch (rounds ≥ 1).
     pub privacy_loss: f64,
+    /// Detection loss L_det on the protector's last person batch (ω > 0, rounds ≥ 1).
+    pub detection_loss: f64,
     /// Top-1 of the attacker on the held-aside photos through the current camera.
     pub check_accuracy: Option<f64>,
 }
@@ -72,6 +79,8 @@ pub struct Outcome {
     pub classes: usize,
     pub train_faces: usize,
     pub check_faces: usize,
+    /// The fine-tuned person detector (ω > 0), to write as ONNX beside the parameters.
+    pub detector: Option<Yolox>,
 }
 
 /// The proxy head H: a linear layer (softmax) or cosine logits with an angular margin
@@ -151,12 +160,6 @@ fn accuracy(logits: &Tensor, y: &Tensor) -> candle_core::Result<f64> {
 
 /// Runs the optimisation described by `cfg`; `on_row` sees every log line as it happens.
 pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, TrainError> {
-    if cfg.protector.omega > 0.0 {
-        return Err(TrainError::Unsupported(format!(
-            "protector.omega = {}: the utility player (person detector, L_det) is not built yet; set protector.omega = 0 to train the privacy player alone",
-            cfg.protector.omega
-        )));
-    }
     let start = std::time::Instant::now();
     let dev = Device::Cpu;
     let sel = Selection {
@@ -171,6 +174,15 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let classes = faces.classes.len();
     let (net, net_vars) = MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?;
     let cam = Camera::identity(cfg.camera.knots, cfg.camera.gamma, &dev)?;
+    let utility = if cfg.protector.omega > 0.0 {
+        let set = PersonSet::open(&cfg.detector.data, cfg.detector.size, cfg.detector.max_images)?;
+        if set.is_empty() {
+            return Err(TrainError::Unsupported(format!("{}: no person images", cfg.detector.data.display())));
+        }
+        Some((set, Yolox::load(&cfg.detector.model, &dev)?))
+    } else {
+        None
+    };
     let embed = |x: &Tensor, train_bn: bool| -> candle_core::Result<Tensor> { l2_normalise(&net.forward_t(&normalise_unit(x)?, train_bn)?) };
 
     // H from the class means of the raw training embeddings.
@@ -191,6 +203,9 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         v.push(("camera.curve".into(), cam.curve.clone()));
         v.push(("head.w".into(), head.w.clone()));
         v.extend(head.b.clone().map(|b| ("head.b".to_string(), b)));
+        if let Some((_, det)) = &utility {
+            v.extend(det.named_vars().into_iter().map(|(k, var)| (format!("detector.{k}"), var)));
+        }
         v
     };
     let mut first_round = 1;
@@ -215,6 +230,11 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let mut sgd = SGD::new(head.vars(), cfg.attacker.lr)?;
     let mut sgd_backbone = SGD::new(MobileFaceNet::trainable(&net_vars), cfg.attacker.backbone_lr)?;
     let mut adam = AdamW::new(cam.vars(), ParamsAdamW { lr: cfg.camera.lr, weight_decay: 0.0, ..Default::default() })?;
+    let mut adam_det = match &utility {
+        Some((_, det)) if cfg.detector.lr > 0.0 => Some(AdamW::new(det.vars(), ParamsAdamW { lr: cfg.detector.lr, weight_decay: 0.0, ..Default::default() })?),
+        _ => None,
+    };
+    let mut person_order: Vec<usize> = Vec::new();
     // Reseeded from the round on resume (see `checkpoint`).
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ ((first_round as u64 - 1) << 32));
     let mut order: Vec<usize> = Vec::new();
@@ -256,7 +276,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             break;
         }
     }
-    let row = LogRow { round: first_round - 1, seconds: start.elapsed().as_secs_f64(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: f64::NAN, check_accuracy: Some(check_accuracy(first_round > 1)?) };
+    let row = LogRow { round: first_round - 1, seconds: start.elapsed().as_secs_f64(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: f64::NAN, detection_loss: f64::NAN, check_accuracy: Some(check_accuracy(first_round > 1)?) };
     on_row(&row);
     log.push(row);
     let m = if cfg.protector.protector_only { 0 } else { cfg.attacker.steps_per_round };
@@ -265,14 +285,32 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
             (ce, acc) = attacker_step(&cam.forward(&x)?.detach(), &y, &mut sgd, &mut sgd_backbone)?;
         }
-        let mut lns = f64::NAN;
+        let (mut lns, mut ldet) = (f64::NAN, f64::NAN);
         for _ in 0..cfg.protector.steps_per_round {
             let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
             let logits = head.logits(&embed(&cam.forward(&x)?, false)?, None)?;
-            let loss = non_saturating_loss(&logits, &y)?;
+            let mut loss = non_saturating_loss(&logits, &y)?;
             lns = loss.to_scalar::<f32>()? as f64;
             finite("privacy loss", lns)?;
-            adam.step(&loss.backward()?)?;
+            if let Some((set, det)) = &utility {
+                if person_order.len() < cfg.detector.batch {
+                    let mut fresh: Vec<usize> = (0..set.len()).collect();
+                    fresh.shuffle(&mut rng);
+                    person_order.extend(fresh);
+                }
+                let idx: Vec<usize> = person_order.drain(..cfg.detector.batch.min(person_order.len())).collect();
+                let pb = set.batch(&idx, &dev)?;
+                let head_out = det.forward(&detector_input(&cam.forward(&pb.x)?, &pb.mask)?)?;
+                let (l, _) = crate::detection::yolox_loss(&head_out, set.size, set.size, &pb.boxes)?;
+                ldet = l.to_scalar::<f32>()? as f64;
+                finite("detection loss", ldet)?;
+                loss = (loss + (l * cfg.protector.omega)?)?;
+            }
+            let grads = loss.backward()?;
+            adam.step(&grads)?;
+            if let Some(a) = adam_det.as_mut() {
+                a.step(&grads)?;
+            }
             cam.project()?;
         }
         let last = round == cfg.budget.rounds || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
@@ -282,7 +320,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         } else {
             None
         };
-        let row = LogRow { round, seconds: start.elapsed().as_secs_f64(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: lns, check_accuracy: check_acc };
+        let row = LogRow { round, seconds: start.elapsed().as_secs_f64(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: lns, detection_loss: ldet, check_accuracy: check_acc };
         on_row(&row);
         log.push(row);
         if last {
@@ -292,13 +330,14 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let prov = serde_json::json!({
         "optimiser": "campro-train",
         "config": cfg,
-        "data": { "classes": classes, "train_faces": train.len(), "check_faces": check.len(), "skipped_no_face": faces.skipped, "validation_identities": faces.validation },
+        "data": { "classes": classes, "train_faces": train.len(), "check_faces": check.len(), "skipped_no_face": faces.skipped, "validation_identities": faces.validation,
+                  "person_images": utility.as_ref().map(|(s, _)| s.len()) },
         "rounds": log.last().map_or(0, |r| r.round),
         "final": log.last(),
         "seconds": start.elapsed().as_secs_f64(),
     });
     let serde_json::Value::Object(provenance) = prov else { unreachable!("a JSON object") };
-    Ok(Outcome { ccm: cam.ccm_values()?, curve: cam.curve_values()?, gamma: cfg.camera.gamma, provenance, log, seconds: start.elapsed().as_secs_f64(), classes, train_faces: train.len(), check_faces: check.len() })
+    Ok(Outcome { ccm: cam.ccm_values()?, curve: cam.curve_values()?, gamma: cfg.camera.gamma, provenance, log, seconds: start.elapsed().as_secs_f64(), classes, train_faces: train.len(), check_faces: check.len(), detector: utility.map(|(_, d)| d) })
 }
 
 /// The log as two SVG charts: the losses (attacker cross-entropy, privacy loss) and the
@@ -310,7 +349,11 @@ pub fn plot_log(log: &[LogRow]) -> (String, String) {
         "campro train: losses",
         "round",
         "loss",
-        &[series("attacker CE", &|r| Some(r.attacker_ce)), series("privacy −log(1 − p_y)", &|r| Some(r.privacy_loss))],
+        &[
+            series("attacker CE", &|r| Some(r.attacker_ce)),
+            series("privacy −log(1 − p_y)", &|r| Some(r.privacy_loss)),
+            series("detection L_det", &|r| r.detection_loss.is_finite().then_some(r.detection_loss)),
+        ],
         Style::Lines,
         None,
         None,

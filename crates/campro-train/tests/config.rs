@@ -42,6 +42,8 @@ fn bad_values_name_the_key() {
     assert!(Config::parse("[attacker]\nsteps_per_round = 0\n[protector]\nprotector_only = true", "c.toml").is_ok());
     assert_eq!(rule("[data]\nvalidation_identities = 1.0").0, "data.validation_identities");
     assert_eq!(rule("[budget]\nseconds = 0.0").0, "budget.seconds");
+    assert_eq!(rule("[detector]\nsize = 100").0, "detector.size");
+    assert_eq!(rule("[detector]\nlr = -1.0").0, "detector.lr");
 }
 
 #[test]
@@ -63,11 +65,18 @@ fn malformed_files_and_unknown_keys_are_refused() {
 #[test]
 fn shipped_configs_parse() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
-    let mut n = 0;
+    let mut omegas = Vec::new();
     for e in std::fs::read_dir(dir).unwrap() {
-        let c = Config::load(&e.unwrap().path()).unwrap();
-        assert_eq!(c.protector.omega, 0.0, "omega > 0 needs the utility player");
-        n += 1;
+        let path = e.unwrap().path();
+        let c = Config::load(&path).unwrap();
+        // The file name says what it trains.
+        let name = path.file_stem().unwrap().to_string_lossy().into_owned();
+        if let Some(w) = name.strip_prefix("omega-") {
+            assert_eq!(c.protector.omega, w.parse::<f64>().unwrap(), "{name}");
+        }
+        assert_eq!(c.protector.protector_only, name == "protector-only", "{name}");
+        omegas.push(c.protector.omega);
     }
-    assert!(n >= 2);
+    omegas.sort_by(f64::total_cmp);
+    assert_eq!(omegas, [0.0, 0.2, 0.2, 1.0, 5.0]);
 }

@@ -68,11 +68,43 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     assert_eq!(a.len(), out.train_faces + out.check_faces);
 }
 
+/// The three players on tiny data: two COCO images at 128 px with the detector at Adam 1e-3
+/// and ω = 1. Fed the same two images every round, the detection loss must fall (the
+/// detector and camera fit them) while the privacy loss still runs; the fine-tuned detector
+/// comes back and checkpoints hold it.
 #[test]
-fn a_detector_weight_is_refused_until_the_utility_player_exists() {
-    let c = Config::default();
-    let err = campro_train::train::run(&c, &Default::default(), |_| {}).err().unwrap().to_string();
-    assert!(err.contains("protector.omega") && err.contains("not built yet"), "{err}");
+fn the_utility_player_fits_its_images_beside_the_privacy_player() {
+    let cache = tempfile::tempdir().unwrap();
+    let Some(mut c) = tiny(cache.path()) else { return };
+    let Some(coco) = shared::shared("data/coco-person/instances_person.json") else { return };
+    c.detector.model = c.data.models.join("yolox_nano.onnx");
+    c.detector.data = coco.parent().unwrap().to_path_buf();
+    c.detector.size = 128;
+    c.detector.batch = 2;
+    c.detector.max_images = Some(2);
+    c.detector.lr = 1e-3;
+    c.protector.omega = 1.0;
+    c.attacker.pretrain_steps = 2;
+    c.budget.rounds = 8;
+    c.budget.checkpoint_every = 8;
+    let ckpts = cache.path().join("ckpt");
+    let out = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None }, |_| {}).unwrap();
+    let det: Vec<f64> = out.log[1..].iter().map(|r| r.detection_loss).collect();
+    assert!(det.iter().all(|v| v.is_finite() && *v > 0.0), "{det:?}");
+    let (first, last) = ((det[0] + det[1]) / 2.0, (det[6] + det[7]) / 2.0);
+    assert!(last < 0.8 * first, "L_det {first} -> {last}: {det:?}");
+    assert!(out.log[1..].iter().all(|r| r.privacy_loss.is_finite()));
+    assert!(out.log[0].detection_loss.is_nan(), "no detection loss before round 1");
+    assert_eq!(out.provenance["data"]["person_images"], 2);
+    let detector = out.detector.expect("the fine-tuned detector");
+    let (tensors, _) = campro_train::checkpoint::load(&ckpts, &campro_train::Device::Cpu).unwrap();
+    let stored = tensors.keys().filter(|k| k.starts_with("detector.")).count();
+    assert_eq!(stored, detector.vars().len());
+    // Without a detector weight the detector is never loaded.
+    c.protector.omega = 0.0;
+    c.detector.model = "/nonexistent.onnx".into();
+    c.budget.rounds = 1;
+    assert!(campro_train::train::run(&c, &Default::default(), |_| {}).unwrap().detector.is_none());
 }
 
 #[test]

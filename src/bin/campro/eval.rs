@@ -17,9 +17,12 @@ use image::RgbImage;
 use std::path::{Path, PathBuf};
 
 /// The shipped manifests (files resolved against `--models`).
+/// The bundled YOLOX-Nano manifest (also the template of a fine-tuned detector's).
+pub const YOLOX_MANIFEST: &str = include_str!("../../../crates/campro-eval/models/yolox_nano.json");
+
 const BUNDLED: [(&str, &str); 4] = [
     ("yunet", include_str!("../../../crates/campro-eval/models/yunet.json")),
-    ("yolox-nano", include_str!("../../../crates/campro-eval/models/yolox_nano.json")),
+    ("yolox-nano", YOLOX_MANIFEST),
     ("faceplugin", include_str!("../../../crates/campro-eval/models/faceplugin.json")),
     ("mobilefacenet-casia", include_str!("../../../crates/campro-eval/models/mobilefacenet_casia.json")),
 ];
@@ -94,6 +97,10 @@ pub struct PrivacyArgs {
     /// Face recognition models: bundled names or manifest files (repeatable).
     #[arg(long = "face-model", default_values_t = ["faceplugin".to_string(), "mobilefacenet-casia".to_string()])]
     face_models: Vec<String>,
+    /// Only these identities: a parameter file from `campro train` (its held-out
+    /// `provenance.data.validation_identities`) or a text file of LFW names, one per line.
+    #[arg(long, value_name = "FILE")]
+    identities: Option<PathBuf>,
     #[arg(long, default_value_t = 10)]
     runs: usize,
     #[arg(long, default_value_t = 0)]
@@ -191,6 +198,24 @@ fn face_models(a: &PrivacyArgs, models: &Path) -> Result<FaceModels> {
     })
 }
 
+/// Identity names from a trained parameter file (held-out identities) or a list file.
+fn read_identities(path: &Path) -> Result<Vec<String>> {
+    let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+    let names: Vec<String> = if text.trim_start().starts_with('{') {
+        let v: serde_json::Value = serde_json::from_str(&text).with_context(|| path.display().to_string())?;
+        let list = v.pointer("/provenance/data/validation_identities").and_then(|l| l.as_array()).ok_or_else(|| {
+            anyhow!("{}: provenance.data.validation_identities: missing (not a parameter file from campro train)", path.display())
+        })?;
+        list.iter().map(|n| n.as_str().map(str::to_string).ok_or_else(|| anyhow!("{}: validation_identities: names must be strings", path.display()))).collect::<Result<_>>()?
+    } else {
+        text.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('#')).map(str::to_string).collect()
+    };
+    if names.is_empty() {
+        bail!("{}: no identities", path.display());
+    }
+    Ok(names)
+}
+
 fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<privacy::PrivacyReport> {
     let lfw_dir = a.lfw.clone().unwrap_or_else(|| c.shared().join("data/lfw"));
     let lfw = data::Lfw::open(&lfw_dir).with_context(|| "reading LFW (set --lfw or --shared)")?;
@@ -200,6 +225,7 @@ fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<priva
         seed: a.seed,
         pool: a.pool,
         limit: c.limit,
+        identities: a.identities.as_deref().map(read_identities).transpose()?,
         verification: !a.no_verification,
         pairs_per_fold: a.pairs_per_fold.or(c.limit.map(|l| l.div_ceil(10).max(1))),
         ..Default::default()

@@ -463,9 +463,9 @@ fn train(config: &Path, output: &Path, log: Option<&Path>, opts: &campro_train::
     pb.set_style(indicatif::ProgressStyle::with_template("train [{bar:30}] round {pos}/{len} {elapsed_precise} eta {eta} {msg}").unwrap().progress_chars("=> "));
     let out = campro_train::train::run(&cfg, opts, |r| {
         pb.set_position(r.round as u64);
-        pb.set_message(format!("L_ns {:.4} attacker acc {:.2}", r.privacy_loss, r.attacker_accuracy));
+        pb.set_message(format!("L_ns {:.4} L_det {:.3} attacker acc {:.2}", r.privacy_loss, r.detection_loss, r.attacker_accuracy));
         if let Some(c) = r.check_accuracy {
-            let line = format!("round {}: check accuracy {:.3} (attacker CE {:.3}, L_ns {:.4}, {:.0} s)", r.round, c, r.attacker_ce, r.privacy_loss, r.seconds);
+            let line = format!("round {}: check accuracy {:.3} (attacker CE {:.3}, L_ns {:.4}, L_det {:.3}, {:.0} s)", r.round, c, r.attacker_ce, r.privacy_loss, r.detection_loss, r.seconds);
             // A hidden bar (not a terminal: logs, CI) prints nothing: the line goes to stderr.
             if pb.is_hidden() {
                 eprintln!("{line}");
@@ -476,9 +476,18 @@ fn train(config: &Path, output: &Path, log: Option<&Path>, opts: &campro_train::
     })?;
     pb.finish_and_clear();
     if let Some(l) = log {
-        let mut csv = String::from("round,seconds,attacker_ce,attacker_accuracy,privacy_loss,check_accuracy\n");
+        let mut csv = String::from("round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy\n");
         for r in &out.log {
-            csv += &format!("{},{:.3},{:.6},{:.4},{:.6},{}\n", r.round, r.seconds, r.attacker_ce, r.attacker_accuracy, r.privacy_loss, r.check_accuracy.map_or(String::new(), |c| format!("{c:.4}")));
+            csv += &format!(
+                "{},{:.3},{:.6},{:.4},{:.6},{:.6},{}\n",
+                r.round,
+                r.seconds,
+                r.attacker_ce,
+                r.attacker_accuracy,
+                r.privacy_loss,
+                r.detection_loss,
+                r.check_accuracy.map_or(String::new(), |c| format!("{c:.4}"))
+            );
         }
         write_atomic(l, csv.as_bytes(), force)?;
         let (losses, acc) = campro_train::train::plot_log(&out.log);
@@ -490,11 +499,30 @@ fn train(config: &Path, output: &Path, log: Option<&Path>, opts: &campro_train::
     let mut params = Params::new(out.ccm, curve, out.gamma)?;
     params.name = output.file_stem().map_or("campro-trained".into(), |s| s.to_string_lossy().into_owned());
     params.description = format!(
-        "learnt by campro train from {} (privacy player{})",
+        "learnt by campro train from {} ({}{})",
         config.display(),
+        if cfg.protector.omega > 0.0 { format!("privacy and utility players, omega {}", cfg.protector.omega) } else { "privacy player".into() },
         if cfg.protector.protector_only { ", protector only" } else { "" }
     );
     params.provenance = out.provenance.clone();
+    if let Some(det) = &out.detector {
+        // The fine-tuned detector beside the parameters, with a manifest `eval utility
+        // --person-detector` reads (the bundled one with the new file).
+        let onnx = output.with_extension("detector.onnx");
+        let manifest_path = output.with_extension("detector.json");
+        for p in [&onnx, &manifest_path] {
+            if p.exists() && !force {
+                bail!("{} exists (use --force to replace it)", p.display());
+            }
+        }
+        det.save_onnx(&onnx)?;
+        let mut m: serde_json::Value = serde_json::from_str(eval::YOLOX_MANIFEST)?;
+        let file = onnx.file_name().expect("a file name").to_string_lossy().into_owned();
+        m["name"] = format!("yolox-nano fine-tuned ({})", params.name).into();
+        m["file"] = file.clone().into();
+        write_atomic(&manifest_path, (serde_json::to_string_pretty(&m)? + "\n").as_bytes(), force)?;
+        params.provenance.insert("detector".into(), serde_json::json!({ "onnx": file, "manifest": manifest_path.file_name().map(|f| f.to_string_lossy().into_owned()) }));
+    }
     write_atomic(output, params.to_json().as_bytes(), force)?;
     eprintln!(
         "trained {} rounds on {} classes ({} faces, {} aside) in {:.0} s -> {}",

@@ -1,0 +1,154 @@
+//! The utility player's loss L_det: YOLOX's own training loss restricted to the person class
+//! (the only labelled class of the shared COCO set).
+//!
+//! Assignment is YOLOX's SimOTA (Ge et al. 2021, as in Megvii's `yolo_head.py` v0.1):
+//! candidate anchors are those whose centre lies in a ground-truth box or within 2.5 strides
+//! of its centre; the cost is `−log √(cls·obj) + 3·(−log IoU) + 10⁵·[not in box and centre]`;
+//! each box takes its `k` cheapest candidates, `k = max(1, ⌊Σ top-10 IoU⌋)`, and an anchor
+//! claimed twice stays with its cheapest box. The loss, per batch, is
+//! `(5·Σ_fg (1 − IoU²) + Σ_all BCE(obj, fg) + Σ_fg BCE(cls_person, IoU)) / max(1, #fg)`.
+//! Crowd regions are left out of the targets (YOLOX ignores them too). Assignment runs on
+//! detached predictions; the loss is differentiable in the head.
+
+use crate::yolox::{anchors, decode_boxes};
+use candle_core::{Result, Tensor, D};
+
+/// A positive anchor: which anchor, which box, and the IoU of its prediction with the box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Positive {
+    pub anchor: usize,
+    pub gt: usize,
+    pub iou: f32,
+}
+
+/// The loss and its parts (each already divided by the number of positives).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct DetLoss {
+    pub iou: f64,
+    pub obj: f64,
+    pub cls: f64,
+    pub positives: usize,
+}
+
+/// IoU of two (cx, cy, w, h) boxes.
+pub fn iou_cxcywh(a: [f32; 4], b: [f32; 4]) -> f32 {
+    let ix = ((a[0] + a[2] / 2.0).min(b[0] + b[2] / 2.0) - (a[0] - a[2] / 2.0).max(b[0] - b[2] / 2.0)).max(0.0);
+    let iy = ((a[1] + a[3] / 2.0).min(b[1] + b[3] / 2.0) - (a[1] - a[3] / 2.0).max(b[1] - b[3] / 2.0)).max(0.0);
+    let inter = ix * iy;
+    inter / (a[2] * a[3] + b[2] * b[3] - inter + 1e-16)
+}
+
+/// SimOTA for one image. `anchors`: (column, row, stride) per anchor; `boxes`: predicted
+/// (cx, cy, w, h); `obj`, `cls`: predicted probabilities; `gts`: (cx, cy, w, h) boxes.
+pub fn simota(anchors: &[(f32, f32, f32)], boxes: &[[f32; 4]], obj: &[f32], cls: &[f32], gts: &[[f32; 4]]) -> Vec<Positive> {
+    const RADIUS: f32 = 2.5;
+    let n = anchors.len();
+    // Geometry: in box, in centre area, per (gt, anchor).
+    let inside = |g: &[f32; 4], i: usize| -> (bool, bool) {
+        let (c, r, s) = anchors[i];
+        let (x, y) = ((c + 0.5) * s, (r + 0.5) * s);
+        let in_box = (x - (g[0] - g[2] / 2.0)).min(g[0] + g[2] / 2.0 - x).min(y - (g[1] - g[3] / 2.0)).min(g[1] + g[3] / 2.0 - y) > 0.0;
+        let in_centre = (x - g[0]).abs() < RADIUS * s && (y - g[1]).abs() < RADIUS * s;
+        (in_box, in_centre)
+    };
+    let candidate: Vec<bool> = (0..n).map(|i| gts.iter().any(|g| matches!(inside(g, i), (true, _) | (_, true)))).collect();
+    let cands: Vec<usize> = (0..n).filter(|&i| candidate[i]).collect();
+    if cands.is_empty() {
+        return Vec::new();
+    }
+    // Per gt: (cost, iou) over the candidates; the chosen anchors.
+    let mut best: Vec<Option<(f32, usize, f32)>> = vec![None; n];
+    for (gi, g) in gts.iter().enumerate() {
+        let scored: Vec<(f32, f32, usize)> = cands
+            .iter()
+            .map(|&i| {
+                let iou = iou_cxcywh(boxes[i], *g);
+                let p = (cls[i] * obj[i]).sqrt().clamp(1e-7, 1.0);
+                let (in_box, in_centre) = inside(g, i);
+                let cost = -p.ln() + 3.0 * -(iou + 1e-8).ln() + if in_box && in_centre { 0.0 } else { 1e5 };
+                (cost, iou, i)
+            })
+            .collect();
+        let mut ious: Vec<f32> = scored.iter().map(|s| s.1).collect();
+        ious.sort_by(|a, b| b.total_cmp(a));
+        let k = (ious.iter().take(10).sum::<f32>() as usize).max(1).min(scored.len());
+        let mut by_cost = scored;
+        by_cost.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
+        for &(cost, iou, i) in &by_cost[..k] {
+            if best[i].is_none_or(|(c, _, _)| cost < c) {
+                best[i] = Some((cost, gi, iou));
+            }
+        }
+    }
+    best.iter().enumerate().filter_map(|(anchor, b)| b.map(|(_, gt, iou)| Positive { anchor, gt, iou })).collect()
+}
+
+/// Binary cross-entropy of probabilities `p` against targets `t`, summed.
+fn bce_sum(p: &Tensor, t: &Tensor) -> Result<Tensor> {
+    let p = p.clamp(1e-7f32, 1.0 - 1e-7)?;
+    let pos = t.mul(&p.log()?)?;
+    let neg = (1.0 - t)?.mul(&(1.0 - &p)?.log()?)?;
+    (pos + neg)?.sum_all()?.neg()
+}
+
+/// IoU of matched (P, 4) (cx, cy, w, h) boxes, differentiable in `a`.
+fn iou_rows(a: &Tensor, b: &Tensor) -> Result<Tensor> {
+    let half = |t: &Tensor| -> Result<(Tensor, Tensor)> {
+        let c = t.narrow(1, 0, 2)?;
+        let h = (t.narrow(1, 2, 2)? * 0.5)?;
+        Ok(((&c - &h)?, (c + h)?))
+    };
+    let ((a0, a1), (b0, b1)) = (half(a)?, half(b)?);
+    let wh = (a1.minimum(&b1)? - a0.maximum(&b0)?)?.relu()?;
+    let inter = (wh.narrow(1, 0, 1)? * wh.narrow(1, 1, 1)?)?;
+    let area = |t: &Tensor| -> Result<Tensor> { t.narrow(1, 2, 1)? * t.narrow(1, 3, 1)? };
+    let union = ((area(a)? + area(b)?)? - &inter)?;
+    (inter / (union + 1e-16)?)?.squeeze(1)
+}
+
+/// L_det for a raw head (B, N, 85) of an `h` x `w` input and each image's person boxes
+/// (cx, cy, w, h) in input pixels; returns the loss tensor and its parts.
+pub fn yolox_loss(head: &Tensor, h: usize, w: usize, gts: &[Vec<[f32; 4]>]) -> Result<(Tensor, DetLoss)> {
+    let (b, n, _) = head.dims3()?;
+    if gts.len() != b {
+        candle_core::bail!("{} images but {} box lists", b, gts.len());
+    }
+    let dev = head.device();
+    let boxes = decode_boxes(head, h, w)?;
+    let obj = head.narrow(D::Minus1, 4, 1)?.squeeze(D::Minus1)?;
+    let cls = head.narrow(D::Minus1, 5, 1)?.squeeze(D::Minus1)?;
+    let a = anchors(h, w);
+    let (bv, ov, cv): (Vec<Vec<[f32; 4]>>, Vec<Vec<f32>>, Vec<Vec<f32>>) = {
+        let raw: Vec<Vec<Vec<f32>>> = boxes.detach().to_vec3()?;
+        (raw.into_iter().map(|img| img.into_iter().map(|r| [r[0], r[1], r[2], r[3]]).collect()).collect(), obj.detach().to_vec2()?, cls.detach().to_vec2()?)
+    };
+    let (mut fg, mut gt_rows, mut iou_t) = (Vec::<u32>::new(), Vec::<f32>::new(), Vec::<f32>::new());
+    let mut obj_t = vec![0f32; b * n];
+    for i in 0..b {
+        for p in simota(&a, &bv[i], &ov[i], &cv[i], &gts[i]) {
+            let k = i * n + p.anchor;
+            fg.push(k as u32);
+            obj_t[k] = 1.0;
+            gt_rows.extend_from_slice(&gts[i][p.gt]);
+            iou_t.push(p.iou);
+        }
+    }
+    let np = fg.len();
+    let norm = np.max(1) as f64;
+    let obj_loss = (bce_sum(&obj.flatten_all()?, &Tensor::from_vec(obj_t, b * n, dev)?)? / norm)?;
+    let (loss, parts) = if np == 0 {
+        let o = obj_loss.to_scalar::<f32>()? as f64;
+        (obj_loss, DetLoss { obj: o, ..Default::default() })
+    } else {
+        let idx = Tensor::from_vec(fg, np, dev)?;
+        let pred = boxes.flatten_to(1)?.index_select(&idx, 0)?;
+        let gt = Tensor::from_vec(gt_rows, (np, 4), dev)?;
+        let iou = iou_rows(&pred, &gt)?;
+        let iou_loss = ((1.0 - iou.sqr()?)?.sum_all()? / norm)?;
+        let cls_fg = cls.flatten_all()?.index_select(&idx, 0)?;
+        let cls_loss = (bce_sum(&cls_fg, &Tensor::from_vec(iou_t, np, dev)?)? / norm)?;
+        let parts = DetLoss { iou: iou_loss.to_scalar::<f32>()? as f64, obj: obj_loss.to_scalar::<f32>()? as f64, cls: cls_loss.to_scalar::<f32>()? as f64, positives: np };
+        (((iou_loss * 5.0)? + obj_loss)?.add(&cls_loss)?, parts)
+    };
+    Ok((loss, parts))
+}

@@ -1,0 +1,310 @@
+//! The utility player P: YOLOX-Nano run by candle straight from its (batch-norm folded)
+//! ONNX graph, so it can be fine-tuned and written back as ONNX for the evaluation.
+//!
+//! The graph is interpreted node by node over the few operators YOLOX exports (Conv, Sigmoid,
+//! Mul, Add, Concat, Slice, MaxPool, Resize, Reshape, Transpose); every Conv weight and bias
+//! becomes a trainable [`Var`]. Input: (B, 3, H, W) **BGR** in 0..255, H and W multiples of
+//! 32 (the network is fully convolutional; the ONNX file's fixed 416 only appears in its
+//! final reshapes, which are read as "flatten the grid"). Output: (B, N, 85), per anchor the
+//! raw (x, y, log w, log h), objectness and 80 class probabilities, anchors of strides 8,
+//! 16, 32 in row-major grid order, as in the ONNX file.
+
+use candle_core::{Result, Tensor, Var, D};
+use prost::Message;
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::Path;
+use tract_onnx::pb;
+
+/// Strides of the three output grids.
+pub const STRIDES: [usize; 3] = [8, 16, 32];
+
+#[derive(Debug, thiserror::Error)]
+pub enum YoloxError {
+    #[error("{path}: {message}")]
+    Io { path: String, message: String },
+    #[error("{path}: {message}")]
+    Graph { path: String, message: String },
+    #[error("tensor: {0}")]
+    Tensor(#[from] candle_core::Error),
+}
+
+#[derive(Debug, Clone)]
+enum Op {
+    /// One axis, from `start` to `end` (clamped) by `step`.
+    Slice { axis: usize, start: usize, end: i64, step: usize },
+    Concat(usize),
+    Conv { w: String, b: Option<String>, stride: usize, pad: usize, depthwise: bool },
+    Sigmoid,
+    Mul,
+    Add,
+    /// Stride-1 max pooling, `k` x `k`, padding (k − 1) / 2.
+    MaxPool(usize),
+    /// Nearest-neighbour upsampling by an integer factor.
+    Upsample(usize),
+    /// (B, C, H, W) → (B, C, H·W).
+    Flatten,
+    /// (B, C, N) → (B, N, C).
+    Transpose,
+}
+
+#[derive(Debug, Clone)]
+struct Node {
+    op: Op,
+    inputs: Vec<String>,
+    output: String,
+}
+
+/// YOLOX from an ONNX file, with trainable convolutions.
+pub struct Yolox {
+    nodes: Vec<Node>,
+    input: String,
+    output: String,
+    /// Conv weights and biases by initializer name, in graph order.
+    params: Vec<(String, Var)>,
+    index: HashMap<String, usize>,
+    /// The file as read, to write back with new weights.
+    model: pb::ModelProto,
+}
+
+fn ints(t: &pb::TensorProto) -> Vec<i64> {
+    if !t.int64_data.is_empty() {
+        return t.int64_data.clone();
+    }
+    t.raw_data.chunks_exact(8).map(|c| i64::from_le_bytes(c.try_into().expect("8 bytes"))).collect()
+}
+
+fn floats(t: &pb::TensorProto) -> Vec<f32> {
+    if !t.float_data.is_empty() {
+        return t.float_data.clone();
+    }
+    t.raw_data.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect()
+}
+
+impl Yolox {
+    /// Reads the ONNX file; any operator or attribute outside what YOLOX uses is an error
+    /// naming the node.
+    pub fn load(path: &Path, dev: &candle_core::Device) -> std::result::Result<Self, YoloxError> {
+        let p = path.display().to_string();
+        let bytes = std::fs::read(path).map_err(|e| YoloxError::Io { path: p.clone(), message: e.to_string() })?;
+        let model = pb::ModelProto::decode(bytes.as_slice()).map_err(|e| YoloxError::Graph { path: p.clone(), message: format!("not an ONNX model: {e}") })?;
+        let bad = |m: String| YoloxError::Graph { path: p.clone(), message: m };
+        let graph = model.graph.as_ref().ok_or_else(|| bad("no graph".into()))?;
+        let inits: HashMap<&str, &pb::TensorProto> = graph.initializer.iter().map(|t| (t.name.as_str(), t)).collect();
+        let int_of = |name: &str| -> std::result::Result<i64, YoloxError> {
+            let t = inits.get(name).ok_or_else(|| bad(format!("{name}: expected a constant")))?;
+            ints(t).first().copied().ok_or_else(|| bad(format!("{name}: empty constant")))
+        };
+        let mut nodes = Vec::new();
+        let mut params = Vec::new();
+        for n in &graph.node {
+            let what = format!("node {} ({})", n.name, n.op_type);
+            let attr = |name: &str| n.attribute.iter().find(|a| a.name == name);
+            let attr_ints = |name: &str| attr(name).map(|a| a.ints.clone()).unwrap_or_default();
+            let data: Vec<String> = n.input.iter().filter(|i| !inits.contains_key(i.as_str()) && !i.is_empty()).cloned().collect();
+            let op = match n.op_type.as_str() {
+                "Slice" => {
+                    let arg = |k: usize| int_of(&n.input[k]);
+                    if n.input.len() != 5 {
+                        return Err(bad(format!("{what}: expected data, starts, ends, axes, steps")));
+                    }
+                    let (start, end, axis, step) = (arg(1)?, arg(2)?, arg(3)?, arg(4)?);
+                    if start < 0 || !(0..4).contains(&axis) || step < 1 {
+                        return Err(bad(format!("{what}: start {start}, axis {axis}, step {step} unsupported")));
+                    }
+                    Op::Slice { axis: axis as usize, start: start as usize, end, step: step as usize }
+                }
+                "Concat" => Op::Concat(attr("axis").map_or(0, |a| a.i) as usize),
+                "Conv" => {
+                    let w = inits.get(n.input[1].as_str()).ok_or_else(|| bad(format!("{what}: weight is not a constant")))?;
+                    let (stride, pads, dil, group) = (attr_ints("strides"), attr_ints("pads"), attr_ints("dilations"), attr("group").map_or(1, |a| a.i));
+                    let pad = pads.first().copied().unwrap_or(0);
+                    if pads.iter().any(|&q| q != pad) || dil.iter().any(|&d| d != 1) || stride.len() != 2 || stride[0] != stride[1] {
+                        return Err(bad(format!("{what}: only symmetric padding, square strides and no dilation")));
+                    }
+                    let depthwise = group != 1;
+                    if depthwise && (w.dims.get(1) != Some(&1) || w.dims[0] != group) {
+                        return Err(bad(format!("{what}: grouped convolution that is not depthwise")));
+                    }
+                    let b = n.input.get(2).cloned();
+                    for name in std::iter::once(&n.input[1]).chain(b.iter()) {
+                        let t = inits[name.as_str()];
+                        let dims: Vec<usize> = t.dims.iter().map(|&d| d as usize).collect();
+                        params.push((name.clone(), Var::from_vec(floats(t), dims, dev)?));
+                    }
+                    Op::Conv { w: n.input[1].clone(), b, stride: stride[0] as usize, pad: pad as usize, depthwise }
+                }
+                "Sigmoid" => Op::Sigmoid,
+                "Mul" => Op::Mul,
+                "Add" => Op::Add,
+                "MaxPool" => {
+                    let k = attr_ints("kernel_shape");
+                    let (s, pads) = (attr_ints("strides"), attr_ints("pads"));
+                    if k.len() != 2 || k[0] != k[1] || k[0] % 2 == 0 || s.iter().any(|&v| v != 1) || pads.iter().any(|&q| q != k[0] / 2) {
+                        return Err(bad(format!("{what}: only odd square stride-1 'same' pooling")));
+                    }
+                    Op::MaxPool(k[0] as usize)
+                }
+                "Resize" => {
+                    let mode = attr("mode").map(|a| String::from_utf8_lossy(&a.s).to_string()).unwrap_or_default();
+                    let scales = n.input.get(2).and_then(|s| inits.get(s.as_str())).map(|t| floats(t)).unwrap_or_default();
+                    let f = scales.get(2).copied().unwrap_or(0.0);
+                    if mode != "nearest" || scales.len() != 4 || scales[3] != f || f.fract() != 0.0 || f < 1.0 {
+                        return Err(bad(format!("{what}: only nearest upsampling by an integer factor (mode {mode}, scales {scales:?})")));
+                    }
+                    Op::Upsample(f as usize)
+                }
+                "Reshape" => Op::Flatten,
+                "Transpose" => {
+                    if attr_ints("perm") != [0, 2, 1] {
+                        return Err(bad(format!("{what}: only perm [0, 2, 1]")));
+                    }
+                    Op::Transpose
+                }
+                other => return Err(bad(format!("{what}: operator {other} is not supported"))),
+            };
+            let output = n.output.first().cloned().ok_or_else(|| bad(format!("{what}: no output")))?;
+            nodes.push(Node { op, inputs: data, output });
+        }
+        let input = graph.input.iter().map(|i| i.name.clone()).find(|n| !inits.contains_key(n.as_str())).ok_or_else(|| bad("no input".into()))?;
+        let output = graph.output.first().map(|o| o.name.clone()).ok_or_else(|| bad("no output".into()))?;
+        let index = params.iter().enumerate().map(|(i, (n, _))| (n.clone(), i)).collect();
+        Ok(Self { nodes, input, output, params, index, model })
+    }
+
+    /// Every trainable tensor (conv weights and biases).
+    pub fn vars(&self) -> Vec<Var> {
+        self.params.iter().map(|(_, v)| v.clone()).collect()
+    }
+
+    /// Every trainable tensor with its ONNX initializer name.
+    pub fn named_vars(&self) -> Vec<(String, Var)> {
+        self.params.clone()
+    }
+
+    fn param(&self, name: &str) -> &Var {
+        &self.params[self.index[name]].1
+    }
+
+    /// The raw head (B, N, 85) for `x` (B, 3, H, W), BGR 0..255.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let (_, _, h, w) = x.dims4()?;
+        if h % 32 != 0 || w % 32 != 0 {
+            candle_core::bail!("YOLOX input {h}x{w}: height and width must be multiples of 32");
+        }
+        let mut values: HashMap<&str, Tensor> = HashMap::new();
+        values.insert(&self.input, x.clone());
+        for n in &self.nodes {
+            let arg = |k: usize| -> Result<&Tensor> { values.get(n.inputs[k].as_str()).ok_or_else(|| candle_core::Error::Msg(format!("{} not computed", n.inputs[k]))) };
+            let y = match &n.op {
+                Op::Slice { axis, start, end, step } => {
+                    let x = arg(0)?;
+                    let len = x.dim(*axis)?;
+                    let end = (*end).clamp(0, len as i64) as usize;
+                    let x = x.narrow(*axis, *start, end.saturating_sub(*start))?;
+                    every(&x, *axis, *step)?
+                }
+                Op::Concat(axis) => Tensor::cat(&(0..n.inputs.len()).map(arg).collect::<Result<Vec<_>>>()?, *axis)?,
+                Op::Conv { w, b, stride, pad, depthwise } => {
+                    let w = self.param(w).as_tensor();
+                    let y = if *depthwise { crate::dwconv::depthwise(arg(0)?, w, *stride, *pad)? } else { crate::mobilefacenet::dense(arg(0)?, w, *stride, *pad)? };
+                    match b {
+                        Some(b) => y.broadcast_add(&self.param(b).as_tensor().reshape((1, (), 1, 1))?)?,
+                        None => y,
+                    }
+                }
+                Op::Sigmoid => candle_nn::ops::sigmoid(arg(0)?)?,
+                Op::Mul => arg(0)?.broadcast_mul(arg(1)?)?,
+                Op::Add => arg(0)?.broadcast_add(arg(1)?)?,
+                Op::MaxPool(k) => max_pool_same(arg(0)?, *k)?,
+                Op::Upsample(f) => {
+                    let (_, _, h, w) = arg(0)?.dims4()?;
+                    arg(0)?.upsample_nearest2d(h * f, w * f)?
+                }
+                Op::Flatten => arg(0)?.flatten_from(2)?,
+                Op::Transpose => arg(0)?.transpose(1, 2)?.contiguous()?,
+            };
+            values.insert(&n.output, y);
+        }
+        values.remove(self.output.as_str()).ok_or_else(|| candle_core::Error::Msg("output not computed".into()))
+    }
+
+    /// Writes the model with the current weights as ONNX (temporary file, then rename).
+    pub fn save_onnx(&self, path: &Path) -> std::result::Result<(), YoloxError> {
+        let p = path.display().to_string();
+        let mut model = self.model.clone();
+        let graph = model.graph.as_mut().expect("checked in load");
+        for t in graph.initializer.iter_mut() {
+            if let Some(&i) = self.index.get(&t.name) {
+                let v: Vec<f32> = self.params[i].1.as_tensor().flatten_all()?.to_vec1()?;
+                t.float_data.clear();
+                t.raw_data = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+            }
+        }
+        let io = |e: std::io::Error| YoloxError::Io { path: p.clone(), message: e.to_string() };
+        let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
+        tmp.write_all(&model.encode_to_vec()).and_then(|_| tmp.flush()).map_err(io)?;
+        tmp.persist(path).map_err(|e| io(e.error))?;
+        Ok(())
+    }
+}
+
+/// Every `step`-th element along `axis`, from 0.
+fn every(x: &Tensor, axis: usize, step: usize) -> Result<Tensor> {
+    if step == 1 {
+        return Ok(x.clone());
+    }
+    let n = x.dim(axis)?;
+    let m = n.div_ceil(step);
+    let x = if m * step > n { x.pad_with_zeros(axis, 0, m * step - n)? } else { x.clone() };
+    let mut dims = x.dims().to_vec();
+    dims[axis] = m;
+    dims.insert(axis + 1, step);
+    x.reshape(dims)?.narrow(axis + 1, 0, 1)?.squeeze(axis + 1)
+}
+
+/// Stride-1 `k` x `k` max pooling with (k − 1)/2 padding that never wins (ONNX's −∞), as two
+/// separable passes of element-wise maxima (differentiable; candle's pooling backward needs
+/// stride = kernel).
+fn max_pool_same(x: &Tensor, k: usize) -> Result<Tensor> {
+    let r = k / 2;
+    let pass = |x: &Tensor, dim: usize| -> Result<Tensor> {
+        let n = x.dim(dim)?;
+        let mut shape = x.dims().to_vec();
+        shape[dim] = r;
+        let wall = Tensor::full(f32::MIN, shape, x.device())?;
+        let padded = Tensor::cat(&[&wall, x, &wall], dim)?;
+        let mut m = padded.narrow(dim, 0, n)?;
+        for s in 1..k {
+            m = m.maximum(&padded.narrow(dim, s, n)?)?;
+        }
+        Ok(m)
+    };
+    pass(&pass(x, 3)?, 2)
+}
+
+/// Anchor centres and strides of the output grids for an `h` x `w` input: per anchor
+/// (column, row, stride), in the head's order.
+pub fn anchors(h: usize, w: usize) -> Vec<(f32, f32, f32)> {
+    let mut out = Vec::new();
+    for s in STRIDES {
+        for row in 0..h / s {
+            for col in 0..w / s {
+                out.push((col as f32, row as f32, s as f32));
+            }
+        }
+    }
+    out
+}
+
+/// Raw head (B, N, 85) → boxes (B, N, 4) as (cx, cy, w, h) in input pixels, differentiable.
+pub fn decode_boxes(head: &Tensor, h: usize, w: usize) -> Result<Tensor> {
+    let a = anchors(h, w);
+    let dev = head.device();
+    let grid = Tensor::from_vec(a.iter().flat_map(|&(c, r, _)| [c, r]).collect::<Vec<_>>(), (1, a.len(), 2), dev)?;
+    let stride = Tensor::from_vec(a.iter().map(|&(_, _, s)| s).collect::<Vec<_>>(), (1, a.len(), 1), dev)?;
+    let xy = head.narrow(D::Minus1, 0, 2)?.broadcast_add(&grid)?.broadcast_mul(&stride)?;
+    let wh = head.narrow(D::Minus1, 2, 2)?.exp()?.broadcast_mul(&stride)?;
+    Tensor::cat(&[xy, wh], D::Minus1)
+}

@@ -1,0 +1,147 @@
+//! The utility player against independent implementations: YOLOX-Nano interpreted by candle
+//! against the same ONNX file run by tract (forward, and after an edit written back as ONNX),
+//! the detection loss's assignment and IoU by hand.
+
+#[path = "../../../tests/common/shared.rs"]
+mod shared;
+
+use campro_eval::manifest::Manifest;
+use campro_eval::model::Model;
+use campro_train::yolox::Yolox;
+use candle_core::{Device, Tensor};
+use std::path::Path;
+
+const MANIFEST: &str = include_str!("../../campro-eval/models/yolox_nano.json");
+
+/// A real COCO image letterboxed to 416 (the evaluation's own preprocessing), as tract's
+/// input tensor and as candle's.
+fn canvas(img: &Path) -> image::RgbImage {
+    let img = campro_eval::data::read_rgb8(img).unwrap();
+    let s = (416.0 / img.width() as f64).min(416.0 / img.height() as f64);
+    campro_eval::geometry::letterbox(&img, 416, 416, s, 114)
+}
+
+fn bgr_tensor(c: &image::RgbImage) -> Tensor {
+    let (w, h) = (c.width() as usize, c.height() as usize);
+    let mut v = vec![0f32; 3 * h * w];
+    for (i, p) in c.pixels().enumerate() {
+        for ch in 0..3 {
+            v[ch * h * w + i] = p.0[2 - ch] as f32;
+        }
+    }
+    Tensor::from_vec(v, (1, 3, h, w), &Device::Cpu).unwrap()
+}
+
+fn tract_head(onnx: &Path, models: &Path, c: &image::RgbImage) -> Vec<f32> {
+    let mut m = Manifest::parse(MANIFEST, Path::new("yolox_nano.json"), models).unwrap();
+    m.file = onnx.to_path_buf();
+    Model::load(m).unwrap().run(c).unwrap().any("output").unwrap().to_vec()
+}
+
+#[test]
+fn yolox_matches_tract_and_round_trips_through_onnx() {
+    let Some(onnx) = shared::shared("models/yolox_nano.onnx") else { return };
+    let Some(img) = shared::shared("data/coco-person/images/000000000139.jpg") else { return };
+    let models = onnx.parent().unwrap().to_path_buf();
+    let c = canvas(&img);
+    let net = Yolox::load(&onnx, &Device::Cpu).unwrap();
+    let ours: Vec<f32> = net.forward(&bgr_tensor(&c)).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let theirs = tract_head(&onnx, &models, &c);
+    assert_eq!(ours.len(), theirs.len());
+    assert_eq!(ours.len(), 3549 * 85);
+    let worst = ours.iter().zip(&theirs).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(worst < 2e-3, "max |candle − tract| = {worst}");
+    // Edit a weight of the objectness conv, write ONNX, and tract sees the edit.
+    let bias = net.vars().into_iter().find(|v| v.dims() == [1]).unwrap();
+    bias.set(&(bias.as_tensor() + 1.0).unwrap()).unwrap();
+    let edited: Vec<f32> = net.forward(&bgr_tensor(&c)).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("edited.onnx");
+    net.save_onnx(&out).unwrap();
+    let back = tract_head(&out, &models, &c);
+    let worst = edited.iter().zip(&back).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    let moved = edited.iter().zip(&ours).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(moved > 0.01, "the edit changed nothing ({moved})");
+    assert!(worst < 2e-3, "written ONNX differs from candle by {worst}");
+}
+
+#[test]
+fn iou_by_hand() {
+    use campro_train::detection::iou_cxcywh;
+    // [0,2]² and [1,3]²: intersection 1, union 7.
+    assert!((iou_cxcywh([1.0, 1.0, 2.0, 2.0], [2.0, 2.0, 2.0, 2.0]) - 1.0 / 7.0).abs() < 1e-7);
+    assert_eq!(iou_cxcywh([0.0, 0.0, 1.0, 1.0], [5.0, 5.0, 1.0, 1.0]), 0.0);
+    assert!((iou_cxcywh([3.0, 4.0, 2.0, 6.0], [3.0, 4.0, 2.0, 6.0]) - 1.0).abs() < 1e-7);
+}
+
+/// A 32x32 input: 16 + 4 + 1 anchors. One person box [8, 16]² (centre (12, 12)); the
+/// anchor at stride 8, column 1, row 1 (index 5) predicts it exactly, every other anchor a
+/// far-away dot. Σ top-10 IoU = 1, so k = 1 and SimOTA picks anchor 5 alone; the loss is
+/// then (5·0 + Σ BCE(obj, [i = 5]) + BCE(cls_5, 1)) / 1, computed here by hand.
+#[test]
+fn simota_and_loss_by_hand() {
+    use campro_train::detection::{simota, yolox_loss, Positive};
+    use campro_train::yolox::anchors;
+    let a = anchors(32, 32);
+    assert_eq!(a.len(), 21);
+    assert_eq!(a[5], (1.0, 1.0, 8.0));
+    let mut head = vec![0f32; 21 * 85];
+    let (mut obj, mut cls) = (vec![0f32; 21], vec![0f32; 21]);
+    for i in 0..21 {
+        let r = &mut head[i * 85..(i + 1) * 85];
+        // Far dot: centre (col + 100)·s, size e^-5·s.
+        r[..4].copy_from_slice(&[100.0, 100.0, -5.0, -5.0]);
+        obj[i] = 0.1 + 0.01 * i as f32;
+        cls[i] = 0.3;
+        r[4] = obj[i];
+        r[5] = cls[i];
+    }
+    // Anchor 5: centre (0.5 + 1)·8 = 12, size e^0·8 = 8.
+    head[5 * 85..5 * 85 + 4].copy_from_slice(&[0.5, 0.5, 0.0, 0.0]);
+    cls[5] = 0.8;
+    head[5 * 85 + 5] = 0.8;
+    let gt = [12.0f32, 12.0, 8.0, 8.0];
+    let boxes: Vec<[f32; 4]> = (0..21).map(|i| if i == 5 { gt } else { [0.0; 4] }).collect();
+    assert_eq!(simota(&a, &boxes, &obj, &cls, &[gt]), vec![Positive { anchor: 5, gt: 0, iou: 1.0 }]);
+    let t = Tensor::from_vec(head, (1, 21, 85), &Device::Cpu).unwrap();
+    let (loss, parts) = yolox_loss(&t, 32, 32, &[vec![gt]]).unwrap();
+    let bce = |p: f64, y: f64| -(y * p.ln() + (1.0 - y) * (1.0 - p).ln());
+    let obj_sum: f64 = (0..21).map(|i| bce(obj[i] as f64, if i == 5 { 1.0 } else { 0.0 })).sum();
+    let want = obj_sum + bce(0.8, 1.0);
+    assert_eq!(parts.positives, 1);
+    assert!(parts.iou.abs() < 1e-6, "{}", parts.iou);
+    let got = loss.to_scalar::<f32>().unwrap() as f64;
+    assert!((got - want).abs() < 1e-4, "{got} vs {want}");
+    // No people: only objectness, all negative, normalised by 1.
+    let (loss, parts) = yolox_loss(&t, 32, 32, &[vec![]]).unwrap();
+    let want: f64 = (0..21).map(|i| bce(obj[i] as f64, 0.0)).sum();
+    assert_eq!(parts.positives, 0);
+    assert!((loss.to_scalar::<f32>().unwrap() as f64 - want).abs() < 1e-4);
+}
+
+/// Two boxes whose candidate areas overlap: an anchor claimed by both stays with the box it
+/// costs less for.
+#[test]
+fn simota_resolves_conflicts_by_cost() {
+    use campro_train::detection::simota;
+    use campro_train::yolox::anchors;
+    let a = anchors(64, 64);
+    let n = a.len();
+    // Every anchor predicts box A = [16, 32]²  centre (24, 24) side 16, with equal scores.
+    let ga = [24.0f32, 24.0, 16.0, 16.0];
+    let gb = [28.0f32, 24.0, 16.0, 16.0];
+    let boxes = vec![ga; n];
+    let (obj, cls) = (vec![0.5f32; n], vec![0.5f32; n]);
+    let pos = simota(&a, &boxes, &obj, &cls, &[ga, gb]);
+    // IoU with A is 1 everywhere, with B 12·16/(2·256 − 192) = 0.6: A costs less on every shared anchor.
+    let iou_b = 12.0 * 16.0 / (2.0 * 256.0 - 192.0);
+    for p in &pos {
+        let want = if p.gt == 0 { 1.0 } else { iou_b };
+        assert!((p.iou - want).abs() < 1e-6, "{p:?}");
+    }
+    let mut anchors_seen: Vec<usize> = pos.iter().map(|p| p.anchor).collect();
+    anchors_seen.dedup();
+    assert_eq!(anchors_seen.len(), pos.len(), "an anchor assigned twice");
+    // k_A = min(10, candidates) IoUs of 1 → 10 anchors, all with both geometry terms.
+    assert_eq!(pos.iter().filter(|p| p.gt == 0).count(), 10);
+}

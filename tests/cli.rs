@@ -353,3 +353,46 @@ fn eval_refuses_bad_arguments_clearly() {
     let shared = common::shared("").unwrap();
     fails_with(campro().args(["eval", "utility", "--person-detector", "nosuchmodel", "--shared"]).arg(&shared), "neither a bundled model");
 }
+
+/// `train` with all three players on tiny data writes a parameter set, the fine-tuned
+/// detector (ONNX + manifest) beside it and the log; `eval utility` runs that detector and
+/// `eval privacy --identities` scores only the identities the run held out.
+#[test]
+fn train_writes_params_and_detector_that_eval_reads() {
+    let Some(models) = common::shared("models/yolox_nano.onnx") else { return };
+    let Some(lfw) = common::shared("data/lfw/pairs.txt") else { return };
+    let Some(coco) = common::shared("data/coco-person/instances_person.json") else { return };
+    let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
+    let dir = tempfile::tempdir().unwrap();
+    let q = |p: &std::path::Path| format!("{:?}", p.to_str().unwrap());
+    let cfg = format!(
+        "[attacker]\ncheckpoint = {}\npretrain_steps = 2\n[protector]\nomega = 1.0\n[data]\nlfw = {}\nmodels = {}\nmax_identities = 5\nbatch = 8\ncache = {}\n[detector]\nmodel = {}\ndata = {}\nsize = 128\nbatch = 2\nmax_images = 2\n[budget]\nrounds = 2\n",
+        q(&models.with_file_name("mobilefacenet_casia_068.ckpt")),
+        q(lfw.parent().unwrap()),
+        q(models.parent().unwrap()),
+        q(&dir.path().join("cache")),
+        q(&models),
+        q(coco.parent().unwrap())
+    );
+    std::fs::write(dir.path().join("tiny.toml"), cfg).unwrap();
+    let p = dir.path().join("p.json");
+    campro().arg("train").arg(dir.path().join("tiny.toml")).arg("-o").arg(&p).arg("--log").arg(dir.path().join("log.csv")).assert().success();
+    campro().arg("validate").arg(&p).assert().success();
+    let log = std::fs::read_to_string(dir.path().join("log.csv")).unwrap();
+    assert!(log.starts_with("round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy\n") && log.lines().count() == 4, "{log}");
+    let manifest = dir.path().join("p.detector.json");
+    assert!(dir.path().join("p.detector.onnx").is_file() && manifest.is_file());
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+    assert_eq!(v["provenance"]["detector"]["onnx"], "p.detector.onnx");
+    let held_out = v["provenance"]["data"]["validation_identities"].as_array().unwrap().len();
+    assert_eq!(held_out, 1);
+    // Run from another folder: the manifest finds its ONNX beside itself.
+    let out = dir.path().join("ev");
+    campro().current_dir("/").args(["eval", "utility"]).arg(&p).arg("--person-detector").arg(&manifest).args(["--limit", "2", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
+    assert!(std::fs::read_to_string(out.join("utility.md")).unwrap().contains("fine-tuned (p)"));
+    campro().args(["eval", "privacy"]).arg(&p).arg("--identities").arg(&p).args(["--runs", "1", "--no-verification", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
+    assert!(std::fs::read_to_string(out.join("privacy.md")).unwrap().contains("Closed set: 1 identities"));
+    let names = dir.path().join("names.txt");
+    std::fs::write(&names, "# two people\nNo_Such_Person\n").unwrap();
+    fails_with(campro().args(["eval", "privacy"]).arg(&p).arg("--identities").arg(&names).args(["--shared"]).arg(&shared).arg("-o").arg(&out), "\"No_Such_Person\" is not in LFW");
+}

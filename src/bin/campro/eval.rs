@@ -219,13 +219,17 @@ fn read_identities(path: &Path) -> Result<Vec<String>> {
 fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<privacy::PrivacyReport> {
     let lfw_dir = a.lfw.clone().unwrap_or_else(|| c.shared().join("data/lfw"));
     let lfw = data::Lfw::open(&lfw_dir).with_context(|| "reading LFW (set --lfw or --shared)")?;
+    let identities = a.identities.as_deref().map(read_identities).transpose()?;
+    if let Some(missing) = identities.iter().flatten().find(|n| !lfw.people.contains_key(*n)) {
+        bail!("{}: identity {missing:?} is not in LFW", a.identities.as_ref().expect("read").display());
+    }
     let fm = face_models(a, &c.models_dir())?;
     let o = PrivacyOptions {
         runs: a.runs,
         seed: a.seed,
         pool: a.pool,
         limit: c.limit,
-        identities: a.identities.as_deref().map(read_identities).transpose()?,
+        identities,
         verification: !a.no_verification,
         pairs_per_fold: a.pairs_per_fold.or(c.limit.map(|l| l.div_ceil(10).max(1))),
         ..Default::default()

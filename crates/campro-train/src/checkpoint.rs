@@ -43,11 +43,16 @@ fn atomic(dir: &Path, name: &str, bytes: &[u8]) -> Result<(), CheckpointError> {
 /// Writes `tensors` and `state` into `dir` (tensors first: a state always names a complete
 /// tensor file).
 pub fn save(dir: &Path, tensors: &HashMap<String, Tensor>, state: &State) -> Result<(), CheckpointError> {
-    std::fs::create_dir_all(dir).map_err(|e| CheckpointError::Io { path: dir.into(), message: e.to_string() })?;
-    let tmp = dir.join(format!("{TENSORS}.partial"));
-    candle_core::safetensors::save(tensors, &tmp).map_err(|e| CheckpointError::Format { path: tmp.clone(), message: e.to_string() })?;
-    std::fs::rename(&tmp, dir.join(TENSORS)).map_err(|e| CheckpointError::Io { path: dir.join(TENSORS), message: e.to_string() })?;
+    write_tensors(dir, TENSORS, tensors)?;
     atomic(dir, STATE, &serde_json::to_vec_pretty(state).expect("state serialises"))
+}
+
+/// Writes `tensors` as `dir/name` (safetensors) through a partial file and a rename.
+pub fn write_tensors(dir: &Path, name: &str, tensors: &HashMap<String, Tensor>) -> Result<(), CheckpointError> {
+    std::fs::create_dir_all(dir).map_err(|e| CheckpointError::Io { path: dir.into(), message: e.to_string() })?;
+    let tmp = dir.join(format!("{name}.partial"));
+    candle_core::safetensors::save(tensors, &tmp).map_err(|e| CheckpointError::Format { path: tmp.clone(), message: e.to_string() })?;
+    std::fs::rename(&tmp, dir.join(name)).map_err(|e| CheckpointError::Io { path: dir.join(name), message: e.to_string() })
 }
 
 /// Reads a checkpoint written by [`save`].

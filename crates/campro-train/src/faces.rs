@@ -174,6 +174,6 @@ impl FaceSet {
 }
 
 /// FNV-1a, 64 bits: names the cache file of a selection.
-fn fnv(s: &str) -> u64 {
+pub(crate) fn fnv(s: &str) -> u64 {
     s.bytes().fold(0xcbf29ce484222325, |h, b| (h ^ b as u64).wrapping_mul(0x100000001b3))
 }

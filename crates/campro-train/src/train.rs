@@ -185,16 +185,29 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     };
     let embed = |x: &Tensor, train_bn: bool| -> candle_core::Result<Tensor> { l2_normalise(&net.forward_t(&normalise_unit(x)?, train_bn)?) };
 
-    // H from the class means of the raw training embeddings.
-    let mut sums = vec![vec![0f32; EMBEDDING]; classes];
-    for chunk in train.chunks(64) {
-        let (x, _) = faces.batch(chunk, &dev)?;
-        let e: Vec<Vec<f32>> = embed(&x, false)?.to_vec2()?;
-        for (&i, v) in chunk.iter().zip(e) {
-            sums[faces.labels[i] as usize].iter_mut().zip(v).for_each(|(s, x)| *s += x);
+    // H from the class means of the raw training embeddings, cached beside the faces (keyed
+    // by the face selection and the checkpoint file): one backbone pass over every face.
+    let ckpt_len = std::fs::metadata(&cfg.attacker.checkpoint).map_or(0, |m| m.len());
+    let key = crate::faces::fnv(&format!("{}|{}|{ckpt_len}", serde_json::to_string(&sel).expect("selection serialises"), cfg.attacker.checkpoint.display()));
+    let means_file = cfg.data.cache.join(format!("means-{key:016x}.safetensors"));
+    let cached = candle_core::safetensors::load(&means_file, &dev).ok().and_then(|mut t| t.remove("means")).filter(|m| m.dims() == [classes, EMBEDDING]);
+    let means = match cached {
+        Some(m) => m,
+        None => {
+            let mut sums = vec![vec![0f32; EMBEDDING]; classes];
+            for chunk in train.chunks(64) {
+                let (x, _) = faces.batch(chunk, &dev)?;
+                let e: Vec<Vec<f32>> = embed(&x, false)?.to_vec2()?;
+                for (&i, v) in chunk.iter().zip(e) {
+                    sums[faces.labels[i] as usize].iter_mut().zip(v).for_each(|(s, x)| *s += x);
+                }
+            }
+            let m = Tensor::from_vec(sums.concat(), (classes, EMBEDDING), &dev)?;
+            // A cache that cannot be written only costs the next run this pass.
+            let _ = crate::checkpoint::write_tensors(&cfg.data.cache, means_file.file_name().expect("a name").to_str().expect("ascii"), &[("means".to_string(), m.clone())].into());
+            m
         }
-    }
-    let means = Tensor::from_vec(sums.concat(), (classes, EMBEDDING), &dev)?;
+    };
     let head = ProxyHead::from_means(&means, cfg.attacker.head)?;
     // Everything a checkpoint holds, by name.
     let named = || -> Vec<(String, Var)> {

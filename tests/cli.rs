@@ -390,6 +390,13 @@ fn train_writes_params_and_detector_that_eval_reads() {
     let out = dir.path().join("ev");
     campro().current_dir("/").args(["eval", "utility"]).arg(&p).arg("--person-detector").arg(&manifest).args(["--limit", "2", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
     assert!(std::fs::read_to_string(out.join("utility.md")).unwrap().contains("fine-tuned (p)"));
+    // --own-detector: raw with the bundled detector, p with its own, rows in order.
+    campro().args(["eval", "utility"]).arg(&p).args(["--own-detector", "--limit", "2", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
+    let md = std::fs::read_to_string(out.join("utility.md")).unwrap();
+    assert!(md.contains("yolox-nano; p each with its own fine-tuned detector"), "{md}");
+    let rows: Vec<&str> = md.lines().filter(|l| l.starts_with("| raw") || l.starts_with("| p ")).collect();
+    assert_eq!(rows.len(), 2, "{md}");
+    assert!(rows[0].starts_with("| raw"));
     campro().args(["eval", "privacy"]).arg(&p).arg("--identities").arg(&p).args(["--runs", "1", "--no-verification", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
     assert!(std::fs::read_to_string(out.join("privacy.md")).unwrap().contains("Closed set: 1 identities"));
     let names = dir.path().join("names.txt");

@@ -3,7 +3,8 @@
 //!
 //! - attacker: MobileFaceNet + head forward/backward and an SGD step on C(x);
 //! - privacy: the protector's L_ns through the frozen attacker into the camera;
-//! - detector: C(people) through YOLOX-Nano, L_det (SimOTA), backward into camera and P.
+//! - detector: C(people) through YOLOX-Nano, L_det (SimOTA), backward into camera and P;
+//! - each network alone at the shapes `tools/framework-step` times in burn.
 
 use campro_train::camera::Camera;
 use campro_train::detection::yolox_loss;
@@ -67,7 +68,20 @@ fn main() -> anyhow::Result<()> {
         adam_det.step(&g)?;
         Ok(())
     })?;
+    // The shapes of tools/framework-step (burn): sum of the output, backward, no update.
+    let x416 = Tensor::rand(0f32, 255f32, (1, 3, 416, 416), &dev)?;
+    let yolox_416 = median(|| {
+        let _ = det.forward(&x416)?.sum_all()?.backward()?;
+        Ok(())
+    })?;
+    let mfn_8 = Tensor::rand(0f32, 1f32, (8, 3, 112, 96), &dev)?;
+    let mfn_step = median(|| {
+        let _ = net.forward_t(&normalise_unit(&mfn_8)?, false)?.sum_all()?.backward()?;
+        Ok(())
+    })?;
     println!("threads {}", rayon::current_num_threads());
+    println!("YOLOX-Nano 1x416x416 forward + backward of the output sum: {:.0} ms", yolox_416 * 1e3);
+    println!("MobileFaceNet 8x112x96 forward + backward of the output sum: {:.0} ms", mfn_step * 1e3);
     println!("attacker step, {fb} faces: {:.0} ms", attacker * 1e3);
     println!("privacy step, {fb} faces: {:.0} ms", privacy * 1e3);
     println!("detector step, {pb} people at {size}: {:.0} ms", detector * 1e3);

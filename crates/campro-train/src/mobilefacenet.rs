@@ -50,7 +50,10 @@ pub fn dense(x: &Tensor, w: &Tensor, stride: usize, pad: usize) -> Result<Tensor
 }
 
 /// Every `s`-th element along `dim`, from 0.
-fn subsample(x: &Tensor, dim: usize, s: usize) -> Result<Tensor> {
+pub(crate) fn subsample(x: &Tensor, dim: usize, s: usize) -> Result<Tensor> {
+    if s == 1 {
+        return Ok(x.clone());
+    }
     let n = x.dim(dim)?;
     let m = n.div_ceil(s);
     let x = if m * s > n { x.pad_with_zeros(dim, 0, m * s - n)? } else { x.clone() };

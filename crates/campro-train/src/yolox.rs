@@ -202,7 +202,7 @@ impl Yolox {
                     let len = x.dim(*axis)?;
                     let end = (*end).clamp(0, len as i64) as usize;
                     let x = x.narrow(*axis, *start, end.saturating_sub(*start))?;
-                    every(&x, *axis, *step)?
+                    crate::mobilefacenet::subsample(&x, *axis, *step)?
                 }
                 Op::Concat(axis) => Tensor::cat(&(0..n.inputs.len()).map(arg).collect::<Result<Vec<_>>>()?, *axis)?,
                 Op::Conv { w, b, stride, pad, depthwise } => {
@@ -248,20 +248,6 @@ impl Yolox {
         tmp.persist(path).map_err(|e| io(e.error))?;
         Ok(())
     }
-}
-
-/// Every `step`-th element along `axis`, from 0.
-fn every(x: &Tensor, axis: usize, step: usize) -> Result<Tensor> {
-    if step == 1 {
-        return Ok(x.clone());
-    }
-    let n = x.dim(axis)?;
-    let m = n.div_ceil(step);
-    let x = if m * step > n { x.pad_with_zeros(axis, 0, m * step - n)? } else { x.clone() };
-    let mut dims = x.dims().to_vec();
-    dims[axis] = m;
-    dims.insert(axis + 1, step);
-    x.reshape(dims)?.narrow(axis + 1, 0, 1)?.squeeze(axis + 1)
 }
 
 /// Stride-1 `k` x `k` max pooling with (k − 1)/2 padding that never wins (ONNX's −∞), as two

@@ -2,6 +2,7 @@
 //! (campro-eval), with CamPro parameter sets run through the exact 8-bit pipeline.
 
 use anyhow::{anyhow, bail, Context, Result};
+use std::collections::HashMap;
 use campro::pipeline::fast::Exact8;
 use campro::Params;
 use campro_eval::baselines::Baseline;
@@ -127,6 +128,10 @@ pub struct UtilityArgs {
     /// Confidence for precision / recall / F1.
     #[arg(long, default_value_t = 0.25)]
     confidence: f64,
+    /// Score each parameter set from `campro train` with the detector fine-tuned beside it
+    /// (its `provenance.detector.manifest`); raw images and other sets use --person-detector.
+    #[arg(long)]
+    own_detector: bool,
 }
 
 impl Common {
@@ -247,10 +252,41 @@ fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utili
     let name = model.manifest.name.clone();
     let det = PersonDetector::new(model)?;
     let o = UtilityOptions { limit: c.limit, confidence: a.confidence };
-    let r = utility::evaluate(&images, &det, &name, conds, &o)?;
+    let own = if a.own_detector { own_detectors(&c.params)? } else { HashMap::new() };
+    let shared: Vec<Condition> = conds.iter().filter(|x| !own.contains_key(&x.name)).cloned().collect();
+    let mut r = utility::evaluate(&images, &det, &name, &shared, &o)?;
+    for x in conds.iter().filter(|x| own.contains_key(&x.name)) {
+        let m = load(&own[&x.name].to_string_lossy(), &c.models_dir())?;
+        let rx = utility::evaluate(&images, &PersonDetector::new(m)?, &x.name, std::slice::from_ref(x), &o)?;
+        r.rows.extend(rx.rows);
+        r.seconds += rx.seconds;
+    }
+    if !own.is_empty() {
+        r.rows.sort_by_key(|row| conds.iter().position(|x| x.name == row.condition));
+        let mut names: Vec<&String> = own.keys().collect();
+        names.sort();
+        r.detector = format!("{name}; {} each with its own fine-tuned detector", names.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", "));
+    }
     report::write_utility(&r, &c.output)?;
     eprintln!("utility: {} images, {:.0} s -> {}", r.images, r.seconds, c.output.join("utility.md").display());
     Ok(r)
+}
+
+/// Parameter set name → the manifest of the detector fine-tuned with it, for the sets whose
+/// provenance names one.
+fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBuf>> {
+    let mut own = HashMap::new();
+    for path in params {
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).with_context(|| path.display().to_string())?)?;
+        if let Some(m) = v.pointer("/provenance/detector/manifest").and_then(|m| m.as_str()) {
+            let manifest = path.parent().unwrap_or(Path::new(".")).join(m);
+            if !manifest.is_file() {
+                bail!("{}: provenance.detector.manifest: {} not found", path.display(), manifest.display());
+            }
+            own.insert(path.file_stem().map_or("params".into(), |s| s.to_string_lossy().into_owned()), manifest);
+        }
+    }
+    Ok(own)
 }
 
 fn run_quality(c: &Common, images: Option<&Path>, conds: &[Condition]) -> Result<quality::QualityReport> {

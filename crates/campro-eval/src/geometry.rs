@@ -46,12 +46,16 @@ pub fn resize_bilinear(img: &RgbImage, width: u32, height: u32) -> RgbImage {
     })
 }
 
+/// The size (width, height) the image of `dims` takes on a [`letterbox`] canvas.
+pub fn letterbox_size(dims: (u32, u32), width: u32, height: u32, scale: f64) -> (u32, u32) {
+    (((dims.0 as f64 * scale).round() as u32).clamp(1, width), ((dims.1 as f64 * scale).round() as u32).clamp(1, height))
+}
+
 /// Scales `img` by `scale` (bilinear) and places it at the top-left of a `width x height`
 /// canvas filled with `pad`. Returns the canvas; a point of the canvas maps back to the
 /// image by dividing by `scale`.
 pub fn letterbox(img: &RgbImage, width: u32, height: u32, scale: f64, pad: u8) -> RgbImage {
-    let sw = ((img.width() as f64 * scale).round() as u32).clamp(1, width);
-    let sh = ((img.height() as f64 * scale).round() as u32).clamp(1, height);
+    let (sw, sh) = letterbox_size(img.dimensions(), width, height, scale);
     let scaled = if (sw, sh) == img.dimensions() { img.clone() } else { resize_bilinear(img, sw, sh) };
     let mut canvas = RgbImage::from_pixel(width, height, Rgb([pad; 3]));
     image::imageops::replace(&mut canvas, &scaled, 0, 0);

@@ -186,6 +186,14 @@ pub fn rank_of(scores: &[f32], truth: usize) -> usize {
     1 + scores.iter().filter(|&&s| s > t).count()
 }
 
+/// Every name must be an LFW identity (checked before any model runs).
+pub fn check_identities(lfw: &Lfw, names: &[String]) -> Result<()> {
+    match names.iter().find(|n| !lfw.people.contains_key(*n)) {
+        Some(missing) => Err(EvalError::Invalid(format!("privacy: identity {missing:?} is not in LFW"))),
+        None => Ok(()),
+    }
+}
+
 /// Runs the identification protocol (and verification) on LFW.
 pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &PrivacyOptions) -> Result<PrivacyReport> {
     if o.pool < 2 || o.runs == 0 {
@@ -195,9 +203,7 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     let mut rng = ChaCha8Rng::seed_from_u64(o.seed);
     let mut ids: Vec<(&String, &Vec<PathBuf>)> = lfw.people.iter().filter(|(_, v)| v.len() >= 2).collect();
     if let Some(keep) = &o.identities {
-        if let Some(missing) = keep.iter().find(|n| !lfw.people.contains_key(*n)) {
-            return Err(EvalError::Invalid(format!("privacy: identity {missing:?} is not in LFW")));
-        }
+        check_identities(lfw, keep)?;
         ids.retain(|(n, _)| keep.contains(n));
         if ids.is_empty() {
             return Err(EvalError::Invalid("privacy: none of the given identities has 2 or more photos".into()));

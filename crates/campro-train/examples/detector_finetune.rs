@@ -4,9 +4,9 @@
 //! with `campro eval utility params/identity.json --person-detector MANIFEST --limit IMAGES`.
 
 use campro_train::detection::yolox_loss;
-use campro_train::persons::PersonSet;
+use campro_train::persons::{detector_input, PersonSet};
 use campro_train::yolox::Yolox;
-use candle_core::{Device, Tensor};
+use candle_core::Device;
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use std::path::PathBuf;
 
@@ -25,8 +25,7 @@ fn main() -> anyhow::Result<()> {
     for step in 0..steps {
         let idx: Vec<usize> = (0..4).map(|k| (step * 4 + k) % set.len()).collect();
         let b = set.batch(&idx, &dev)?;
-        let x = (Tensor::cat(&[b.x.narrow(1, 2, 1)?, b.x.narrow(1, 1, 1)?, b.x.narrow(1, 0, 1)?], 1)? * 255.0)?;
-        let (l, parts) = yolox_loss(&det.forward(&x)?, size, size, &b.boxes)?;
+        let (l, parts) = yolox_loss(&det.forward(&detector_input(&b.x, &b.mask)?)?, size, size, &b.boxes)?;
         adam.step(&l.backward()?)?;
         println!("step {step}: L_det {:.3} (iou {:.3} obj {:.3} cls {:.3}, {} positives)", l.to_scalar::<f32>()?, parts.iou, parts.obj, parts.cls, parts.positives);
     }

@@ -3,7 +3,7 @@
 //! fit, top-left, padding 114), with their boxes in canvas pixels.
 
 use campro_eval::data::{coco_person, read_rgb8, CocoImage};
-use campro_eval::geometry::letterbox;
+use campro_eval::geometry::{letterbox, letterbox_size};
 use candle_core::{Device, Tensor};
 use rayon::prelude::*;
 use std::path::Path;
@@ -53,9 +53,8 @@ impl PersonSet {
                 let img = read_rgb8(&im.path)?;
                 let scale = (s as f64 / img.width() as f64).min(s as f64 / img.height() as f64);
                 let canvas = letterbox(&img, s as u32, s as u32, scale, PAD);
-                // The same rounding as `letterbox`.
-                let sw = ((img.width() as f64 * scale).round() as usize).clamp(1, s);
-                let sh = ((img.height() as f64 * scale).round() as usize).clamp(1, s);
+                let (sw, sh) = letterbox_size(img.dimensions(), s as u32, s as u32, scale);
+                let (sw, sh) = (sw as usize, sh as usize);
                 let mut x = vec![0f32; 3 * s * s];
                 for (k, p) in canvas.pixels().enumerate() {
                     for c in 0..3 {

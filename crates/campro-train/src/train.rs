@@ -129,6 +129,17 @@ impl ProxyHead {
     }
 }
 
+/// The next `n` of `pool`, drawn epoch by epoch: `order` holds what is left of the current
+/// shuffled epochs and is refilled with a fresh shuffle of `pool` when it runs short.
+fn draw(order: &mut Vec<usize>, pool: &[usize], n: usize, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<usize> {
+    if order.len() < n {
+        let mut fresh = pool.to_vec();
+        fresh.shuffle(rng);
+        order.extend(fresh);
+    }
+    order.drain(..n.min(order.len())).collect()
+}
+
 /// Stops a diverging run at the first non-finite loss, before it reaches the parameters.
 fn finite(what: &str, v: f64) -> Result<(), TrainError> {
     if v.is_finite() {
@@ -189,7 +200,8 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     // by the face selection and the checkpoint file): one backbone pass over every face.
     let ckpt_len = std::fs::metadata(&cfg.attacker.checkpoint).map_or(0, |m| m.len());
     let key = crate::faces::fnv(&format!("{}|{}|{ckpt_len}", serde_json::to_string(&sel).expect("selection serialises"), cfg.attacker.checkpoint.display()));
-    let means_file = cfg.data.cache.join(format!("means-{key:016x}.safetensors"));
+    let means_name = format!("means-{key:016x}.safetensors");
+    let means_file = cfg.data.cache.join(&means_name);
     let cached = candle_core::safetensors::load(&means_file, &dev).ok().and_then(|mut t| t.remove("means")).filter(|m| m.dims() == [classes, EMBEDDING]);
     let means = match cached {
         Some(m) => m,
@@ -204,7 +216,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             }
             let m = Tensor::from_vec(sums.concat(), (classes, EMBEDDING), &dev)?;
             // A cache that cannot be written only costs the next run this pass.
-            let _ = crate::checkpoint::write_tensors(&cfg.data.cache, means_file.file_name().expect("a name").to_str().expect("ascii"), &[("means".to_string(), m.clone())].into());
+            let _ = crate::checkpoint::write_tensors(&cfg.data.cache, &means_name, &[("means".to_string(), m.clone())].into());
             m
         }
     };
@@ -247,18 +259,11 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         Some((_, det)) if cfg.detector.lr > 0.0 => Some(AdamW::new(det.vars(), ParamsAdamW { lr: cfg.detector.lr, weight_decay: 0.0, ..Default::default() })?),
         _ => None,
     };
-    let mut person_order: Vec<usize> = Vec::new();
+    let (mut person_order, all_people): (Vec<usize>, Vec<usize>) = (Vec::new(), (0..utility.as_ref().map_or(0, |(set, _)| set.len())).collect());
     // Reseeded from the round on resume (see `checkpoint`).
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ ((first_round as u64 - 1) << 32));
     let mut order: Vec<usize> = Vec::new();
-    let mut next_batch = |rng: &mut rand_chacha::ChaCha8Rng| -> Vec<usize> {
-        if order.len() < cfg.data.batch {
-            let mut fresh = train.clone();
-            fresh.shuffle(rng);
-            order.extend(fresh);
-        }
-        order.drain(..cfg.data.batch.min(order.len())).collect()
-    };
+    let mut next_batch = |rng: &mut rand_chacha::ChaCha8Rng| draw(&mut order, &train, cfg.data.batch, rng);
     let check_accuracy = |through_camera: bool| -> candle_core::Result<f64> {
         let mut hits = 0.0;
         for chunk in check.chunks(64) {
@@ -306,13 +311,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             lns = loss.to_scalar::<f32>()? as f64;
             finite("privacy loss", lns)?;
             if let Some((set, det)) = &utility {
-                if person_order.len() < cfg.detector.batch {
-                    let mut fresh: Vec<usize> = (0..set.len()).collect();
-                    fresh.shuffle(&mut rng);
-                    person_order.extend(fresh);
-                }
-                let idx: Vec<usize> = person_order.drain(..cfg.detector.batch.min(person_order.len())).collect();
-                let pb = set.batch(&idx, &dev)?;
+                let pb = set.batch(&draw(&mut person_order, &all_people, cfg.detector.batch, &mut rng), &dev)?;
                 let head_out = det.forward(&detector_input(&cam.forward(&pb.x)?, &pb.mask)?)?;
                 let (l, _) = crate::detection::yolox_loss(&head_out, set.size, set.size, &pb.boxes)?;
                 ldet = l.to_scalar::<f32>()? as f64;

@@ -225,8 +225,8 @@ fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<priva
     let lfw_dir = a.lfw.clone().unwrap_or_else(|| c.shared().join("data/lfw"));
     let lfw = data::Lfw::open(&lfw_dir).with_context(|| "reading LFW (set --lfw or --shared)")?;
     let identities = a.identities.as_deref().map(read_identities).transpose()?;
-    if let Some(missing) = identities.iter().flatten().find(|n| !lfw.people.contains_key(*n)) {
-        bail!("{}: identity {missing:?} is not in LFW", a.identities.as_ref().expect("read").display());
+    if let (Some(names), Some(file)) = (&identities, &a.identities) {
+        privacy::check_identities(&lfw, names).with_context(|| file.display().to_string())?;
     }
     let fm = face_models(a, &c.models_dir())?;
     let o = PrivacyOptions {

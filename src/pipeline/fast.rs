@@ -68,13 +68,14 @@ pub struct Exact8<'a> {
     simd: Option<avx512::Kernel>,
 }
 
-/// Pixels of one [`Exact8::run`] that left the block engine.
+/// Pixels of one [`Exact8::run`] redone by the f64 reference.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Fallbacks {
-    /// Flagged by the AVX-512 engine (near a rounding boundary), redone by the tables.
-    pub to_tables: usize,
-    /// Redone by the f64 reference (ambiguous in the tables as well).
-    pub to_reference: usize,
+    /// Flagged by the AVX-512 engine (a value within its error bound of a rounding
+    /// boundary).
+    pub flagged: usize,
+    /// Outside whole blocks (or without the engine): ambiguous in the scalar tables.
+    pub ambiguous: usize,
 }
 
 /// Which engine [`Exact8::run`] uses for whole blocks.
@@ -163,8 +164,7 @@ impl<'a> Exact8<'a> {
         if (e[0] | e[1] | e[2]) & AMBIGUOUS == 0 {
             return ([e[0] as u8, e[1] as u8, e[2] as u8], false);
         }
-        let v = self.reference.pixel(rgb.map(u16::from));
-        (v.map(|x| quantize(x, 255.0) as u8), true)
+        (self.exact(rgb), true)
     }
 
     /// Interleaved RGB8 in and out; `src.len() == dst.len()`, a multiple of 3. Uses
@@ -172,32 +172,28 @@ impl<'a> Exact8<'a> {
     pub fn run(&self, src: &[u8], dst: &mut [u8]) -> Fallbacks {
         assert_eq!(src.len(), dst.len(), "source and destination sample counts differ");
         let mut fell = Fallbacks::default();
-        let mut slow = 0;
         #[allow(unused_mut)]
         let (mut src, mut dst) = (src, dst);
         #[cfg(target_arch = "x86_64")]
         if let Some(k) = &self.simd {
             let whole = src.len() / avx512::BLOCK_BYTES * avx512::BLOCK_BYTES;
-            let mut flagged = Vec::new();
-            k.run(&src[..whole], &mut dst[..whole], &mut flagged);
-            // Flagged pixels take the scalar tables, and the reference where those are
-            // ambiguous too.
-            for &i in &flagged {
-                let px = &src[3 * i..3 * i + 3];
-                let (o, f) = self.pixel_flagged([px[0], px[1], px[2]]);
-                dst[3 * i..3 * i + 3].copy_from_slice(&o);
-                slow += f as usize;
-            }
-            fell.to_tables = flagged.len();
+            // Flagged pixels go straight to the reference: most of them sit in ambiguous
+            // table cells too (both are near a rounding boundary).
+            fell.flagged = k.run(&src[..whole], &mut dst[..whole], |px| self.exact(px));
             (src, dst) = (&src[whole..], &mut dst[whole..]);
         }
         for (s, d) in src.chunks_exact(3).zip(dst.chunks_exact_mut(3)) {
             let (o, f) = self.pixel_flagged([s[0], s[1], s[2]]);
-            slow += f as usize;
+            fell.ambiguous += f as usize;
             d.copy_from_slice(&o);
         }
-        fell.to_reference = slow;
         fell
+    }
+
+    /// One pixel by the f64 reference, rounded.
+    #[inline]
+    fn exact(&self, rgb: [u8; 3]) -> [u8; 3] {
+        self.reference.pixel(rgb.map(u16::from)).map(|x| quantize(x, 255.0) as u8)
     }
 
     /// [`Exact8::run`] that reuses the previous output while the input pixel repeats

@@ -97,7 +97,7 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
     exact.run(&sample, &mut sample_out);
     let e = err8(&sample_out, &want);
     let px = (w * h) as f64 / 100.0;
-    let fb = format!("{}, {:?} engine; {:.2}% px flagged to tables, {:.3}% to reference", ratio(t), exact.engine(), fell.to_tables as f64 / px, fell.to_reference as f64 / px);
+    let fb = format!("{}, {:?} engine; {:.2}% px flagged to the reference, {:.3}% ambiguous in the tables", ratio(t), exact.engine(), fell.flagged as f64 / px, fell.ambiguous as f64 / px);
     rows.push(Row { group: "image", name: "exact 8-bit, 1 thread (default)".into(), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: fb });
     let scalar = Exact8::new(params).scalar();
     let t = median(runs, || {

@@ -8,25 +8,28 @@
 //!   blend), and the bytes are re-assembled into f32 lanes by unpacks.
 //! - Matrix: `x = CCM · (k - 1)` in f32 by FMA, clamped to [0, k - 1]: the curve input
 //!   in segment units. (Or `k - 1 - x`, with the curve reversed; see below.)
-//! - Curve: uniform knots only (k <= 32): `floor` picks the segment, the value and slope
-//!   (pre-scaled by 255) come from two `vpermi2ps`, one FMA evaluates.
+//! - Curve: uniform knots only (k <= 32): `floor` picks the segment, its slope and
+//!   intercept (pre-scaled by 255, so `w = b_s + x · a_s` is the curve in output LSB)
+//!   come from two `vpermi2ps`, one FMA evaluates.
 //! - Output: round to nearest. A lane whose value lies within the path's error bound `E`
-//!   of a rounding boundary is flagged, and its pixel is redone by the f64 reference, so
-//!   the result is bit-identical to the reference.
+//!   of a rounding boundary is flagged, and its pixel is redone by the f64 reference
+//!   within the same block (its bytes are still in L1), so the result is bit-identical to
+//!   the reference.
 //! - Clipped lanes: `x = k - 1` exactly (the matrix output clipped at that end) reads
-//!   table slot `k - 1`, which holds the rounded code of the curve's end if that code is
-//!   the same over the last `E`-wide stretch of input, so a curve ending exactly on a
-//!   rounding tie (y = 0.5) does not send every clipped pixel to the reference. The
+//!   table slot `k - 1` (slope 0), which holds the rounded code of the curve's end if that
+//!   code is the same over the last `E`-wide stretch of input, so a curve ending exactly
+//!   on a rounding tie (y = 0.5) does not send every clipped pixel to the reference. The
 //!   orientation (x or `k - 1 - x`) is chosen so that this slot serves the end that
 //!   needs it.
 //!
-//! `E` (output LSB) = `255 · (L · 5u · (S + 1) + 3u)`, widened by 1% (u = 2^-24; S the
-//! largest absolute row sum of the CCM; L the curve's largest slope): the matrix sum
-//! carries at most `5u · (S + 1)` in curve-input units (f32 CCM and degamma entries, three
-//! FMA roundings, partial sums bounded by `S + 1` with the reversed start), which the
-//! curve amplifies by L; the scaled knot value, the scaled slope and the final FMA each
-//! round once (at most `255u` each). `floor` and the segment fraction `x - floor(x)` are
-//! exact, so the segment choice adds nothing (the curve is continuous).
+//! `E` (output LSB) = `255 · L · 5u · (S + 1) + u · (2 · 255 + 2 · (k - 1) · D)`, widened
+//! by 1% (u = 2^-24; S the largest absolute row sum of the CCM; L the curve's largest
+//! slope; D the largest knot step in LSB): the matrix sum carries at most `5u · (S + 1)` in
+//! curve-input units (f32 CCM and degamma entries, three FMA roundings, partial sums
+//! bounded by `S + 1` with the reversed start), which the curve amplifies by L; the
+//! intercept (|b| <= 255 + (k - 1) · D) and the slope each round once, as does the final
+//! FMA (|w| <= 255). `floor` is exact and the curve continuous, so the segment choice
+//! adds nothing.
 
 use crate::params::Params;
 use std::arch::x86_64::*;
@@ -48,9 +51,12 @@ pub(super) fn supported() -> bool {
 pub(super) fn error_lsb(params: &Params) -> f64 {
     let u = f32::EPSILON as f64 / 2.0;
     let s = crate::ccm::norm_inf(&params.ccm);
-    let l = params.tone_curve.max_slope();
+    let c = &params.tone_curve;
+    let l = c.max_slope();
+    let top = (c.len() - 1) as f64;
+    let d = 255.0 * c.y().windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
     // 1e-12 · (1 + L·S) covers the f64 reference's own rounding.
-    255.0 * (l * 5.0 * u * (s + 1.0) + 3.0 * u) * 1.01 + 1e-12 * (1.0 + l * s) * 255.0
+    (255.0 * l * 5.0 * u * (s + 1.0) + u * (2.0 * 255.0 + 2.0 * top * d)) * 1.01 + 1e-12 * (1.0 + l * s) * 255.0
 }
 
 /// The same bound in curve-input units (the matrix output's error).
@@ -71,9 +77,10 @@ pub(super) struct Kernel {
     start: f32,
     /// `k - 1`.
     top: f32,
-    /// `255 · y_i` (of the curve in this orientation); slot `k - 1` holds the end's code
-    /// (or code + 0.5, always flagged, when the end is ambiguous); padded after.
-    value: [f32; 32],
+    /// `255 · y_i - i · slope_i` (of the curve in this orientation): segment i's line at
+    /// x = 0; slot `k - 1` holds the end's code (or code + 0.5, always flagged, when the
+    /// end is ambiguous); padded after.
+    intercept: [f32; 32],
     /// `255 · (y_{i+1} - y_i)`, zero from `k - 1` on.
     slope: [f32; 32],
     /// A lane with `|w - round(w)| > margin` is within `E` of a rounding boundary.
@@ -124,13 +131,14 @@ impl Kernel {
                 m[3 * i + j] = (sign * v * top) as f32;
             }
         }
-        let mut value = [0f32; 32];
+        let mut intercept = [0f32; 32];
         let mut slope = [0f32; 32];
         for i in 0..k - 1 {
-            value[i] = (255.0 * ys[i]) as f32;
-            slope[i] = (255.0 * (ys[i + 1] - ys[i])) as f32;
+            let a = 255.0 * (ys[i + 1] - ys[i]);
+            intercept[i] = (255.0 * ys[i] - i as f64 * a) as f32;
+            slope[i] = a as f32;
         }
-        value[k - 1..].fill(match end {
+        intercept[k - 1..].fill(match end {
             Some(q) => q as f32,
             None => (255.0 * ys[k - 1]).floor() as f32 + 0.5,
         });
@@ -158,21 +166,22 @@ impl Kernel {
             }
         }
         let start = if reverse { top as f32 } else { 0.0 };
-        Some(Self { planes, m, start, top: top as f32, value, slope, margin: (0.5 - e) as f32, split, merge })
+        Some(Self { planes, m, start, top: top as f32, intercept, slope, margin: (0.5 - e) as f32, split, merge })
     }
 
-    /// Runs whole blocks: `src.len() == dst.len()`, a multiple of [`BLOCK_BYTES`].
-    /// Appends the index of every pixel left for the reference to `flagged`; those
-    /// pixels' output bytes are to be overwritten by the caller.
-    pub(super) fn run(&self, src: &[u8], dst: &mut [u8], flagged: &mut Vec<usize>) {
+    /// Runs whole blocks: `src.len() == dst.len()`, a multiple of [`BLOCK_BYTES`]. Each
+    /// flagged pixel's output is `exact(its input)`, computed as its block is done.
+    /// Returns how many were flagged.
+    pub(super) fn run(&self, src: &[u8], dst: &mut [u8], exact: impl Fn([u8; 3]) -> [u8; 3]) -> usize {
         assert!(src.len() == dst.len() && src.len().is_multiple_of(BLOCK_BYTES));
         // SAFETY: a Kernel exists only where `supported()` held, so the CPU has every
         // feature `blocks` is compiled for.
-        unsafe { self.blocks(src, dst, flagged) }
+        unsafe { self.blocks(src, dst, &exact) }
     }
 
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vbmi")]
-    fn blocks(&self, src: &[u8], dst: &mut [u8], flagged: &mut Vec<usize>) {
+    fn blocks(&self, src: &[u8], dst: &mut [u8], exact: &dyn Fn([u8; 3]) -> [u8; 3]) -> usize {
+        let mut flagged = 0;
         // SAFETY (all loads and stores below): every pointer is into `self`'s arrays of
         // 64 bytes / 16 f32, or into a 192-byte chunk of `src` / `dst`.
         let ld = |b: &[u8; 64]| unsafe { _mm512_loadu_si512(b.as_ptr().cast()) };
@@ -181,10 +190,10 @@ impl Kernel {
         let merge = self.merge.map(|s| s.map(|v| ld(&v)));
         let m = self.m.map(|v| _mm512_set1_ps(v));
         let (zero, start, top, margin) = (_mm512_setzero_ps(), _mm512_set1_ps(self.start), _mm512_set1_ps(self.top), _mm512_set1_ps(self.margin));
-        let (v0, v1) = unsafe { (_mm512_loadu_ps(self.value.as_ptr()), _mm512_loadu_ps(self.value[16..].as_ptr())) };
+        let (v0, v1) = unsafe { (_mm512_loadu_ps(self.intercept.as_ptr()), _mm512_loadu_ps(self.intercept[16..].as_ptr())) };
         let (s0, s1) = unsafe { (_mm512_loadu_ps(self.slope.as_ptr()), _mm512_loadu_ps(self.slope[16..].as_ptr())) };
 
-        for (blk, (si, di)) in src.chunks_exact(BLOCK_BYTES).zip(dst.chunks_exact_mut(BLOCK_BYTES)).enumerate() {
+        for (si, di) in src.chunks_exact(BLOCK_BYTES).zip(dst.chunks_exact_mut(BLOCK_BYTES)) {
             let mut raw = [_mm512_setzero_si512(); 3];
             for (r, v) in raw.iter_mut().enumerate() {
                 *v = unsafe { _mm512_loadu_si512(si[64 * r..].as_ptr().cast()) };
@@ -223,10 +232,9 @@ impl Kernel {
                     let s = _mm512_fmadd_ps(m[3 * c + 2], lin[2][g], s);
                     let x = _mm512_min_ps(_mm512_max_ps(s, zero), top);
                     let seg = _mm512_cvttps_epi32(x);
-                    let frac = _mm512_reduce_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(x);
-                    let y0 = _mm512_permutex2var_ps(v0, seg, v1);
-                    let dy = _mm512_permutex2var_ps(s0, seg, s1);
-                    let w = _mm512_fmadd_ps(frac, dy, y0);
+                    let b = _mm512_permutex2var_ps(v0, seg, v1);
+                    let a = _mm512_permutex2var_ps(s0, seg, s1);
+                    let w = _mm512_fmadd_ps(x, a, b);
                     let off = _mm512_reduce_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(w);
                     worst = _mm512_range_ps::<0b1011>(worst, off);
                     q[c][g] = _mm512_cvtps_epi32(w);
@@ -246,20 +254,22 @@ impl Kernel {
                 unsafe { _mm512_storeu_si512(di[64 * r..].as_mut_ptr().cast(), out) };
             }
             if flags.iter().any(|&f| f != 0) {
+                // Lane l of group g is pixel 16·(l / 4) + 4·g + l % 4.
                 let mut any = 0u64;
                 for (g, &f) in flags.iter().enumerate() {
                     for l in 0..16 {
-                        if f >> l & 1 != 0 {
-                            any |= 1 << (16 * (l / 4) + 4 * g + l % 4);
-                        }
+                        any |= ((f >> l & 1) as u64) << (16 * (l / 4) + 4 * g + l % 4);
                     }
                 }
+                flagged += any.count_ones() as usize;
                 while any != 0 {
-                    flagged.push(blk * BLOCK + any.trailing_zeros() as usize);
+                    let i = 3 * any.trailing_zeros() as usize;
+                    di[i..i + 3].copy_from_slice(&exact([si[i], si[i + 1], si[i + 2]]));
                     any &= any - 1;
                 }
             }
         }
+        flagged
     }
 }
 

@@ -394,6 +394,9 @@ fn train_writes_params_and_detector_that_eval_reads() {
     campro().args(["eval", "utility"]).arg(&p).args(["--own-detector", "--limit", "2", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
     let md = std::fs::read_to_string(out.join("utility.md")).unwrap();
     assert!(md.contains("yolox-nano; p each with its own fine-tuned detector"), "{md}");
+    assert!(md.contains("2 images (those held out of detector fine-tuning: COCO id % 5 == 0)"), "{md}");
+    let scored: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("utility.json")).unwrap()).unwrap();
+    assert_eq!(scored["options"]["held_out"], true);
     let rows: Vec<&str> = md.lines().filter(|l| l.starts_with("| raw") || l.starts_with("| p ")).collect();
     assert_eq!(rows.len(), 2, "{md}");
     assert!(rows[0].starts_with("| raw"));
@@ -402,4 +405,43 @@ fn train_writes_params_and_detector_that_eval_reads() {
     let names = dir.path().join("names.txt");
     std::fs::write(&names, "# two people\nNo_Such_Person\n").unwrap();
     fails_with(campro().args(["eval", "privacy"]).arg(&p).arg("--identities").arg(&names).args(["--shared"]).arg(&shared).arg("-o").arg(&out), "\"No_Such_Person\" is not in LFW");
+}
+
+#[test]
+fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
+    let Some(models) = common::shared("models/yolox_nano.onnx") else { return };
+    let Some(coco) = common::shared("data/coco-person/instances_person.json") else { return };
+    let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
+    let dir = tempfile::tempdir().unwrap();
+    let q = |p: &std::path::Path| format!("{:?}", p.to_str().unwrap());
+    let cfg = format!("seed = 3\n[detector]\nmodel = {}\ndata = {}\nsize = 128\nbatch = 2\nmax_images = 2\n", q(&models), q(coco.parent().unwrap()));
+    std::fs::write(dir.path().join("ft.toml"), cfg).unwrap();
+    let p = dir.path().join("inv.json");
+    std::fs::copy(env!("CARGO_MANIFEST_DIR").to_string() + "/params/campro-omega-1.json", &p).unwrap();
+    let before: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+    let run = || {
+        let mut c = campro();
+        c.arg("finetune-detector").arg(&p).arg("--config").arg(dir.path().join("ft.toml")).args(["--steps", "2", "--log"]).arg(dir.path().join("ft.csv"));
+        c
+    };
+    run().assert().success();
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+    assert_eq!(v["ccm"], before["ccm"], "the camera is not touched");
+    let d = &v["provenance"]["detector"];
+    assert_eq!((d["onnx"].as_str(), d["manifest"].as_str()), (Some("inv.detector.onnx"), Some("inv.detector.json")));
+    assert_eq!((d["finetune"]["steps"].as_u64(), d["finetune"]["images"].as_u64(), d["finetune"]["seed"].as_u64()), (Some(2), Some(2), Some(3)));
+    assert!(d["held_out_images"].as_str().unwrap().contains("% 5 == 0"));
+    assert_eq!(std::fs::read_to_string(dir.path().join("ft.csv")).unwrap().lines().count(), 3);
+    // Existing outputs are kept unless --force.
+    fails_with(&mut run(), "exists (use --force");
+    run().arg("--force").assert().success();
+    let out = dir.path().join("ev");
+    campro().args(["eval", "utility"]).arg(&p).args(["--own-detector", "--limit", "2", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
+    assert!(std::fs::read_to_string(out.join("utility.md")).unwrap().contains("inv each with its own fine-tuned detector"));
+    // A curve with uneven knots cannot drive the optimiser's camera.
+    let uneven = dir.path().join("uneven.json");
+    let mut u = before.clone();
+    u["tone_curve"] = serde_json::json!({ "x": [0.0, 0.3, 1.0], "y": [0.0, 0.5, 1.0] });
+    std::fs::write(&uneven, u.to_string()).unwrap();
+    fails_with(campro().arg("finetune-detector").arg(&uneven).arg("--config").arg(dir.path().join("ft.toml")).args(["--steps", "1"]), "tone_curve: the optimiser's camera needs evenly spaced knots");
 }

@@ -103,6 +103,17 @@ pub fn parse_pairs(text: &str, path: &Path, find: impl Fn(&str, usize) -> Option
     Ok((pairs, skipped))
 }
 
+/// Every this many COCO ids, one is held out of detector fine-tuning: an image is held out
+/// iff its id is a multiple of it (about 20% of the set). `campro train` and
+/// `campro finetune-detector` never train on these; `eval utility --held-out` (implied by
+/// `--own-detector`) scores only them.
+pub const HOLDOUT_EVERY: u64 = 5;
+
+/// Whether the COCO image `id` is held out of detector fine-tuning (see [`HOLDOUT_EVERY`]).
+pub fn detector_held_out(id: u64) -> bool {
+    id.is_multiple_of(HOLDOUT_EVERY)
+}
+
 /// One COCO image with its person boxes.
 pub struct CocoImage {
     pub id: u64,

@@ -148,8 +148,11 @@ pub fn write_utility(r: &UtilityReport, dir: &Path) -> Result<()> {
     write_atomic(&dir.join("utility.json"), &json(r))?;
     let mut c = String::from("image_type,AP,AP50,AP75,precision,recall,F1,confidence,ground_truths,detections\n");
     let mut m = format!(
-        "# Utility: person detection ({}) on COCO\n\n{} images; precision, recall and F1 at confidence {} and IoU 0.5.\n\n| image type | AP | AP@0.5 | AP@0.75 | precision | recall | F1 |\n|---|---|---|---|---|---|---|\n",
-        r.detector, r.images, r.options.confidence
+        "# Utility: person detection ({}) on COCO\n\n{} images{}; precision, recall and F1 at confidence {} and IoU 0.5.\n\n| image type | AP | AP@0.5 | AP@0.75 | precision | recall | F1 |\n|---|---|---|---|---|---|---|\n",
+        r.detector,
+        r.images,
+        if r.options.held_out { format!(" (those held out of detector fine-tuning: COCO id % {} == 0)", crate::data::HOLDOUT_EVERY) } else { String::new() },
+        r.options.confidence
     );
     for x in &r.rows {
         let t = &x.metrics;

@@ -14,11 +14,14 @@ pub struct UtilityOptions {
     pub limit: Option<usize>,
     /// Confidence at which precision, recall and F1 are reported.
     pub confidence: f64,
+    /// Only the images held out of detector fine-tuning ([`crate::data::detector_held_out`]),
+    /// before `limit`.
+    pub held_out: bool,
 }
 
 impl Default for UtilityOptions {
     fn default() -> Self {
-        Self { limit: None, confidence: 0.25 }
+        Self { limit: None, confidence: 0.25, held_out: false }
     }
 }
 
@@ -41,7 +44,8 @@ pub struct UtilityReport {
 /// Detects people in every image under every condition and scores them.
 pub fn evaluate(images: &[CocoImage], detector: &PersonDetector, name: &str, conds: &[Condition], o: &UtilityOptions) -> Result<UtilityReport> {
     let start = std::time::Instant::now();
-    let images = &images[..o.limit.unwrap_or(images.len()).min(images.len())];
+    let kept: Vec<&CocoImage> = images.iter().filter(|im| !o.held_out || crate::data::detector_held_out(im.id)).collect();
+    let images = &kept[..o.limit.unwrap_or(kept.len()).min(kept.len())];
     // dets[i][c]: detections of image i under condition c, as COCO [x, y, w, h].
     let dets: Vec<Vec<Vec<Scored>>> = crate::par_map_progress(images, "utility: detecting people", |im| {
         let img = read_rgb8(&im.path)?;

@@ -13,6 +13,7 @@ pub mod detection;
 pub mod config;
 pub mod dwconv;
 pub mod faces;
+pub mod finetune;
 pub mod mobilefacenet;
 pub mod persons;
 pub mod torch_legacy;

@@ -2,7 +2,7 @@
 //! letterboxed to the detector's training size the way the evaluation feeds YOLOX (scaled to
 //! fit, top-left, padding 114), with their boxes in canvas pixels.
 
-use campro_eval::data::{coco_person, read_rgb8, CocoImage};
+use campro_eval::data::{coco_person, detector_held_out, read_rgb8, CocoImage};
 use campro_eval::geometry::{letterbox, letterbox_size};
 use candle_core::{Device, Tensor};
 use rayon::prelude::*;
@@ -28,9 +28,11 @@ pub struct PersonSet {
 }
 
 impl PersonSet {
-    /// Opens `root` (the COCO person folder); `limit` keeps the first images by id.
+    /// Opens the training part of `root` (the COCO person folder): every image but those
+    /// held out for evaluation ([`detector_held_out`]); `limit` keeps the first by id.
     pub fn open(root: &Path, size: usize, limit: Option<usize>) -> campro_eval::Result<Self> {
         let mut images = coco_person(root)?;
+        images.retain(|im| !detector_held_out(im.id));
         images.truncate(limit.unwrap_or(usize::MAX));
         Ok(Self { images, size })
     }

@@ -131,7 +131,7 @@ impl ProxyHead {
 
 /// The next `n` of `pool`, drawn epoch by epoch: `order` holds what is left of the current
 /// shuffled epochs and is refilled with a fresh shuffle of `pool` when it runs short.
-fn draw(order: &mut Vec<usize>, pool: &[usize], n: usize, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<usize> {
+pub(crate) fn draw(order: &mut Vec<usize>, pool: &[usize], n: usize, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<usize> {
     if order.len() < n {
         let mut fresh = pool.to_vec();
         fresh.shuffle(rng);
@@ -343,7 +343,8 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         "optimiser": "campro-train",
         "config": cfg,
         "data": { "classes": classes, "train_faces": train.len(), "check_faces": check.len(), "skipped_no_face": faces.skipped, "validation_identities": faces.validation,
-                  "person_images": utility.as_ref().map(|(s, _)| s.len()) },
+                  "person_images": utility.as_ref().map(|(s, _)| s.len()),
+                  "person_images_held_out": format!("COCO id % {} == 0 (never trained on)", campro_eval::data::HOLDOUT_EVERY) },
         "rounds": log.last().map_or(0, |r| r.round),
         "final": log.last(),
         "seconds": start.elapsed().as_secs_f64(),

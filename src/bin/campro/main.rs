@@ -3,6 +3,7 @@
 
 mod bench;
 mod eval;
+mod train;
 
 use anyhow::{anyhow, bail, Context, Result};
 use campro::ccm::{self, Mat3};
@@ -145,6 +146,28 @@ enum Cmd {
         #[arg(long)]
         resume: Option<PathBuf>,
         /// Replace existing output files.
+        #[arg(long)]
+        force: bool,
+    },
+    /// Fine-tune the person detector behind a parameter set's camera (the paper's utility
+    /// protocol), for `eval utility --own-detector`: writes PARAMS.detector.onnx and
+    /// PARAMS.detector.json beside PARAMS and names them in its provenance.
+    FinetuneDetector {
+        /// The parameter set (JSON); its provenance gains `detector`.
+        params: PathBuf,
+        /// TOML configuration whose `[detector]` and `seed` are used (default: the paper's).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Detector steps of `detector.batch` images.
+        #[arg(long, default_value_t = 500)]
+        steps: usize,
+        /// Stop after this many seconds even if steps remain.
+        #[arg(long, default_value_t = f64::INFINITY)]
+        seconds: f64,
+        /// The fine-tuning log (CSV, one line per step).
+        #[arg(long)]
+        log: Option<PathBuf>,
+        /// Replace existing detector files and log.
         #[arg(long)]
         force: bool,
     },
@@ -302,8 +325,9 @@ fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
         Cmd::Eval { what } => eval::run(what),
         Cmd::Train { config, output, log, checkpoints, resume, force } => {
-            train(&config, &output, log.as_deref(), &campro_train::train::RunOptions { checkpoints, resume }, force)
+            train::train(&config, &output, log.as_deref(), &campro_train::train::RunOptions { checkpoints, resume }, force)
         }
+        Cmd::FinetuneDetector { params, config, steps, seconds, log, force } => train::finetune_detector(&params, config.as_deref(), steps, seconds, log.as_deref(), force),
         Cmd::Validate { params } => {
             for p in params {
                 let v = load_params(&p)?;
@@ -420,7 +444,7 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
-fn load_params(path: &Path) -> Result<Params> {
+pub(crate) fn load_params(path: &Path) -> Result<Params> {
     Params::from_file(path).map_err(|e| anyhow!("{}: {e}", path.display()))
 }
 
@@ -452,91 +476,7 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
 
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename,
 /// so a reader never sees a partial file. Refuses to replace `path` unless `force`.
-fn train(config: &Path, output: &Path, log: Option<&Path>, opts: &campro_train::train::RunOptions, force: bool) -> Result<()> {
-    let cfg = campro_train::config::Config::load(config)?;
-    for p in std::iter::once(output).chain(log) {
-        if p.exists() && !force {
-            bail!("{} exists (use --force to replace it)", p.display());
-        }
-    }
-    let pb = indicatif::ProgressBar::new(cfg.budget.rounds as u64);
-    pb.set_style(indicatif::ProgressStyle::with_template("train [{bar:30}] round {pos}/{len} {elapsed_precise} eta {eta} {msg}").unwrap().progress_chars("=> "));
-    let out = campro_train::train::run(&cfg, opts, |r| {
-        pb.set_position(r.round as u64);
-        pb.set_message(format!("L_ns {:.4} L_det {:.3} attacker acc {:.2}", r.privacy_loss, r.detection_loss, r.attacker_accuracy));
-        if let Some(c) = r.check_accuracy {
-            let line = format!("round {}: check accuracy {:.3} (attacker CE {:.3}, L_ns {:.4}, L_det {:.3}, {:.0} s)", r.round, c, r.attacker_ce, r.privacy_loss, r.detection_loss, r.seconds);
-            // A hidden bar (not a terminal: logs, CI) prints nothing: the line goes to stderr.
-            if pb.is_hidden() {
-                eprintln!("{line}");
-            } else {
-                pb.println(line);
-            }
-        }
-    })?;
-    pb.finish_and_clear();
-    if let Some(l) = log {
-        let mut csv = String::from("round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy\n");
-        for r in &out.log {
-            csv += &format!(
-                "{},{:.3},{:.6},{:.4},{:.6},{:.6},{}\n",
-                r.round,
-                r.seconds,
-                r.attacker_ce,
-                r.attacker_accuracy,
-                r.privacy_loss,
-                r.detection_loss,
-                r.check_accuracy.map_or(String::new(), |c| format!("{c:.4}"))
-            );
-        }
-        write_atomic(l, csv.as_bytes(), force)?;
-        let (losses, acc) = campro_train::train::plot_log(&out.log);
-        let stem = l.with_extension("");
-        write_atomic(&PathBuf::from(format!("{}-losses.svg", stem.display())), losses.as_bytes(), true)?;
-        write_atomic(&PathBuf::from(format!("{}-accuracy.svg", stem.display())), acc.as_bytes(), true)?;
-    }
-    let curve = campro::tone_curve::ToneCurve::uniform(out.curve.clone())?;
-    let mut params = Params::new(out.ccm, curve, out.gamma)?;
-    params.name = output.file_stem().map_or("campro-trained".into(), |s| s.to_string_lossy().into_owned());
-    params.description = format!(
-        "learnt by campro train from {} ({}{})",
-        config.display(),
-        if cfg.protector.omega > 0.0 { format!("privacy and utility players, omega {}", cfg.protector.omega) } else { "privacy player".into() },
-        if cfg.protector.protector_only { ", protector only" } else { "" }
-    );
-    params.provenance = out.provenance.clone();
-    if let Some(det) = &out.detector {
-        // The fine-tuned detector beside the parameters, with a manifest `eval utility
-        // --person-detector` reads (the bundled one with the new file).
-        let onnx = output.with_extension("detector.onnx");
-        let manifest_path = output.with_extension("detector.json");
-        for p in [&onnx, &manifest_path] {
-            if p.exists() && !force {
-                bail!("{} exists (use --force to replace it)", p.display());
-            }
-        }
-        det.save_onnx(&onnx)?;
-        let mut m: serde_json::Value = serde_json::from_str(eval::YOLOX_MANIFEST)?;
-        let file = onnx.file_name().expect("a file name").to_string_lossy().into_owned();
-        m["name"] = format!("yolox-nano fine-tuned ({})", params.name).into();
-        m["file"] = file.clone().into();
-        write_atomic(&manifest_path, (serde_json::to_string_pretty(&m)? + "\n").as_bytes(), force)?;
-        params.provenance.insert("detector".into(), serde_json::json!({ "onnx": file, "manifest": manifest_path.file_name().map(|f| f.to_string_lossy().into_owned()) }));
-    }
-    write_atomic(output, params.to_json().as_bytes(), force)?;
-    eprintln!(
-        "trained {} rounds on {} classes ({} faces, {} aside) in {:.0} s -> {}",
-        out.log.last().map_or(0, |r| r.round),
-        out.classes,
-        out.train_faces,
-        out.check_faces,
-        out.seconds,
-        output.display()
-    );
-    Ok(())
-}
-
-fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()> {
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()> {
     if !force && path.exists() {
         bail!("{} exists (use --force to overwrite)", path.display());
     }

@@ -1,0 +1,103 @@
+//! Fine-tunes the person detector for one fixed camera: the paper's utility protocol (its
+//! App. B: "we finetune the person detector ... for each method"), run after `campro train`
+//! or for any parameter set. YOLOX-Nano starts from its ONNX file and takes Adam steps on
+//! the detection loss ([`crate::detection::yolox_loss`]) over the training part of the COCO
+//! person set, epoch by epoch; the held-out images
+//! ([`campro_eval::data::detector_held_out`]) are never seen, so `eval utility
+//! --own-detector` scores on them alone.
+
+use crate::camera::Camera;
+use crate::config::DetectorConfig;
+use crate::detection::yolox_loss;
+use crate::persons::{detector_input, PersonSet};
+use crate::train::{draw, TrainError};
+use crate::yolox::Yolox;
+use candle_core::Device;
+use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+use rand::SeedableRng;
+
+/// The camera a detector is fine-tuned behind.
+#[derive(Debug, Clone)]
+pub enum Imaging {
+    /// Unprocessed sRGB (the images as stored).
+    Raw,
+    /// campro's desktop pipeline with these values: CCM, curve outputs at evenly spaced
+    /// knots, degamma exponent.
+    Camera { ccm: [[f64; 3]; 3], curve: Vec<f64>, gamma: f64 },
+}
+
+/// How long to fine-tune.
+#[derive(Debug, Clone)]
+pub struct FinetuneOptions {
+    /// Detector steps (each `batch` images).
+    pub steps: usize,
+    /// Stop after this many seconds even if steps remain.
+    pub seconds: f64,
+    /// Seed of the image order.
+    pub seed: u64,
+}
+
+/// One step of the log.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct StepRow {
+    pub step: usize,
+    pub seconds: f64,
+    /// `5·L_iou + L_obj + L_cls` of the batch, before the step.
+    pub loss: f64,
+    pub iou: f64,
+    pub obj: f64,
+    pub cls: f64,
+    pub positives: usize,
+}
+
+/// The fine-tuned detector and its log.
+pub struct Finetuned {
+    pub detector: Yolox,
+    pub log: Vec<StepRow>,
+    /// Training images available (the held-out ones excluded).
+    pub images: usize,
+}
+
+/// Fine-tunes `cfg.model` behind `imaging` with `cfg`'s data, size, batch and learning rate.
+pub fn run(imaging: &Imaging, cfg: &DetectorConfig, o: &FinetuneOptions, mut on_step: impl FnMut(&StepRow)) -> Result<Finetuned, TrainError> {
+    if cfg.lr <= 0.0 {
+        return Err(TrainError::Unsupported("detector.lr: must be > 0 to fine-tune".into()));
+    }
+    let dev = Device::Cpu;
+    let set = PersonSet::open(&cfg.data, cfg.size, cfg.max_images)?;
+    if set.is_empty() {
+        return Err(TrainError::Unsupported(format!("{}: no person images outside the held-out part", cfg.data.display())));
+    }
+    let camera = match imaging {
+        Imaging::Raw => None,
+        Imaging::Camera { ccm, curve, gamma } => Some(Camera::from_values(*ccm, curve, *gamma, &dev)?),
+    };
+    let det = Yolox::load(&cfg.model, &dev)?;
+    let mut adam = AdamW::new(det.vars(), ParamsAdamW { lr: cfg.lr, weight_decay: 0.0, ..Default::default() })?;
+    let pool: Vec<usize> = (0..set.len()).collect();
+    let mut order = Vec::new();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(o.seed);
+    let start = std::time::Instant::now();
+    let mut log = Vec::with_capacity(o.steps);
+    for step in 1..=o.steps {
+        if start.elapsed().as_secs_f64() >= o.seconds {
+            break;
+        }
+        let b = set.batch(&draw(&mut order, &pool, cfg.batch, &mut rng), &dev)?;
+        // The camera is fixed: its output is data here.
+        let x = match &camera {
+            Some(c) => c.forward(&b.x)?.detach(),
+            None => b.x.clone(),
+        };
+        let (loss, parts) = yolox_loss(&det.forward(&detector_input(&x, &b.mask)?)?, cfg.size, cfg.size, &b.boxes)?;
+        let l = loss.to_scalar::<f32>()? as f64;
+        if !l.is_finite() {
+            return Err(TrainError::Diverged(format!("detection loss is {l} at step {step}: lower detector.lr")));
+        }
+        adam.step(&loss.backward()?)?;
+        let row = StepRow { step, seconds: start.elapsed().as_secs_f64(), loss: l, iou: parts.iou, obj: parts.obj, cls: parts.cls, positives: parts.positives };
+        on_step(&row);
+        log.push(row);
+    }
+    Ok(Finetuned { detector: det, log, images: set.len() })
+}

@@ -1,0 +1,47 @@
+//! The detector's own split of the COCO person set and the post-hoc fine-tune behind a fixed
+//! camera (skipped without ../shared, required under CI=true).
+
+#[path = "../../../tests/common/shared.rs"]
+mod shared;
+
+use campro_eval::data::{coco_person, detector_held_out};
+use campro_train::config::DetectorConfig;
+use campro_train::finetune::{run, FinetuneOptions, Imaging};
+use campro_train::persons::PersonSet;
+
+#[test]
+fn training_never_sees_the_held_out_images() {
+    let Some(coco) = shared::shared("data/coco-person/instances_person.json") else { return };
+    let root = coco.parent().unwrap();
+    let all = coco_person(root).unwrap();
+    let set = PersonSet::open(root, 320, None).unwrap();
+    assert!(set.images.iter().all(|im| im.id % 5 != 0));
+    let held = all.iter().filter(|im| im.id % 5 == 0).count();
+    assert_eq!(set.len() + held, all.len());
+    assert!(held * 6 > all.len() && held * 4 < all.len(), "about a fifth held out: {held} of {}", all.len());
+    assert!(detector_held_out(10) && !detector_held_out(11) && detector_held_out(0));
+    // `limit` counts training images only.
+    let some = PersonSet::open(root, 320, Some(7)).unwrap();
+    assert_eq!(some.len(), 7);
+    assert!(some.images.iter().zip(&set.images).all(|(a, b)| a.id == b.id));
+}
+
+#[test]
+fn fine_tuning_behind_a_camera_fits_its_images_and_stops_on_time() {
+    let Some(model) = shared::shared("models/yolox_nano.onnx") else { return };
+    let Some(coco) = shared::shared("data/coco-person/instances_person.json") else { return };
+    let cfg = DetectorConfig { model, data: coco.parent().unwrap().to_path_buf(), size: 128, batch: 2, lr: 1e-3, max_images: Some(2) };
+    // A strong camera (colour inversion through the curve): the detector must adapt to it.
+    let imaging = Imaging::Camera { ccm: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], curve: (0..32).map(|i| 1.0 - i as f64 / 31.0).collect(), gamma: 2.2 };
+    let done = run(&imaging, &cfg, &FinetuneOptions { steps: 8, seconds: f64::INFINITY, seed: 0 }, |_| {}).unwrap();
+    assert_eq!((done.log.len(), done.images), (8, 2));
+    let l: Vec<f64> = done.log.iter().map(|r| r.loss).collect();
+    assert!(l.iter().all(|v| v.is_finite() && *v > 0.0), "{l:?}");
+    assert!(done.log.iter().all(|r| r.positives > 0));
+    let (first, last) = ((l[0] + l[1]) / 2.0, (l[6] + l[7]) / 2.0);
+    assert!(last < 0.8 * first, "L_det {first} -> {last}: {l:?}");
+    // The time budget stops it before the first step; a zero learning rate is refused.
+    assert!(run(&Imaging::Raw, &cfg, &FinetuneOptions { steps: 8, seconds: 0.0, seed: 0 }, |_| {}).unwrap().log.is_empty());
+    let frozen = DetectorConfig { lr: 0.0, ..cfg };
+    assert!(run(&Imaging::Raw, &frozen, &FinetuneOptions { steps: 1, seconds: 1.0, seed: 0 }, |_| {}).is_err());
+}

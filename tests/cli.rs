@@ -438,6 +438,8 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     let out = dir.path().join("ev");
     campro().args(["eval", "utility"]).arg(&p).args(["--own-detector", "--limit", "2", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
     assert!(std::fs::read_to_string(out.join("utility.md")).unwrap().contains("inv each with its own fine-tuned detector"));
+    fails_with(campro().arg("finetune-detector").arg(&p).args(["--steps", "0"]), "--steps: must be at least 1");
+    fails_with(campro().arg("finetune-detector").arg(&p).args(["--seconds", "NaN"]), "--seconds: must be > 0");
     // A curve with uneven knots cannot drive the optimiser's camera.
     let uneven = dir.path().join("uneven.json");
     let mut u = before.clone();

@@ -100,6 +100,12 @@ fn write_detector(det: &Yolox, params_path: &Path, name: &str, force: bool) -> R
 
 /// Fine-tunes YOLOX-Nano behind the camera of `params_path` and records it in that file.
 pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize, seconds: f64, log: Option<&Path>, force: bool) -> Result<()> {
+    if steps == 0 {
+        bail!("--steps: must be at least 1");
+    }
+    if seconds.is_nan() || seconds <= 0.0 {
+        bail!("--seconds: must be > 0 (inf for no limit), got {seconds}");
+    }
     let cfg = match config {
         Some(c) => campro_train::config::Config::load(c)?,
         None => campro_train::config::Config::default(),

@@ -1,5 +1,5 @@
 //! Training checkpoints: every trainable tensor (camera, attacker backbone and batch-norm
-//! statistics, proxy head) in one safetensors file plus a small JSON state (round, seed),
+//! statistics, proxy head) in one safetensors file plus a small JSON state (round, seed, log),
 //! both written through a temporary file and a rename, so a crash never leaves a torn
 //! checkpoint. On resume the optimisers' moments start afresh and the batch order is
 //! reseeded from (seed, round): a resumed run is deterministic, though not bit-identical to
@@ -26,6 +26,9 @@ pub struct State {
     pub seed: u64,
     /// Classes of the proxy head, in order (a resume must see the same face set).
     pub classes: Vec<String>,
+    /// The training log up to `round` (empty in checkpoints written before it was kept).
+    #[serde(default)]
+    pub log: Vec<crate::train::LogRow>,
 }
 
 const TENSORS: &str = "tensors.safetensors";

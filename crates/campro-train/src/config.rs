@@ -122,7 +122,8 @@ pub struct DetectorConfig {
 pub struct BudgetConfig {
     /// Rounds of (m attacker + n protector) steps.
     pub rounds: usize,
-    /// Stop after this many seconds of training (checkpoint written).
+    /// Stop after this many seconds of training in this invocation (a resumed run gets the
+    /// whole budget again; checkpoint written).
     pub seconds: f64,
     /// Write a checkpoint every this many rounds.
     pub checkpoint_every: usize,

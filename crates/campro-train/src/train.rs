@@ -16,7 +16,7 @@ use candle_core::{DType, Device, Tensor, Var, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW, SGD};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
-use serde::Serialize;
+use serde::{Deserialize, Deserializer, Serialize};
 
 /// Where checkpoints go, and which one to resume from.
 #[derive(Debug, Clone, Default)]
@@ -46,22 +46,34 @@ pub enum TrainError {
     Diverged(String),
 }
 
-/// One line of the training log.
-#[derive(Debug, Clone, Serialize)]
+/// One line of the training log. Checkpoints keep the log, so a resumed run's log (and its
+/// plots) covers the whole run. Values not measured are NaN (`null` in a checkpoint).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LogRow {
-    /// 0 for pretraining (or the round resumed from), then 1, 2, ...
+    /// 0 for pretraining (or the round a checkpoint without a log was resumed from), then 1, 2, ...
     pub round: usize,
+    /// Training time since round 0, over all resumed parts (s).
+    #[serde(deserialize_with = "nan_if_null")]
     pub seconds: f64,
     /// Attacker cross-entropy on its last batch.
+    #[serde(deserialize_with = "nan_if_null")]
     pub attacker_ce: f64,
     /// Attacker top-1 on its last batch.
+    #[serde(deserialize_with = "nan_if_null")]
     pub attacker_accuracy: f64,
     /// Protector loss `−log(1 − p_y)` on its last batch (rounds ≥ 1).
+    #[serde(deserialize_with = "nan_if_null")]
     pub privacy_loss: f64,
     /// Detection loss L_det on the protector's last person batch (ω > 0, rounds ≥ 1).
+    #[serde(deserialize_with = "nan_if_null")]
     pub detection_loss: f64,
     /// Top-1 of the attacker on the held-aside photos through the current camera.
     pub check_accuracy: Option<f64>,
+}
+
+/// JSON has no NaN: serde_json writes it as `null`, read back here as NaN.
+fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 /// The learnt camera (campro's parameter model is built from it by the caller, which keeps
@@ -74,7 +86,9 @@ pub struct Outcome {
     pub gamma: f64,
     /// Config, data, seed, rounds, final losses, time.
     pub provenance: serde_json::Map<String, serde_json::Value>,
+    /// The whole run's log, earlier resumed parts included.
     pub log: Vec<LogRow>,
+    /// Training time of the whole run, earlier resumed parts included (s).
     pub seconds: f64,
     pub classes: usize,
     pub train_faces: usize,
@@ -233,7 +247,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         }
         v
     };
-    let mut first_round = 1;
+    let (mut first_round, mut log, mut earlier_seconds) = (1, Vec::new(), 0.0);
     if let Some(dir) = &opts.resume {
         let (tensors, state) = crate::checkpoint::load(dir, &dev)?;
         if state.classes != faces.classes || state.seed != cfg.seed {
@@ -244,11 +258,14 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             var.set(t)?;
         }
         first_round = state.round + 1;
+        earlier_seconds = state.log.last().map_or(0.0, |r| r.seconds);
+        log = state.log;
     }
-    let save = |round: usize| -> Result<(), TrainError> {
+    let seconds = || earlier_seconds + start.elapsed().as_secs_f64();
+    let save = |round: usize, log: &[LogRow]| -> Result<(), TrainError> {
         let Some(dir) = &opts.checkpoints else { return Ok(()) };
         let tensors = named().into_iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
-        crate::checkpoint::save(dir, &tensors, &crate::checkpoint::State { round, seed: cfg.seed, classes: faces.classes.clone() })?;
+        crate::checkpoint::save(dir, &tensors, &crate::checkpoint::State { round, seed: cfg.seed, classes: faces.classes.clone(), log: log.to_vec() })?;
         Ok(())
     };
     // Two SGD groups: the head at `lr`, the pretrained backbone at `backbone_lr`.
@@ -283,7 +300,6 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         sgd_backbone.step(&grads)?;
         Ok((loss, accuracy(&logits, y)?))
     };
-    let mut log = Vec::new();
     // Pretraining on raw faces until the head reaches the threshold (or the step budget).
     let (mut ce, mut acc) = (f64::NAN, 0.0);
     let pretrain = if first_round == 1 { cfg.attacker.pretrain_steps } else { 0 };
@@ -294,9 +310,12 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             break;
         }
     }
-    let row = LogRow { round: first_round - 1, seconds: start.elapsed().as_secs_f64(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: f64::NAN, detection_loss: f64::NAN, check_accuracy: Some(check_accuracy(first_round > 1)?) };
+    // Round 0, or the resumed camera's check (logged only when the checkpoint had no log).
+    let row = LogRow { round: first_round - 1, seconds: seconds(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: f64::NAN, detection_loss: f64::NAN, check_accuracy: Some(check_accuracy(first_round > 1)?) };
     on_row(&row);
-    log.push(row);
+    if log.is_empty() {
+        log.push(row);
+    }
     let m = if cfg.protector.protector_only { 0 } else { cfg.attacker.steps_per_round };
     for round in first_round..=cfg.budget.rounds {
         for _ in 0..m {
@@ -326,15 +345,14 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             cam.project()?;
         }
         let last = round == cfg.budget.rounds || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
-        let check_acc = if round % cfg.budget.checkpoint_every == 0 || last {
-            save(round)?;
-            Some(check_accuracy(true)?)
-        } else {
-            None
-        };
-        let row = LogRow { round, seconds: start.elapsed().as_secs_f64(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: lns, detection_loss: ldet, check_accuracy: check_acc };
+        let checkpoint = round % cfg.budget.checkpoint_every == 0 || last;
+        let check_acc = if checkpoint { Some(check_accuracy(true)?) } else { None };
+        let row = LogRow { round, seconds: seconds(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: lns, detection_loss: ldet, check_accuracy: check_acc };
         on_row(&row);
         log.push(row);
+        if checkpoint {
+            save(round, &log)?;
+        }
         if last {
             break;
         }
@@ -347,10 +365,59 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
                   "person_images_held_out": format!("COCO id % {} == 0 (never trained on)", campro_eval::data::HOLDOUT_EVERY) },
         "rounds": log.last().map_or(0, |r| r.round),
         "final": log.last(),
-        "seconds": start.elapsed().as_secs_f64(),
+        "seconds": seconds(),
     });
     let serde_json::Value::Object(provenance) = prov else { unreachable!("a JSON object") };
-    Ok(Outcome { ccm: cam.ccm_values()?, curve: cam.curve_values()?, gamma: cfg.camera.gamma, provenance, log, seconds: start.elapsed().as_secs_f64(), classes, train_faces: train.len(), check_faces: check.len(), detector: utility.map(|(_, d)| d) })
+    Ok(Outcome { ccm: cam.ccm_values()?, curve: cam.curve_values()?, gamma: cfg.camera.gamma, provenance, log, seconds: seconds(), classes, train_faces: train.len(), check_faces: check.len(), detector: utility.map(|(_, d)| d) })
+}
+
+const LOG_HEADER: &str = "round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy";
+
+/// The log as CSV (one line per round, a header, `NaN` where not measured, an empty
+/// `check_accuracy` where not checked).
+pub fn log_csv(log: &[LogRow]) -> String {
+    let mut csv = format!("{LOG_HEADER}\n");
+    for r in log {
+        csv += &format!(
+            "{},{:.3},{:.6},{:.4},{:.6},{:.6},{}\n",
+            r.round,
+            r.seconds,
+            r.attacker_ce,
+            r.attacker_accuracy,
+            r.privacy_loss,
+            r.detection_loss,
+            r.check_accuracy.map_or(String::new(), |c| format!("{c:.4}"))
+        );
+    }
+    csv
+}
+
+/// Reads a log written by [`log_csv`]; the error names the line and the field.
+pub fn parse_log_csv(text: &str) -> Result<Vec<LogRow>, String> {
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, h)) if h.trim() == LOG_HEADER => {}
+        _ => return Err(format!("line 1: expected the header {LOG_HEADER}")),
+    }
+    lines
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, line)| {
+            let f: Vec<&str> = line.split(',').map(str::trim).collect();
+            if f.len() != 7 {
+                return Err(format!("line {}: {} fields, expected 7", i + 1, f.len()));
+            }
+            let num = |k: usize| f[k].parse::<f64>().map_err(|e| format!("line {}: {}: {e}", i + 1, LOG_HEADER.split(',').nth(k).unwrap_or("?")));
+            Ok(LogRow {
+                round: f[0].parse().map_err(|e| format!("line {}: round: {e}", i + 1))?,
+                seconds: num(1)?,
+                attacker_ce: num(2)?,
+                attacker_accuracy: num(3)?,
+                privacy_loss: num(4)?,
+                detection_loss: num(5)?,
+                check_accuracy: if f[6].is_empty() { None } else { Some(num(6)?) },
+            })
+        })
+        .collect()
 }
 
 /// The log as two SVG charts: the losses (attacker cross-entropy, privacy loss) and the
@@ -381,4 +448,26 @@ pub fn plot_log(log: &[LogRow]) -> (String, String) {
         Some((0.0, 1.0)),
     );
     (losses, acc)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_csv_log_reads_back_with_its_nans_and_gaps() {
+        let rows = vec![
+            LogRow { round: 0, seconds: 1.5, attacker_ce: 2.25, attacker_accuracy: 0.5, privacy_loss: f64::NAN, detection_loss: f64::NAN, check_accuracy: Some(0.875) },
+            LogRow { round: 1, seconds: 7.125, attacker_ce: 3.0, attacker_accuracy: 0.25, privacy_loss: 0.5, detection_loss: 4.0, check_accuracy: None },
+        ];
+        let csv = log_csv(&rows);
+        assert_eq!(csv.lines().nth(1), Some("0,1.500,2.250000,0.5000,NaN,NaN,0.8750"));
+        let back = parse_log_csv(&csv).unwrap();
+        assert_eq!(back[1], rows[1]);
+        assert!(back[0].privacy_loss.is_nan() && back[0].check_accuracy == Some(0.875));
+        let bad = csv.replace("7.125", "x");
+        assert!(parse_log_csv(&bad).unwrap_err().starts_with("line 3: seconds"), "{}", parse_log_csv(&bad).unwrap_err());
+        assert!(parse_log_csv("round,seconds\n").unwrap_err().contains("header"));
+        assert!(parse_log_csv(&format!("{LOG_HEADER}\n1,2\n")).unwrap_err().contains("2 fields"));
+    }
 }

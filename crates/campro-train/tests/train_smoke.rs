@@ -62,11 +62,19 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     assert_eq!(cached, ["faces", "means"]);
     // Resuming from the last checkpoint (round 10) for two more rounds starts where it ended:
     // same camera, so the same held-aside accuracy.
+    // The checkpoint kept the log: the resumed run's log is the whole run's, rounds 0..=12,
+    // its first 11 rows the first part's (NaN-valued fields included), seconds rising.
     c.budget.rounds = 12;
-    let resumed = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts.clone()) }, |_| {}).unwrap();
-    assert_eq!(resumed.log[0].round, 10);
-    assert_eq!(resumed.log[0].check_accuracy, Some(after));
-    assert_eq!(resumed.log.last().unwrap().round, 12);
+    let mut seen = Vec::new();
+    let resumed = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts.clone()) }, |r| seen.push(r.clone())).unwrap();
+    assert_eq!((seen[0].round, seen[0].check_accuracy), (10, Some(after)));
+    assert_eq!(resumed.log.iter().map(|r| r.round).collect::<Vec<_>>(), (0..=12).collect::<Vec<_>>());
+    let same = |a: f64, b: f64| a == b || (a.is_nan() && b.is_nan());
+    for (a, b) in rows.iter().zip(&resumed.log) {
+        assert!(same(a.seconds, b.seconds) && same(a.privacy_loss, b.privacy_loss) && same(a.detection_loss, b.detection_loss) && a.check_accuracy == b.check_accuracy, "{a:?} != {b:?}");
+    }
+    assert!(resumed.log.windows(2).all(|w| w[1].seconds >= w[0].seconds));
+    assert!(resumed.seconds >= out.seconds && resumed.provenance["rounds"] == 12);
     // A checkpoint of another seed is refused.
     c.seed = 2;
     let err = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts) }, |_| {}).err().unwrap().to_string();

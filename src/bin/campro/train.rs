@@ -30,19 +30,7 @@ pub fn train(config: &Path, output: &Path, log: Option<&Path>, opts: &campro_tra
     })?;
     pb.finish_and_clear();
     if let Some(l) = log {
-        let mut csv = String::from("round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy\n");
-        for r in &out.log {
-            csv += &format!(
-                "{},{:.3},{:.6},{:.4},{:.6},{:.6},{}\n",
-                r.round,
-                r.seconds,
-                r.attacker_ce,
-                r.attacker_accuracy,
-                r.privacy_loss,
-                r.detection_loss,
-                r.check_accuracy.map_or(String::new(), |c| format!("{c:.4}"))
-            );
-        }
+        let csv = campro_train::train::log_csv(&out.log);
         write_atomic(l, csv.as_bytes(), force)?;
         let (losses, acc) = campro_train::train::plot_log(&out.log);
         let stem = l.with_extension("");

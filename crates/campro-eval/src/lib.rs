@@ -11,6 +11,7 @@
 //! paper's baselines and a user's own filter are evaluated the same way.
 
 pub mod ap;
+pub mod atomic;
 pub mod baselines;
 pub mod data;
 pub mod error;

@@ -9,17 +9,11 @@ use crate::privacy::{Order, PrivacyReport};
 use crate::quality::QualityReport;
 use crate::utility::UtilityReport;
 use std::fmt::Write as _;
-use std::io::Write;
 use std::path::Path;
 
-/// Writes `bytes` to `path` through a temporary file in the same folder and a rename.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).map_err(EvalError::io(dir))?;
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(EvalError::io(dir))?;
-    tmp.write_all(bytes).map_err(EvalError::io(path))?;
-    tmp.persist(path).map_err(|e| EvalError::Io { path: path.into(), error: e.error })?;
-    Ok(())
+/// Writes (or replaces) one report file through [`crate::atomic::write`].
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    crate::atomic::write(path, bytes, true).map_err(EvalError::io(path))
 }
 
 fn json(v: &impl serde::Serialize) -> Vec<u8> {

@@ -20,13 +20,7 @@ fn main() {
     let stem = path.with_extension("");
     for (suffix, svg) in [("losses", losses), ("accuracy", acc)] {
         let out = std::path::PathBuf::from(format!("{}-{suffix}.svg", stem.display()));
-        // Through a temporary file and a rename: never a half-written plot.
-        let dir = out.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
-        let written = tempfile::NamedTempFile::new_in(dir).and_then(|mut f| {
-            std::io::Write::write_all(&mut f, svg.as_bytes())?;
-            f.persist(&out).map(|_| ()).map_err(|e| e.error)
-        });
-        if let Err(e) = written {
+        if let Err(e) = campro_eval::atomic::write(&out, svg.as_bytes(), true) {
             eprintln!("{}: {e}", out.display());
             std::process::exit(1);
         }

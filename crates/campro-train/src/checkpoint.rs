@@ -8,7 +8,6 @@
 use candle_core::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
@@ -36,11 +35,7 @@ const STATE: &str = "state.json";
 
 fn atomic(dir: &Path, name: &str, bytes: &[u8]) -> Result<(), CheckpointError> {
     let io = |e: std::io::Error| CheckpointError::Io { path: dir.join(name), message: e.to_string() };
-    std::fs::create_dir_all(dir).map_err(io)?;
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
-    tmp.write_all(bytes).and_then(|_| tmp.flush()).map_err(io)?;
-    tmp.persist(dir.join(name)).map_err(|e| io(e.error))?;
-    Ok(())
+    campro_eval::atomic::write(&dir.join(name), bytes, true).map_err(io)
 }
 
 /// Writes `tensors` and `state` into `dir` (tensors first: a state always names a complete

@@ -14,7 +14,6 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// Crop size (height, width) of MobileFaceNet.
@@ -103,10 +102,7 @@ impl FaceSet {
             }
         }
         let set = Self::build(sel, models)?;
-        std::fs::create_dir_all(cache).map_err(|e| FacesError::Cache { path: cache.into(), message: e.to_string() })?;
-        let mut tmp = tempfile::NamedTempFile::new_in(cache).map_err(|e| FacesError::Cache { path: cache.into(), message: e.to_string() })?;
-        tmp.write_all(&set.encode(sel)).and_then(|_| tmp.flush()).map_err(|e| FacesError::Cache { path: file.clone(), message: e.to_string() })?;
-        tmp.persist(&file).map_err(|e| FacesError::Cache { path: file.clone(), message: e.error.to_string() })?;
+        campro_eval::atomic::write(&file, &set.encode(sel), true).map_err(|e| FacesError::Cache { path: file.clone(), message: e.to_string() })?;
         Ok(set)
     }
 

@@ -12,7 +12,6 @@
 use candle_core::{Result, Tensor, Var, D};
 use prost::Message;
 use std::collections::HashMap;
-use std::io::Write;
 use std::path::Path;
 use tract_onnx::pb;
 
@@ -242,11 +241,7 @@ impl Yolox {
             }
         }
         let io = |e: std::io::Error| YoloxError::Io { path: p.clone(), message: e.to_string() };
-        let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
-        tmp.write_all(&model.encode_to_vec()).and_then(|_| tmp.flush()).map_err(io)?;
-        tmp.persist(path).map_err(|e| io(e.error))?;
-        Ok(())
+        campro_eval::atomic::write(path, &model.encode_to_vec(), true).map_err(io)
     }
 }
 

@@ -474,26 +474,13 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
     Ok((m, Options { max_curve_points: d.max_curve_points, rational }))
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same folder and a rename,
-/// so a reader never sees a partial file. Refuses to replace `path` unless `force`.
+/// Writes `bytes` to `path` whole or not at all ([`campro_eval::atomic::write`]). Refuses
+/// to replace `path` unless `force`.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()> {
     if !force && path.exists() {
         bail!("{} exists (use --force to overwrite)", path.display());
     }
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
-    let mut tmp = tempfile::Builder::new().prefix(".campro-").suffix(".tmp").tempfile_in(&dir).with_context(|| dir.display().to_string())?;
-    tmp.write_all(bytes)?;
-    tmp.as_file().sync_all()?;
-    if force {
-        tmp.persist(path).map_err(|e| anyhow!("{}: {}", path.display(), e.error))?;
-    } else {
-        tmp.persist_noclobber(path).map_err(|e| anyhow!("{}: {}", path.display(), e.error))?;
-    }
-    Ok(())
+    campro_eval::atomic::write(path, bytes, force).with_context(|| path.display().to_string())
 }
 
 const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff"];

@@ -1,0 +1,70 @@
+//! Output files written whole or not at all, the one way every desktop command writes them:
+//! the bytes go to a temporary file in the destination's folder, are flushed to disk, and
+//! the file is renamed over the destination, so a reader (or a crash) never sees half a file.
+//! The file gets the permissions of any file the user creates (0666 less the umask on Unix),
+//! not the temporary file's private 0600.
+
+use std::io::Write;
+use std::path::Path;
+
+/// Writes `bytes` to `path` atomically, creating missing parent folders. With `replace`
+/// false an existing `path` is left alone and the call fails with
+/// [`std::io::ErrorKind::AlreadyExists`] (checked at the rename, so no race can clobber it).
+pub fn write(path: &Path, bytes: &[u8], replace: bool) -> std::io::Result<()> {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".campro-").suffix(".tmp");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        // The mode given to open(2), which the umask then reduces, as for any new file.
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let mut tmp = builder.tempfile_in(dir)?;
+    tmp.write_all(bytes)?;
+    tmp.as_file().sync_all()?;
+    let done = if replace { tmp.persist(path) } else { tmp.persist_noclobber(path) };
+    done.map(|_| ()).map_err(|e| e.error)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_whole_files_and_replaces_only_when_asked() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a/b/out.json");
+        write(&p, b"first", false).unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"first");
+        let e = write(&p, b"second", false).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::AlreadyExists);
+        assert_eq!(std::fs::read(&p).unwrap(), b"first");
+        write(&p, b"second", true).unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"second");
+        // no temporary file left beside it
+        let names: Vec<_> = std::fs::read_dir(p.parent().unwrap()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("out.json")]);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn the_file_gets_the_permissions_of_an_ordinary_new_file() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let ordinary = dir.path().join("ordinary");
+        std::fs::write(&ordinary, b"x").unwrap(); // 0666 less the umask
+        let ours = dir.path().join("ours");
+        write(&ours, b"x", false).unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(&ours), mode(&ordinary));
+    }
+
+    #[test]
+    fn a_folder_in_the_way_is_an_error_not_a_panic() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("taken")).unwrap();
+        assert!(write(&dir.path().join("taken"), b"x", true).is_err());
+    }
+}

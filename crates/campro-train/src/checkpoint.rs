@@ -45,12 +45,10 @@ pub fn save(dir: &Path, tensors: &HashMap<String, Tensor>, state: &State) -> Res
     atomic(dir, STATE, &serde_json::to_vec_pretty(state).expect("state serialises"))
 }
 
-/// Writes `tensors` as `dir/name` (safetensors) through a partial file and a rename.
+/// Writes `tensors` as `dir/name` (safetensors), whole or not at all.
 pub fn write_tensors(dir: &Path, name: &str, tensors: &HashMap<String, Tensor>) -> Result<(), CheckpointError> {
-    std::fs::create_dir_all(dir).map_err(|e| CheckpointError::Io { path: dir.into(), message: e.to_string() })?;
-    let tmp = dir.join(format!("{name}.partial"));
-    candle_core::safetensors::save(tensors, &tmp).map_err(|e| CheckpointError::Format { path: tmp.clone(), message: e.to_string() })?;
-    std::fs::rename(&tmp, dir.join(name)).map_err(|e| CheckpointError::Io { path: dir.join(name), message: e.to_string() })
+    let bytes = safetensors::serialize(tensors, None).map_err(|e| CheckpointError::Format { path: dir.join(name), message: e.to_string() })?;
+    atomic(dir, name, &bytes)
 }
 
 /// Reads a checkpoint written by [`save`].

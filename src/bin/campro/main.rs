@@ -475,12 +475,12 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
 }
 
 /// Writes `bytes` to `path` whole or not at all ([`campro_eval::atomic::write`]). Refuses
-/// to replace `path` unless `force`.
+/// to replace `path` unless `force` (checked once, at the rename).
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()> {
-    if !force && path.exists() {
-        bail!("{} exists (use --force to overwrite)", path.display());
+    match campro_eval::atomic::write(path, bytes, force) {
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => bail!("{} exists (use --force to overwrite)", path.display()),
+        r => r.with_context(|| path.display().to_string()),
     }
-    campro_eval::atomic::write(path, bytes, force).with_context(|| path.display().to_string())
 }
 
 const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff"];

@@ -115,6 +115,10 @@ pub struct DetectorConfig {
     pub lr: f64,
     /// Use at most this many images (first by COCO id).
     pub max_images: Option<usize>,
+    /// Weight of the distillation term ([`crate::detection::distill_loss`]: the bundled
+    /// detector on the unprotected image as a frozen teacher) added to the detection loss
+    /// when fine-tuning; 0 (the default) leaves it out.
+    pub distill: f64,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -181,7 +185,7 @@ impl Default for DataConfig {
 }
 impl Default for DetectorConfig {
     fn default() -> Self {
-        Self { model: "../shared/models/yolox_nano.onnx".into(), data: "../shared/data/coco-person".into(), size: 320, batch: 4, lr: 1e-5, max_images: None }
+        Self { model: "../shared/models/yolox_nano.onnx".into(), data: "../shared/data/coco-person".into(), size: 320, batch: 4, lr: 1e-5, max_images: None, distill: 0.0 }
     }
 }
 impl Default for BudgetConfig {
@@ -207,7 +211,7 @@ impl Config {
     /// Every rule, first broken one reported.
     pub fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let finite_pos = |v: f64| v.is_finite() && v > 0.0;
-        let checks: [(bool, &str, &str); 17] = [
+        let checks: [(bool, &str, &str); 18] = [
             ((2..=1024).contains(&self.camera.knots), "camera.knots", "must be in 2..=1024"),
             (self.camera.gamma.is_finite() && (0.2..=5.0).contains(&self.camera.gamma), "camera.gamma", "must be in [0.2, 5]"),
             (finite_pos(self.camera.lr), "camera.lr", "must be finite and > 0"),
@@ -223,6 +227,7 @@ impl Config {
             (self.detector.size % 32 == 0 && (64..=1024).contains(&self.detector.size), "detector.size", "must be a multiple of 32 in 64..=1024"),
             ((1..=256).contains(&self.detector.batch), "detector.batch", "must be in 1..=256"),
             (self.detector.lr.is_finite() && self.detector.lr >= 0.0, "detector.lr", "must be finite and ≥ 0 (0 freezes P)"),
+            (self.detector.distill.is_finite() && self.detector.distill >= 0.0, "detector.distill", "must be finite and ≥ 0 (0 leaves it out)"),
             (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
             (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
         ];

@@ -10,7 +10,8 @@
 //! Crowd regions are left out of the targets (YOLOX ignores them too). Assignment runs on
 //! detached predictions; the loss is differentiable in the head.
 
-use crate::yolox::{anchors, decode_boxes};
+use crate::persons::{detector_input, PersonBatch};
+use crate::yolox::{anchors, decode_boxes, Yolox};
 use candle_core::{Result, Tensor, D};
 
 /// A positive anchor: which anchor, which box, and the IoU of its prediction with the box.
@@ -28,6 +29,8 @@ pub struct DetLoss {
     pub obj: f64,
     pub cls: f64,
     pub positives: usize,
+    /// The distillation term before its weight ([`utility_loss`]; 0 without a teacher).
+    pub kd: f64,
 }
 
 /// IoU of two (cx, cy, w, h) boxes.
@@ -106,6 +109,36 @@ fn iou_rows(a: &Tensor, b: &Tensor) -> Result<Tensor> {
     (inter / (union + 1e-16)?)?.squeeze(1)
 }
 
+/// Distillation from a frozen teacher: how far the student's raw head (B, N, 85), run on the
+/// camera's output, is from the teacher's head on the same images unprotected. Per anchor,
+/// weighted by the teacher's objectness `t_obj`: the KL divergence of the student's objectness
+/// from the teacher's (every anchor, unweighted), of its 80 class probabilities (each a
+/// Bernoulli) and the squared error of its box (x, y, log w, log h, in strides); the sum is
+/// divided by `max(1, Σ t_obj)`, the teacher's soft count of objects. Zero when the heads
+/// agree. Unlike [`yolox_loss`] on person-only labels it asks for every class the detector
+/// knew, so it keeps what the bundled model learnt instead of overwriting it (see the
+/// README's detector section).
+pub fn distill_loss(student: &Tensor, teacher: &Tensor) -> Result<Tensor> {
+    if student.dims() != teacher.dims() {
+        candle_core::bail!("student head {:?} and teacher head {:?} differ", student.dims(), teacher.dims());
+    }
+    let t = teacher.detach();
+    let t_obj = t.narrow(D::Minus1, 4, 1)?;
+    let norm = t_obj.sum_all()?.to_scalar::<f32>()?.max(1.0) as f64;
+    // KL(t ‖ s) of Bernoulli probabilities, element-wise.
+    let kl = |s: &Tensor, t: &Tensor| -> Result<Tensor> {
+        let (s, t) = (s.clamp(1e-7f32, 1.0 - 1e-7)?, t.clamp(1e-7f32, 1.0 - 1e-7)?);
+        let pos = t.mul(&(t.log()? - s.log()?)?)?;
+        let neg = (1.0 - &t)?.mul(&((1.0 - &t)?.log()? - (1.0 - &s)?.log()?)?)?;
+        pos + neg
+    };
+    let obj = kl(&student.narrow(D::Minus1, 4, 1)?, &t_obj)?.sum_all()?;
+    let cls = kl(&student.narrow(D::Minus1, 5, 80)?, &t.narrow(D::Minus1, 5, 80)?)?.sum_keepdim(D::Minus1)?;
+    let boxes = (student.narrow(D::Minus1, 0, 4)? - t.narrow(D::Minus1, 0, 4)?)?.sqr()?.sum_keepdim(D::Minus1)?;
+    let weighted = (cls + boxes)?.mul(&t_obj)?.sum_all()?;
+    (obj + weighted)? / norm
+}
+
 /// L_det for a raw head (B, N, 85) of an `h` x `w` input and each image's person boxes
 /// (cx, cy, w, h) in input pixels; returns the loss tensor and its parts.
 pub fn yolox_loss(head: &Tensor, h: usize, w: usize, gts: &[Vec<[f32; 4]>]) -> Result<(Tensor, DetLoss)> {
@@ -147,8 +180,25 @@ pub fn yolox_loss(head: &Tensor, h: usize, w: usize, gts: &[Vec<[f32; 4]>]) -> R
         let iou_loss = ((1.0 - iou.sqr()?)?.sum_all()? / norm)?;
         let cls_fg = cls.flatten_all()?.index_select(&idx, 0)?;
         let cls_loss = (bce_sum(&cls_fg, &Tensor::from_vec(iou_t, np, dev)?)? / norm)?;
-        let parts = DetLoss { iou: iou_loss.to_scalar::<f32>()? as f64, obj: obj_loss.to_scalar::<f32>()? as f64, cls: cls_loss.to_scalar::<f32>()? as f64, positives: np };
+        let parts = DetLoss { iou: iou_loss.to_scalar::<f32>()? as f64, obj: obj_loss.to_scalar::<f32>()? as f64, cls: cls_loss.to_scalar::<f32>()? as f64, positives: np, kd: 0.0 };
         (((iou_loss * 5.0)? + obj_loss)?.add(&cls_loss)?, parts)
     };
     Ok((loss, parts))
+}
+
+/// The utility player's loss as the optimiser and the fine-tuning both use it: `det` on the
+/// camera's output `camera_out` of person batch `b` (canvas side `size`), [`yolox_loss`]
+/// against its boxes, plus `distill` times [`distill_loss`] against `teacher` run on the
+/// unprotected batch when a teacher is given. Returns the loss and its parts.
+pub fn utility_loss(det: &Yolox, teacher: Option<&Yolox>, distill: f64, camera_out: &Tensor, b: &PersonBatch, size: usize) -> Result<(Tensor, DetLoss)> {
+    let head = det.forward(&detector_input(camera_out, &b.mask)?)?;
+    let (loss, mut parts) = yolox_loss(&head, size, size, &b.boxes)?;
+    match teacher {
+        Some(t) if distill > 0.0 => {
+            let kd = distill_loss(&head, &t.forward(&detector_input(&b.x, &b.mask)?)?.detach())?;
+            parts.kd = kd.to_scalar::<f32>()? as f64;
+            Ok(((loss + (kd * distill)?)?, parts))
+        }
+        _ => Ok((loss, parts)),
+    }
 }

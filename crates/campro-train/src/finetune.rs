@@ -1,15 +1,16 @@
 //! Fine-tunes the person detector for one fixed camera: the paper's utility protocol (its
 //! App. B: "we finetune the person detector ... for each method"), run after `campro train`
 //! or for any parameter set. YOLOX-Nano starts from its ONNX file and takes Adam steps on
-//! the detection loss ([`crate::detection::yolox_loss`]) over the training part of the COCO
+//! the detection loss ([`crate::detection::utility_loss`]: YOLOX's, plus `distill` times a
+//! distillation term from the unchanged detector on the raw images) over the training part of the COCO
 //! person set, epoch by epoch; the held-out images
 //! ([`campro_eval::data::detector_held_out`]) are never seen, so `eval utility
 //! --own-detector` scores on them alone.
 
 use crate::camera::Camera;
 use crate::config::DetectorConfig;
-use crate::detection::yolox_loss;
-use crate::persons::{detector_input, PersonSet};
+use crate::detection::utility_loss;
+use crate::persons::PersonSet;
 use crate::train::{draw, TrainError};
 use crate::yolox::Yolox;
 use candle_core::Device;
@@ -42,12 +43,14 @@ pub struct FinetuneOptions {
 pub struct StepRow {
     pub step: usize,
     pub seconds: f64,
-    /// `5·L_iou + L_obj + L_cls` of the batch, before the step.
+    /// `5·L_iou + L_obj + L_cls + distill·L_kd` of the batch, before the step.
     pub loss: f64,
     pub iou: f64,
     pub obj: f64,
     pub cls: f64,
     pub positives: usize,
+    /// The distillation term L_kd before its weight (0 when `distill` is 0).
+    pub kd: f64,
 }
 
 /// The fine-tuned detector and its log.
@@ -73,6 +76,8 @@ pub fn run(imaging: &Imaging, cfg: &DetectorConfig, o: &FinetuneOptions, mut on_
         Imaging::Camera { ccm, curve, gamma } => Some(Camera::from_values(*ccm, curve, *gamma, &dev)?),
     };
     let det = Yolox::load(&cfg.model, &dev)?;
+    // The teacher: the same detector as loaded, never updated, on the unprotected images.
+    let teacher = if cfg.distill > 0.0 { Some(Yolox::load(&cfg.model, &dev)?) } else { None };
     let mut adam = AdamW::new(det.vars(), ParamsAdamW { lr: cfg.lr, weight_decay: 0.0, ..Default::default() })?;
     let pool: Vec<usize> = (0..set.len()).collect();
     let mut order = Vec::new();
@@ -89,13 +94,13 @@ pub fn run(imaging: &Imaging, cfg: &DetectorConfig, o: &FinetuneOptions, mut on_
             Some(c) => c.forward(&b.x)?.detach(),
             None => b.x.clone(),
         };
-        let (loss, parts) = yolox_loss(&det.forward(&detector_input(&x, &b.mask)?)?, cfg.size, cfg.size, &b.boxes)?;
+        let (loss, parts) = utility_loss(&det, teacher.as_ref(), cfg.distill, &x, &b, cfg.size)?;
         let l = loss.to_scalar::<f32>()? as f64;
         if !l.is_finite() {
             return Err(TrainError::Diverged(format!("detection loss is {l} at step {step}: lower detector.lr")));
         }
         adam.step(&loss.backward()?)?;
-        let row = StepRow { step, seconds: start.elapsed().as_secs_f64(), loss: l, iou: parts.iou, obj: parts.obj, cls: parts.cls, positives: parts.positives };
+        let row = StepRow { step, seconds: start.elapsed().as_secs_f64(), loss: l, iou: parts.iou, obj: parts.obj, cls: parts.cls, positives: parts.positives, kd: parts.kd };
         on_step(&row);
         log.push(row);
     }

@@ -2,15 +2,16 @@
 //! on raw faces, then per round m attacker steps (cross-entropy on C(x), camera frozen, F and
 //! H updated by SGD) and n protector steps: `L_ns + ω·L_det`, the non-saturating privacy loss
 //! `−log(1 − p_y)` through the frozen attacker plus the detection loss of the person detector
-//! P on C(COCO people) ([`crate::detection`]), into the camera (Adam, then the CCM and curve
-//! projected into their ranges) and into P (Adam, fine-tuned jointly). ω = 0 trains the
-//! privacy player alone and never loads P.
+//! P on C(COCO people) ([`crate::detection::utility_loss`]; `detector.distill` adds a
+//! distillation term from the unchanged detector on the raw people), into the camera (Adam,
+//! then the CCM and curve projected into their ranges) and into P (Adam, fine-tuned
+//! jointly). ω = 0 trains the privacy player alone and never loads P.
 
 use crate::camera::Camera;
 use crate::config::{Config, Head};
 use crate::faces::{FaceSet, Selection};
 use crate::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet, EMBEDDING};
-use crate::persons::{detector_input, PersonSet};
+use crate::persons::PersonSet;
 use crate::yolox::{Yolox, YoloxError};
 use candle_core::{DType, Device, Tensor, Var, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW, SGD};
@@ -24,6 +25,23 @@ pub struct RunOptions {
     /// Written every `budget.checkpoint_every` rounds and at the end.
     pub checkpoints: Option<std::path::PathBuf>,
     pub resume: Option<std::path::PathBuf>,
+    /// Start the camera here instead of at the identity (`campro train --init`); a resumed
+    /// run takes its camera from the checkpoint instead.
+    pub init: Option<Initial>,
+}
+
+/// A camera to start from: a learnt set continued with another configuration (another ω,
+/// a distilling detector).
+#[derive(Debug, Clone)]
+pub struct Initial {
+    /// CCM rows.
+    pub ccm: [[f64; 3]; 3],
+    /// Curve outputs at evenly spaced knots: `camera.knots` of them.
+    pub curve: Vec<f64>,
+    /// Degamma exponent: must be `camera.gamma`.
+    pub gamma: f64,
+    /// Where it came from, for the provenance (a file name).
+    pub origin: String,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -198,7 +216,20 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let (train, check) = faces.split();
     let classes = faces.classes.len();
     let (net, net_vars) = MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?;
-    let cam = Camera::identity(cfg.camera.knots, cfg.camera.gamma, &dev)?;
+    let cam = match &opts.init {
+        None => Camera::identity(cfg.camera.knots, cfg.camera.gamma, &dev)?,
+        Some(i) => {
+            if i.curve.len() != cfg.camera.knots {
+                return Err(TrainError::Unsupported(format!("--init {}: {} curve knots, but camera.knots is {}", i.origin, i.curve.len(), cfg.camera.knots)));
+            }
+            if i.gamma != cfg.camera.gamma {
+                return Err(TrainError::Unsupported(format!("--init {}: degamma {}, but camera.gamma is {}", i.origin, i.gamma, cfg.camera.gamma)));
+            }
+            let c = Camera::from_values(i.ccm, &i.curve, i.gamma, &dev)?;
+            c.project()?;
+            c
+        }
+    };
     let utility = if cfg.protector.omega > 0.0 {
         let set = PersonSet::open(&cfg.detector.data, cfg.detector.size, cfg.detector.max_images)?;
         if set.is_empty() {
@@ -208,6 +239,8 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     } else {
         None
     };
+    // The frozen teacher of `detector.distill` (the detector as loaded, on raw images).
+    let teacher = if utility.is_some() && cfg.detector.distill > 0.0 { Some(Yolox::load(&cfg.detector.model, &dev)?) } else { None };
     let embed = |x: &Tensor, train_bn: bool| -> candle_core::Result<Tensor> { l2_normalise(&net.forward_t(&normalise_unit(x)?, train_bn)?) };
 
     // H from the class means of the raw training embeddings, cached beside the faces (keyed
@@ -331,8 +364,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             finite("privacy loss", lns)?;
             if let Some((set, det)) = &utility {
                 let pb = set.batch(&draw(&mut person_order, &all_people, cfg.detector.batch, &mut rng), &dev)?;
-                let head_out = det.forward(&detector_input(&cam.forward(&pb.x)?, &pb.mask)?)?;
-                let (l, _) = crate::detection::yolox_loss(&head_out, set.size, set.size, &pb.boxes)?;
+                let (l, _) = crate::detection::utility_loss(det, teacher.as_ref(), cfg.detector.distill, &cam.forward(&pb.x)?, &pb, set.size)?;
                 ldet = l.to_scalar::<f32>()? as f64;
                 finite("detection loss", ldet)?;
                 loss = (loss + (l * cfg.protector.omega)?)?;
@@ -363,6 +395,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         "data": { "classes": classes, "train_faces": train.len(), "check_faces": check.len(), "skipped_no_face": faces.skipped, "validation_identities": faces.validation,
                   "person_images": utility.as_ref().map(|(s, _)| s.len()),
                   "person_images_held_out": format!("COCO id % {} == 0 (never trained on)", campro_eval::data::HOLDOUT_EVERY) },
+        "init": opts.init.as_ref().map(|i| i.origin.clone()),
         "rounds": log.last().map_or(0, |r| r.round),
         "final": log.last(),
         "seconds": seconds(),

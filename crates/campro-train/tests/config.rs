@@ -44,6 +44,8 @@ fn bad_values_name_the_key() {
     assert_eq!(rule("[budget]\nseconds = 0.0").0, "budget.seconds");
     assert_eq!(rule("[detector]\nsize = 100").0, "detector.size");
     assert_eq!(rule("[detector]\nlr = -1.0").0, "detector.lr");
+    assert_eq!(rule("[detector]\ndistill = -0.5").0, "detector.distill");
+    assert_eq!(rule("[detector]\ndistill = nan").0, "detector.distill");
 }
 
 #[test]
@@ -72,11 +74,15 @@ fn shipped_configs_parse() {
         // The file name says what it trains.
         let name = path.file_stem().unwrap().to_string_lossy().into_owned();
         if let Some(w) = name.strip_prefix("omega-") {
-            assert_eq!(c.protector.omega, w.parse::<f64>().unwrap(), "{name}");
+            assert_eq!(c.protector.omega, w.split('-').next().unwrap().parse::<f64>().unwrap(), "{name}");
         }
         assert_eq!(c.protector.protector_only, name == "protector-only", "{name}");
+        assert_eq!(c.detector.distill > 0.0, name.ends_with("distill"), "{name}");
+        if name.starts_with("finetune") {
+            continue; // read for its seed and [detector] only
+        }
         omegas.push(c.protector.omega);
     }
     omegas.sort_by(f64::total_cmp);
-    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 1.0, 5.0]);
+    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 1.0, 5.0]);
 }

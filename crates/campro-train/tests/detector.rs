@@ -145,3 +145,33 @@ fn simota_resolves_conflicts_by_cost() {
     // k_A = min(10, candidates) IoUs of 1 → 10 anchors, all with both geometry terms.
     assert_eq!(pos.iter().filter(|p| p.gt == 0).count(), 10);
 }
+
+#[test]
+fn distillation_by_hand() {
+    use campro_train::detection::distill_loss;
+    // Two anchors. Anchor 0: the student's box, objectness and person score differ from the
+    // teacher's; anchor 1: identical (its teacher objectness 0.7 only raises the normaliser).
+    let row = |b: [f32; 4], obj: f32, person: f32| -> Vec<f32> {
+        let mut r = vec![0.5f32; 85];
+        r[..4].copy_from_slice(&b);
+        r[4] = obj;
+        r[5] = person;
+        r
+    };
+    let head = |rows: Vec<Vec<f32>>| Tensor::from_vec(rows.concat(), (1, 2, 85), &Device::Cpu).unwrap();
+    let teacher = head(vec![row([0.5, 0.2, 0.1, -0.3], 0.8, 0.9), row([1.0, 2.0, 0.0, 0.0], 0.7, 0.3)]);
+    let student = head(vec![row([0.1, 0.2, 0.1, 0.3], 0.4, 0.6), row([1.0, 2.0, 0.0, 0.0], 0.7, 0.3)]);
+    let kl = |t: f64, s: f64| t * (t / s).ln() + (1.0 - t) * ((1.0 - t) / (1.0 - s)).ln();
+    let boxes = 0.4f64 * 0.4 + 0.6 * 0.6;
+    let want = (kl(0.8, 0.4) + 0.8 * (kl(0.9, 0.6) + boxes)) / 1.5;
+    let got = distill_loss(&student, &teacher).unwrap().to_scalar::<f32>().unwrap() as f64;
+    assert!((got - want).abs() < 1e-5, "{got} vs {want}");
+    // Agreeing heads cost nothing; a teacher with almost no objects is not divided by < 1.
+    assert!(distill_loss(&teacher, &teacher).unwrap().to_scalar::<f32>().unwrap().abs() < 1e-6);
+    let faint = head(vec![row([0.5, 0.2, 0.1, -0.3], 0.2, 0.9), row([1.0, 2.0, 0.0, 0.0], 0.1, 0.3)]);
+    let s2 = head(vec![row([0.1, 0.2, 0.1, 0.3], 0.2, 0.9), row([1.0, 2.0, 0.0, 0.0], 0.1, 0.3)]);
+    let got = distill_loss(&s2, &faint).unwrap().to_scalar::<f32>().unwrap() as f64;
+    assert!((got - 0.2 * boxes).abs() < 1e-5, "{got}");
+    // Heads of different shapes are an error, not a broadcast.
+    assert!(distill_loss(&student.narrow(1, 0, 1).unwrap(), &teacher).is_err());
+}

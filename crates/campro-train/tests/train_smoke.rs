@@ -35,7 +35,7 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     c.budget.rounds = 10;
     c.budget.checkpoint_every = 10;
     let ckpts = cache.path().join("ckpt");
-    let opts = campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None };
+    let opts = campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None, init: None };
     let out = campro_train::train::run(&c, &opts, |_| {}).unwrap();
     let rows = &out.log;
     assert_eq!(rows.len(), 11, "pretraining row + 10 rounds");
@@ -66,7 +66,7 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     // its first 11 rows the first part's (NaN-valued fields included), seconds rising.
     c.budget.rounds = 12;
     let mut seen = Vec::new();
-    let resumed = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts.clone()) }, |r| seen.push(r.clone())).unwrap();
+    let resumed = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts.clone()), init: None }, |r| seen.push(r.clone())).unwrap();
     assert_eq!((seen[0].round, seen[0].check_accuracy), (10, Some(after)));
     assert_eq!(resumed.log.iter().map(|r| r.round).collect::<Vec<_>>(), (0..=12).collect::<Vec<_>>());
     let same = |a: f64, b: f64| a == b || (a.is_nan() && b.is_nan());
@@ -77,7 +77,7 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     assert!(resumed.seconds >= out.seconds && resumed.provenance["rounds"] == 12);
     // A checkpoint of another seed is refused.
     c.seed = 2;
-    let err = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts) }, |_| {}).err().unwrap().to_string();
+    let err = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts), init: None }, |_| {}).err().unwrap().to_string();
     assert!(err.contains("another face set or seed"), "{err}");
     let (losses, acc) = campro_train::train::plot_log(&out.log);
     assert!(losses.starts_with("<svg") && losses.contains("privacy") && acc.contains("held-aside"));
@@ -105,7 +105,7 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     c.budget.rounds = 8;
     c.budget.checkpoint_every = 8;
     let ckpts = cache.path().join("ckpt");
-    let out = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None }, |_| {}).unwrap();
+    let out = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None, init: None }, |_| {}).unwrap();
     let det: Vec<f64> = out.log[1..].iter().map(|r| r.detection_loss).collect();
     assert!(det.iter().all(|v| v.is_finite() && *v > 0.0), "{det:?}");
     let (first, last) = ((det[0] + det[1]) / 2.0, (det[6] + det[7]) / 2.0);
@@ -122,6 +122,18 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     c.detector.model = "/nonexistent.onnx".into();
     c.budget.rounds = 1;
     assert!(campro_train::train::run(&c, &Default::default(), |_| {}).unwrap().detector.is_none());
+    // --init: the camera starts at the given set (at a learning rate too small to move it in
+    // one round, it ends there) and the provenance names it; a set of other knots is refused.
+    let ccm = [[0.5, -1.0, 0.25], [2.0, 1.0, -0.5], [0.0, 0.125, 1.5]];
+    let curve: Vec<f64> = (0..32).map(|i| ((i * 7) % 32) as f64 / 31.0).collect();
+    let init = |curve: Vec<f64>| campro_train::train::RunOptions { init: Some(campro_train::train::Initial { ccm, curve, gamma: 2.2, origin: "start.json".into() }), ..Default::default() };
+    c.camera.lr = 1e-12;
+    let out = campro_train::train::run(&c, &init(curve.clone()), |_| {}).unwrap();
+    assert!(out.ccm.iter().flatten().zip(ccm.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-6), "{:?}", out.ccm);
+    assert!(out.curve.iter().zip(&curve).all(|(a, b)| (a - b).abs() < 1e-6), "{:?}", out.curve);
+    assert_eq!(out.provenance["init"], "start.json");
+    let err = campro_train::train::run(&c, &init(vec![0.0, 1.0]), |_| {}).err().unwrap().to_string();
+    assert!(err.contains("2 curve knots") && err.contains("camera.knots is 32"), "{err}");
 }
 
 #[test]

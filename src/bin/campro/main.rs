@@ -145,6 +145,10 @@ enum Cmd {
         /// Resume from this checkpoint folder (same configuration and face set).
         #[arg(long)]
         resume: Option<PathBuf>,
+        /// Start the camera from this parameter set (evenly spaced knots, camera.knots of
+        /// them, degamma camera.gamma) instead of the identity.
+        #[arg(long, conflicts_with = "resume")]
+        init: Option<PathBuf>,
         /// Replace existing output files.
         #[arg(long)]
         force: bool,
@@ -324,9 +328,7 @@ fn main() {
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
         Cmd::Eval { what } => eval::run(what),
-        Cmd::Train { config, output, log, checkpoints, resume, force } => {
-            train::train(&config, &output, log.as_deref(), &campro_train::train::RunOptions { checkpoints, resume }, force)
-        }
+        Cmd::Train { config, output, log, checkpoints, resume, init, force } => train::train(&config, &output, log.as_deref(), checkpoints, resume, init.as_deref(), force),
         Cmd::FinetuneDetector { params, config, steps, seconds, log, force } => train::finetune_detector(&params, config.as_deref(), steps, seconds, log.as_deref(), force),
         Cmd::Validate { params } => {
             for p in params {

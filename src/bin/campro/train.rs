@@ -6,8 +6,19 @@ use campro::Params;
 use campro_train::yolox::Yolox;
 use std::path::{Path, PathBuf};
 
-pub fn train(config: &Path, output: &Path, log: Option<&Path>, opts: &campro_train::train::RunOptions, force: bool) -> Result<()> {
+pub fn train(config: &Path, output: &Path, log: Option<&Path>, checkpoints: Option<PathBuf>, resume: Option<PathBuf>, init: Option<&Path>, force: bool) -> Result<()> {
     let cfg = campro_train::config::Config::load(config)?;
+    let init = match init {
+        Some(p) => {
+            let params = load_params(p)?;
+            if !params.tone_curve.is_uniform() {
+                bail!("{}: tone_curve: the optimiser's camera needs evenly spaced knots", p.display());
+            }
+            Some(campro_train::train::Initial { ccm: params.ccm, curve: params.tone_curve.y().to_vec(), gamma: params.degamma, origin: p.display().to_string() })
+        }
+        None => None,
+    };
+    let opts = &campro_train::train::RunOptions { checkpoints, resume, init };
     for p in std::iter::once(output).chain(log) {
         if p.exists() && !force {
             bail!("{} exists (use --force to replace it)", p.display());
@@ -121,9 +132,9 @@ pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize
     })?;
     pb.finish_and_clear();
     if let Some(l) = log {
-        let mut csv = String::from("step,seconds,loss,iou,obj,cls,positives\n");
+        let mut csv = String::from("step,seconds,loss,iou,obj,cls,positives,kd\n");
         for r in &done.log {
-            csv += &format!("{},{:.3},{:.6},{:.6},{:.6},{:.6},{}\n", r.step, r.seconds, r.loss, r.iou, r.obj, r.cls, r.positives);
+            csv += &format!("{},{:.3},{:.6},{:.6},{:.6},{:.6},{},{:.6}\n", r.step, r.seconds, r.loss, r.iou, r.obj, r.cls, r.positives, r.kd);
         }
         write_atomic(l, csv.as_bytes(), force)?;
     }

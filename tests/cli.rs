@@ -446,4 +446,14 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     u["tone_curve"] = serde_json::json!({ "x": [0.0, 0.3, 1.0], "y": [0.0, 0.5, 1.0] });
     std::fs::write(&uneven, u.to_string()).unwrap();
     fails_with(campro().arg("finetune-detector").arg(&uneven).arg("--config").arg(dir.path().join("ft.toml")).args(["--steps", "1"]), "tone_curve: the optimiser's camera needs evenly spaced knots");
+    // ... nor start it (train --init), which also excludes --resume; no output is written.
+    let trained = dir.path().join("t.json");
+    let train = |init: &Path| {
+        let mut c = campro();
+        c.arg("train").arg(dir.path().join("ft.toml")).arg("--init").arg(init).arg("-o").arg(&trained);
+        c
+    };
+    fails_with(&mut train(&uneven), "tone_curve: the optimiser's camera needs evenly spaced knots");
+    fails_with(train(&p).arg("--resume").arg(dir.path()), "cannot be used with");
+    assert!(!trained.exists());
 }

@@ -115,9 +115,9 @@ pub struct DetectorConfig {
     pub lr: f64,
     /// Use at most this many images (first by COCO id).
     pub max_images: Option<usize>,
-    /// Weight of the distillation term ([`crate::detection::distill_loss`]: the bundled
-    /// detector on the unprotected image as a frozen teacher) added to the detection loss
-    /// when fine-tuning; 0 (the default) leaves it out.
+    /// Weight of the distillation term ([`crate::detection::distill_loss`]: `model` as
+    /// loaded, frozen, on the unprotected image as the teacher) added to the detection loss,
+    /// in the joint training and in `finetune-detector` alike; 0 (the default) leaves it out.
     pub distill: f64,
 }
 

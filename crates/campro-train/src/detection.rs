@@ -186,6 +186,16 @@ pub fn yolox_loss(head: &Tensor, h: usize, w: usize, gts: &[Vec<[f32; 4]>]) -> R
     Ok((loss, parts))
 }
 
+/// The frozen teacher of `cfg.distill`: `cfg.model` as loaded, never updated; None when
+/// distillation is off.
+pub fn teacher(cfg: &crate::config::DetectorConfig, dev: &candle_core::Device) -> std::result::Result<Option<Yolox>, crate::yolox::YoloxError> {
+    if cfg.distill > 0.0 {
+        Yolox::load(&cfg.model, dev).map(Some)
+    } else {
+        Ok(None)
+    }
+}
+
 /// The utility player's loss as the optimiser and the fine-tuning both use it: `det` on the
 /// camera's output `camera_out` of person batch `b` (canvas side `size`), [`yolox_loss`]
 /// against its boxes, plus `distill` times [`distill_loss`] against `teacher` run on the

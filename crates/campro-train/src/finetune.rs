@@ -76,8 +76,7 @@ pub fn run(imaging: &Imaging, cfg: &DetectorConfig, o: &FinetuneOptions, mut on_
         Imaging::Camera { ccm, curve, gamma } => Some(Camera::from_values(*ccm, curve, *gamma, &dev)?),
     };
     let det = Yolox::load(&cfg.model, &dev)?;
-    // The teacher: the same detector as loaded, never updated, on the unprotected images.
-    let teacher = if cfg.distill > 0.0 { Some(Yolox::load(&cfg.model, &dev)?) } else { None };
+    let teacher = crate::detection::teacher(cfg, &dev)?;
     let mut adam = AdamW::new(det.vars(), ParamsAdamW { lr: cfg.lr, weight_decay: 0.0, ..Default::default() })?;
     let pool: Vec<usize> = (0..set.len()).collect();
     let mut order = Vec::new();

@@ -239,8 +239,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     } else {
         None
     };
-    // The frozen teacher of `detector.distill` (the detector as loaded, on raw images).
-    let teacher = if utility.is_some() && cfg.detector.distill > 0.0 { Some(Yolox::load(&cfg.detector.model, &dev)?) } else { None };
+    let teacher = if utility.is_some() { crate::detection::teacher(&cfg.detector, &dev)? } else { None };
     let embed = |x: &Tensor, train_bn: bool| -> candle_core::Result<Tensor> { l2_normalise(&net.forward_t(&normalise_unit(x)?, train_bn)?) };
 
     // H from the class means of the raw training embeddings, cached beside the faces (keyed

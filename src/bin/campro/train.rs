@@ -10,11 +10,8 @@ pub fn train(config: &Path, output: &Path, log: Option<&Path>, checkpoints: Opti
     let cfg = campro_train::config::Config::load(config)?;
     let init = match init {
         Some(p) => {
-            let params = load_params(p)?;
-            if !params.tone_curve.is_uniform() {
-                bail!("{}: tone_curve: the optimiser's camera needs evenly spaced knots", p.display());
-            }
-            Some(campro_train::train::Initial { ccm: params.ccm, curve: params.tone_curve.y().to_vec(), gamma: params.degamma, origin: p.display().to_string() })
+            let (ccm, curve, gamma) = camera_values(&load_params(p)?, p)?;
+            Some(campro_train::train::Initial { ccm, curve, gamma, origin: p.display().to_string() })
         }
         None => None,
     };
@@ -97,6 +94,15 @@ fn write_detector(det: &Yolox, params_path: &Path, name: &str, force: bool) -> R
                            "held_out_images": format!("COCO id % {} == 0 (never trained on)", campro_eval::data::HOLDOUT_EVERY) }))
 }
 
+/// The optimiser's camera values of `params` (read from `path`): CCM rows, curve outputs,
+/// degamma exponent; its curve must have evenly spaced knots.
+fn camera_values(params: &Params, path: &Path) -> Result<([[f64; 3]; 3], Vec<f64>, f64)> {
+    if !params.tone_curve.is_uniform() {
+        bail!("{}: tone_curve: the optimiser's camera needs evenly spaced knots", path.display());
+    }
+    Ok((params.ccm, params.tone_curve.y().to_vec(), params.degamma))
+}
+
 /// Fine-tunes YOLOX-Nano behind the camera of `params_path` and records it in that file.
 pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize, seconds: f64, log: Option<&Path>, force: bool) -> Result<()> {
     if steps == 0 {
@@ -115,10 +121,8 @@ pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize
         }
     }
     let mut params = load_params(params_path)?;
-    if !params.tone_curve.is_uniform() {
-        bail!("{}: tone_curve: the optimiser's camera needs evenly spaced knots", params_path.display());
-    }
-    let imaging = campro_train::finetune::Imaging::Camera { ccm: params.ccm, curve: params.tone_curve.y().to_vec(), gamma: params.degamma };
+    let (ccm, curve, gamma) = camera_values(&params, params_path)?;
+    let imaging = campro_train::finetune::Imaging::Camera { ccm, curve, gamma };
     let opts = campro_train::finetune::FinetuneOptions { steps, seconds, seed: cfg.seed };
     let pb = indicatif::ProgressBar::new(steps as u64);
     pb.set_style(indicatif::ProgressStyle::with_template("finetune-detector [{bar:30}] step {pos}/{len} {elapsed_precise} eta {eta} {msg}").unwrap().progress_chars("=> "));

@@ -177,9 +177,7 @@ impl<'a> Exact8<'a> {
         #[cfg(target_arch = "x86_64")]
         if let Some(k) = &self.simd {
             let whole = src.len() / avx512::BLOCK_BYTES * avx512::BLOCK_BYTES;
-            // Flagged pixels go straight to the reference: most of them sit in ambiguous
-            // table cells too (both are near a rounding boundary).
-            fell.flagged = k.run(&src[..whole], &mut dst[..whole], |px| self.exact(px));
+            fell.flagged = k.run(&src[..whole], &mut dst[..whole]);
             (src, dst) = (&src[whole..], &mut dst[whole..]);
         }
         for (s, d) in src.chunks_exact(3).zip(dst.chunks_exact_mut(3)) {

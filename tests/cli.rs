@@ -343,6 +343,55 @@ fn eval_all_with_a_limit_writes_every_report() {
     assert!(report.contains("tradeoff.svg") && report.contains("| lowres-8 |"));
 }
 
+/// `eval privacy --distractors`: the probed identities and their gallery and probe photos
+/// stay the same while the gallery grows, so under the nearest classifier no probe's rank
+/// can improve: every CMC point is at most the one without distractors.
+#[test]
+fn privacy_distractors_only_enlarge_the_gallery() {
+    let Some(models) = common::shared("models/yunet_s_640_640.onnx") else { return };
+    let Some(_) = common::shared("data/lfw/pairs.txt") else { return };
+    let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
+    let dir = tempfile::tempdir().unwrap();
+    let run = |extra: &[&str], out: &str| -> serde_json::Value {
+        let out = dir.path().join(out);
+        campro()
+            .args(["eval", "privacy"])
+            .arg(bundled("color-inversion.json"))
+            .args(["--limit", "4", "--runs", "3", "--no-verification", "--shared"])
+            .arg(&shared)
+            .args(extra)
+            .arg("-o")
+            .arg(&out)
+            .assert()
+            .success();
+        serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap()
+    };
+    let (a, b) = (run(&[], "plain"), run(&["--distractors", "6"], "more"));
+    assert_eq!(a["identities"], b["identities"]);
+    assert_eq!(a["gallery"], a["identities"]);
+    let (n, g) = (b["identities"].as_u64().unwrap(), b["gallery"].as_u64().unwrap());
+    assert!(g > n && g <= n + 6, "gallery {g} for {n} probed identities and 6 distractors");
+    let md = std::fs::read_to_string(dir.path().join("more/privacy.md")).unwrap();
+    assert!(md.contains(&format!("gallery of {g} identities, {} of them distractors", g - n)), "{md}");
+    assert!(md.contains(&format!("(chance {:.2}%)", 100.0 / g as f64)), "{md}");
+    let rows = |v: &serde_json::Value| v["identification"].as_array().unwrap().clone();
+    let (ra, rb) = (rows(&a), rows(&b));
+    assert_eq!(ra.len(), rb.len());
+    let mut compared = 0;
+    for (x, y) in ra.iter().zip(&rb) {
+        assert_eq!((&x["condition"], &x["order"], &x["model"], &x["classifier"]), (&y["condition"], &y["order"], &y["model"], &y["classifier"]));
+        if x["classifier"] == "nearest" {
+            for (p, q) in x["cmc"].as_array().unwrap().iter().zip(y["cmc"].as_array().unwrap()) {
+                assert!(q.as_f64().unwrap() <= p.as_f64().unwrap() + 1e-12, "{x} vs {y}");
+            }
+            compared += 1;
+        }
+    }
+    assert_eq!(compared, 2 * 2 * 2, "2 conditions x 2 orders x 2 models");
+    let bad = campro().args(["eval", "privacy", "--distractors", "many"]).output().unwrap();
+    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("expected a count or `all`, got \"many\""));
+}
+
 #[test]
 fn eval_refuses_bad_arguments_clearly() {
     let out = campro().args(["eval", "quality", "--baseline", "lowres-0"]).output().unwrap();

@@ -12,6 +12,12 @@
 //!
 //! Images whose raw photo has no detectable face are left out (counted), since neither
 //! order can align them.
+//!
+//! Distractors: by default the gallery holds exactly the evaluated identities. With
+//! `distractors`, other LFW identities with ≥ 2 photos join the gallery (and the linear
+//! classifier's classes) with raw photos only, while probes still come from the evaluated
+//! identities alone: the paper's closed set over every subject (1,680 in full LFW) with
+//! the score kept to identities an optimiser never trained on.
 
 use crate::data::{read_rgb8, Lfw};
 use crate::error::{EvalError, Result};
@@ -26,7 +32,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::HashMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 /// Settings of a privacy evaluation.
@@ -43,6 +49,9 @@ pub struct PrivacyOptions {
     /// Use only these identities (LFW folder names), e.g. those an optimiser held out of
     /// training; applied before `limit`. A name LFW lacks is an error.
     pub identities: Option<Vec<String>>,
+    /// Add up to this many other identities with ≥ 2 photos (seeded choice; `usize::MAX`:
+    /// all of them) to the gallery as distractors, raw only; they are never probed.
+    pub distractors: usize,
     /// Ranks reported on the CMC curve.
     pub cmc_ranks: usize,
     pub linear: LinearOptions,
@@ -54,7 +63,18 @@ pub struct PrivacyOptions {
 
 impl Default for PrivacyOptions {
     fn default() -> Self {
-        Self { runs: 10, seed: 0, pool: 6, limit: None, identities: None, cmc_ranks: 20, linear: LinearOptions::default(), verification: true, pairs_per_fold: None }
+        Self {
+            runs: 10,
+            seed: 0,
+            pool: 6,
+            limit: None,
+            identities: None,
+            distractors: 0,
+            cmc_ranks: 20,
+            linear: LinearOptions::default(),
+            verification: true,
+            pairs_per_fold: None,
+        }
     }
 }
 
@@ -108,7 +128,10 @@ pub struct VerifRow {
 #[derive(Debug, Clone, Serialize)]
 pub struct PrivacyReport {
     pub options: PrivacyOptions,
+    /// Identities probed.
     pub identities: usize,
+    /// Identities in the gallery: those probed plus the distractors (chance is 1 / this).
+    pub gallery: usize,
     pub images: usize,
     /// Pool images left out because no face was found in the raw photo.
     pub raw_undetected: usize,
@@ -145,8 +168,25 @@ fn progress(len: usize, what: &str) -> ProgressBar {
     pb
 }
 
-/// Embeds one photo under every condition. Returns None when the raw photo has no face.
-fn embed_photo(path: &PathBuf, m: &FaceModels, conds: &[Condition], e2e: bool) -> Result<Option<Record>> {
+/// What a photo is embedded for, least to most.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Need {
+    /// A distractor's: raw only.
+    Raw,
+    /// Verification: raw and protected in the paper's order.
+    Paper,
+    /// A probed identity's: both orders.
+    EndToEnd,
+}
+
+/// Embeds one photo raw and, unless only the raw embedding is needed, under every
+/// condition. Returns None when the raw photo has no face.
+fn embed_photo(path: &Path, m: &FaceModels, conds: &[Condition], need: Need) -> Result<Option<Record>> {
+    let (conds, e2e) = match need {
+        Need::Raw => (&[][..], false),
+        Need::Paper => (conds, false),
+        Need::EndToEnd => (conds, true),
+    };
     let img = read_rgb8(path)?;
     let Some(face) = central_face(&m.detector.detect(&img)?, img.width(), img.height()) else { return Ok(None) };
     let crops: Vec<_> = m.embedders.iter().map(|e| e.align(&img, &face.landmarks)).collect();
@@ -215,6 +255,14 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
         ids.sort();
     }
     let pools: Vec<Vec<PathBuf>> = ids.iter().map(|(_, v)| v.choose_multiple(&mut rng, o.pool.min(v.len())).cloned().collect()).collect();
+    // Distractors, drawn after the probed identities' pools so that those stay the same.
+    let mut others: Vec<&Vec<PathBuf>> = lfw.people.iter().filter(|(n, v)| v.len() >= 2 && !ids.iter().any(|(m, _)| m == n)).map(|(_, v)| v).collect();
+    if o.distractors < others.len() {
+        others.shuffle(&mut rng);
+        others.truncate(o.distractors);
+        others.sort();
+    }
+    let other_pools: Vec<Vec<PathBuf>> = others.iter().map(|v| v.choose_multiple(&mut rng, o.pool.min(v.len())).cloned().collect()).collect();
     // Verification pairs (optionally capped per fold and kind).
     let (mut pairs, absent) = if o.verification { lfw.pairs()? } else { (Vec::new(), 0) };
     if let Some(cap) = o.pairs_per_fold {
@@ -225,21 +273,24 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
             *n <= cap
         });
     }
-    // Every photo to embed; end-to-end only for the identification pools.
-    let mut todo: HashMap<PathBuf, bool> = HashMap::new();
-    for p in pools.iter().flatten() {
-        todo.insert(p.clone(), true);
-    }
+    // Every photo to embed, each for the most it is needed for.
+    let mut todo: HashMap<PathBuf, Need> = HashMap::new();
+    let mut need = |p: &PathBuf, n: Need| {
+        let e = todo.entry(p.clone()).or_insert(n);
+        *e = (*e).max(n);
+    };
+    pools.iter().flatten().for_each(|p| need(p, Need::EndToEnd));
+    other_pools.iter().flatten().for_each(|p| need(p, Need::Raw));
     for p in &pairs {
-        todo.entry(p.a.clone()).or_insert(false);
-        todo.entry(p.b.clone()).or_insert(false);
+        need(&p.a, Need::Paper);
+        need(&p.b, Need::Paper);
     }
-    let mut todo: Vec<(PathBuf, bool)> = todo.into_iter().collect();
+    let mut todo: Vec<(PathBuf, Need)> = todo.into_iter().collect();
     todo.sort();
     let pb = progress(todo.len(), "privacy: embedding faces");
     let records: Mutex<HashMap<PathBuf, Record>> = Mutex::new(HashMap::new());
-    todo.par_iter().try_for_each(|(path, e2e)| -> Result<()> {
-        if let Some(r) = embed_photo(path, models, conds, *e2e)? {
+    todo.par_iter().try_for_each(|(path, need)| -> Result<()> {
+        if let Some(r) = embed_photo(path, models, conds, *need)? {
             records.lock().unwrap().insert(path.clone(), r);
         }
         pb.inc(1);
@@ -252,6 +303,11 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     let usable: Vec<Vec<&Record>> =
         pools.iter().map(|p| p.iter().filter_map(|x| records.get(x)).collect::<Vec<_>>()).filter(|v| v.len() >= 2).collect();
     let classes = usable.len();
+    // Distractors usable by the same rule; gallery rows and classifier classes after the
+    // probed identities'.
+    let extra: Vec<Vec<&Record>> =
+        other_pools.iter().map(|p| p.iter().filter_map(|x| records.get(x)).collect::<Vec<_>>()).filter(|v| v.len() >= 2).collect();
+    let gallery_size = classes + extra.len();
     let nm = models.embedders.len();
     let orders = [Order::Paper, Order::EndToEnd];
     // results[(cond, order, model, classifier)] = per-run (top1, cmc, detection rate)
@@ -271,22 +327,24 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
                 (g, p)
             })
             .collect();
+        let extra_picks: Vec<usize> = extra.iter().map(|v| rand::Rng::random_range(&mut rng, 0..v.len())).collect();
         for mi in 0..nm {
             let dim = usable[0][0].raw[mi].len();
-            let gallery = Array2::from_shape_fn((classes, dim), |(c, k)| usable[c][picks[c].0].raw[mi][k]);
+            let row = |c: usize| if c < classes { &usable[c][picks[c].0].raw[mi] } else { &extra[c - classes][extra_picks[c - classes]].raw[mi] };
+            let gallery = Array2::from_shape_fn((gallery_size, dim), |(c, k)| row(c)[k]);
             // The linear classifier's training set: every usable raw image but the probe.
             let mut xs = Vec::new();
             let mut ys = Vec::new();
-            for (c, v) in usable.iter().enumerate() {
+            for (c, v) in usable.iter().chain(&extra).enumerate() {
                 for (j, r) in v.iter().enumerate() {
-                    if j != picks[c].1 {
+                    if c >= classes || j != picks[c].1 {
                         xs.extend_from_slice(&r.raw[mi]);
                         ys.push(c);
                     }
                 }
             }
             let x = Array2::from_shape_vec((ys.len(), dim), xs).expect("rows of equal length");
-            let lin = linear::train(&x, &ys, classes, &o.linear);
+            let lin = linear::train(&x, &ys, gallery_size, &o.linear);
             for ci in 0..conds.len() {
                 for (oi, &order) in orders.iter().enumerate() {
                     let mut ranks: [Vec<usize>; 2] = [Vec::new(), Vec::new()];
@@ -365,6 +423,7 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     Ok(PrivacyReport {
         options: o.clone(),
         identities: classes,
+        gallery: gallery_size,
         images: usable.iter().map(Vec::len).sum(),
         raw_undetected,
         pairs_skipped_absent: absent,

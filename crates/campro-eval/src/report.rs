@@ -99,10 +99,21 @@ pub fn write_privacy(r: &PrivacyReport, dir: &Path) -> Result<()> {
 pub fn privacy_markdown(r: &PrivacyReport) -> String {
     let models = models_of(r);
     let mut s = String::from("# Privacy: face identification on LFW\n\n");
+    let gallery = if r.gallery > r.identities {
+        format!("; gallery of {} identities, {} of them distractors (raw, never probed)", r.gallery, r.gallery - r.identities)
+    } else {
+        String::new()
+    };
     let _ = writeln!(
         s,
-        "Closed set: {} identities, {} photos (pool ≤ {} per identity; {} pool photos without a face in the raw photo left out), {} runs (seed {}), top-1 in % as mean ± std over runs. Lower is better protection.\n",
-        r.identities, r.images, r.options.pool, r.raw_undetected, r.options.runs, r.options.seed
+        "Closed set: {} identities, {} photos (pool ≤ {} per identity; {} pool photos without a face in the raw photo left out){gallery}, {} runs (seed {}), top-1 in % as mean ± std over runs (chance {:.2}%). Lower is better protection.\n",
+        r.identities,
+        r.images,
+        r.options.pool,
+        r.raw_undetected,
+        r.options.runs,
+        r.options.seed,
+        100.0 / r.gallery as f64
     );
     let _ = writeln!(s, "| order | image type | classifier | {} | average |", models.join(" | "));
     let _ = writeln!(s, "|---|---|---|{}---|", "---|".repeat(models.len()));

@@ -102,6 +102,10 @@ pub struct PrivacyArgs {
     /// `provenance.data.validation_identities`) or a text file of LFW names, one per line.
     #[arg(long, value_name = "FILE")]
     identities: Option<PathBuf>,
+    /// Other LFW identities (≥ 2 photos) to add to the gallery as distractors, raw and never
+    /// probed: a number (seeded choice) or `all` (the paper's gallery of every subject).
+    #[arg(long, value_name = "N|all", default_value = "0", value_parser = parse_distractors)]
+    distractors: usize,
     #[arg(long, default_value_t = 10)]
     runs: usize,
     #[arg(long, default_value_t = 0)]
@@ -207,6 +211,14 @@ fn face_models(a: &PrivacyArgs, models: &Path) -> Result<FaceModels> {
     })
 }
 
+/// `--distractors`: a count, or `all` (every other identity).
+fn parse_distractors(v: &str) -> std::result::Result<usize, String> {
+    match v {
+        "all" => Ok(usize::MAX),
+        n => n.parse().map_err(|_| format!("expected a count or `all`, got {n:?}")),
+    }
+}
+
 /// Identity names from a trained parameter file (held-out identities) or a list file.
 fn read_identities(path: &Path) -> Result<Vec<String>> {
     let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
@@ -239,6 +251,7 @@ fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<priva
         pool: a.pool,
         limit: c.limit,
         identities,
+        distractors: a.distractors,
         verification: !a.no_verification,
         pairs_per_fold: a.pairs_per_fold.or(c.limit.map(|l| l.div_ceil(10).max(1))),
         ..Default::default()

@@ -12,7 +12,8 @@
 //!   On x86-64 CPUs with AVX-512 (F, BW, DQ, VBMI) and a uniform curve of at most 32
 //!   knots, whole blocks of 64 pixels run on the gather-free engine of [`avx512`]
 //!   instead, which flags lanes near a rounding boundary for the reference in the same
-//!   way: still bit-identical. [`Exact8::engine`] says which runs.
+//!   way (redone eight at a time by the reference's own f64 operations on vector lanes):
+//!   still bit-identical. [`Exact8::engine`] says which runs.
 //! - [`F32Path`]: any depth in and out, in f32: a degamma table over every input code, the
 //!   3x3 matrix, and the curve by exact piecewise-linear interpolation. Its error against
 //!   the reference is stated by [`F32Path::error_bound`] (f32 rounding amplified by the

@@ -10,10 +10,15 @@
 //!   in segment units. (Or `k - 1 - x`, with the curve reversed; see below.)
 //! - Curve: uniform knots only (k <= 32): `floor` picks the segment, its slope and
 //!   intercept (pre-scaled by 255, so `w = b_s + x · a_s` is the curve in output LSB)
-//!   come from two `vpermi2ps`, one FMA evaluates.
-//! - Output: round to nearest. A lane whose value lies within the path's error bound `E`
-//!   of a rounding boundary is flagged, and its pixel is redone by the f64 reference
-//!   while its bytes are still in L1, so the result is bit-identical to the reference.
+//!   come from two `vpermi2ps`, one FMA evaluates. Only the low end is clamped in f32:
+//!   above `k - 1` the segment index is clamped as an integer, onto slot `k - 1` whose
+//!   slope is 0.
+//! - Output: the tables are pre-scaled by 2^16 and shifted by `0.5 + E`, so one
+//!   conversion to integer holds the code (rounded half up) in its high 16 bits and the
+//!   distance past the rounding boundary in its low 16 bits. A lane whose low bits are
+//!   below `2^17 · E + 0.5` (within `E` of a boundary) is flagged by one unsigned word
+//!   compare, and its pixel is redone by the f64 reference while its bytes are still in
+//!   L1, so the result is bit-identical to the reference.
 //!   Flagged pixels are queued and redone eight at a time by [`Reference`], the
 //!   reference's own f64 operations in the same order on eight lanes (IEEE arithmetic
 //!   is deterministic, so each lane equals `Prepared::pixel` rounded, bit for bit; the
@@ -26,14 +31,15 @@
 //!   orientation (x or `k - 1 - x`) is chosen so that this slot serves the end that
 //!   needs it.
 //!
-//! `E` (output LSB) = `255 · L · 5u · (S + 1) + u · (2 · 255 + 2 · (k - 1) · D)`, widened
+//! `E` (output LSB) = `255 · L · 5u · (S + 1) + u · (2 · 256 + 2 · (k - 1) · D)`, widened
 //! by 1% (u = 2^-24; S the largest absolute row sum of the CCM; L the curve's largest
 //! slope; D the largest knot step in LSB): the matrix sum carries at most `5u · (S + 1)` in
 //! curve-input units (f32 CCM and degamma entries, three FMA roundings, partial sums
 //! bounded by `S + 1` with the reversed start), which the curve amplifies by L; the
-//! intercept (|b| <= 255 + (k - 1) · D) and the slope each round once, as does the final
-//! FMA (|w| <= 255). `floor` is exact and the curve continuous, so the segment choice
-//! adds nothing.
+//! intercept (|b| <= 256 + (k - 1) · D with the shift) and the slope each round once, as
+//! does the final FMA (|w| <= 256). Scaling by 2^16 is exact; `floor` is exact and the
+//! curve continuous, so the segment choice adds nothing; the conversion to integer adds
+//! 0.5 units of 2^-16 LSB, which the flag threshold includes.
 
 use crate::params::Params;
 use std::arch::x86_64::*;
@@ -62,7 +68,7 @@ pub(super) fn error_lsb(params: &Params) -> f64 {
     let top = (c.len() - 1) as f64;
     let d = 255.0 * c.y().windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
     // 1e-12 · (1 + L·S) covers the f64 reference's own rounding.
-    (255.0 * l * 5.0 * u * (s + 1.0) + u * (2.0 * 255.0 + 2.0 * top * d)) * 1.01 + 1e-12 * (1.0 + l * s) * 255.0
+    (255.0 * l * 5.0 * u * (s + 1.0) + u * (2.0 * 256.0 + 2.0 * top * d)) * 1.01 + 1e-12 * (1.0 + l * s) * 255.0
 }
 
 /// The same bound in curve-input units (the matrix output's error).
@@ -81,16 +87,17 @@ pub(super) struct Kernel {
     m: [f32; 9],
     /// Start of the FMA chain: 0, or `k - 1` when reversed.
     start: f32,
-    /// `k - 1`.
-    top: f32,
-    /// `255 · y_i - i · slope_i` (of the curve in this orientation): segment i's line at
-    /// x = 0; slot `k - 1` holds the end's code (or code + 0.5, always flagged, when the
-    /// end is ambiguous); padded after.
+    /// `k - 1`, the last table slot.
+    last: i32,
+    /// `2^16 · (255 · y_i - i · slope_i + 0.5 + E)` (of the curve in this orientation):
+    /// segment i's line at x = 0, shifted; slot `k - 1` holds the end's code, shifted the
+    /// same way (or code + 0.5, always flagged, when the end is ambiguous); padded after.
     intercept: [f32; 32],
-    /// `255 · (y_{i+1} - y_i)`, zero from `k - 1` on.
+    /// `2^16 · 255 · (y_{i+1} - y_i)`, zero from `k - 1` on.
     slope: [f32; 32],
-    /// A lane with `|w - round(w)| > margin` is within `E` of a rounding boundary.
-    margin: f32,
+    /// A lane whose low 16 bits are below this is within `E` of a rounding boundary:
+    /// `ceil(2^17 · E + 0.5)`.
+    threshold: i32,
     /// Byte permutes: deinterleave (plane c: first from bytes 0..128, then 128..192)
     /// and interleave (output register r: first R and G, then B).
     split: [[[u8; 64]; 2]; 3],
@@ -233,16 +240,17 @@ impl Kernel {
                 m[3 * i + j] = (sign * v * top) as f32;
             }
         }
+        let (scale, shift) = (65536.0, 0.5 + e);
         let mut intercept = [0f32; 32];
         let mut slope = [0f32; 32];
         for i in 0..k - 1 {
             let a = 255.0 * (ys[i + 1] - ys[i]);
-            intercept[i] = (255.0 * ys[i] - i as f64 * a) as f32;
-            slope[i] = a as f32;
+            intercept[i] = (scale * (255.0 * ys[i] - i as f64 * a + shift)) as f32;
+            slope[i] = (scale * a) as f32;
         }
         intercept[k - 1..].fill(match end {
-            Some(q) => q as f32,
-            None => (255.0 * ys[k - 1]).floor() as f32 + 0.5,
+            Some(q) => (scale * (q as f64 + shift)) as f32,
+            None => (scale * ((255.0 * ys[k - 1]).floor() + 0.5 + shift)) as f32,
         });
         let mut split = [[[0u8; 64]; 2]; 3];
         let mut merge = [[[0u8; 64]; 2]; 3];
@@ -269,7 +277,8 @@ impl Kernel {
         }
         let start = if reverse { top as f32 } else { 0.0 };
         let reference = Reference::new(params, degamma);
-        Some(Self { planes, m, start, top: top as f32, intercept, slope, margin: (0.5 - e) as f32, split, merge, reference })
+        let threshold = (2.0 * scale * e + 0.5).ceil() as i32;
+        Some(Self { planes, m, start, last: (k - 1) as i32, intercept, slope, threshold, split, merge, reference })
     }
 
     /// Runs whole blocks: `src.len() == dst.len()`, a multiple of [`BLOCK_BYTES`]. Each
@@ -295,7 +304,13 @@ impl Kernel {
         let split = self.split.map(|s| s.map(|v| ld(&v)));
         let merge = self.merge.map(|s| s.map(|v| ld(&v)));
         let m = self.m.map(|v| _mm512_set1_ps(v));
-        let (zero, start, top, margin) = (_mm512_setzero_ps(), _mm512_set1_ps(self.start), _mm512_set1_ps(self.top), _mm512_set1_ps(self.margin));
+        let (zero, start) = (_mm512_setzero_ps(), _mm512_set1_ps(self.start));
+        let (last, threshold) = (_mm512_set1_epi32(self.last), _mm512_set1_epi32(self.threshold));
+        // Word j of a pack: the high word of dword 4·(j / 8) + j % 4 of the first (j % 8 < 4)
+        // or second register, the order of `packus_epi32`.
+        let high_words = _mm512_set_epi16(
+            63, 61, 59, 57, 31, 29, 27, 25, 55, 53, 51, 49, 23, 21, 19, 17, 47, 45, 43, 41, 15, 13, 11, 9, 39, 37, 35, 33, 7, 5, 3, 1,
+        );
         let (v0, v1) = unsafe { (_mm512_loadu_ps(self.intercept.as_ptr()), _mm512_loadu_ps(self.intercept[16..].as_ptr())) };
         let (s0, s1) = unsafe { (_mm512_loadu_ps(self.slope.as_ptr()), _mm512_loadu_ps(self.slope[16..].as_ptr())) };
 
@@ -335,31 +350,29 @@ impl Kernel {
                         _mm512_castsi512_ps(_mm512_unpackhi_epi16(w01h, w23h)),
                     ];
                 }
-                let mut flags = [0u16; 4];
+                // Flags: bit 2·l of group g's mask, lane l near a boundary in any channel.
+                let mut near = [0u32; 4];
                 let mut q = [[_mm512_setzero_si512(); 4]; 3];
                 for g in 0..4 {
-                    // Largest |w - round(w)| over the three channels (vrangeps: max |a|, |b|).
-                    let mut worst = zero;
                     for c in 0..3 {
                         let s = _mm512_fmadd_ps(m[3 * c], lin[0][g], start);
                         let s = _mm512_fmadd_ps(m[3 * c + 1], lin[1][g], s);
                         let s = _mm512_fmadd_ps(m[3 * c + 2], lin[2][g], s);
-                        let x = _mm512_min_ps(_mm512_max_ps(s, zero), top);
-                        let seg = _mm512_cvttps_epi32(x);
+                        let x = _mm512_max_ps(s, zero);
+                        let seg = _mm512_min_epu32(_mm512_cvttps_epi32(x), last);
                         let b = _mm512_permutex2var_ps(v0, seg, v1);
                         let a = _mm512_permutex2var_ps(s0, seg, s1);
-                        let w = _mm512_fmadd_ps(x, a, b);
-                        let off = _mm512_reduce_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(w);
-                        worst = _mm512_range_ps::<0b1011>(worst, off);
-                        q[c][g] = _mm512_cvtps_epi32(w);
+                        let t = _mm512_cvtps_epi32(_mm512_fmadd_ps(x, a, b));
+                        near[g] |= _mm512_mask_cmplt_epu16_mask(0x5555_5555, t, threshold);
+                        q[c][g] = t;
                     }
-                    flags[g] = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(worst, margin);
                 }
-                // Pack back to byte planes (packs undo the unpack order), then interleave.
+                // Pack the codes (high words) back to byte planes (the packs' order undoes
+                // the unpack order), then interleave.
                 let mut planes = [_mm512_setzero_si512(); 3];
                 for c in 0..3 {
-                    let a = _mm512_packus_epi32(q[c][0], q[c][1]);
-                    let b = _mm512_packus_epi32(q[c][2], q[c][3]);
+                    let a = _mm512_permutex2var_epi16(q[c][0], high_words, q[c][1]);
+                    let b = _mm512_permutex2var_epi16(q[c][2], high_words, q[c][3]);
                     planes[c] = _mm512_packus_epi16(a, b);
                 }
                 for (r, mg) in merge.iter().enumerate() {
@@ -367,15 +380,16 @@ impl Kernel {
                     let out = _mm512_permutex2var_epi8(t, mg[1], planes[2]);
                     unsafe { _mm512_storeu_si512(di[64 * r..].as_mut_ptr().cast(), out) };
                 }
-                // Bit 16·g + l: lane l of group g.
-                *mask = flags[0] as u64 | (flags[1] as u64) << 16 | (flags[2] as u64) << 32 | (flags[3] as u64) << 48;
+                // Bit 32·(g / 2) + 2·l + g % 2: lane l of group g.
+                *mask = (near[0] | near[1] << 1) as u64 | ((near[2] | near[3] << 1) as u64) << 32;
             }
             for (j, &mask) in masks[..blocks].iter().enumerate() {
                 let mut any = mask;
                 flagged += any.count_ones() as usize;
                 while any != 0 {
                     // Lane l of group g is pixel 16·(l / 4) + 4·g + l % 4.
-                    let (g, l) = (any.trailing_zeros() as usize / 16, any.trailing_zeros() as usize % 16);
+                    let bit = any.trailing_zeros() as usize;
+                    let (g, l) = (2 * (bit / 32) + bit % 2, bit % 32 / 2);
                     queue[queued] = first + j * BLOCK_BYTES + 3 * (16 * (l / 4) + 4 * g + l % 4);
                     queued += 1;
                     if queued == 8 {

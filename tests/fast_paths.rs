@@ -28,6 +28,10 @@ fn sets() -> Vec<Params> {
     // Jumps and plateaus on a non-uniform grid.
     let steps = ToneCurve::new(vec![0.0, 0.2, 0.2001, 0.5, 0.50001, 1.0], vec![0.0, 0.0, 1.0, 1.0, 0.3, 0.9]).unwrap();
     v.push(Params::new([[0.9, 0.2, -0.1], [0.1, 0.8, 0.1], [-0.2, 0.1, 1.1]], steps, 2.2).unwrap());
+    // 17 uniform knots (table slots 16..31 are the end's) under a matrix that clips far
+    // past both ends: the block engine's segment index is clamped as an integer.
+    let short = ToneCurve::from_fn(17, |t| 0.5 + 0.45 * (9.0 * t).sin());
+    v.push(Params::new([[2.5, 1.5, -1.0], [-2.0, 3.0, 1.0], [1.0, -3.0, 4.0]], short, 2.2).unwrap());
     v
 }
 

@@ -32,6 +32,12 @@ fn sets() -> Vec<Params> {
     // past both ends: the block engine's segment index is clamped as an integer.
     let short = ToneCurve::from_fn(17, |t| 0.5 + 0.45 * (9.0 * t).sin());
     v.push(Params::new([[2.5, 1.5, -1.0], [-2.0, 3.0, 1.0], [1.0, -3.0, 4.0]], short, 2.2).unwrap());
+    // 2, 30 and 31 knots (the engine's end slots: 2 and 30 have separate ones, 31 shares
+    // one between both ends, like 32), matrices clipping at both ends.
+    for (k, ccm) in [(2, [[1.8, -0.9, 0.4], [-1.2, 2.6, -0.7], [0.3, -1.5, 2.9]]), (30, [[-2.0, 4.0, -1.0], [3.5, -3.0, 1.5], [0.5, 0.5, -0.8]]), (31, [[4.9, -4.9, 1.0], [-0.4, 1.1, 0.2], [2.0, 2.0, -3.5]])] {
+        let c = ToneCurve::from_fn(k, |t| 0.5 + 0.45 * (11.0 * t + 0.3).sin());
+        v.push(Params::new(ccm, c, 2.2).unwrap());
+    }
     v
 }
 
@@ -112,6 +118,39 @@ fn clipped_pixels_at_a_tie_end_stay_in_the_block_engine() {
         // boundary itself), so a few may still be flagged.
         if f.engine() == campro::pipeline::fast::Engine::Avx512 {
             assert!(fell.flagged * 100 < frame.len() / 3, "{name}: {} of {} pixels flagged", fell.flagged, frame.len() / 3);
+        }
+    }
+}
+
+/// Every uniform knot count the block engine takes (2..=32), with both ends of the curve
+/// on a rounding tie and a matrix that clips pixels past both ends: bit-identical to the
+/// reference, and the clipped pixels stay in the engine (its end slots) instead of all
+/// being flagged.
+#[test]
+fn every_knot_count_is_exact_with_both_ends_clipped_on_a_tie() {
+    let mut px = campro::compare::test_frame(256, 64);
+    px.extend(random_pixels(20_000, 11).into_iter().flatten());
+    let ccm = [[3.0, -2.5, 0.5], [-2.0, 3.5, -1.0], [0.6, -3.0, 3.2]];
+    let mut out = vec![0u8; px.len()];
+    for k in 2..=32 {
+        // y = 0.5 at both ends (255 · 0.5 = 127.5, which rounds up to 128), above it in
+        // between, so that the code just inside either end is 128 too.
+        let c = ToneCurve::from_fn(k, |t| if t == 0.0 || t == 1.0 { 0.5 } else { 0.5 + 1.6 * t * (1.0 - t) });
+        let p = Params::new(ccm, c, 2.2).unwrap();
+        let reference = Prepared::new(&p, Depth::Eight);
+        let f = Exact8::new(&p);
+        let fell = f.run(&px, &mut out);
+        let mut clipped = 0;
+        for (s, o) in px.chunks_exact(3).zip(out.chunks_exact(3)) {
+            let want = reference.pixel([s[0], s[1], s[2]].map(u16::from)).map(|v| (v * 255.0 + 0.5) as u8);
+            assert_eq!(o, want, "{k} knots: pixel {s:?}");
+            clipped += want.contains(&128) as usize;
+        }
+        let n = px.len() / 3;
+        assert!(clipped * 5 > n, "{k} knots: only {clipped} of {n} pixels clip");
+        // (Two knots on a tie are a constant curve on the tie: every pixel is flagged.)
+        if f.engine() == campro::pipeline::fast::Engine::Avx512 && k > 2 {
+            assert!(fell.flagged * 20 < n, "{k} knots: {} of {n} pixels flagged", fell.flagged);
         }
     }
 }

@@ -1,45 +1,46 @@
 //! The AVX-512 engine of [`super::Exact8`] (x86-64 with AVX-512 F, BW, DQ and VBMI,
 //! checked at run time): 64 pixels per step and no gathers, every table lookup is a
-//! register permute.
+//! register permute. Each stretch of blocks runs in two passes over an L1 scratch, so
+//! each pass keeps its own tables in registers and its chains short:
 //!
-//! - Deinterleave: 192 bytes of RGB become three 64-byte planes (two byte permutes each).
-//! - Degamma: the f32 table over the 256 input codes is held as four byte planes of
-//!   256 bytes; each plane is looked up for 64 pixels at once (two `vpermi2b` and a
-//!   blend), and the bytes are re-assembled into f32 lanes by unpacks.
-//! - Matrix: `x = CCM · (k - 1)` in f32 by FMA, clamped to [0, k - 1]: the curve input
-//!   in segment units. (Or `k - 1 - x`, with the curve reversed; see below.)
-//! - Curve: uniform knots only (k <= 32): `floor` picks the segment, its slope and
-//!   intercept (pre-scaled by 255, so `w = b_s + x · a_s` is the curve in output LSB)
-//!   come from two `vpermi2ps`, one FMA evaluates. Only the low end is clamped in f32:
-//!   above `k - 1` the segment index is clamped as an integer, onto slot `k - 1` whose
-//!   slope is 0.
-//! - Output: the tables are pre-scaled by 2^16 and shifted by `0.5 + E`, so one
-//!   conversion to integer holds the code (rounded half up) in its high 16 bits and the
-//!   distance past the rounding boundary in its low 16 bits. A lane whose low bits are
-//!   below `2^17 · E + 0.5` (within `E` of a boundary) is flagged by one unsigned word
-//!   compare, and its pixel is redone by the f64 reference while its bytes are still in
-//!   L1, so the result is bit-identical to the reference.
-//!   Flagged pixels are queued and redone eight at a time by [`Reference`], the
+//! - Pass 1, deinterleave: 192 bytes of RGB become three 64-byte planes (two byte
+//!   permutes each). Degamma: the f32 table over the 256 input codes is held as four byte
+//!   planes of 256 bytes; each plane is looked up for 64 pixels at once (two `vpermi2b`
+//!   and a blend), and the bytes are re-assembled into f32 lanes by unpacks.
+//! - Pass 2, matrix: `x' = CCM · (k - 1) · v - h` in f32 by FMA (x' is the curve input in
+//!   segment units, offset by the half-integer h of [`half`]), clamped to [-h, h] by one
+//!   `vrangeps` (absolute minimum, sign kept).
+//! - Curve: uniform knots only (k <= 32). Rounding x' to the nearest integer n picks the
+//!   segment (h is a half-integer, so each open segment is one n) and `n mod 32` the table
+//!   slot: its slope and intercept (pre-scaled by 255, so `w = b + x' · a` is the curve in
+//!   output LSB) come from two `vpermt2ps`, one FMA evaluates. The clamped ends round onto
+//!   slots of their own (see [`slots`]).
+//! - Output: the tables are pre-scaled by 2^16 and shifted by `0.5 + E_c` (output channel
+//!   c), so one conversion to integer holds the code (rounded half up) in its high 16 bits
+//!   and the distance past the rounding boundary in its low 16 bits. A lane whose low
+//!   bits are below `2^17 · E_c + 0.5` (within `E_c` of a boundary) is flagged by one
+//!   unsigned word compare, and that sample is redone by the f64 reference while its
+//!   bytes are still in cache, so the result is bit-identical to the reference.
+//!   Flagged samples are queued and redone eight at a time by [`Reference`], the
 //!   reference's own f64 operations in the same order on eight lanes (IEEE arithmetic
 //!   is deterministic, so each lane equals `Prepared::pixel` rounded, bit for bit; the
-//!   exhaustive test over all 2^24 code triples checks it), about 15x cheaper per pixel
-//!   than the scalar call.
-//! - Clipped lanes: `x = k - 1` exactly (the matrix output clipped at that end) reads
-//!   table slot `k - 1` (slope 0), which holds the rounded code of the curve's end if that
-//!   code is the same over the last `E`-wide stretch of input, so a curve ending exactly
-//!   on a rounding tie (y = 0.5) does not send every clipped pixel to the reference. The
-//!   orientation (x or `k - 1 - x`) is chosen so that this slot serves the end that
-//!   needs it.
+//!   exhaustive test over all 2^24 code triples checks it).
+//! - Clipped lanes: `x' = ±h` exactly (the matrix output clipped at that end) reads an
+//!   end slot, which holds the rounded code of the curve's end if that code is the same
+//!   over the last `E`-wide stretch of input, so a curve ending exactly on a rounding tie
+//!   (y = 0.5) does not send every clipped pixel to the reference.
 //!
-//! `E` (output LSB) = `255 · L · 5u · (S + 1) + u · (2 · 256 + 2 · (k - 1) · D)`, widened
-//! by 1% (u = 2^-24; S the largest absolute row sum of the CCM; L the curve's largest
-//! slope; D the largest knot step in LSB): the matrix sum carries at most `5u · (S + 1)` in
-//! curve-input units (f32 CCM and degamma entries, three FMA roundings, partial sums
-//! bounded by `S + 1` with the reversed start), which the curve amplifies by L; the
-//! intercept (|b| <= 256 + (k - 1) · D with the shift) and the slope each round once, as
-//! does the final FMA (|w| <= 256). Scaling by 2^16 is exact; `floor` is exact and the
-//! curve continuous, so the segment choice adds nothing; the conversion to integer adds
-//! 0.5 units of 2^-16 LSB, which the flag threshold includes.
+//! `E_c` (output LSB) = `255 · L · P_c + 1.01 · u · (513 + 2 · h · D)` (u = 2^-24; L the
+//! curve's largest slope; D the largest knot step in LSB), with the position error
+//! `P_c = 1.01 · u · (5.0001 · S_c + 3h / (k - 1))` in curve-input units (S_c the
+//! absolute sum of CCM row c): the products of the f32 CCM and degamma entries err `2u`
+//! relative and the three FMA roundings each at most u of a partial sum bounded by
+//! `h + S_c · (k - 1)`; the curve amplifies P_c by L; the intercept
+//! (|b| <= 256 + h · D with the shift), the slope (times |x'| <= h) and the final FMA
+//! (|w| <= 256.5) each round once. Scaling by 2^16 is exact; the rounding to n is exact
+//! and the curve continuous, so the segment choice adds nothing (at a knot either
+//! neighbour's line holds the knot); the conversion to integer adds 0.5 units of 2^-16
+//! LSB, which the flag threshold includes.
 
 use crate::params::Params;
 use std::arch::x86_64::*;
@@ -50,6 +51,16 @@ pub(super) const BLOCK: usize = 64;
 pub(super) const BLOCK_BYTES: usize = 3 * BLOCK;
 /// Blocks whose flagged pixels are collected before they are redone (12 KiB of input).
 const STRETCH: usize = 64;
+/// Blocks degammaed into an L1 scratch before the matrix and curve pass over them.
+const PHASE: usize = 8;
+
+/// Round to nearest, ties to even, exceptions suppressed (both conversions).
+const NEAREST: i32 = _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC;
+/// The tables' scale: one output LSB is 2^16 units of the converted integer.
+const SCALE: f64 = 65536.0;
+/// Least flag threshold (units of 2^-16 LSB): keeps an always-flagged end value inside
+/// the window despite the few units its shared slot's line may round by.
+const MIN_THRESHOLD: i32 = 16;
 
 /// Whether this CPU can run the engine.
 pub(super) fn supported() -> bool {
@@ -57,25 +68,39 @@ pub(super) fn supported() -> bool {
         && is_x86_feature_detected!("avx512bw")
         && is_x86_feature_detected!("avx512dq")
         && is_x86_feature_detected!("avx512vbmi")
+        && is_x86_feature_detected!("popcnt")
+        && is_x86_feature_detected!("bmi1")
 }
 
-/// Error bound of the engine's value before rounding, in output LSB (see the module doc).
-pub(super) fn error_lsb(params: &Params) -> f64 {
+/// `h` for a curve of k uniform knots: the least half-integer of the form `2m - 1/2`
+/// (so `round(±h)` ties away from the segments, onto the end slots) with
+/// `h >= (k - 1) / 2`; at most 15.5 for k <= 32.
+fn half(k: usize) -> f64 {
+    2.0 * (((k - 1) as f64 / 2.0 + 0.5) / 2.0).ceil() - 0.5
+}
+
+/// Error bound of the engine's value before rounding, in output LSB, for each output
+/// channel (see the module doc).
+pub(super) fn error_lsb(params: &Params) -> [f64; 3] {
     let u = f32::EPSILON as f64 / 2.0;
-    let s = crate::ccm::norm_inf(&params.ccm);
     let c = &params.tone_curve;
     let l = c.max_slope();
-    let top = (c.len() - 1) as f64;
+    let h = half(c.len());
     let d = 255.0 * c.y().windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
-    // 1e-12 · (1 + L·S) covers the f64 reference's own rounding.
-    (255.0 * l * 5.0 * u * (s + 1.0) + u * (2.0 * 256.0 + 2.0 * top * d)) * 1.01 + 1e-12 * (1.0 + l * s) * 255.0
+    // The curve amplifies the position error by L; the intercept (|b| <= 256 + h·D), the
+    // slope (times |x'| <= h) and the final FMA (|w| <= 256.5) round once each.
+    [0, 1, 2].map(|row| 255.0 * l * position_error(params, row) + u * (513.0 + 2.0 * h * d) * 1.01)
 }
 
-/// The same bound in curve-input units (the matrix output's error).
-fn position_error(params: &Params) -> f64 {
+/// The matrix output's error for one output channel (row), in curve-input units:
+/// products `f32(CCM·(k - 1)) · f32(degamma)` err `2u` relative (sum `2u·S`, S the row's
+/// absolute sum), three FMA roundings of partial sums bounded by `h + S·(k - 1)`; plus
+/// the f64 reference's own rounding.
+fn position_error(params: &Params, row: usize) -> f64 {
     let u = f32::EPSILON as f64 / 2.0;
-    let s = crate::ccm::norm_inf(&params.ccm);
-    5.0 * u * (s + 1.0) * 1.01 + 1e-12 * (1.0 + s)
+    let s: f64 = params.ccm[row].iter().map(|v| v.abs()).sum();
+    let top = (params.tone_curve.len() - 1) as f64;
+    u * (5.0001 * s + 3.0 * half(params.tone_curve.len()) / top) * 1.01 + 1e-12 * (1.0 + s)
 }
 
 /// Tables of one parameter set. Only built where [`supported`] holds.
@@ -83,21 +108,19 @@ fn position_error(params: &Params) -> f64 {
 pub(super) struct Kernel {
     /// `planes[b][x]`: byte b (little-endian) of the f32 degamma of code x.
     planes: [[u8; 256]; 4],
-    /// `±CCM · (k - 1)`, row-major, f32 (negated when reversed).
+    /// `CCM · (k - 1)`, row-major, f32.
     m: [f32; 9],
-    /// Start of the FMA chain: 0, or `k - 1` when reversed.
-    start: f32,
-    /// `k - 1`, the last table slot.
-    last: i32,
-    /// `2^16 · (255 · y_i - i · slope_i + 0.5 + E)` (of the curve in this orientation):
-    /// segment i's line at x = 0, shifted; slot `k - 1` holds the end's code, shifted the
-    /// same way (or code + 0.5, always flagged, when the end is ambiguous); padded after.
-    intercept: [f32; 32],
-    /// `2^16 · 255 · (y_{i+1} - y_i)`, zero from `k - 1` on.
+    /// `h` ([`half`]): the curve input is `x' = x - h` (x in segment units), clamped to
+    /// [-h, h].
+    half: f32,
+    /// Per table slot `n mod 32` (n = x' rounded to nearest, ties to even), the line
+    /// `w = intercept + x' · slope` in output LSB, scaled by 2^16 and shifted by
+    /// `0.5 + E_c` for output channel c (see [`slots`]).
+    intercept: [[f32; 32]; 3],
     slope: [f32; 32],
-    /// A lane whose low 16 bits are below this is within `E` of a rounding boundary:
-    /// `ceil(2^17 · E + 0.5)`.
-    threshold: i32,
+    /// A lane of channel c whose low 16 bits are below `threshold[c]` is within `E_c` of
+    /// a rounding boundary: `ceil(2^17 · E_c + 0.5)`, at least [`MIN_THRESHOLD`].
+    threshold: [i32; 3],
     /// Byte permutes: deinterleave (plane c: first from bytes 0..128, then 128..192)
     /// and interleave (output register r: first R and G, then B).
     split: [[[u8; 64]; 2]; 3],
@@ -151,10 +174,10 @@ impl Reference {
         t
     }
 
-    /// The rounded outputs of eight pixels, given as byte offsets into `src`; written to
-    /// the same offsets of `dst`.
-    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vbmi")]
-    fn redo(&self, at: &[usize; 8], src: &[u8], dst: &mut [u8]) {
+    /// The rounded outputs of eight samples: lane l is output channel `channel[l]` (0..3)
+    /// of the pixel at byte offset `at[l]` of `src`; written to the same place of `dst`.
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vbmi,popcnt,bmi1")]
+    fn redo(&self, at: &[usize; 8], channel: &[i64; 8], src: &[u8], dst: &mut [u8]) {
         // Permute from a 32-entry table: two 16-entry permutes, bit 4 picks.
         let load = |t: &[f64; 32]| {
             // SAFETY: four loads of eight f64 inside a 32-entry array.
@@ -172,32 +195,97 @@ impl Reference {
                 *l = _mm512_i32gather_pd::<8>(idx, self.degamma.as_ptr());
             }
         }
+        // SAFETY: eight i64 loaded from an eight-element array.
+        let row = unsafe { _mm512_loadu_si512(channel.as_ptr().cast()) };
+        // Lane l's matrix row: column j of the CCM permuted by the lane's channel.
+        let m = |j: usize| _mm512_permutexvar_pd(row, _mm512_setr_pd(self.m[j], self.m[3 + j], self.m[6 + j], 0.0, 0.0, 0.0, 0.0, 0.0));
         let pick = |t: &[__m512d; 4], seg: __m512i, high: __mmask8| {
             let lo = _mm512_permutex2var_pd(t[0], seg, t[1]);
             let hi = _mm512_permutex2var_pd(t[2], seg, t[3]);
             _mm512_mask_blend_pd(high, lo, hi)
         };
-        let mut out = [[0i32; 8]; 3];
-        for (c, o) in out.iter_mut().enumerate() {
-            let m = |j: usize| _mm512_set1_pd(self.m[3 * c + j]);
-            // ccm::apply: (m0·v0 + m1·v1) + m2·v2, each product and sum rounded.
-            let s = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(m(0), lin[0]), _mm512_mul_pd(m(1), lin[1])), _mm512_mul_pd(m(2), lin[2]));
-            // clip01 (no NaN can occur: finite CCM, degamma in [0, 1]).
-            let t = _mm512_min_pd(_mm512_max_pd(s, zero), one);
-            // ToneCurve::eval on uniform knots: segment min(trunc(t · (k - 1)), k - 2).
-            let seg = _mm512_min_epi64(_mm512_cvttpd_epi64(_mm512_mul_pd(t, _mm512_set1_pd(self.scale))), _mm512_set1_epi64(self.last));
-            let high = _mm512_test_epi64_mask(seg, _mm512_set1_epi64(16));
-            let a = _mm512_div_pd(_mm512_sub_pd(t, pick(&tx0, seg, high)), pick(&tdx, seg, high));
-            let v = _mm512_add_pd(pick(&ty0, seg, high), _mm512_mul_pd(a, pick(&tdy, seg, high)));
-            // quantize: (v · 255 + 0.5) truncated.
-            let q = _mm512_cvttpd_epi32(_mm512_add_pd(_mm512_mul_pd(v, _mm512_set1_pd(255.0)), _mm512_set1_pd(0.5)));
-            // SAFETY: eight i32 stored into an eight-element array.
-            unsafe { _mm256_storeu_si256(o.as_mut_ptr().cast(), q) };
-        }
-        for (l, &i) in at.iter().enumerate() {
-            dst[i..i + 3].copy_from_slice(&[out[0][l] as u8, out[1][l] as u8, out[2][l] as u8]);
+        // ccm::apply: (m0·v0 + m1·v1) + m2·v2, each product and sum rounded.
+        let s = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(m(0), lin[0]), _mm512_mul_pd(m(1), lin[1])), _mm512_mul_pd(m(2), lin[2]));
+        // clip01 (no NaN can occur: finite CCM, degamma in [0, 1]).
+        let t = _mm512_min_pd(_mm512_max_pd(s, zero), one);
+        // ToneCurve::eval on uniform knots: segment min(trunc(t · (k - 1)), k - 2).
+        let seg = _mm512_min_epi64(_mm512_cvttpd_epi64(_mm512_mul_pd(t, _mm512_set1_pd(self.scale))), _mm512_set1_epi64(self.last));
+        let high = _mm512_test_epi64_mask(seg, _mm512_set1_epi64(16));
+        let a = _mm512_div_pd(_mm512_sub_pd(t, pick(&tx0, seg, high)), pick(&tdx, seg, high));
+        let v = _mm512_add_pd(pick(&ty0, seg, high), _mm512_mul_pd(a, pick(&tdy, seg, high)));
+        // quantize: (v · 255 + 0.5) truncated.
+        let q = _mm512_cvttpd_epi32(_mm512_add_pd(_mm512_mul_pd(v, _mm512_set1_pd(255.0)), _mm512_set1_pd(0.5)));
+        let mut out = [0i32; 8];
+        // SAFETY: eight i32 stored into an eight-element array.
+        unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), q) };
+        for l in 0..8 {
+            dst[at[l] + channel[l] as usize] = out[l] as u8;
         }
     }
+}
+
+/// What a table slot stands for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Slot {
+    Unused,
+    /// Segment s of the curve, `x in [s, s + 1]`.
+    Segment(usize),
+    /// Only `x' = -h` (the matrix output clipped at 0) and/or values past the top end
+    /// (`x >= k - 1`, clipped at 1).
+    Ends { low: bool, high: bool },
+}
+
+/// The curve's lines per slot, for `x' = x - h` clamped to [-h, h] and `n = round(x')`
+/// (ties to even) looked up at `n mod 32`. Inside, segment s (`x in [s, s + 1)`) is
+/// `n = s - h + 1/2`, one n for the whole open segment since h is a half-integer; at a
+/// knot (a tie) either neighbour's line holds the knot's value. The n past the segments
+/// are the ends: `n = round(-h)`, below segment 0 (only `x' = -h` rounds there), and
+/// every n above segment `k - 2` (`x in [k - 1, 2h]`, where the reference has clipped
+/// at 1: slope 0).
+/// An end slot holds the end's code if it is the same over the last `pos`-wide stretch of
+/// input (`codes`), else a value in the middle of the flag window, always flagged; it
+/// has slope 0, or, where both ends share a slot (h = 15.5: `round(-h) = -16` and
+/// `round(h) = 16`), the line through both end values at `x' = ∓h` (exact to a few
+/// units of 2^-16 LSB, well inside the window's margins).
+/// Returns `(h, intercept, slope)`, or `None` if a segment would share a slot.
+fn slots(y: &[f64], e: f64, threshold: i32, codes: [Option<u16>; 2]) -> Option<(f64, [f32; 32], [f32; 32])> {
+    let k = y.len();
+    let h = half(k);
+    let shift = 0.5 + e;
+    let mut kinds = [Slot::Unused; 32];
+    let (lo, hi) = ((-h).round_ties_even() as i64, h.round_ties_even() as i64);
+    for n in lo..=hi {
+        let seg = n as f64 + h - 0.5;
+        let slot = &mut kinds[n.rem_euclid(32) as usize];
+        *slot = match (*slot, seg) {
+            (Slot::Unused, s) if s >= 0.0 && s <= (k - 2) as f64 => Slot::Segment(s as usize),
+            (Slot::Unused, s) => Slot::Ends { low: s < 0.0, high: s >= 0.0 },
+            (Slot::Ends { low, high }, s) if s < 0.0 || s > (k - 2) as f64 => Slot::Ends { low: low || s < 0.0, high: high || s >= 0.0 },
+            _ => return None,
+        };
+    }
+    // An end's value (LSB, shifted): its constant code, or inside the flag window.
+    let end = |code: Option<u16>, v: f64| match code {
+        Some(q) => q as f64 + shift,
+        None => (255.0 * v).floor() + 1.0 + threshold as f64 / 2.0 / SCALE,
+    };
+    let (v_lo, v_hi) = (end(codes[0], y[0]), end(codes[1], y[k - 1]));
+    let mut intercept = [0f32; 32];
+    let mut slope = [0f32; 32];
+    for (i, kind) in kinds.iter().enumerate() {
+        let (b, a) = match *kind {
+            Slot::Unused => (0.0, 0.0),
+            Slot::Segment(s) => {
+                let a = 255.0 * (y[s + 1] - y[s]);
+                (255.0 * y[s] + (h - s as f64) * a + shift, a)
+            }
+            Slot::Ends { low: true, high: true } => ((v_lo + v_hi) / 2.0, (v_hi - v_lo) / (2.0 * h)),
+            Slot::Ends { low: true, .. } => (v_lo, 0.0),
+            Slot::Ends { .. } => (v_hi, 0.0),
+        };
+        (intercept[i], slope[i]) = ((SCALE * b) as f32, (SCALE * a) as f32);
+    }
+    Some((h, intercept, slope))
 }
 
 impl Kernel {
@@ -210,7 +298,7 @@ impl Kernel {
             return None;
         }
         let e = error_lsb(params);
-        if e >= 0.25 {
+        if e.iter().any(|&e| e >= 0.25) {
             return None;
         }
         let mut planes = [[0u8; 256]; 4];
@@ -219,39 +307,24 @@ impl Kernel {
                 planes[b][x] = byte;
             }
         }
-        // The rounded code at each clipped end if it is the same for every input the
-        // f32 sum may have stood for; the end whose raw value sits near a rounding
-        // boundary gets the slot.
-        let y = c.y();
-        let pos = position_error(params);
+        let pos = (0..3).map(|row| position_error(params, row)).fold(0.0, f64::max);
         let mut hint = 0;
         let low_code = super::constant_code(c, 0.0, pos.min(1.0), &mut hint);
         let mut hint = 0;
         let high_code = super::constant_code(c, (1.0 - pos).max(0.0), 1.0, &mut hint);
-        let near_tie = |v: f64| ((255.0 * v).fract() - 0.5).abs() < e + 1e-6;
-        let reverse = near_tie(y[0]) && !near_tie(y[k - 1]);
-        let ys: Vec<f64> = if reverse { y.iter().rev().copied().collect() } else { y.to_vec() };
-        let end = if reverse { low_code } else { high_code };
         let top = (k - 1) as f64;
-        let sign = if reverse { -1.0 } else { 1.0 };
         let mut m = [0f32; 9];
         for (i, row) in params.ccm.iter().enumerate() {
             for (j, v) in row.iter().enumerate() {
-                m[3 * i + j] = (sign * v * top) as f32;
+                m[3 * i + j] = (v * top) as f32;
             }
         }
-        let (scale, shift) = (65536.0, 0.5 + e);
-        let mut intercept = [0f32; 32];
-        let mut slope = [0f32; 32];
-        for i in 0..k - 1 {
-            let a = 255.0 * (ys[i + 1] - ys[i]);
-            intercept[i] = (scale * (255.0 * ys[i] - i as f64 * a + shift)) as f32;
-            slope[i] = (scale * a) as f32;
+        let threshold = e.map(|e| ((2.0 * SCALE * e + 0.5).ceil() as i32).max(MIN_THRESHOLD));
+        let mut intercept = [[0f32; 32]; 3];
+        let (mut half, mut slope) = (0.0, [0f32; 32]);
+        for ch in 0..3 {
+            (half, intercept[ch], slope) = slots(c.y(), e[ch], threshold[ch], [low_code, high_code])?;
         }
-        intercept[k - 1..].fill(match end {
-            Some(q) => (scale * (q as f64 + shift)) as f32,
-            None => (scale * ((255.0 * ys[k - 1]).floor() + 0.5 + shift)) as f32,
-        });
         let mut split = [[[0u8; 64]; 2]; 3];
         let mut merge = [[[0u8; 64]; 2]; 3];
         for (c, plane) in split.iter_mut().enumerate() {
@@ -275,10 +348,8 @@ impl Kernel {
                 out[1][j] = if plane == 2 { 64 + pos } else { j as u8 };
             }
         }
-        let start = if reverse { top as f32 } else { 0.0 };
         let reference = Reference::new(params, degamma);
-        let threshold = (2.0 * scale * e + 0.5).ceil() as i32;
-        Some(Self { planes, m, start, last: (k - 1) as i32, intercept, slope, threshold, split, merge, reference })
+        Some(Self { planes, m, half: half as f32, intercept, slope, threshold, split, merge, reference })
     }
 
     /// Runs whole blocks: `src.len() == dst.len()`, a multiple of [`BLOCK_BYTES`]. Each
@@ -291,11 +362,13 @@ impl Kernel {
         unsafe { self.blocks(src, dst) }
     }
 
-    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vbmi")]
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vbmi,popcnt,bmi1")]
     fn blocks(&self, src: &[u8], dst: &mut [u8]) -> usize {
         let mut flagged = 0;
         // Byte offsets of flagged pixels waiting for the reference.
         let mut queue = [0usize; 8];
+        // Their output channels.
+        let mut channel = [0i64; 8];
         let mut queued = 0;
         // SAFETY (all loads and stores below): every pointer is into `self`'s arrays of
         // 64 bytes / 16 f32, or into a 192-byte chunk of `src` / `dst`.
@@ -304,109 +377,180 @@ impl Kernel {
         let split = self.split.map(|s| s.map(|v| ld(&v)));
         let merge = self.merge.map(|s| s.map(|v| ld(&v)));
         let m = self.m.map(|v| _mm512_set1_ps(v));
-        let (zero, start) = (_mm512_setzero_ps(), _mm512_set1_ps(self.start));
-        let (last, threshold) = (_mm512_set1_epi32(self.last), _mm512_set1_epi32(self.threshold));
+        let (half, start) = (_mm512_set1_ps(self.half), _mm512_set1_ps(-self.half));
+        let threshold = self.threshold.map(|t| _mm512_set1_epi32(t));
         // Word j of a pack: the high word of dword 4·(j / 8) + j % 4 of the first (j % 8 < 4)
         // or second register, the order of `packus_epi32`.
         let high_words = _mm512_set_epi16(
             63, 61, 59, 57, 31, 29, 27, 25, 55, 53, 51, 49, 23, 21, 19, 17, 47, 45, 43, 41, 15, 13, 11, 9, 39, 37, 35, 33, 7, 5, 3, 1,
         );
-        let (v0, v1) = unsafe { (_mm512_loadu_ps(self.intercept.as_ptr()), _mm512_loadu_ps(self.intercept[16..].as_ptr())) };
+        let v = self.intercept.map(|t| unsafe { [_mm512_loadu_ps(t.as_ptr()), _mm512_loadu_ps(t[16..].as_ptr())] });
         let (s0, s1) = unsafe { (_mm512_loadu_ps(self.slope.as_ptr()), _mm512_loadu_ps(self.slope[16..].as_ptr())) };
 
         // Flag masks (bit i: pixel i of the block) of a stretch of blocks, scanned after
         // the stretch: the scan's unpredictable branches stay out of the vector loop.
-        let mut masks = [0u64; STRETCH];
+        let mut masks = [[0u64; 3]; STRETCH];
+        let mut scratch = [[[_mm512_setzero_ps(); 4]; 3]; PHASE];
         let stretch_bytes = STRETCH * BLOCK_BYTES;
         for first in (0..src.len()).step_by(stretch_bytes) {
             let blocks = (src.len() - first).min(stretch_bytes) / BLOCK_BYTES;
-            for (j, mask) in masks[..blocks].iter_mut().enumerate() {
-                let base = first + j * BLOCK_BYTES;
-                let (si, di) = (&src[base..base + BLOCK_BYTES], &mut dst[base..base + BLOCK_BYTES]);
-                let mut raw = [_mm512_setzero_si512(); 3];
-                for (r, v) in raw.iter_mut().enumerate() {
-                    *v = unsafe { _mm512_loadu_si512(si[64 * r..].as_ptr().cast()) };
-                }
-                // Planes of 64 codes, then their degamma as 4 x 16 f32 lanes per channel.
-                // Lane l of group g holds pixel 16·(l / 4) + 4·g + l % 4 (the unpack order).
-                // (Plain loops, not closures: closures here are not inlined.)
-                let mut lin = [[_mm512_setzero_ps(); 4]; 3];
-                for c in 0..3 {
-                    let t = _mm512_permutex2var_epi8(raw[0], split[c][0], raw[1]);
-                    let codes = _mm512_permutex2var_epi8(t, split[c][1], raw[2]);
-                    let high = _mm512_movepi8_mask(codes);
-                    let mut bytes = [_mm512_setzero_si512(); 4];
-                    for b in 0..4 {
-                        let lo = _mm512_permutex2var_epi8(tables[b][0], codes, tables[b][1]);
-                        let hi = _mm512_permutex2var_epi8(tables[b][2], codes, tables[b][3]);
-                        bytes[b] = _mm512_mask_blend_epi8(high, lo, hi);
+            for sub in (0..blocks).step_by(PHASE) {
+                let n = (blocks - sub).min(PHASE);
+                // Phase 1: planes of 64 codes, then their degamma as 4 x 16 f32 lanes per
+                // channel, into an L1 scratch. Lane l of group g holds pixel
+                // 16·(l / 4) + 4·g + l % 4 (the unpack order).
+                for (j, lin) in scratch[..n].iter_mut().enumerate() {
+                    let base = first + (sub + j) * BLOCK_BYTES;
+                    let si = &src[base..base + BLOCK_BYTES];
+                    let mut raw = [_mm512_setzero_si512(); 3];
+                    for (r, v) in raw.iter_mut().enumerate() {
+                        *v = unsafe { _mm512_loadu_si512(si[64 * r..].as_ptr().cast()) };
                     }
-                    let (w01l, w01h) = (_mm512_unpacklo_epi8(bytes[0], bytes[1]), _mm512_unpackhi_epi8(bytes[0], bytes[1]));
-                    let (w23l, w23h) = (_mm512_unpacklo_epi8(bytes[2], bytes[3]), _mm512_unpackhi_epi8(bytes[2], bytes[3]));
-                    lin[c] = [
-                        _mm512_castsi512_ps(_mm512_unpacklo_epi16(w01l, w23l)),
-                        _mm512_castsi512_ps(_mm512_unpackhi_epi16(w01l, w23l)),
-                        _mm512_castsi512_ps(_mm512_unpacklo_epi16(w01h, w23h)),
-                        _mm512_castsi512_ps(_mm512_unpackhi_epi16(w01h, w23h)),
-                    ];
-                }
-                // Flags: bit 2·l of group g's mask, lane l near a boundary in any channel.
-                let mut near = [0u32; 4];
-                let mut q = [[_mm512_setzero_si512(); 4]; 3];
-                for g in 0..4 {
+                    // (Plain loops, not closures: closures here are not inlined.)
                     for c in 0..3 {
-                        let s = _mm512_fmadd_ps(m[3 * c], lin[0][g], start);
-                        let s = _mm512_fmadd_ps(m[3 * c + 1], lin[1][g], s);
-                        let s = _mm512_fmadd_ps(m[3 * c + 2], lin[2][g], s);
-                        let x = _mm512_max_ps(s, zero);
-                        let seg = _mm512_min_epu32(_mm512_cvttps_epi32(x), last);
-                        let b = _mm512_permutex2var_ps(v0, seg, v1);
-                        let a = _mm512_permutex2var_ps(s0, seg, s1);
-                        let t = _mm512_cvtps_epi32(_mm512_fmadd_ps(x, a, b));
-                        near[g] |= _mm512_mask_cmplt_epu16_mask(0x5555_5555, t, threshold);
-                        q[c][g] = t;
+                        let t = _mm512_permutex2var_epi8(raw[0], split[c][0], raw[1]);
+                        let codes = _mm512_permutex2var_epi8(t, split[c][1], raw[2]);
+                        let high = _mm512_movepi8_mask(codes);
+                        let mut bytes = [_mm512_setzero_si512(); 4];
+                        for b in 0..4 {
+                            let lo = _mm512_permutex2var_epi8(tables[b][0], codes, tables[b][1]);
+                            let hi = _mm512_permutex2var_epi8(tables[b][2], codes, tables[b][3]);
+                            bytes[b] = _mm512_mask_blend_epi8(high, lo, hi);
+                        }
+                        let (w01l, w01h) = (_mm512_unpacklo_epi8(bytes[0], bytes[1]), _mm512_unpackhi_epi8(bytes[0], bytes[1]));
+                        let (w23l, w23h) = (_mm512_unpacklo_epi8(bytes[2], bytes[3]), _mm512_unpackhi_epi8(bytes[2], bytes[3]));
+                        lin[c] = [
+                            _mm512_castsi512_ps(_mm512_unpacklo_epi16(w01l, w23l)),
+                            _mm512_castsi512_ps(_mm512_unpackhi_epi16(w01l, w23l)),
+                            _mm512_castsi512_ps(_mm512_unpacklo_epi16(w01h, w23h)),
+                            _mm512_castsi512_ps(_mm512_unpackhi_epi16(w01h, w23h)),
+                        ];
                     }
                 }
-                // Pack the codes (high words) back to byte planes (the packs' order undoes
-                // the unpack order), then interleave.
-                let mut planes = [_mm512_setzero_si512(); 3];
-                for c in 0..3 {
-                    let a = _mm512_permutex2var_epi16(q[c][0], high_words, q[c][1]);
-                    let b = _mm512_permutex2var_epi16(q[c][2], high_words, q[c][3]);
-                    planes[c] = _mm512_packus_epi16(a, b);
+                // Phase 2: matrix, curve, flags, pack.
+                for (j, lin) in scratch[..n].iter().enumerate() {
+                    let base = first + (sub + j) * BLOCK_BYTES;
+                    let di = &mut dst[base..base + BLOCK_BYTES];
+                    // Flags: bit 2·l of group g's mask in channel c: lane l near a boundary.
+                    let mut near = [[0u32; 4]; 3];
+                    let mut q = [[_mm512_setzero_si512(); 4]; 3];
+                    for g in 0..4 {
+                        for c in 0..3 {
+                            let s = _mm512_fmadd_ps(m[3 * c], lin[0][g], start);
+                            let s = _mm512_fmadd_ps(m[3 * c + 1], lin[1][g], s);
+                            let s = _mm512_fmadd_ps(m[3 * c + 2], lin[2][g], s);
+                            // Absolute minimum, sign from s: sign(s) · min(|s|, h), the clamp to [-h, h].
+                            let x = _mm512_range_ps::<0b0010>(s, half);
+                            let seg = _mm512_cvt_roundps_epi32::<NEAREST>(x);
+                            let b = _mm512_permutex2var_ps(v[c][0], seg, v[c][1]);
+                            let a = _mm512_permutex2var_ps(s0, seg, s1);
+                            let t = _mm512_cvt_roundps_epi32::<NEAREST>(_mm512_fmadd_ps(x, a, b));
+                            near[c][g] = _mm512_mask_cmplt_epu16_mask(0x5555_5555, t, threshold[c]);
+                            q[c][g] = t;
+                        }
+                    }
+                    // Pack the codes (high words) back to byte planes (the packs' order undoes
+                    // the unpack order), then interleave.
+                    let mut planes = [_mm512_setzero_si512(); 3];
+                    for c in 0..3 {
+                        let a = _mm512_permutex2var_epi16(q[c][0], high_words, q[c][1]);
+                        let b = _mm512_permutex2var_epi16(q[c][2], high_words, q[c][3]);
+                        planes[c] = _mm512_packus_epi16(a, b);
+                    }
+                    for (r, mg) in merge.iter().enumerate() {
+                        let t = _mm512_permutex2var_epi8(planes[0], mg[0], planes[1]);
+                        let out = _mm512_permutex2var_epi8(t, mg[1], planes[2]);
+                        unsafe { _mm512_storeu_si512(di[64 * r..].as_mut_ptr().cast(), out) };
+                    }
+                    // Bit 32·(g / 2) + 2·l + g % 2: lane l of group g.
+                    masks[sub + j] = near.map(|n| (n[0] | n[1] << 1) as u64 | ((n[2] | n[3] << 1) as u64) << 32);
                 }
-                for (r, mg) in merge.iter().enumerate() {
-                    let t = _mm512_permutex2var_epi8(planes[0], mg[0], planes[1]);
-                    let out = _mm512_permutex2var_epi8(t, mg[1], planes[2]);
-                    unsafe { _mm512_storeu_si512(di[64 * r..].as_mut_ptr().cast(), out) };
-                }
-                // Bit 32·(g / 2) + 2·l + g % 2: lane l of group g.
-                *mask = (near[0] | near[1] << 1) as u64 | ((near[2] | near[3] << 1) as u64) << 32;
             }
-            for (j, &mask) in masks[..blocks].iter().enumerate() {
-                let mut any = mask;
+            for (j, mask) in masks[..blocks].iter().enumerate() {
+                let any = mask[0] | mask[1] | mask[2];
+                if any == 0 {
+                    continue;
+                }
                 flagged += any.count_ones() as usize;
-                while any != 0 {
-                    // Lane l of group g is pixel 16·(l / 4) + 4·g + l % 4.
-                    let bit = any.trailing_zeros() as usize;
-                    let (g, l) = (2 * (bit / 32) + bit % 2, bit % 32 / 2);
-                    queue[queued] = first + j * BLOCK_BYTES + 3 * (16 * (l / 4) + 4 * g + l % 4);
-                    queued += 1;
-                    if queued == 8 {
-                        self.reference.redo(&queue, src, dst);
-                        queued = 0;
+                for (ch, &m) in mask.iter().enumerate() {
+                    let mut bits = m;
+                    while bits != 0 {
+                        // Lane l of group g is pixel 16·(l / 4) + 4·g + l % 4.
+                        let bit = bits.trailing_zeros() as usize;
+                        let (g, l) = (2 * (bit / 32) + bit % 2, bit % 32 / 2);
+                        queue[queued] = first + j * BLOCK_BYTES + 3 * (16 * (l / 4) + 4 * g + l % 4);
+                        channel[queued] = ch as i64;
+                        queued += 1;
+                        if queued == 8 {
+                            self.reference.redo(&queue, &channel, src, dst);
+                            queued = 0;
+                        }
+                        bits &= bits - 1;
                     }
-                    any &= any - 1;
                 }
             }
         }
         if queued > 0 {
-            // Fill the batch with repeats of a queued pixel (redone twice, same result).
-            let first = queue[0];
+            // Fill the batch with repeats of a queued sample (redone twice, same result).
+            let (first, ch) = (queue[0], channel[0]);
             queue[queued..].fill(first);
-            self.reference.redo(&queue, src, dst);
+            channel[queued..].fill(ch);
+            self.reference.redo(&queue, &channel, src, dst);
         }
         flagged
     }
 }
 
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The table slots as the engine evaluates them (f32 FMA, one rounding; conversion
+    /// ties to even), at the clamped ends and inside every segment, for every knot count.
+    #[test]
+    fn slots_give_each_input_its_line() {
+        let eval = |intercept: &[f32; 32], slope: &[f32; 32], x: f32| {
+            let n = (x as f64).round_ties_even() as i64;
+            let i = n.rem_euclid(32) as usize;
+            x.mul_add(slope[i], intercept[i]) as f64 / SCALE
+        };
+        for k in 2..=32usize {
+            let y: Vec<f64> = (0..k).map(|i| 0.5 + 0.4 * ((3 * i + 1) % 7) as f64 / 7.0 - 0.2).collect();
+            let (e, threshold) = (1e-3, 300);
+            let h = half(k);
+            assert!(h >= (k - 1) as f64 / 2.0 && h <= 15.5 && (h + 0.5) % 2.0 == 0.0, "{k}: h = {h}");
+            for codes in [[Some(17), Some(200)], [None, None], [Some(3), None]] {
+                let (hh, intercept, slope) = slots(&y, e, threshold, codes).expect("every k <= 32 fits");
+                assert_eq!(hh, h);
+                // The clamped ends: the end's code + 0.5 + E, or the middle of the flag window.
+                for (x, code, v) in [(-h, codes[0], y[0]), (h, codes[1], y[k - 1])] {
+                    let w = eval(&intercept, &slope, x as f32);
+                    let want = match code {
+                        Some(q) => q as f64 + 0.5 + e,
+                        None => (255.0 * v).floor() + 1.0 + threshold as f64 / 2.0 / SCALE,
+                    };
+                    assert!((w - want).abs() <= 4.0 / SCALE, "{k} knots, x' = {x}: {w} vs {want}");
+                }
+                // Inside: the curve through the knots, shifted by 0.5 + E (the ends, which
+                // may round onto an end slot, are checked above).
+                for j in 1..(k - 1) * 8 {
+                    let x = j as f64 / 8.0; // segment units, knots included
+                    let s = ((x as usize).min(k - 2), x.fract());
+                    let want = 255.0 * (y[s.0] + s.1 * (y[s.0 + 1] - y[s.0])) + 0.5 + e;
+                    let w = eval(&intercept, &slope, (x - h) as f32);
+                    assert!((w - want).abs() < 1e-4, "{k} knots, x = {x}: {w} vs {want}");
+                }
+                // Past the top (x in (k - 1, 2h]) the line is flat at the end's value.
+                if 2.0 * h > (k - 1) as f64 + 0.25 {
+                    let w = eval(&intercept, &slope, (k as f64 - 1.0 + 0.25 - h) as f32);
+                    let want = match codes[1] {
+                        Some(q) => q as f64 + 0.5 + e,
+                        None => (255.0 * y[k - 1]).floor() + 1.0 + threshold as f64 / 2.0 / SCALE,
+                    };
+                    assert!((w - want).abs() <= 4.0 / SCALE, "{k} knots past the top: {w} vs {want}");
+                }
+            }
+        }
+    }
+}

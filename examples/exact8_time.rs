@@ -1,0 +1,33 @@
+//! Times the default exact 8-bit path against a copy on one 1080p frame (one thread):
+//! `cargo run --release --example exact8_time [-- RUNS]`. Medians of the same run.
+use campro::compare::test_frame;
+use campro::pipeline::fast::Exact8;
+use campro::{Params, ToneCurve};
+use std::hint::black_box;
+use std::time::Instant;
+
+fn median(runs: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    let mut t: Vec<f64> = (0..runs)
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    t[t.len() / 2]
+}
+
+fn main() {
+    let runs: usize = std::env::args().nth(1).and_then(|a| a.parse().ok()).unwrap_or(201);
+    let ccm = [[1.2101, 0.0430, -0.6679], [-4.3933, 1.1114, -2.2755], [0.2930, 1.3570, 1.3287]];
+    let p = Params::new(ccm, ToneCurve::from_fn(32, |t| (7.0 * t).sin() * 0.5 + 0.5), 2.2).unwrap();
+    let frame = test_frame(1920, 1080);
+    let mut out = vec![0u8; frame.len()];
+    let exact = Exact8::new(&p);
+    let mut fell = Default::default();
+    let copy = median(runs, || out.copy_from_slice(black_box(&frame)));
+    let t = median(runs, || fell = exact.run(black_box(&frame), &mut out));
+    println!("copy {:.3} ms, exact8 ({:?}) {:.3} ms = {:.2}x copy, {:?}", copy * 1e3, exact.engine(), t * 1e3, t / copy, fell);
+}

@@ -1,23 +1,9 @@
 //! Times the default exact 8-bit path against a copy on one 1080p frame (one thread):
 //! `cargo run --release --example exact8_time [-- RUNS]`. Medians of the same run.
-use campro::compare::test_frame;
+use campro::compare::{median_seconds as median, test_frame};
 use campro::pipeline::fast::Exact8;
 use campro::{Params, ToneCurve};
 use std::hint::black_box;
-use std::time::Instant;
-
-fn median(runs: usize, mut f: impl FnMut()) -> f64 {
-    f();
-    let mut t: Vec<f64> = (0..runs)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed().as_secs_f64()
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
-}
 
 fn main() {
     let runs: usize = std::env::args().nth(1).and_then(|a| a.parse().ok()).unwrap_or(201);

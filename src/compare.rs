@@ -92,6 +92,21 @@ pub fn code_cube(step: usize) -> Vec<[u8; 3]> {
     out
 }
 
+/// Median seconds of `f` over `runs` runs, after one warm-up run (the benchmarks' timer:
+/// medians, since the machines they run on are shared and noisy).
+pub fn median_seconds(runs: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    let mut t: Vec<f64> = (0..runs.max(1))
+        .map(|_| {
+            let s = std::time::Instant::now();
+            f();
+            s.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    t[t.len() / 2]
+}
+
 /// A `w` x `h` interleaved RGB8 test frame that looks like a photo to a cache: smooth
 /// colour gradients, a few flat regions and fine texture (deterministic).
 pub fn test_frame(w: usize, h: usize) -> Vec<u8> {

@@ -16,19 +16,7 @@ use std::time::Instant;
 
 const PHONE: Mat3 = [[1.78, -0.62, -0.16], [-0.28, 1.62, -0.34], [0.02, -0.71, 1.69]];
 
-/// Median seconds of `f` over `runs` runs (after one warm-up).
-fn median(runs: usize, mut f: impl FnMut()) -> f64 {
-    f();
-    let mut t: Vec<f64> = (0..runs)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed().as_secs_f64()
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
-}
+use campro::compare::median_seconds as median;
 
 /// Median seconds per call of `f`, timed in batches of `batch` calls.
 fn per_call(batch: usize, runs: usize, mut f: impl FnMut()) -> f64 {

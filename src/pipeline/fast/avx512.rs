@@ -366,9 +366,10 @@ impl Kernel {
     fn blocks(&self, src: &[u8], dst: &mut [u8]) -> usize {
         let mut flagged = 0;
         // Byte offsets of flagged pixels waiting for the reference.
-        let mut queue = [0usize; 8];
+        // (Room for the seven left over and every sample of one block.)
+        let mut queue = [0usize; 8 + 3 * BLOCK];
         // Their output channels.
-        let mut channel = [0i64; 8];
+        let mut channel = [0i64; 8 + 3 * BLOCK];
         let mut queued = 0;
         // SAFETY (all loads and stores below): every pointer is into `self`'s arrays of
         // 64 bytes / 16 f32, or into a 192-byte chunk of `src` / `dst`.
@@ -413,9 +414,10 @@ impl Kernel {
                         let high = _mm512_movepi8_mask(codes);
                         let mut bytes = [_mm512_setzero_si512(); 4];
                         for b in 0..4 {
-                            let lo = _mm512_permutex2var_epi8(tables[b][0], codes, tables[b][1]);
-                            let hi = _mm512_permutex2var_epi8(tables[b][2], codes, tables[b][3]);
-                            bytes[b] = _mm512_mask_blend_epi8(high, lo, hi);
+                            // Codes below 128 from the first half of the plane, then the
+                            // others (still holding their code) from the second half.
+                            let lo = _mm512_mask2_permutex2var_epi8(tables[b][0], codes, !high, tables[b][1]);
+                            bytes[b] = _mm512_mask2_permutex2var_epi8(tables[b][2], lo, high, tables[b][3]);
                         }
                         let (w01l, w01h) = (_mm512_unpacklo_epi8(bytes[0], bytes[1]), _mm512_unpackhi_epi8(bytes[0], bytes[1]));
                         let (w23l, w23h) = (_mm512_unpacklo_epi8(bytes[2], bytes[3]), _mm512_unpackhi_epi8(bytes[2], bytes[3]));
@@ -472,30 +474,34 @@ impl Kernel {
                     continue;
                 }
                 flagged += any.count_ones() as usize;
-                for (ch, &m) in mask.iter().enumerate() {
-                    let mut bits = m;
-                    while bits != 0 {
-                        // Lane l of group g is pixel 16·(l / 4) + 4·g + l % 4.
-                        let bit = bits.trailing_zeros() as usize;
-                        let (g, l) = (2 * (bit / 32) + bit % 2, bit % 32 / 2);
-                        queue[queued] = first + j * BLOCK_BYTES + 3 * (16 * (l / 4) + 4 * g + l % 4);
-                        channel[queued] = ch as i64;
-                        queued += 1;
-                        if queued == 8 {
-                            self.reference.redo(&queue, &channel, src, dst);
-                            queued = 0;
-                        }
-                        bits &= bits - 1;
+                let base = first + j * BLOCK_BYTES;
+                let mut bits = any;
+                while bits != 0 {
+                    // Lane l of group g is pixel 16·(l / 4) + 4·g + l % 4. Each of its
+                    // flagged channels is queued, without a branch per channel.
+                    let bit = bits.trailing_zeros() as usize;
+                    let (g, l) = (2 * (bit / 32) + bit % 2, bit % 32 / 2);
+                    let at = base + 3 * (16 * (l / 4) + 4 * g + l % 4);
+                    for (ch, m) in mask.iter().enumerate() {
+                        (queue[queued], channel[queued]) = (at, ch as i64);
+                        queued += (m >> bit & 1) as usize;
                     }
+                    bits &= bits - 1;
+                }
+                while queued >= 8 {
+                    self.reference.redo(queue[..8].try_into().expect("eight"), channel[..8].try_into().expect("eight"), src, dst);
+                    queue.copy_within(8..queued, 0);
+                    channel.copy_within(8..queued, 0);
+                    queued -= 8;
                 }
             }
         }
         if queued > 0 {
             // Fill the batch with repeats of a queued sample (redone twice, same result).
             let (first, ch) = (queue[0], channel[0]);
-            queue[queued..].fill(first);
-            channel[queued..].fill(ch);
-            self.reference.redo(&queue, &channel, src, dst);
+            queue[queued..8].fill(first);
+            channel[queued..8].fill(ch);
+            self.reference.redo(queue[..8].try_into().expect("eight"), channel[..8].try_into().expect("eight"), src, dst);
         }
         flagged
     }

@@ -5,8 +5,9 @@
 //!
 //! - Pass 1, deinterleave: 192 bytes of RGB become three 64-byte planes (two byte
 //!   permutes each). Degamma: the f32 table over the 256 input codes is held as four byte
-//!   planes of 256 bytes; each plane is looked up for 64 pixels at once (two `vpermi2b`
-//!   and a blend), and the bytes are re-assembled into f32 lanes by unpacks.
+//!   planes of 256 bytes; each plane is looked up for 64 pixels at once (two merge-masked
+//!   `vpermi2b`, one per half of the plane), and the bytes are re-assembled into f32 lanes
+//!   by unpacks.
 //! - Pass 2, matrix: `x' = CCM · (k - 1) · v - h` in f32 by FMA (x' is the curve input in
 //!   segment units, offset by the half-integer h of [`half`]), clamped to [-h, h] by one
 //!   `vrangeps` (absolute minimum, sign kept).

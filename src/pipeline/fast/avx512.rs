@@ -33,10 +33,11 @@
 //!
 //! `E_c` (output LSB) = `255 · L · P_c + 1.01 · u · (513 + 2 · h · D)` (u = 2^-24; L the
 //! curve's largest slope; D the largest knot step in LSB), with the position error
-//! `P_c = 1.01 · u · (5.0001 · S_c + 3h / (k - 1))` in curve-input units (S_c the
-//! absolute sum of CCM row c): the products of the f32 CCM and degamma entries err `2u`
-//! relative and the three FMA roundings each at most u of a partial sum bounded by
-//! `h + S_c · (k - 1)`; the curve amplifies P_c by L; the intercept
+//! `P_c = 1.01 · u · (2.0001 · S_c + 2|M_c0| + |M_c1| + 3h / (k - 1))` in curve-input
+//! units (S_c the absolute sum of CCM row c; see [`position_error`]): the products of the
+//! f32 CCM and degamma entries err `2u` relative, and the three FMA roundings each at
+//! most u of a partial sum (the last one only where it is not clamped, so at most h);
+//! the curve amplifies P_c by L; the intercept
 //! (|b| <= 256 + h · D with the shift), the slope (times |x'| <= h) and the final FMA
 //! (|w| <= 256.5) each round once. Scaling by 2^16 is exact; the rounding to n is exact
 //! and the curve continuous, so the segment choice adds nothing (at a knot either
@@ -93,15 +94,20 @@ pub(super) fn error_lsb(params: &Params) -> [f64; 3] {
     [0, 1, 2].map(|row| 255.0 * l * position_error(params, row) + u * (513.0 + 2.0 * h * d) * 1.01)
 }
 
-/// The matrix output's error for one output channel (row), in curve-input units:
-/// products `f32(CCM·(k - 1)) · f32(degamma)` err `2u` relative (sum `2u·S`, S the row's
-/// absolute sum), three FMA roundings of partial sums bounded by `h + S·(k - 1)`; plus
-/// the f64 reference's own rounding.
+/// The matrix output's error for one output channel (row c), in curve-input units. The
+/// products `f32(CCM·(k - 1)) · f32(degamma)` are exact inside the FMAs but their factors
+/// err u each: `2u·S_c` in all (S_c the row's absolute sum). The FMAs run over the columns
+/// in order 0, 1, 2 from `-h`: the first two round partial sums bounded by `h + |M_c0|` and
+/// `h + |M_c0| + |M_c1|` (units of `k - 1`), the last a sum that matters only where it is
+/// not clamped, so bounded by h; each rounding errs at most u of its result. Plus the f64
+/// reference's own rounding.
 fn position_error(params: &Params, row: usize) -> f64 {
     let u = f32::EPSILON as f64 / 2.0;
-    let s: f64 = params.ccm[row].iter().map(|v| v.abs()).sum();
+    let m = params.ccm[row].map(f64::abs);
+    let s = m[0] + m[1] + m[2];
     let top = (params.tone_curve.len() - 1) as f64;
-    u * (5.0001 * s + 3.0 * half(params.tone_curve.len()) / top) * 1.01 + 1e-12 * (1.0 + s)
+    let h = half(params.tone_curve.len()) / top;
+    u * (2.0001 * s + (h + m[0]) + (h + m[0] + m[1]) + h) * 1.01 + 1e-12 * (1.0 + s)
 }
 
 /// Tables of one parameter set. Only built where [`supported`] holds.

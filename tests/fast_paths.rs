@@ -155,6 +155,36 @@ fn every_knot_count_is_exact_with_both_ends_clipped_on_a_tie() {
     }
 }
 
+/// 31 and 32 knots, where both clamped ends share one table slot (a line through both
+/// end values): one end's code is the same over its last stretch of input, the other end
+/// sits on a rounding tie that the curve crosses just before it (so pixels clipped there
+/// must be redone), and the matrix rows' error bounds differ widely (row sums 0.6 to 9).
+#[test]
+fn shared_end_slot_with_one_ambiguous_end_stays_exact() {
+    let mut px = campro::compare::test_frame(256, 64);
+    px.extend(random_pixels(20_000, 3).into_iter().flatten());
+    let ccm = [[0.3, 0.2, 0.1], [4.5, -3.0, 1.5], [-1.0, 3.0, -0.5]];
+    let mut out = vec![0u8; px.len()];
+    for k in [31, 32] {
+        for top_tie in [true, false] {
+            // The tied end is y = 0.5 (127.5 rounds up to 128) approached from below
+            // (127.x rounds to 127 just inside it); the other end is a plain 0.12 or 0.15.
+            let c = ToneCurve::from_fn(k, |t| match (top_tie, t) {
+                (true, 1.0) | (false, 0.0) => 0.5,
+                (true, _) => 0.12 + 0.36 * t,
+                (false, _) => 0.45 - 0.3 * t,
+            });
+            let p = Params::new(ccm, c, 2.2).unwrap();
+            let reference = Prepared::new(&p, Depth::Eight);
+            Exact8::new(&p).run(&px, &mut out);
+            for (s, o) in px.chunks_exact(3).zip(out.chunks_exact(3)) {
+                let want = reference.pixel([s[0], s[1], s[2]].map(u16::from)).map(|v| (v * 255.0 + 0.5) as u8);
+                assert_eq!(o, want, "{k} knots, tie at the {} end: pixel {s:?}", if top_tie { "top" } else { "bottom" });
+            }
+        }
+    }
+}
+
 #[test]
 fn block_engine_handles_any_length_and_alignment() {
     let p = &sets()[3];

@@ -60,9 +60,10 @@ const PHASE: usize = 8;
 const NEAREST: i32 = _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC;
 /// The tables' scale: one output LSB is 2^16 units of the converted integer.
 const SCALE: f64 = 65536.0;
-/// Least flag threshold (units of 2^-16 LSB): keeps an always-flagged end value inside
-/// the window despite the few units its shared slot's line may round by.
-const MIN_THRESHOLD: i32 = 16;
+/// Least `E_c` used for the shift and the flag window (8 units of 2^-16 LSB): an
+/// always-flagged end value sits `E_c` into the window `[0, 2 E_c)`, farther than the few
+/// units its shared slot's line may round by.
+const MIN_E: f64 = 8.0 / SCALE;
 
 /// Whether this CPU can run the engine.
 pub(super) fn supported() -> bool {
@@ -126,7 +127,7 @@ pub(super) struct Kernel {
     intercept: [[f32; 32]; 3],
     slope: [f32; 32],
     /// A lane of channel c whose low 16 bits are below `threshold[c]` is within `E_c` of
-    /// a rounding boundary: `ceil(2^17 · E_c + 0.5)`, at least [`MIN_THRESHOLD`].
+    /// a rounding boundary: `ceil(2^17 · E_c + 0.5)` (`E_c` at least [`MIN_E`]).
     threshold: [i32; 3],
     /// Byte permutes: deinterleave (plane c: first from bytes 0..128, then 128..192)
     /// and interleave (output register r: first R and G, then B).
@@ -249,16 +250,18 @@ enum Slot {
 /// are the ends: `n = round(-h)`, below segment 0 (only `x' = -h` rounds there), and
 /// every n above segment `k - 2` (`x in [k - 1, 2h]`, where the reference has clipped
 /// at 1: slope 0).
-/// An end slot holds the end's code if it is the same over the last `pos`-wide stretch of
-/// input (`codes`), else a value in the middle of the flag window, always flagged; it
-/// has slope 0, or, where both ends share a slot (h = 15.5: `round(-h) = -16` and
-/// `round(h) = 16`), the line through both end values at `x' = ∓h` (exact to a few
-/// units of 2^-16 LSB, well inside the window's margins).
-/// Returns `(h, intercept, slope)`, or `None` if a segment would share a slot.
-fn slots(y: &[f64], e: f64, threshold: i32, codes: [Option<u16>; 2]) -> Option<(f64, [f32; 32], [f32; 32])> {
+/// An end slot holds the end's code + 1/2 if that code is the same over the last
+/// stretch of input (`codes`), else the code boundary next above the end's value (in
+/// the flag window once shifted, so always flagged); it has slope 0, or, where both ends
+/// share a slot (h = 15.5: `round(-h) = -16` and `round(h) = 16`), the line through both
+/// end values at `x' = ∓h` (exact to a few units of 2^-16 LSB, well inside the window's
+/// margins of at least [`MIN_E`]).
+/// Returns `(h, intercept, slope)` in output LSB, the intercepts before the shift E
+/// (each channel adds its own; the slopes do not depend on it), or `None` if a segment
+/// would share a slot.
+fn slots(y: &[f64], codes: [Option<u16>; 2]) -> Option<(f64, [f64; 32], [f64; 32])> {
     let k = y.len();
     let h = half(k);
-    let shift = 0.5 + e;
     let mut kinds = [Slot::Unused; 32];
     let (lo, hi) = ((-h).round_ties_even() as i64, h.round_ties_even() as i64);
     for n in lo..=hi {
@@ -271,26 +274,24 @@ fn slots(y: &[f64], e: f64, threshold: i32, codes: [Option<u16>; 2]) -> Option<(
             _ => return None,
         };
     }
-    // An end's value (LSB, shifted): its constant code, or inside the flag window.
     let end = |code: Option<u16>, v: f64| match code {
-        Some(q) => q as f64 + shift,
-        None => (255.0 * v).floor() + 1.0 + threshold as f64 / 2.0 / SCALE,
+        Some(q) => q as f64 + 0.5,
+        None => (255.0 * v).floor() + 1.0,
     };
     let (v_lo, v_hi) = (end(codes[0], y[0]), end(codes[1], y[k - 1]));
-    let mut intercept = [0f32; 32];
-    let mut slope = [0f32; 32];
+    let mut intercept = [0.0; 32];
+    let mut slope = [0.0; 32];
     for (i, kind) in kinds.iter().enumerate() {
-        let (b, a) = match *kind {
+        (intercept[i], slope[i]) = match *kind {
             Slot::Unused => (0.0, 0.0),
             Slot::Segment(s) => {
                 let a = 255.0 * (y[s + 1] - y[s]);
-                (255.0 * y[s] + (h - s as f64) * a + shift, a)
+                (255.0 * y[s] + (h - s as f64) * a + 0.5, a)
             }
             Slot::Ends { low: true, high: true } => ((v_lo + v_hi) / 2.0, (v_hi - v_lo) / (2.0 * h)),
             Slot::Ends { low: true, .. } => (v_lo, 0.0),
             Slot::Ends { .. } => (v_hi, 0.0),
         };
-        (intercept[i], slope[i]) = ((SCALE * b) as f32, (SCALE * a) as f32);
     }
     Some((h, intercept, slope))
 }
@@ -326,12 +327,11 @@ impl Kernel {
                 m[3 * i + j] = (v * top) as f32;
             }
         }
-        let threshold = e.map(|e| ((2.0 * SCALE * e + 0.5).ceil() as i32).max(MIN_THRESHOLD));
-        let mut intercept = [[0f32; 32]; 3];
-        let (mut half, mut slope) = (0.0, [0f32; 32]);
-        for ch in 0..3 {
-            (half, intercept[ch], slope) = slots(c.y(), e[ch], threshold[ch], [low_code, high_code])?;
-        }
+        let e = e.map(|e| e.max(MIN_E));
+        let threshold = e.map(|e| (2.0 * SCALE * e + 0.5).ceil() as i32);
+        let (half, b, a) = slots(c.y(), [low_code, high_code])?;
+        let intercept = e.map(|e| b.map(|b| (SCALE * (b + e)) as f32));
+        let slope = a.map(|a| (SCALE * a) as f32);
         let mut split = [[[0u8; 64]; 2]; 3];
         let mut merge = [[[0u8; 64]; 2]; 3];
         for (c, plane) in split.iter_mut().enumerate() {
@@ -520,48 +520,52 @@ mod tests {
     use super::*;
 
     /// The table slots as the engine evaluates them (f32 FMA, one rounding; conversion
-    /// ties to even), at the clamped ends and inside every segment, for every knot count.
+    /// ties to even), at the clamped ends and inside every segment, for every knot count
+    /// and for several shifts E sharing one slope table (as the channels do).
     #[test]
     fn slots_give_each_input_its_line() {
         let eval = |intercept: &[f32; 32], slope: &[f32; 32], x: f32| {
             let n = (x as f64).round_ties_even() as i64;
             let i = n.rem_euclid(32) as usize;
-            x.mul_add(slope[i], intercept[i]) as f64 / SCALE
+            x.mul_add(slope[i], intercept[i]) as f64
         };
         for k in 2..=32usize {
             let y: Vec<f64> = (0..k).map(|i| 0.5 + 0.4 * ((3 * i + 1) % 7) as f64 / 7.0 - 0.2).collect();
-            let (e, threshold) = (1e-3, 300);
             let h = half(k);
             assert!(h >= (k - 1) as f64 / 2.0 && h <= 15.5 && (h + 0.5) % 2.0 == 0.0, "{k}: h = {h}");
-            for codes in [[Some(17), Some(200)], [None, None], [Some(3), None]] {
-                let (hh, intercept, slope) = slots(&y, e, threshold, codes).expect("every k <= 32 fits");
+            for codes in [[Some(17), Some(200)], [None, None], [Some(3), None], [None, Some(255)]] {
+                let (hh, b, a) = slots(&y, codes).expect("every k <= 32 fits");
                 assert_eq!(hh, h);
-                // The clamped ends: the end's code + 0.5 + E, or the middle of the flag window.
-                for (x, code, v) in [(-h, codes[0], y[0]), (h, codes[1], y[k - 1])] {
-                    let w = eval(&intercept, &slope, x as f32);
-                    let want = match code {
-                        Some(q) => q as f64 + 0.5 + e,
-                        None => (255.0 * v).floor() + 1.0 + threshold as f64 / 2.0 / SCALE,
-                    };
-                    assert!((w - want).abs() <= 4.0 / SCALE, "{k} knots, x' = {x}: {w} vs {want}");
-                }
-                // Inside: the curve through the knots, shifted by 0.5 + E (the ends, which
-                // may round onto an end slot, are checked above).
-                for j in 1..(k - 1) * 8 {
-                    let x = j as f64 / 8.0; // segment units, knots included
-                    let s = ((x as usize).min(k - 2), x.fract());
-                    let want = 255.0 * (y[s.0] + s.1 * (y[s.0 + 1] - y[s.0])) + 0.5 + e;
-                    let w = eval(&intercept, &slope, (x - h) as f32);
-                    assert!((w - want).abs() < 1e-4, "{k} knots, x = {x}: {w} vs {want}");
-                }
-                // Past the top (x in (k - 1, 2h]) the line is flat at the end's value.
-                if 2.0 * h > (k - 1) as f64 + 0.25 {
-                    let w = eval(&intercept, &slope, (k as f64 - 1.0 + 0.25 - h) as f32);
-                    let want = match codes[1] {
-                        Some(q) => q as f64 + 0.5 + e,
-                        None => (255.0 * y[k - 1]).floor() + 1.0 + threshold as f64 / 2.0 / SCALE,
-                    };
-                    assert!((w - want).abs() <= 4.0 / SCALE, "{k} knots past the top: {w} vs {want}");
+                let slope = a.map(|a| (SCALE * a) as f32);
+                for e in [MIN_E, 1e-3, 0.2] {
+                    let intercept = b.map(|b| (SCALE * (b + e)) as f32);
+                    let threshold = (2.0 * SCALE * e + 0.5).ceil();
+                    // The clamped ends, and past the top (x in (k - 1, 2h], flat): the end's
+                    // code + 1/2 + E, or the boundary above its value + E, which lies at
+                    // least 4 units inside the flag window [0, threshold).
+                    let mut ends = vec![(-h, codes[0], y[0]), (h, codes[1], y[k - 1])];
+                    if 2.0 * h > (k - 1) as f64 + 0.25 {
+                        ends.push((k as f64 - 0.75 - h, codes[1], y[k - 1]));
+                    }
+                    for (x, code, v) in ends {
+                        let w = eval(&intercept, &slope, x as f32);
+                        let want = SCALE * (e + code.map_or((255.0 * v).floor() + 1.0, |q| q as f64 + 0.5));
+                        assert!((w - want).abs() <= 4.0, "{k} knots, E {e}, x' = {x}: {w} vs {want}");
+                        let low = w.round_ties_even().rem_euclid(SCALE);
+                        match code {
+                            Some(_) => assert!(low >= threshold, "{k} knots, E {e}, x' = {x}: flagged"),
+                            None => assert!(low >= 4.0 && low + 4.0 <= threshold, "{k} knots, E {e}, x' = {x}: {low} of {threshold}"),
+                        }
+                    }
+                    // Inside: the curve through the knots, shifted by 0.5 + E (the ends, which
+                    // may round onto an end slot, are checked above).
+                    for j in 1..(k - 1) * 8 {
+                        let x = j as f64 / 8.0; // segment units, knots included
+                        let (s, f) = ((x as usize).min(k - 2), x - (x as usize).min(k - 2) as f64);
+                        let want = SCALE * (255.0 * (y[s] + f * (y[s + 1] - y[s])) + 0.5 + e);
+                        let w = eval(&intercept, &slope, (x - h) as f32);
+                        assert!((w - want).abs() < 8.0, "{k} knots, E {e}, x = {x}: {w} vs {want}");
+                    }
                 }
             }
         }

@@ -53,8 +53,9 @@ pub(super) const BLOCK: usize = 64;
 pub(super) const BLOCK_BYTES: usize = 3 * BLOCK;
 /// Blocks whose flagged pixels are collected before they are redone (12 KiB of input).
 const STRETCH: usize = 64;
-/// Blocks degammaed into an L1 scratch before the matrix and curve pass over them.
-const PHASE: usize = 8;
+/// Blocks degammaed into an L1 scratch (pass 1) before the matrix and curve pass over
+/// them (pass 2).
+const PASS: usize = 8;
 
 /// Round to nearest, ties to even, exceptions suppressed (both conversions).
 const NEAREST: i32 = _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC;
@@ -372,10 +373,10 @@ impl Kernel {
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vbmi,popcnt,bmi1")]
     fn blocks(&self, src: &[u8], dst: &mut [u8]) -> usize {
         let mut flagged = 0;
-        // Byte offsets of flagged pixels waiting for the reference.
-        // (Room for the seven left over and every sample of one block.)
+        // Flagged samples waiting for the reference: their pixels' byte offsets (room for
+        // the seven left over and every sample of one block)...
         let mut queue = [0usize; 8 + 3 * BLOCK];
-        // Their output channels.
+        // ...and their output channels.
         let mut channel = [0i64; 8 + 3 * BLOCK];
         let mut queued = 0;
         // SAFETY (all loads and stores below): every pointer is into `self`'s arrays of
@@ -398,13 +399,13 @@ impl Kernel {
         // Flag masks (bit i: pixel i of the block) of a stretch of blocks, scanned after
         // the stretch: the scan's unpredictable branches stay out of the vector loop.
         let mut masks = [[0u64; 3]; STRETCH];
-        let mut scratch = [[[_mm512_setzero_ps(); 4]; 3]; PHASE];
+        let mut scratch = [[[_mm512_setzero_ps(); 4]; 3]; PASS];
         let stretch_bytes = STRETCH * BLOCK_BYTES;
         for first in (0..src.len()).step_by(stretch_bytes) {
             let blocks = (src.len() - first).min(stretch_bytes) / BLOCK_BYTES;
-            for sub in (0..blocks).step_by(PHASE) {
-                let n = (blocks - sub).min(PHASE);
-                // Phase 1: planes of 64 codes, then their degamma as 4 x 16 f32 lanes per
+            for sub in (0..blocks).step_by(PASS) {
+                let n = (blocks - sub).min(PASS);
+                // Pass 1: planes of 64 codes, then their degamma as 4 x 16 f32 lanes per
                 // channel, into an L1 scratch. Lane l of group g holds pixel
                 // 16·(l / 4) + 4·g + l % 4 (the unpack order).
                 for (j, lin) in scratch[..n].iter_mut().enumerate() {
@@ -436,7 +437,7 @@ impl Kernel {
                         ];
                     }
                 }
-                // Phase 2: matrix, curve, flags, pack.
+                // Pass 2: matrix, curve, flags, pack.
                 for (j, lin) in scratch[..n].iter().enumerate() {
                     let base = first + (sub + j) * BLOCK_BYTES;
                     let di = &mut dst[base..base + BLOCK_BYTES];

@@ -8,15 +8,14 @@ use campro::compare::test_frame;
 use campro::pipeline::fast::{Exact8, F32Path};
 use campro::pipeline::{Depth, Prepared};
 use campro::targets::camera2::{convert, Options};
-use campro::{Params, ToneCurve};
+use campro::Params;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
 
 const PHONE: campro::Mat3 = [[1.78, -0.62, -0.16], [-0.28, 1.62, -0.34], [0.02, -0.71, 1.69]];
 
 fn params() -> Params {
-    let ccm = [[1.2101, 0.0430, -0.6679], [-4.3933, 1.1114, -2.2755], [0.2930, 1.3570, 1.3287]];
-    Params::new(ccm, ToneCurve::from_fn(32, |t| (7.0 * t).sin() * 0.5 + 0.5), 2.2).unwrap()
+    campro::compare::bench_params()
 }
 
 fn bench_convert(c: &mut Criterion) {

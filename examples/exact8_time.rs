@@ -1,14 +1,12 @@
 //! Times the default exact 8-bit path against a copy on one 1080p frame (one thread):
 //! `cargo run --release --example exact8_time [-- RUNS]`. Medians of the same run.
-use campro::compare::{median_seconds as median, test_frame};
+use campro::compare::{bench_params, median_seconds as median, test_frame};
 use campro::pipeline::fast::Exact8;
-use campro::{Params, ToneCurve};
 use std::hint::black_box;
 
 fn main() {
     let runs: usize = std::env::args().nth(1).and_then(|a| a.parse().ok()).unwrap_or(201);
-    let ccm = [[1.2101, 0.0430, -0.6679], [-4.3933, 1.1114, -2.2755], [0.2930, 1.3570, 1.3287]];
-    let p = Params::new(ccm, ToneCurve::from_fn(32, |t| (7.0 * t).sin() * 0.5 + 0.5), 2.2).unwrap();
+    let p = bench_params();
     let frame = test_frame(1920, 1080);
     let mut out = vec![0u8; frame.len()];
     let exact = Exact8::new(&p);

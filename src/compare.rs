@@ -92,6 +92,15 @@ pub fn code_cube(step: usize) -> Vec<[u8; 3]> {
     out
 }
 
+/// The benchmarks' parameter set ("bench"), like the paper's strong checkpoints: CCM
+/// entries to ±4.4 and a 32-knot curve with slopes to 3.5.
+pub fn bench_params() -> Params {
+    let ccm = [[1.2101, 0.0430, -0.6679], [-4.3933, 1.1114, -2.2755], [0.2930, 1.3570, 1.3287]];
+    let mut p = Params::new(ccm, crate::ToneCurve::from_fn(32, |t| (7.0 * t).sin() * 0.5 + 0.5), 2.2).expect("valid");
+    p.name = "bench".into();
+    p
+}
+
 /// Median seconds of `f` over `runs` runs, after one warm-up run (the benchmarks' timer:
 /// medians, since the machines they run on are shared and noisy).
 pub fn median_seconds(runs: usize, mut f: impl FnMut()) -> f64 {

@@ -9,7 +9,7 @@ use campro::lut3d::{Interp, Lut3d};
 use campro::pipeline::fast::{Exact8, F32Path};
 use campro::pipeline::{Depth, Prepared};
 use campro::targets::camera2::{convert, Options, RationalMode};
-use campro::{Params, ToneCurve};
+use campro::Params;
 use rayon::prelude::*;
 use std::hint::black_box;
 use std::time::Instant;
@@ -217,8 +217,5 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
 
 /// The parameter set the table uses by default: like the paper's strong checkpoints.
 pub fn default_params() -> Params {
-    let ccm = [[1.2101, 0.0430, -0.6679], [-4.3933, 1.1114, -2.2755], [0.2930, 1.3570, 1.3287]];
-    let mut p = Params::new(ccm, ToneCurve::from_fn(32, |t| (7.0 * t).sin() * 0.5 + 0.5), 2.2).expect("valid");
-    p.name = "bench".into();
-    p
+    campro::compare::bench_params()
 }

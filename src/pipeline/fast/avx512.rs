@@ -85,7 +85,7 @@ fn half(k: usize) -> f64 {
 
 /// Error bound of the engine's value before rounding, in output LSB, for each output
 /// channel (see the module doc).
-pub(super) fn error_lsb(params: &Params) -> [f64; 3] {
+fn error_lsb(params: &Params) -> [f64; 3] {
     let u = f32::EPSILON as f64 / 2.0;
     let c = &params.tone_curve;
     let l = c.max_slope();
@@ -183,10 +183,13 @@ impl Reference {
         t
     }
 
-    /// The rounded outputs of eight samples: lane l is output channel `channel[l]` (0..3)
-    /// of the pixel at byte offset `at[l]` of `src`; written to the same place of `dst`.
+    /// The rounded outputs of the first eight samples of a queue: lane l is output channel
+    /// `channel[l]` (0..3) of the pixel at byte offset `at[l]` of `src`; written to the
+    /// same place of `dst`.
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vbmi,popcnt,bmi1")]
-    fn redo(&self, at: &[usize; 8], channel: &[i64; 8], src: &[u8], dst: &mut [u8]) {
+    fn redo<const N: usize>(&self, at: &[usize; N], channel: &[i64; N], src: &[u8], dst: &mut [u8]) {
+        const { assert!(N >= 8) };
+        let (Some(at), Some(channel)) = (at.first_chunk::<8>(), channel.first_chunk::<8>()) else { unreachable!("N >= 8") };
         // Permute from a 32-entry table: two 16-entry permutes, bit 4 picks.
         let load = |t: &[f64; 32]| {
             // SAFETY: four loads of eight f64 inside a 32-entry array.
@@ -396,8 +399,9 @@ impl Kernel {
         let v = self.intercept.map(|t| unsafe { [_mm512_loadu_ps(t.as_ptr()), _mm512_loadu_ps(t[16..].as_ptr())] });
         let (s0, s1) = unsafe { (_mm512_loadu_ps(self.slope.as_ptr()), _mm512_loadu_ps(self.slope[16..].as_ptr())) };
 
-        // Flag masks (bit i: pixel i of the block) of a stretch of blocks, scanned after
-        // the stretch: the scan's unpredictable branches stay out of the vector loop.
+        // Flag masks of a stretch of blocks, one per output channel (bit order below),
+        // scanned after the stretch: the scan's unpredictable branches stay out of the
+        // vector loop.
         let mut masks = [[0u64; 3]; STRETCH];
         let mut scratch = [[[_mm512_setzero_ps(); 4]; 3]; PASS];
         let stretch_bytes = STRETCH * BLOCK_BYTES;
@@ -497,7 +501,7 @@ impl Kernel {
                     bits &= bits - 1;
                 }
                 while queued >= 8 {
-                    self.reference.redo(queue[..8].try_into().expect("eight"), channel[..8].try_into().expect("eight"), src, dst);
+                    self.reference.redo(&queue, &channel, src, dst);
                     queue.copy_within(8..queued, 0);
                     channel.copy_within(8..queued, 0);
                     queued -= 8;
@@ -509,7 +513,7 @@ impl Kernel {
             let (first, ch) = (queue[0], channel[0]);
             queue[queued..8].fill(first);
             channel[queued..8].fill(ch);
-            self.reference.redo(queue[..8].try_into().expect("eight"), channel[..8].try_into().expect("eight"), src, dst);
+            self.reference.redo(&queue, &channel, src, dst);
         }
         flagged
     }

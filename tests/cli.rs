@@ -392,6 +392,43 @@ fn privacy_distractors_only_enlarge_the_gallery() {
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("expected a count or `all`, got \"many\""));
 }
 
+/// `eval privacy --restore`: each parameter set gets a "NAME restored" row. Colour inversion
+/// is a bijection, so restoring it gives most of the raw accuracy back; baselines get none.
+#[test]
+fn privacy_restore_undoes_a_bijective_camera() {
+    let Some(models) = common::shared("models/yunet_s_640_640.onnx") else { return };
+    let Some(_) = common::shared("data/lfw/pairs.txt") else { return };
+    let Some(_) = common::shared("data/coco-person/instances_person.json") else { return };
+    let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("r");
+    campro()
+        .args(["eval", "privacy"])
+        .arg(bundled("color-inversion.json"))
+        .args(["--baseline", "lowres-8", "--restore", "--limit", "8", "--runs", "3", "--no-verification", "--shared"])
+        .arg(&shared)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap();
+    let top1 = |cond: &str| -> f64 {
+        let rows: Vec<f64> = v["identification"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["condition"] == cond && r["order"] == "paper" && r["classifier"] == "nearest")
+            .map(|r| 100.0 * r["top1_mean"].as_f64().unwrap())
+            .collect();
+        assert_eq!(rows.len(), 2, "{cond}: one row per model");
+        rows.iter().sum::<f64>() / 2.0
+    };
+    let (inverted, restored, raw) = (top1("color-inversion"), top1("color-inversion restored"), top1("raw"));
+    assert!(restored > inverted + 30.0 && restored > 0.6 * raw, "inverted {inverted}, restored {restored}, raw {raw}");
+    let names: Vec<&str> = v["identification"].as_array().unwrap().iter().map(|r| r["condition"].as_str().unwrap()).collect();
+    assert!(!names.contains(&"lowres-8 restored"), "only parameter sets are restored");
+}
+
 #[test]
 fn eval_refuses_bad_arguments_clearly() {
     let out = campro().args(["eval", "quality", "--baseline", "lowres-0"]).output().unwrap();

@@ -25,6 +25,7 @@ pub mod plot;
 pub mod privacy;
 pub mod quality;
 pub mod report;
+pub mod restore;
 pub mod utility;
 
 pub use error::{EvalError, Result};

@@ -119,6 +119,23 @@ pub struct DetectorConfig {
     /// loaded, frozen, on the unprotected image as the teacher) added to the detection loss,
     /// in the joint training and in `finetune-detector` alike; 0 (the default) leaves it out.
     pub distill: f64,
+    /// Hidden units of a per-pixel colour adapter in front of the detector
+    /// ([`crate::yolox::Yolox::with_adapter`]: 1x1 convolutions, starting as the identity,
+    /// written into the fine-tuned ONNX file); 0 (the default) adds none. A detector
+    /// fine-tuned at `lr` = 1e-5 barely moves its first layer (Adam moves a weight by about
+    /// `lr` a step), so it cannot undo even a colour inversion, which that layer could absorb
+    /// exactly, and a larger `lr` everywhere breaks the deeper layers (README, detector
+    /// section). The adapter learns the colour map at its own rate instead and, in
+    /// `campro train`, takes one fitting step ([`crate::detection::AdapterFit`]) per
+    /// protector step to follow the camera.
+    pub adapter: usize,
+    /// Adam learning rate of the adapter (its share of the detection loss, and its fitting
+    /// steps in `campro train`).
+    pub adapter_lr: f64,
+    /// `finetune-detector` first fits the adapter alone for this many steps (Adam at
+    /// [`crate::finetune::FIT_LR`], a person batch each) to undo the camera pixel by pixel,
+    /// `adapter(C(x)) ≈ x` in squared error, which needs no detector pass. 0 skips it.
+    pub adapter_fit: usize,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -185,9 +202,10 @@ impl Default for DataConfig {
 }
 impl Default for DetectorConfig {
     fn default() -> Self {
-        Self { model: "../shared/models/yolox_nano.onnx".into(), data: "../shared/data/coco-person".into(), size: 320, batch: 4, lr: 1e-5, max_images: None, distill: 0.0 }
+        Self { model: "../shared/models/yolox_nano.onnx".into(), data: "../shared/data/coco-person".into(), size: 320, batch: 4, lr: 1e-5, max_images: None, distill: 0.0, adapter: 0, adapter_lr: 1e-3, adapter_fit: 0 }
     }
 }
+
 impl Default for BudgetConfig {
     fn default() -> Self {
         Self { rounds: 2000, seconds: 4.0 * 3600.0, checkpoint_every: 100 }
@@ -211,7 +229,7 @@ impl Config {
     /// Every rule, first broken one reported.
     pub fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let finite_pos = |v: f64| v.is_finite() && v > 0.0;
-        let checks: [(bool, &str, &str); 18] = [
+        let checks: [(bool, &str, &str); 20] = [
             ((2..=1024).contains(&self.camera.knots), "camera.knots", "must be in 2..=1024"),
             (self.camera.gamma.is_finite() && (0.2..=5.0).contains(&self.camera.gamma), "camera.gamma", "must be in [0.2, 5]"),
             (finite_pos(self.camera.lr), "camera.lr", "must be finite and > 0"),
@@ -228,6 +246,8 @@ impl Config {
             ((1..=256).contains(&self.detector.batch), "detector.batch", "must be in 1..=256"),
             (self.detector.lr.is_finite() && self.detector.lr >= 0.0, "detector.lr", "must be finite and ≥ 0 (0 freezes P)"),
             (self.detector.distill.is_finite() && self.detector.distill >= 0.0, "detector.distill", "must be finite and ≥ 0 (0 leaves it out)"),
+            (self.detector.adapter <= 4096, "detector.adapter", "must be at most 4096 hidden units (0 for none)"),
+            (self.detector.adapter_lr.is_finite() && self.detector.adapter_lr >= 0.0, "detector.adapter_lr", "must be finite and ≥ 0 (0 freezes the adapter)"),
             (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
             (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
         ];

@@ -186,6 +186,74 @@ pub fn yolox_loss(head: &Tensor, h: usize, w: usize, gts: &[Vec<[f32; 4]>]) -> R
     Ok((loss, parts))
 }
 
+/// The detector's optimiser: Adam at `cfg.lr`, with the colour adapter's tensors (if any)
+/// in a group of their own at `cfg.adapter_lr`.
+pub struct DetectorAdam {
+    groups: Vec<candle_nn::AdamW>,
+}
+
+impl DetectorAdam {
+    pub fn new(det: &Yolox, cfg: &crate::config::DetectorConfig) -> Result<Self> {
+        use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+        let adam = |vars: Vec<candle_core::Var>, lr: f64| AdamW::new(vars, ParamsAdamW { lr, weight_decay: 0.0, ..Default::default() });
+        let (adapter, rest) = det.adapter_and_rest();
+        let mut groups = vec![adam(rest, cfg.lr)?];
+        if !adapter.is_empty() {
+            groups.push(adam(adapter, cfg.adapter_lr)?);
+        }
+        Ok(Self { groups })
+    }
+
+    /// One step of every group on `grads`.
+    pub fn step(&mut self, grads: &candle_core::backprop::GradStore) -> Result<()> {
+        use candle_nn::Optimizer;
+        self.groups.iter_mut().try_for_each(|g| g.step(grads))
+    }
+}
+
+/// Fits the detector's colour adapter ([`Yolox::with_adapter`]) to undo a camera pixel by
+/// pixel: Adam on the adapter alone, minimising the mean squared error (in 0..1 units) of
+/// `adapter(C(x))` against `x` over a person batch's pixels, padding included (which the
+/// camera leaves alone). No detector pass is needed.
+pub struct AdapterFit {
+    adam: candle_nn::AdamW,
+}
+
+impl AdapterFit {
+    /// Adam at `lr` on `det`'s adapter; None when it has none.
+    pub fn new(det: &Yolox, lr: f64) -> Result<Option<Self>> {
+        use candle_nn::Optimizer;
+        let (vars, _) = det.adapter_and_rest();
+        if vars.is_empty() {
+            return Ok(None);
+        }
+        let adam = candle_nn::AdamW::new(vars, candle_nn::ParamsAdamW { lr, weight_decay: 0.0, ..Default::default() })?;
+        Ok(Some(Self { adam }))
+    }
+
+    /// One step on batch `b` seen through the camera as `seen` (detached here); returns the
+    /// error before the step.
+    pub fn step(&mut self, det: &Yolox, seen: &Tensor, b: &PersonBatch) -> Result<f64> {
+        use candle_nn::Optimizer;
+        let want = detector_input(&b.x, &b.mask)?;
+        let mse = ((det.adapt(&detector_input(&seen.detach(), &b.mask)?)? - want)? / 255.0)?.sqr()?.mean_all()?;
+        let e = mse.to_scalar::<f32>()? as f64;
+        self.adam.step(&mse.backward()?)?;
+        Ok(e)
+    }
+}
+
+/// The detector `cfg` trains: `cfg.model`, with a colour adapter of `cfg.adapter` units
+/// (seeded by `seed`) when that is not 0.
+pub fn student(cfg: &crate::config::DetectorConfig, seed: u64, dev: &candle_core::Device) -> std::result::Result<Yolox, crate::yolox::YoloxError> {
+    let det = Yolox::load(&cfg.model, dev)?;
+    if cfg.adapter > 0 {
+        det.with_adapter(cfg.adapter, seed, dev)
+    } else {
+        Ok(det)
+    }
+}
+
 /// The frozen teacher of `cfg.distill`: `cfg.model` as loaded, never updated; None when
 /// distillation is off.
 pub fn teacher(cfg: &crate::config::DetectorConfig, dev: &candle_core::Device) -> std::result::Result<Option<Yolox>, crate::yolox::YoloxError> {
@@ -197,17 +265,17 @@ pub fn teacher(cfg: &crate::config::DetectorConfig, dev: &candle_core::Device) -
 }
 
 /// The utility player's loss as the optimiser and the fine-tuning both use it: `det` on the
-/// camera's output `camera_out` of person batch `b` (canvas side `size`), [`yolox_loss`]
-/// against its boxes, plus `distill` times [`distill_loss`] against `teacher` run on the
+/// camera's output `camera_out` of person batch `b` (canvas side `cfg.size`), [`yolox_loss`]
+/// against its boxes, plus `cfg.distill` times [`distill_loss`] against `teacher` run on the
 /// unprotected batch when a teacher is given. Returns the loss and its parts.
-pub fn utility_loss(det: &Yolox, teacher: Option<&Yolox>, distill: f64, camera_out: &Tensor, b: &PersonBatch, size: usize) -> Result<(Tensor, DetLoss)> {
+pub fn utility_loss(det: &Yolox, teacher: Option<&Yolox>, cfg: &crate::config::DetectorConfig, camera_out: &Tensor, b: &PersonBatch) -> Result<(Tensor, DetLoss)> {
     let head = det.forward(&detector_input(camera_out, &b.mask)?)?;
-    let (loss, mut parts) = yolox_loss(&head, size, size, &b.boxes)?;
+    let (loss, mut parts) = yolox_loss(&head, cfg.size, cfg.size, &b.boxes)?;
     match teacher {
-        Some(t) if distill > 0.0 => {
+        Some(t) if cfg.distill > 0.0 => {
             let kd = distill_loss(&head, &t.forward(&detector_input(&b.x, &b.mask)?)?.detach())?;
             parts.kd = kd.to_scalar::<f32>()? as f64;
-            Ok(((loss + (kd * distill)?)?, parts))
+            Ok(((loss + (kd * cfg.distill)?)?, parts))
         }
         _ => Ok((loss, parts)),
     }

@@ -14,8 +14,10 @@ use crate::persons::PersonSet;
 use crate::train::{draw, TrainError};
 use crate::yolox::Yolox;
 use candle_core::Device;
-use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use rand::SeedableRng;
+
+/// Adam's rate for the adapter's fit before fine-tuning (`detector.adapter_fit`).
+pub const FIT_LR: f64 = 1e-2;
 
 /// The camera a detector is fine-tuned behind.
 #[derive(Debug, Clone)]
@@ -59,6 +61,8 @@ pub struct Finetuned {
     pub log: Vec<StepRow>,
     /// Training images available (the held-out ones excluded).
     pub images: usize,
+    /// The adapter fit's squared error per step (`detector.adapter_fit`; empty without).
+    pub adapter_fit: Vec<f64>,
 }
 
 /// Fine-tunes `cfg.model` behind `imaging` with `cfg`'s data, size, batch and learning rate.
@@ -75,12 +79,23 @@ pub fn run(imaging: &Imaging, cfg: &DetectorConfig, o: &FinetuneOptions, mut on_
         Imaging::Raw => None,
         Imaging::Camera { ccm, curve, gamma } => Some(Camera::from_values(*ccm, curve, *gamma, &dev)?),
     };
-    let det = Yolox::load(&cfg.model, &dev)?;
+    let det = crate::detection::student(cfg, o.seed, &dev)?;
     let teacher = crate::detection::teacher(cfg, &dev)?;
-    let mut adam = AdamW::new(det.vars(), ParamsAdamW { lr: cfg.lr, weight_decay: 0.0, ..Default::default() })?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(o.seed);
     let pool: Vec<usize> = (0..set.len()).collect();
     let mut order = Vec::new();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(o.seed);
+    let mut fit = Vec::new();
+    if let Some(mut fitter) = crate::detection::AdapterFit::new(&det, FIT_LR)?.filter(|_| cfg.adapter_fit > 0) {
+        for _ in 0..cfg.adapter_fit {
+            let b = set.batch(&draw(&mut order, &pool, cfg.batch, &mut rng), &dev)?;
+            let seen = match &camera {
+                Some(c) => c.forward(&b.x)?,
+                None => b.x.clone(),
+            };
+            fit.push(fitter.step(&det, &seen, &b)?);
+        }
+    }
+    let mut adam = crate::detection::DetectorAdam::new(&det, cfg)?;
     let start = std::time::Instant::now();
     let mut log = Vec::with_capacity(o.steps);
     for step in 1..=o.steps {
@@ -93,7 +108,7 @@ pub fn run(imaging: &Imaging, cfg: &DetectorConfig, o: &FinetuneOptions, mut on_
             Some(c) => c.forward(&b.x)?.detach(),
             None => b.x.clone(),
         };
-        let (loss, parts) = utility_loss(&det, teacher.as_ref(), cfg.distill, &x, &b, cfg.size)?;
+        let (loss, parts) = utility_loss(&det, teacher.as_ref(), cfg, &x, &b)?;
         let l = loss.to_scalar::<f32>()? as f64;
         if !l.is_finite() {
             return Err(TrainError::Diverged(format!("detection loss is {l} at step {step}: lower detector.lr")));
@@ -103,5 +118,5 @@ pub fn run(imaging: &Imaging, cfg: &DetectorConfig, o: &FinetuneOptions, mut on_
         on_step(&row);
         log.push(row);
     }
-    Ok(Finetuned { detector: det, log, images: set.len() })
+    Ok(Finetuned { detector: det, log, images: set.len(), adapter_fit: fit })
 }

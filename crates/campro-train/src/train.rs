@@ -235,7 +235,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         if set.is_empty() {
             return Err(TrainError::Unsupported(format!("{}: no person images", cfg.detector.data.display())));
         }
-        Some((set, Yolox::load(&cfg.detector.model, &dev)?))
+        Some((set, crate::detection::student(&cfg.detector, cfg.seed, &dev)?))
     } else {
         None
     };
@@ -305,7 +305,13 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let mut sgd_backbone = SGD::new(MobileFaceNet::trainable(&net_vars), cfg.attacker.backbone_lr)?;
     let mut adam = AdamW::new(cam.vars(), ParamsAdamW { lr: cfg.camera.lr, weight_decay: 0.0, ..Default::default() })?;
     let mut adam_det = match &utility {
-        Some((_, det)) if cfg.detector.lr > 0.0 => Some(AdamW::new(det.vars(), ParamsAdamW { lr: cfg.detector.lr, weight_decay: 0.0, ..Default::default() })?),
+        Some((_, det)) if cfg.detector.lr > 0.0 => Some(crate::detection::DetectorAdam::new(det, &cfg.detector)?),
+        _ => None,
+    };
+    // A colour adapter in P (`detector.adapter`) is also fitted to undo the camera, one step
+    // per protector step at `detector.adapter_lr`.
+    let mut fitter = match &utility {
+        Some((_, det)) if cfg.detector.adapter_lr > 0.0 => crate::detection::AdapterFit::new(det, cfg.detector.adapter_lr)?,
         _ => None,
     };
     let (mut person_order, all_people): (Vec<usize>, Vec<usize>) = (Vec::new(), (0..utility.as_ref().map_or(0, |(set, _)| set.len())).collect());
@@ -361,17 +367,24 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             let mut loss = non_saturating_loss(&logits, &y)?;
             lns = loss.to_scalar::<f32>()? as f64;
             finite("privacy loss", lns)?;
+            let mut seen = None;
             if let Some((set, det)) = &utility {
                 let pb = set.batch(&draw(&mut person_order, &all_people, cfg.detector.batch, &mut rng), &dev)?;
-                let (l, _) = crate::detection::utility_loss(det, teacher.as_ref(), cfg.detector.distill, &cam.forward(&pb.x)?, &pb, set.size)?;
+                let out = cam.forward(&pb.x)?;
+                let (l, _) = crate::detection::utility_loss(det, teacher.as_ref(), &cfg.detector, &out, &pb)?;
                 ldet = l.to_scalar::<f32>()? as f64;
                 finite("detection loss", ldet)?;
                 loss = (loss + (l * cfg.protector.omega)?)?;
+                seen = Some((out.detach(), pb));
             }
             let grads = loss.backward()?;
             adam.step(&grads)?;
             if let Some(a) = adam_det.as_mut() {
                 a.step(&grads)?;
+            }
+            // The adapter follows the camera: one fit step on the same people.
+            if let (Some(f), Some((_, det)), Some((out, pb))) = (fitter.as_mut(), &utility, &seen) {
+                f.step(det, out, pb)?;
             }
             cam.project()?;
         }

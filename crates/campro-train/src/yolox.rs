@@ -15,6 +15,9 @@ use std::collections::HashMap;
 use std::path::Path;
 use tract_onnx::pb;
 
+/// The colour adapter's output tensor ([`Yolox::with_adapter`]).
+const ADAPTED: &str = "adapter.y";
+
 /// Strides of the three output grids.
 pub const STRIDES: [usize; 3] = [8, 16, 32];
 
@@ -36,6 +39,8 @@ enum Op {
     Conv { w: String, b: Option<String>, stride: usize, pad: usize, depthwise: bool },
     Sigmoid,
     Mul,
+    /// Multiplication by a constant scalar.
+    Scale(f32),
     Add,
     /// Stride-1 max pooling, `k` x `k`, padding (k − 1) / 2.
     MaxPool(usize),
@@ -87,6 +92,10 @@ impl Yolox {
         let p = path.display().to_string();
         let bytes = std::fs::read(path).map_err(|e| YoloxError::Io { path: p.clone(), message: e.to_string() })?;
         let model = pb::ModelProto::decode(bytes.as_slice()).map_err(|e| YoloxError::Graph { path: p.clone(), message: format!("not an ONNX model: {e}") })?;
+        Self::from_model(model, p, dev)
+    }
+
+    fn from_model(model: pb::ModelProto, p: String, dev: &candle_core::Device) -> std::result::Result<Self, YoloxError> {
         let bad = |m: String| YoloxError::Graph { path: p.clone(), message: m };
         let graph = model.graph.as_ref().ok_or_else(|| bad("no graph".into()))?;
         let inits: HashMap<&str, &pb::TensorProto> = graph.initializer.iter().map(|t| (t.name.as_str(), t)).collect();
@@ -134,7 +143,11 @@ impl Yolox {
                     Op::Conv { w: n.input[1].clone(), b, stride: stride[0] as usize, pad: pad as usize, depthwise }
                 }
                 "Sigmoid" => Op::Sigmoid,
-                "Mul" => Op::Mul,
+                "Mul" => match n.input.iter().find_map(|i| inits.get(i.as_str())) {
+                    Some(c) if data.len() == 1 && c.dims.iter().all(|&d| d == 1) && floats(c).len() == 1 => Op::Scale(floats(c)[0]),
+                    Some(_) => return Err(bad(format!("{what}: a constant factor must be a scalar"))),
+                    None => Op::Mul,
+                },
                 "Add" => Op::Add,
                 "MaxPool" => {
                     let k = attr_ints("kernel_shape");
@@ -176,6 +189,72 @@ impl Yolox {
         self.params.iter().map(|(_, v)| v.clone()).collect()
     }
 
+    /// Puts a per-pixel colour adapter with `hidden` units in front of the network:
+    /// `x + 255·(W₂·SiLU(W₁·x/255 + b₁) + b₂)` on the BGR 0..255 input, as 1x1 convolutions
+    /// in the graph itself (so the written ONNX file carries it). `W₁` is drawn from
+    /// N(0, 1/3) by `seed`, the rest is zero, so the adapter starts as the identity and the
+    /// detector's output is unchanged. Its tensors are named `adapter.*`
+    /// ([`Self::adapter_and_rest`]).
+    pub fn with_adapter(self, hidden: usize, seed: u64, dev: &candle_core::Device) -> std::result::Result<Self, YoloxError> {
+        use rand::SeedableRng;
+        use rand_distr::Distribution;
+        let p = "adapter".to_string();
+        if hidden == 0 {
+            return Err(YoloxError::Graph { path: p, message: "an adapter needs at least one hidden unit".into() });
+        }
+        let mut model = self.model;
+        let graph = model.graph.as_mut().expect("checked in load");
+        if graph.initializer.iter().any(|t| t.name.starts_with("adapter.")) {
+            return Err(YoloxError::Graph { path: p, message: "the model already has an adapter".into() });
+        }
+        let tensor = |name: &str, dims: Vec<i64>, v: Vec<f32>| pb::TensorProto { name: name.into(), dims, data_type: 1, raw_data: v.iter().flat_map(|x| x.to_le_bytes()).collect(), ..Default::default() };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let normal = rand_distr::Normal::new(0.0f32, (1.0f32 / 3.0).sqrt()).expect("valid");
+        let h = hidden as i64;
+        graph.initializer.extend([
+            tensor("adapter.in", vec![], vec![1.0 / 255.0]),
+            tensor("adapter.w1", vec![h, 3, 1, 1], (0..3 * hidden).map(|_| normal.sample(&mut rng)).collect()),
+            tensor("adapter.b1", vec![h], vec![0.0; hidden]),
+            tensor("adapter.w2", vec![3, h, 1, 1], vec![0.0; 3 * hidden]),
+            tensor("adapter.b2", vec![3], vec![0.0; 3]),
+            tensor("adapter.out", vec![], vec![255.0]),
+        ]);
+        let input = self.input.clone();
+        for n in graph.node.iter_mut() {
+            for i in n.input.iter_mut().filter(|i| **i == input) {
+                *i = ADAPTED.into();
+            }
+        }
+        let ints = |name: &str, v: Vec<i64>| pb::AttributeProto { name: name.into(), r#type: 7, ints: v, ..Default::default() };
+        let conv_attrs = || vec![ints("kernel_shape", vec![1, 1]), ints("strides", vec![1, 1]), ints("pads", vec![0, 0, 0, 0]), ints("dilations", vec![1, 1])];
+        let node = |op: &str, inputs: &[&str], output: &str, attribute: Vec<pb::AttributeProto>| pb::NodeProto {
+            name: format!("adapter_{output}"),
+            op_type: op.into(),
+            input: inputs.iter().map(|s| s.to_string()).collect(),
+            output: vec![output.into()],
+            attribute,
+            ..Default::default()
+        };
+        let front = vec![
+            node("Mul", &[&input, "adapter.in"], "adapter.u", vec![]),
+            node("Conv", &["adapter.u", "adapter.w1", "adapter.b1"], "adapter.z", conv_attrs()),
+            node("Sigmoid", &["adapter.z"], "adapter.s", vec![]),
+            node("Mul", &["adapter.z", "adapter.s"], "adapter.a", vec![]),
+            node("Conv", &["adapter.a", "adapter.w2", "adapter.b2"], "adapter.r", conv_attrs()),
+            node("Mul", &["adapter.r", "adapter.out"], "adapter.d", vec![]),
+            node("Add", &[&input, "adapter.d"], ADAPTED, vec![]),
+        ];
+        graph.node.splice(0..0, front);
+        Self::from_model(model, p, dev)
+    }
+
+    /// The adapter's trainable tensors ([`Self::with_adapter`]; none without one) and every
+    /// other trainable tensor.
+    pub fn adapter_and_rest(&self) -> (Vec<Var>, Vec<Var>) {
+        let (a, b): (Vec<_>, Vec<_>) = self.params.iter().partition(|(n, _)| n.starts_with("adapter."));
+        (a.into_iter().map(|(_, v)| v.clone()).collect(), b.into_iter().map(|(_, v)| v.clone()).collect())
+    }
+
     /// Every trainable tensor with its ONNX initializer name.
     pub fn named_vars(&self) -> Vec<(String, Var)> {
         self.params.clone()
@@ -191,9 +270,27 @@ impl Yolox {
         if h % 32 != 0 || w % 32 != 0 {
             candle_core::bail!("YOLOX input {h}x{w}: height and width must be multiples of 32");
         }
+        self.run(x, None)?.remove(self.output.as_str()).ok_or_else(|| candle_core::Error::Msg("output not computed".into()))
+    }
+
+    /// The colour adapter's output ([`Self::with_adapter`]) for `x` (B, 3, H, W), BGR
+    /// 0..255, any H and W (it works pixel by pixel); an error without an adapter.
+    pub fn adapt(&self, x: &Tensor) -> Result<Tensor> {
+        if !self.index.contains_key("adapter.w1") {
+            candle_core::bail!("the detector has no colour adapter");
+        }
+        let mut v = self.run(x, Some(ADAPTED))?;
+        v.remove(ADAPTED).ok_or_else(|| candle_core::Error::Msg("the detector has no colour adapter".into()))
+    }
+
+    /// Interprets the graph on `x`, up to the node writing `until` (all of it if None).
+    fn run(&self, x: &Tensor, until: Option<&str>) -> Result<HashMap<&str, Tensor>> {
         let mut values: HashMap<&str, Tensor> = HashMap::new();
         values.insert(&self.input, x.clone());
         for n in &self.nodes {
+            if until.is_some_and(|u| values.contains_key(u)) {
+                break;
+            }
             let arg = |k: usize| -> Result<&Tensor> { values.get(n.inputs[k].as_str()).ok_or_else(|| candle_core::Error::Msg(format!("{} not computed", n.inputs[k]))) };
             let y = match &n.op {
                 Op::Slice { axis, start, end, step } => {
@@ -214,6 +311,7 @@ impl Yolox {
                 }
                 Op::Sigmoid => candle_nn::ops::sigmoid(arg(0)?)?,
                 Op::Mul => arg(0)?.broadcast_mul(arg(1)?)?,
+                Op::Scale(c) => (arg(0)? * *c as f64)?,
                 Op::Add => arg(0)?.broadcast_add(arg(1)?)?,
                 Op::MaxPool(k) => max_pool_same(arg(0)?, *k)?,
                 Op::Upsample(f) => {
@@ -225,7 +323,7 @@ impl Yolox {
             };
             values.insert(&n.output, y);
         }
-        values.remove(self.output.as_str()).ok_or_else(|| candle_core::Error::Msg("output not computed".into()))
+        Ok(values)
     }
 
     /// Writes the model with the current weights as ONNX (temporary file, then rename).

@@ -46,6 +46,8 @@ fn bad_values_name_the_key() {
     assert_eq!(rule("[detector]\nlr = -1.0").0, "detector.lr");
     assert_eq!(rule("[detector]\ndistill = -0.5").0, "detector.distill");
     assert_eq!(rule("[detector]\ndistill = nan").0, "detector.distill");
+    assert_eq!(rule("[detector]\nadapter = 100000").0, "detector.adapter");
+    assert_eq!(rule("[detector]\nadapter = 16\nadapter_lr = -1e-3").0, "detector.adapter_lr");
 }
 
 #[test]
@@ -77,12 +79,14 @@ fn shipped_configs_parse() {
             assert_eq!(c.protector.omega, w.split('-').next().unwrap().parse::<f64>().unwrap(), "{name}");
         }
         assert_eq!(c.protector.protector_only, name == "protector-only", "{name}");
-        assert_eq!(c.detector.distill > 0.0, name.ends_with("distill"), "{name}");
+        // Adapter configurations distil too.
+        assert_eq!(c.detector.adapter > 0, name.contains("adapter"), "{name}");
+        assert_eq!(c.detector.distill > 0.0, name.ends_with("distill") || name.contains("adapter"), "{name}");
         if name.starts_with("finetune") {
             continue; // read for its seed and [detector] only
         }
         omegas.push(c.protector.omega);
     }
     omegas.sort_by(f64::total_cmp);
-    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 1.0, 5.0]);
+    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
 }

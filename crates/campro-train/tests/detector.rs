@@ -175,3 +175,57 @@ fn distillation_by_hand() {
     // Heads of different shapes are an error, not a broadcast.
     assert!(distill_loss(&student.narrow(1, 0, 1).unwrap(), &teacher).is_err());
 }
+
+#[test]
+fn colour_adapter_starts_as_the_identity_and_round_trips_through_onnx() {
+    let Some(onnx) = shared::shared("models/yolox_nano.onnx") else { return };
+    let Some(img) = shared::shared("data/coco-person/images/000000000139.jpg") else { return };
+    let models = onnx.parent().unwrap().to_path_buf();
+    let c = canvas(&img);
+    let x = bgr_tensor(&c);
+    let dev = Device::Cpu;
+    let plain = Yolox::load(&onnx, &dev).unwrap();
+    let want: Vec<f32> = plain.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let net = Yolox::load(&onnx, &dev).unwrap().with_adapter(4, 7, &dev).unwrap();
+    let (adapter, rest) = net.adapter_and_rest();
+    assert_eq!(adapter.iter().map(|v| v.dims().to_vec()).collect::<Vec<_>>(), [vec![4, 3, 1, 1], vec![4], vec![3, 4, 1, 1], vec![3]]);
+    assert_eq!(rest.len(), plain.vars().len());
+    assert!(plain.adapter_and_rest().0.is_empty());
+    let start: Vec<f32> = net.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    assert_eq!(start, want, "a fresh adapter must leave the detector unchanged");
+    assert!(Yolox::load(&onnx, &dev).unwrap().with_adapter(0, 7, &dev).is_err());
+    // Give it a colour map by hand: w1 = unit rows on B, G, R and one more, b1 = 0, w2 sends
+    // unit 0 to channel 2 (R) with weight −2 and b2 = (0, 0, 1): R' = R + 255·(1 − 2·SiLU(B/255)).
+    let (w1, b1, w2, b2) = (&adapter[0], &adapter[1], &adapter[2], &adapter[3]);
+    let rows: Vec<f32> = [[1., 0., 0.], [0., 1., 0.], [0., 0., 1.], [1., 1., 1.]].concat();
+    w1.set(&Tensor::from_vec(rows, (4, 3, 1, 1), &dev).unwrap()).unwrap();
+    b1.set(&Tensor::zeros(4, candle_core::DType::F32, &dev).unwrap()).unwrap();
+    let mut m = vec![0f32; 12];
+    m[2 * 4] = -2.0;
+    w2.set(&Tensor::from_vec(m, (3, 4, 1, 1), &dev).unwrap()).unwrap();
+    b2.set(&Tensor::from_vec(vec![0f32, 0., 1.], 3, &dev).unwrap()).unwrap();
+    // The same detector run on the colour-mapped image by hand, without an adapter.
+    let silu = |v: f32| v / (1.0 + (-v).exp());
+    let (w, h) = (c.width() as usize, c.height() as usize);
+    let mut v: Vec<f32> = x.flatten_all().unwrap().to_vec1().unwrap();
+    for i in 0..h * w {
+        v[2 * h * w + i] += 255.0 * (1.0 - 2.0 * silu(v[i] / 255.0));
+    }
+    let by_hand: Vec<f32> = plain.forward(&Tensor::from_vec(v, (1, 3, h, w), &dev).unwrap()).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let ours: Vec<f32> = net.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let worst = ours.iter().zip(&by_hand).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(worst < 2e-3, "adapter vs the map by hand: {worst}");
+    let moved = ours.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(moved > 0.1, "the map changed nothing ({moved})");
+    // Written as ONNX, tract runs the adapter too.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("adapted.onnx");
+    net.save_onnx(&out).unwrap();
+    let back = tract_head(&out, &models, &c);
+    let worst = ours.iter().zip(&back).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(worst < 2e-3, "written ONNX differs from candle by {worst}");
+    // Our own loader reads the written file back, adapter included, and refuses a second.
+    let again = Yolox::load(&out, &dev).unwrap();
+    assert_eq!(again.adapter_and_rest().0.len(), 4);
+    assert!(again.with_adapter(4, 7, &dev).is_err());
+}

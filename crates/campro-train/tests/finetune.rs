@@ -30,7 +30,7 @@ fn training_never_sees_the_held_out_images() {
 fn fine_tuning_behind_a_camera_fits_its_images_and_stops_on_time() {
     let Some(model) = shared::shared("models/yolox_nano.onnx") else { return };
     let Some(coco) = shared::shared("data/coco-person/instances_person.json") else { return };
-    let cfg = DetectorConfig { model, data: coco.parent().unwrap().to_path_buf(), size: 128, batch: 2, lr: 1e-3, max_images: Some(2), distill: 0.0 };
+    let cfg = DetectorConfig { model, data: coco.parent().unwrap().to_path_buf(), size: 128, batch: 2, lr: 1e-3, max_images: Some(2), ..DetectorConfig::default() };
     // A strong camera (colour inversion through the curve): the detector must adapt to it.
     let imaging = Imaging::Camera { ccm: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], curve: (0..32).map(|i| 1.0 - i as f64 / 31.0).collect(), gamma: 2.2 };
     let done = run(&imaging, &cfg, &FinetuneOptions { steps: 8, seconds: f64::INFINITY, seed: 0 }, |_| {}).unwrap();
@@ -53,6 +53,15 @@ fn fine_tuning_behind_a_camera_fits_its_images_and_stops_on_time() {
     let r = inv.log[0];
     assert!(r.kd > 0.1, "{r:?}");
     assert!((r.loss - (5.0 * r.iou + r.obj + r.cls + r.kd)).abs() < 1e-3 * r.loss, "{r:?}");
+    // A colour adapter fitted to the inverting camera: its pixel error falls well below where
+    // it starts (the identity map), and the written detector carries it.
+    let adapted = DetectorConfig { adapter: 8, adapter_fit: 60, ..cfg.clone() };
+    let fit = run(&imaging, &adapted, &two, |_| {}).unwrap();
+    let e = &fit.adapter_fit;
+    assert_eq!(e.len(), 60);
+    assert!(e[0] > 0.05 && e[59] < 0.3 * e[0], "adapter fit {} -> {}", e[0], e[59]);
+    assert_eq!(fit.detector.adapter_and_rest().0.len(), 4);
+    assert!(done.adapter_fit.is_empty());
     let frozen = DetectorConfig { lr: 0.0, ..cfg };
     assert!(run(&Imaging::Raw, &frozen, &FinetuneOptions { steps: 1, seconds: 1.0, seed: 0 }, |_| {}).is_err());
 }

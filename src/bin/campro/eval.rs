@@ -119,6 +119,15 @@ pub struct PrivacyArgs {
     /// Verification pairs of each kind per fold (default: all 300).
     #[arg(long)]
     pairs_per_fold: Option<usize>,
+    /// Also attack each parameter set after a restoration that knows the camera: every
+    /// protected colour mapped back to the mean raw colour producing it, under the colour
+    /// histogram of `--restore-prior` (rows "NAME restored"; campro_eval::restore).
+    #[arg(long)]
+    restore: bool,
+    /// Raw images whose colours are the restoration's prior: the first 200 of this folder
+    /// (default: SHARED/data/coco-person/images, people but not LFW's).
+    #[arg(long, value_name = "DIR")]
+    restore_prior: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -245,6 +254,13 @@ fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<priva
         privacy::check_identities(&lfw, names).with_context(|| file.display().to_string())?;
     }
     let fm = face_models(a, &c.models_dir())?;
+    let restored;
+    let conds = if a.restore {
+        restored = with_restorations(c, a, conds)?;
+        &restored[..]
+    } else {
+        conds
+    };
     let o = PrivacyOptions {
         runs: a.runs,
         seed: a.seed,
@@ -260,6 +276,34 @@ fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<priva
     report::write_privacy(&r, &c.output)?;
     eprintln!("privacy: {} identities, {:.0} s -> {}", r.identities, r.seconds, c.output.join("privacy.md").display());
     Ok(r)
+}
+
+/// `conds` with a "NAME restored" condition after each parameter set's (`--restore`).
+fn with_restorations(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<Vec<Condition>> {
+    let dir = a.restore_prior.clone().unwrap_or_else(|| c.shared().join("data/coco-person/images"));
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .with_context(|| format!("--restore-prior {}: cannot list images", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| ["jpg", "jpeg", "png"].iter().any(|e| x.eq_ignore_ascii_case(e))))
+        .collect();
+    paths.sort();
+    paths.truncate(200);
+    if paths.is_empty() {
+        bail!("--restore-prior {}: no JPEG or PNG images", dir.display());
+    }
+    let prior = paths.iter().map(|p| data::read_rgb8(p)).collect::<campro_eval::Result<Vec<_>>>()?;
+    let sets: Vec<String> = c.params.iter().filter_map(|p| p.file_stem().map(|s| s.to_string_lossy().into_owned())).collect();
+    let mut out = Vec::with_capacity(conds.len() * 2);
+    for x in conds {
+        out.push(x.clone());
+        if let (Some(p), true) = (&x.protect, sets.contains(&x.name)) {
+            let r = campro_eval::restore::Restorer::fit(p.as_ref(), &prior)?;
+            let p = p.clone();
+            out.push(Condition::new(format!("{} restored", x.name), move |img: &RgbImage| r.apply(&p(img))));
+        }
+    }
+    eprintln!("restoration prior: {} images from {}", prior.len(), dir.display());
+    Ok(out)
 }
 
 fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utility::UtilityReport> {

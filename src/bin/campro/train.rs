@@ -135,6 +135,10 @@ pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize
         }
     })?;
     pb.finish_and_clear();
+    let fit = done.adapter_fit.first().zip(done.adapter_fit.last()).map(|(a, b)| [*a, *b]);
+    if let Some([a, b]) = fit {
+        eprintln!("adapter fit: squared error {a:.5} -> {b:.5} in {} steps", done.adapter_fit.len());
+    }
     if let Some(l) = log {
         let mut csv = String::from("step,seconds,loss,iou,obj,cls,positives,kd\n");
         for r in &done.log {
@@ -146,7 +150,7 @@ pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize
     let tail = &done.log[done.log.len().saturating_sub(50)..];
     entry["finetune"] = serde_json::json!({
         "steps": done.log.len(), "seconds": done.log.last().map_or(0.0, |r| r.seconds), "images": done.images,
-        "detector": cfg.detector, "seed": cfg.seed,
+        "detector": cfg.detector, "seed": cfg.seed, "adapter_fit_error": fit,
         "mean_loss_last_50": tail.iter().map(|r| r.loss).sum::<f64>() / tail.len().max(1) as f64,
     });
     params.provenance.insert("detector".into(), entry);

@@ -117,6 +117,20 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     let (tensors, _) = campro_train::checkpoint::load(&ckpts, &campro_train::Device::Cpu).unwrap();
     let stored = tensors.keys().filter(|k| k.starts_with("detector.")).count();
     assert_eq!(stored, detector.vars().len());
+    // With a colour adapter in P: it trains and follows the camera (its output layer leaves
+    // zero, where it starts) and the checkpoint holds it with the rest.
+    let mut a = c.clone();
+    a.detector.adapter = 4;
+    let ckpts_a = cache.path().join("ckpt-a");
+    let out = campro_train::train::run(&a, &campro_train::train::RunOptions { checkpoints: Some(ckpts_a.clone()), resume: None, init: None }, |_| {}).unwrap();
+    let detector = out.detector.expect("the fine-tuned detector");
+    let (adapter, _) = detector.adapter_and_rest();
+    assert_eq!(adapter.len(), 4);
+    let w2: Vec<f32> = adapter[2].as_tensor().flatten_all().unwrap().to_vec1().unwrap();
+    assert!(w2.iter().any(|v| v.abs() > 1e-3), "{w2:?}");
+    let (tensors, _) = campro_train::checkpoint::load(&ckpts_a, &campro_train::Device::Cpu).unwrap();
+    assert_eq!(tensors.keys().filter(|k| k.starts_with("detector.")).count(), detector.vars().len());
+    assert!(tensors.contains_key("detector.adapter.w2"));
     // Without a detector weight the detector is never loaded.
     c.protector.omega = 0.0;
     c.detector.model = "/nonexistent.onnx".into();

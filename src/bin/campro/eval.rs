@@ -281,16 +281,8 @@ fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<priva
 /// `conds` with a "NAME restored" condition after each parameter set's (`--restore`).
 fn with_restorations(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<Vec<Condition>> {
     let dir = a.restore_prior.clone().unwrap_or_else(|| c.shared().join("data/coco-person/images"));
-    let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .with_context(|| format!("--restore-prior {}: cannot list images", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| ["jpg", "jpeg", "png"].iter().any(|e| x.eq_ignore_ascii_case(e))))
-        .collect();
-    paths.sort();
+    let mut paths = list_images(&dir).context("--restore-prior")?;
     paths.truncate(200);
-    if paths.is_empty() {
-        bail!("--restore-prior {}: no JPEG or PNG images", dir.display());
-    }
     let prior = paths.iter().map(|p| data::read_rgb8(p)).collect::<campro_eval::Result<Vec<_>>>()?;
     let sets: Vec<String> = c.params.iter().filter_map(|p| p.file_stem().map(|s| s.to_string_lossy().into_owned())).collect();
     let mut out = Vec::with_capacity(conds.len() * 2);
@@ -350,9 +342,9 @@ fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBuf>> {
     Ok(own)
 }
 
-fn run_quality(c: &Common, images: Option<&Path>, conds: &[Condition]) -> Result<quality::QualityReport> {
-    let dir = images.map(Path::to_path_buf).unwrap_or_else(|| c.shared().join("data/coco-person/images"));
-    let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)
+/// The JPEG and PNG files of `dir`, sorted by name; none is an error.
+fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot list images", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| ["jpg", "jpeg", "png"].iter().any(|e| x.eq_ignore_ascii_case(e))))
@@ -361,6 +353,12 @@ fn run_quality(c: &Common, images: Option<&Path>, conds: &[Condition]) -> Result
     if paths.is_empty() {
         bail!("{}: no JPEG or PNG images", dir.display());
     }
+    Ok(paths)
+}
+
+fn run_quality(c: &Common, images: Option<&Path>, conds: &[Condition]) -> Result<quality::QualityReport> {
+    let dir = images.map(Path::to_path_buf).unwrap_or_else(|| c.shared().join("data/coco-person/images"));
+    let paths = list_images(&dir)?;
     let r = quality::evaluate(&paths, conds, c.limit)?;
     report::write_quality(&r, &c.output)?;
     eprintln!("quality: {} images, {:.0} s -> {}", r.images, r.seconds, c.output.join("quality.md").display());

@@ -193,8 +193,8 @@ impl Yolox {
     /// `x + 255·(W₂·SiLU(W₁·x/255 + b₁) + b₂)` on the BGR 0..255 input, as 1x1 convolutions
     /// in the graph itself (so the written ONNX file carries it). `W₁` is drawn from
     /// N(0, 1/3) by `seed`, the rest is zero, so the adapter starts as the identity and the
-    /// detector's output is unchanged. Its tensors are named `adapter.*`
-    /// ([`Self::adapter_and_rest`]).
+    /// detector's output is unchanged. The network keeps its current weights (new tensors,
+    /// fresh optimiser state). Its tensors are named `adapter.*` ([`Self::adapter_and_rest`]).
     pub fn with_adapter(self, hidden: usize, seed: u64, dev: &candle_core::Device) -> std::result::Result<Self, YoloxError> {
         use rand::SeedableRng;
         use rand_distr::Distribution;
@@ -202,7 +202,7 @@ impl Yolox {
         if hidden == 0 {
             return Err(YoloxError::Graph { path: p, message: "an adapter needs at least one hidden unit".into() });
         }
-        let mut model = self.model;
+        let mut model = self.current()?;
         let graph = model.graph.as_mut().expect("checked in load");
         if graph.initializer.iter().any(|t| t.name.starts_with("adapter.")) {
             return Err(YoloxError::Graph { path: p, message: "the model already has an adapter".into() });
@@ -329,6 +329,13 @@ impl Yolox {
     /// Writes the model with the current weights as ONNX (temporary file, then rename).
     pub fn save_onnx(&self, path: &Path) -> std::result::Result<(), YoloxError> {
         let p = path.display().to_string();
+        let model = self.current()?;
+        let io = |e: std::io::Error| YoloxError::Io { path: p.clone(), message: e.to_string() };
+        campro_eval::atomic::write(path, &model.encode_to_vec(), true).map_err(io)
+    }
+
+    /// The ONNX model with the current weights.
+    fn current(&self) -> Result<pb::ModelProto> {
         let mut model = self.model.clone();
         let graph = model.graph.as_mut().expect("checked in load");
         for t in graph.initializer.iter_mut() {
@@ -338,8 +345,7 @@ impl Yolox {
                 t.raw_data = v.iter().flat_map(|x| x.to_le_bytes()).collect();
             }
         }
-        let io = |e: std::io::Error| YoloxError::Io { path: p.clone(), message: e.to_string() };
-        campro_eval::atomic::write(path, &model.encode_to_vec(), true).map_err(io)
+        Ok(model)
     }
 }
 

@@ -194,6 +194,14 @@ fn colour_adapter_starts_as_the_identity_and_round_trips_through_onnx() {
     let start: Vec<f32> = net.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
     assert_eq!(start, want, "a fresh adapter must leave the detector unchanged");
     assert!(Yolox::load(&onnx, &dev).unwrap().with_adapter(0, 7, &dev).is_err());
+    // Weights changed before the adapter is added are kept.
+    let edited = Yolox::load(&onnx, &dev).unwrap();
+    let bias = edited.vars().into_iter().find(|v| v.dims() == [1]).unwrap();
+    bias.set(&(bias.as_tensor() + 1.0).unwrap()).unwrap();
+    let before: Vec<f32> = edited.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let after: Vec<f32> = edited.with_adapter(2, 1, &dev).unwrap().forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    assert_eq!(before, after);
+    assert_ne!(before, want);
     // Give it a colour map by hand: w1 = unit rows on B, G, R and one more, b1 = 0, w2 sends
     // unit 0 to channel 2 (R) with weight −2 and b2 = (0, 0, 1): R' = R + 255·(1 − 2·SiLU(B/255)).
     let (w1, b1, w2, b2) = (&adapter[0], &adapter[1], &adapter[2], &adapter[3]);

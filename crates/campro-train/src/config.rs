@@ -229,7 +229,7 @@ impl Config {
     /// Every rule, first broken one reported.
     pub fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let finite_pos = |v: f64| v.is_finite() && v > 0.0;
-        let checks: [(bool, &str, &str); 20] = [
+        let checks: [(bool, &str, &str); 21] = [
             ((2..=1024).contains(&self.camera.knots), "camera.knots", "must be in 2..=1024"),
             (self.camera.gamma.is_finite() && (0.2..=5.0).contains(&self.camera.gamma), "camera.gamma", "must be in [0.2, 5]"),
             (finite_pos(self.camera.lr), "camera.lr", "must be finite and > 0"),
@@ -247,6 +247,7 @@ impl Config {
             (self.detector.lr.is_finite() && self.detector.lr >= 0.0, "detector.lr", "must be finite and ≥ 0 (0 freezes P)"),
             (self.detector.distill.is_finite() && self.detector.distill >= 0.0, "detector.distill", "must be finite and ≥ 0 (0 leaves it out)"),
             (self.detector.adapter <= 4096, "detector.adapter", "must be at most 4096 hidden units (0 for none)"),
+            (self.detector.adapter_fit == 0 || self.detector.adapter > 0, "detector.adapter_fit", "needs detector.adapter > 0 (there is no adapter to fit)"),
             (self.detector.adapter_lr.is_finite() && self.detector.adapter_lr >= 0.0, "detector.adapter_lr", "must be finite and ≥ 0 (0 freezes the adapter)"),
             (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
             (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),

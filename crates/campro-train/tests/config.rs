@@ -48,6 +48,7 @@ fn bad_values_name_the_key() {
     assert_eq!(rule("[detector]\ndistill = nan").0, "detector.distill");
     assert_eq!(rule("[detector]\nadapter = 100000").0, "detector.adapter");
     assert_eq!(rule("[detector]\nadapter = 16\nadapter_lr = -1e-3").0, "detector.adapter_lr");
+    assert_eq!(rule("[detector]\nadapter_fit = 10").0, "detector.adapter_fit");
 }
 
 #[test]

@@ -30,8 +30,6 @@ fn bin(p: [u8; 3]) -> usize {
 pub struct Restorer {
     /// Per protected-colour bin, the restored colour (None: never reached).
     lut: Vec<Option<[u8; 3]>>,
-    /// Raw-colour bins the prior filled.
-    pub prior_bins: usize,
 }
 
 impl Restorer {
@@ -67,7 +65,7 @@ impl Restorer {
             (0..3).for_each(|c| acc[o][c] += count[b] * rep[c] as u64);
         }
         let lut = (0..w.len()).map(|o| (w[o] > 0).then(|| std::array::from_fn(|c| ((acc[o][c] + w[o] / 2) / w[o]) as u8))).collect();
-        Ok(Self { lut, prior_bins: filled.len() })
+        Ok(Self { lut })
     }
 
     /// Restores a protected image pixel by pixel.

@@ -84,15 +84,19 @@ pub fn run(imaging: &Imaging, cfg: &DetectorConfig, o: &FinetuneOptions, mut on_
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(o.seed);
     let pool: Vec<usize> = (0..set.len()).collect();
     let mut order = Vec::new();
+    // The camera is fixed: its output is data here.
+    let through = |x: &candle_core::Tensor| -> candle_core::Result<candle_core::Tensor> {
+        match &camera {
+            Some(c) => Ok(c.forward(x)?.detach()),
+            None => Ok(x.clone()),
+        }
+    };
     let mut fit = Vec::new();
-    if let Some(mut fitter) = crate::detection::AdapterFit::new(&det, FIT_LR)?.filter(|_| cfg.adapter_fit > 0) {
+    let fitter = if cfg.adapter_fit > 0 { crate::detection::AdapterFit::new(&det, FIT_LR)? } else { None };
+    if let Some(mut fitter) = fitter {
         for _ in 0..cfg.adapter_fit {
             let b = set.batch(&draw(&mut order, &pool, cfg.batch, &mut rng), &dev)?;
-            let seen = match &camera {
-                Some(c) => c.forward(&b.x)?,
-                None => b.x.clone(),
-            };
-            fit.push(fitter.step(&det, &seen, &b)?);
+            fit.push(fitter.step(&det, &through(&b.x)?, &b)?);
         }
     }
     let mut adam = crate::detection::DetectorAdam::new(&det, cfg)?;
@@ -103,11 +107,7 @@ pub fn run(imaging: &Imaging, cfg: &DetectorConfig, o: &FinetuneOptions, mut on_
             break;
         }
         let b = set.batch(&draw(&mut order, &pool, cfg.batch, &mut rng), &dev)?;
-        // The camera is fixed: its output is data here.
-        let x = match &camera {
-            Some(c) => c.forward(&b.x)?.detach(),
-            None => b.x.clone(),
-        };
+        let x = through(&b.x)?;
         let (loss, parts) = utility_loss(&det, teacher.as_ref(), cfg, &x, &b)?;
         let l = loss.to_scalar::<f32>()? as f64;
         if !l.is_finite() {

@@ -38,6 +38,16 @@ fn tract_head(onnx: &Path, models: &Path, c: &image::RgbImage) -> Vec<f32> {
     Model::load(m).unwrap().run(c).unwrap().any("output").unwrap().to_vec()
 }
 
+/// The raw head of `net` on `x`, flattened.
+fn head_of(net: &Yolox, x: &Tensor) -> Vec<f32> {
+    net.forward(x).unwrap().flatten_all().unwrap().to_vec1().unwrap()
+}
+
+/// max |a − b|.
+fn max_diff(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max)
+}
+
 #[test]
 fn yolox_matches_tract_and_round_trips_through_onnx() {
     let Some(onnx) = shared::shared("models/yolox_nano.onnx") else { return };
@@ -45,22 +55,22 @@ fn yolox_matches_tract_and_round_trips_through_onnx() {
     let models = onnx.parent().unwrap().to_path_buf();
     let c = canvas(&img);
     let net = Yolox::load(&onnx, &Device::Cpu).unwrap();
-    let ours: Vec<f32> = net.forward(&bgr_tensor(&c)).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let ours: Vec<f32> = head_of(&net, &bgr_tensor(&c));
     let theirs = tract_head(&onnx, &models, &c);
     assert_eq!(ours.len(), theirs.len());
     assert_eq!(ours.len(), 3549 * 85);
-    let worst = ours.iter().zip(&theirs).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    let worst = max_diff(&ours, &theirs);
     assert!(worst < 2e-3, "max |candle − tract| = {worst}");
     // Edit a weight of the objectness conv, write ONNX, and tract sees the edit.
     let bias = net.vars().into_iter().find(|v| v.dims() == [1]).unwrap();
     bias.set(&(bias.as_tensor() + 1.0).unwrap()).unwrap();
-    let edited: Vec<f32> = net.forward(&bgr_tensor(&c)).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let edited: Vec<f32> = head_of(&net, &bgr_tensor(&c));
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("edited.onnx");
     net.save_onnx(&out).unwrap();
     let back = tract_head(&out, &models, &c);
-    let worst = edited.iter().zip(&back).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
-    let moved = edited.iter().zip(&ours).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    let worst = max_diff(&edited, &back);
+    let moved = max_diff(&edited, &ours);
     assert!(moved > 0.01, "the edit changed nothing ({moved})");
     assert!(worst < 2e-3, "written ONNX differs from candle by {worst}");
 }
@@ -185,21 +195,21 @@ fn colour_adapter_starts_as_the_identity_and_round_trips_through_onnx() {
     let x = bgr_tensor(&c);
     let dev = Device::Cpu;
     let plain = Yolox::load(&onnx, &dev).unwrap();
-    let want: Vec<f32> = plain.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let want: Vec<f32> = head_of(&plain, &x);
     let net = Yolox::load(&onnx, &dev).unwrap().with_adapter(4, 7, &dev).unwrap();
     let (adapter, rest) = net.adapter_and_rest();
     assert_eq!(adapter.iter().map(|v| v.dims().to_vec()).collect::<Vec<_>>(), [vec![4, 3, 1, 1], vec![4], vec![3, 4, 1, 1], vec![3]]);
     assert_eq!(rest.len(), plain.vars().len());
     assert!(plain.adapter_and_rest().0.is_empty());
-    let start: Vec<f32> = net.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let start: Vec<f32> = head_of(&net, &x);
     assert_eq!(start, want, "a fresh adapter must leave the detector unchanged");
     assert!(Yolox::load(&onnx, &dev).unwrap().with_adapter(0, 7, &dev).is_err());
     // Weights changed before the adapter is added are kept.
     let edited = Yolox::load(&onnx, &dev).unwrap();
     let bias = edited.vars().into_iter().find(|v| v.dims() == [1]).unwrap();
     bias.set(&(bias.as_tensor() + 1.0).unwrap()).unwrap();
-    let before: Vec<f32> = edited.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
-    let after: Vec<f32> = edited.with_adapter(2, 1, &dev).unwrap().forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let before: Vec<f32> = head_of(&edited, &x);
+    let after: Vec<f32> = head_of(&edited.with_adapter(2, 1, &dev).unwrap(), &x);
     assert_eq!(before, after);
     assert_ne!(before, want);
     // Give it a colour map by hand: w1 = unit rows on B, G, R and one more, b1 = 0, w2 sends
@@ -219,18 +229,18 @@ fn colour_adapter_starts_as_the_identity_and_round_trips_through_onnx() {
     for i in 0..h * w {
         v[2 * h * w + i] += 255.0 * (1.0 - 2.0 * silu(v[i] / 255.0));
     }
-    let by_hand: Vec<f32> = plain.forward(&Tensor::from_vec(v, (1, 3, h, w), &dev).unwrap()).unwrap().flatten_all().unwrap().to_vec1().unwrap();
-    let ours: Vec<f32> = net.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
-    let worst = ours.iter().zip(&by_hand).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    let by_hand: Vec<f32> = head_of(&plain, &Tensor::from_vec(v, (1, 3, h, w), &dev).unwrap());
+    let ours: Vec<f32> = head_of(&net, &x);
+    let worst = max_diff(&ours, &by_hand);
     assert!(worst < 2e-3, "adapter vs the map by hand: {worst}");
-    let moved = ours.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    let moved = max_diff(&ours, &want);
     assert!(moved > 0.1, "the map changed nothing ({moved})");
     // Written as ONNX, tract runs the adapter too.
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("adapted.onnx");
     net.save_onnx(&out).unwrap();
     let back = tract_head(&out, &models, &c);
-    let worst = ours.iter().zip(&back).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    let worst = max_diff(&ours, &back);
     assert!(worst < 2e-3, "written ONNX differs from candle by {worst}");
     // Our own loader reads the written file back, adapter included, and refuses a second.
     let again = Yolox::load(&out, &dev).unwrap();

@@ -165,7 +165,7 @@ impl Common {
         let mut c = vec![Condition::raw()];
         for path in &self.params {
             let p = Params::from_file(path).map_err(|e| anyhow!("{}: {e}", path.display()))?;
-            let name = path.file_stem().map_or("params".into(), |s| s.to_string_lossy().into_owned());
+            let name = set_name(path);
             if c.iter().any(|x| x.name == name) {
                 bail!("{}: two parameter sets are named {name:?}", path.display());
             }
@@ -182,6 +182,11 @@ impl Common {
         }
         Ok(c)
     }
+}
+
+/// A parameter file's image-type name in the reports: its file stem.
+fn set_name(path: &Path) -> String {
+    path.file_stem().map_or("params".into(), |s| s.to_string_lossy().into_owned())
 }
 
 /// A parameter set as a protection: the exact 8-bit desktop pipeline (bit-identical to the
@@ -284,7 +289,7 @@ fn with_restorations(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result
     let mut paths = list_images(&dir).context("--restore-prior")?;
     paths.truncate(200);
     let prior = paths.iter().map(|p| data::read_rgb8(p)).collect::<campro_eval::Result<Vec<_>>>()?;
-    let sets: Vec<String> = c.params.iter().filter_map(|p| p.file_stem().map(|s| s.to_string_lossy().into_owned())).collect();
+    let sets: Vec<String> = c.params.iter().map(|p| set_name(p)).collect();
     let mut out = Vec::with_capacity(conds.len() * 2);
     for x in conds {
         out.push(x.clone());
@@ -336,7 +341,7 @@ fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBuf>> {
             if !manifest.is_file() {
                 bail!("{}: provenance.detector.manifest: {} not found", path.display(), manifest.display());
             }
-            own.insert(path.file_stem().map_or("params".into(), |s| s.to_string_lossy().into_owned()), manifest);
+            own.insert(set_name(path), manifest);
         }
     }
     Ok(own)

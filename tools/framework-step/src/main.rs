@@ -1,7 +1,9 @@
 //! One training step (forward, sum of the output, backward) of each player's network in burn
 //! (NdArray backend with Autodiff, f32, CPU), at the shapes campro-train's `step_time`
 //! example times in candle: YOLOX-Nano 1x3x416x416 (its ONNX fixes batch 1) and
-//! MobileFaceNet 8x3x112x96. Median of 5 after one warm-up.
+//! MobileFaceNet 8x3x112x96. Each phase (building the model from its weights, the forward
+//! pass, the backward pass) is timed apart and printed as it ends, so a run cut short still
+//! says where its time went; then the median of `REPS` (default 3) whole steps.
 
 mod yolox {
     include!(concat!(env!("OUT_DIR"), "/model/yolox_nano.rs"));
@@ -12,34 +14,53 @@ mod mfn {
 
 use burn::backend::{Autodiff, NdArray};
 use burn::tensor::{Distribution, Tensor};
+use std::time::Instant;
 
 type B = Autodiff<NdArray<f32>>;
 
-fn median(mut f: impl FnMut()) -> f64 {
-    f();
-    let mut t: Vec<f64> = (0..5)
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Times one player: load, first forward, first backward, then the median whole step.
+fn player(name: &str, reps: usize, load: impl FnOnce() -> Box<dyn Fn() -> Tensor<B, 1>>) {
+    let t = Instant::now();
+    let step = load();
+    println!("burn {name}: model built in {:.0} ms", ms(t));
+    let t = Instant::now();
+    let loss = step();
+    println!("burn {name}: first forward {:.0} ms", ms(t));
+    let t = Instant::now();
+    let _ = loss.backward();
+    println!("burn {name}: first backward {:.0} ms", ms(t));
+    let mut times: Vec<f64> = (0..reps)
         .map(|_| {
-            let s = std::time::Instant::now();
-            f();
-            s.elapsed().as_secs_f64()
+            let t = Instant::now();
+            let _ = step().backward();
+            ms(t)
         })
         .collect();
-    t.sort_by(f64::total_cmp);
-    t[2]
+    times.sort_by(f64::total_cmp);
+    println!("burn (ndarray + autodiff): {name} forward + backward of the output sum: {:.0} ms (median of {reps})", times[reps / 2]);
 }
 
 fn main() {
-    let dev = Default::default();
-    let y: yolox::Model<B> = yolox::Model::default();
-    let x = Tensor::<B, 4>::random([1, 3, 416, 416], Distribution::Uniform(0.0, 255.0), &dev).require_grad();
-    let yolox_step = median(|| {
-        let _ = y.forward(x.clone()).sum().backward();
+    let reps: usize = std::env::var("REPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(3)
+        .max(1);
+    let dev: burn::backend::ndarray::NdArrayDevice = Default::default();
+    player("YOLOX-Nano 1x416x416", reps, || {
+        let y: yolox::Model<B> = yolox::Model::default();
+        let x = Tensor::<B, 4>::random([1, 3, 416, 416], Distribution::Uniform(0.0, 255.0), &dev)
+            .require_grad();
+        Box::new(move || y.forward(x.clone()).sum())
     });
-    let m: mfn::Model<B> = mfn::Model::default();
-    let f = Tensor::<B, 4>::random([8, 3, 112, 96], Distribution::Uniform(-1.0, 1.0), &dev).require_grad();
-    let mfn_step = median(|| {
-        let _ = m.forward(f.clone()).sum().backward();
+    player("MobileFaceNet 8x112x96", reps, || {
+        let m: mfn::Model<B> = mfn::Model::default();
+        let f = Tensor::<B, 4>::random([8, 3, 112, 96], Distribution::Uniform(-1.0, 1.0), &dev)
+            .require_grad();
+        Box::new(move || m.forward(f.clone()).sum())
     });
-    println!("burn (ndarray + autodiff): YOLOX-Nano 1x416x416 forward + backward of the output sum: {:.0} ms", yolox_step * 1e3);
-    println!("burn (ndarray + autodiff): MobileFaceNet 8x112x96 forward + backward of the output sum: {:.0} ms", mfn_step * 1e3);
 }

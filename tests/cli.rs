@@ -429,6 +429,69 @@ fn privacy_restore_undoes_a_bijective_camera() {
     assert!(!names.contains(&"lowres-8 restored"), "only parameter sets are restored");
 }
 
+/// `eval privacy --enrol camera`: the attacker enrols its gallery through the same camera.
+/// The raw condition's scores cannot change (its camera is the identity). A camera that
+/// outputs one grey for every pixel makes every protected face the same, so the nearest
+/// classifier's ties leave it at chance, 1 / gallery, exactly; enrolled raw, the same
+/// camera sends every probe to one gallery face. Colour inversion keeps identities apart,
+/// so matching inverted to inverted identifies more than matching it to raw faces.
+#[test]
+fn privacy_camera_enrolment_matches_protected_to_protected() {
+    let Some(models) = common::shared("models/yunet_s_640_640.onnx") else { return };
+    let Some(_) = common::shared("data/lfw/pairs.txt") else { return };
+    let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
+    let dir = tempfile::tempdir().unwrap();
+    let mut flat: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(bundled("color-inversion.json")).unwrap()).unwrap();
+    flat["name"] = "flat-grey".into();
+    flat["tone_curve"]["y"] = serde_json::json!(vec![0.5; 32]);
+    let flat_path = dir.path().join("flat-grey.json");
+    std::fs::write(&flat_path, serde_json::to_string(&flat).unwrap()).unwrap();
+    let run = |enrol: &str| -> serde_json::Value {
+        let out = dir.path().join(enrol);
+        campro()
+            .args(["eval", "privacy"])
+            .arg(bundled("color-inversion.json"))
+            .arg(&flat_path)
+            .args(["--limit", "8", "--runs", "3", "--no-verification", "--enrol", enrol, "--shared"])
+            .arg(&shared)
+            .arg("-o")
+            .arg(&out)
+            .assert()
+            .success();
+        let md = std::fs::read_to_string(out.join("privacy.md")).unwrap();
+        assert!(md.contains(if enrol == "camera" { "Enrolled through the camera" } else { "Enrolled raw" }), "{md}");
+        serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap()
+    };
+    let (raw, cam) = (run("raw"), run("camera"));
+    assert_eq!(cam["options"]["enrolment"], "camera");
+    let rows = |v: &serde_json::Value, cond: &str, cls: &str| -> Vec<f64> {
+        let r: Vec<f64> = v["identification"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["condition"] == cond && r["order"] == "paper" && r["classifier"] == cls)
+            .map(|r| r["top1_mean"].as_f64().unwrap())
+            .collect();
+        assert_eq!(r.len(), 2, "{cond} {cls}: one row per model");
+        r
+    };
+    for cls in ["nearest", "linear"] {
+        assert_eq!(rows(&raw, "raw", cls), rows(&cam, "raw", cls), "the raw condition is enrolled the same either way");
+    }
+    let gallery = cam["gallery"].as_f64().unwrap();
+    for t in rows(&cam, "flat-grey", "nearest") {
+        assert!((t - 1.0 / gallery).abs() < 1e-12, "flat camera enrolled through itself: {t}, chance {}", 1.0 / gallery);
+    }
+    for t in rows(&raw, "flat-grey", "nearest") {
+        assert!(t <= 1.0 / gallery + 1e-12, "every probe goes to the same gallery face: {t}");
+    }
+    let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
+    let (as_raw, as_cam) = (mean(rows(&raw, "color-inversion", "nearest")), mean(rows(&cam, "color-inversion", "nearest")));
+    assert!(as_cam > as_raw + 0.2, "colour inversion enrolled raw {as_raw}, through the camera {as_cam}");
+    let bad = campro().args(["eval", "privacy", "--enrol", "sideways"]).output().unwrap();
+    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("sideways"));
+}
+
 #[test]
 fn eval_refuses_bad_arguments_clearly() {
     let out = campro().args(["eval", "quality", "--baseline", "lowres-0"]).output().unwrap();

@@ -2,8 +2,8 @@
 //! verification, raw against protected, for each face-recognition model.
 //!
 //! Identification: identities with ≥ 2 images; per run one random gallery image and a
-//! different random probe image per identity. The gallery (the adversary's) is raw, the
-//! probes are protected. Top-1 and CMC with (a) the nearest gallery embedding by cosine and
+//! different random probe image per identity. The gallery (the adversary's) is raw (see
+//! Enrolment below), the probes are protected. Top-1 and CMC with (a) the nearest gallery embedding by cosine and
 //! (b) a softmax linear classifier trained on the adversary's raw images (every pool image
 //! of each identity except the probe). Two protection orders:
 //! - `paper`: landmarks from the raw photo, the aligned crop is protected (the paper's order);
@@ -18,6 +18,13 @@
 //! classifier's classes) with raw photos only, while probes still come from the evaluated
 //! identities alone: the paper's closed set over every subject (1,680 in full LFW) with
 //! the score kept to identities an optimiser never trained on.
+//!
+//! Enrolment: by default the adversary enrolled its gallery (and trained its linear
+//! classifier) on raw photos, as the paper does. With `Enrolment::Camera` it enrolled them
+//! through the same camera instead (each condition's own protected photos, aligned on the
+//! raw landmarks, distractors too): the re-enrolment attacker, who matches protected to
+//! protected and so wins whenever the camera keeps identities apart, even if it moves every
+//! face far from its raw embedding. Verification then compares two protected photos.
 
 use crate::data::{read_rgb8, Lfw};
 use crate::error::{EvalError, Result};
@@ -59,6 +66,19 @@ pub struct PrivacyOptions {
     pub verification: bool,
     /// Use at most this many pairs of each kind per fold.
     pub pairs_per_fold: Option<usize>,
+    /// How the adversary's gallery and classifier photos were taken.
+    pub enrolment: Enrolment,
+}
+
+/// How the adversary enrolled its gallery (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Enrolment {
+    /// Raw photos (the paper's protocol).
+    #[default]
+    Raw,
+    /// Photos through the same camera as the probes (paper order).
+    Camera,
 }
 
 impl Default for PrivacyOptions {
@@ -74,6 +94,7 @@ impl Default for PrivacyOptions {
             linear: LinearOptions::default(),
             verification: true,
             pairs_per_fold: None,
+            enrolment: Enrolment::Raw,
         }
     }
 }
@@ -213,6 +234,15 @@ fn embed_photo(path: &Path, m: &FaceModels, conds: &[Condition], need: Need) -> 
     Ok(Some(Record { raw, prot }))
 }
 
+/// A photo's embedding by model `mi` as the adversary enrolled it: raw (`None`) or through
+/// condition `ci`'s camera in the paper's order (`Some(ci)`).
+fn enrolled(r: &Record, mi: usize, view: Option<usize>) -> &[f32] {
+    match view {
+        None => &r.raw[mi],
+        Some(ci) => &r.prot[ci].paper[mi],
+    }
+}
+
 fn mean_std(v: &[f64]) -> (f64, f64) {
     let n = v.len() as f64;
     let m = v.iter().sum::<f64>() / n;
@@ -220,10 +250,24 @@ fn mean_std(v: &[f64]) -> (f64, f64) {
     (m, var.sqrt())
 }
 
-/// 1-based rank of `truth` among `scores` (ties counted in its favour).
-pub fn rank_of(scores: &[f32], truth: usize) -> usize {
-    let t = scores[truth];
-    1 + scores.iter().filter(|&&s| s > t).count()
+/// Where `truth` stands among `scores`: how many score higher, and how many others tie it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Rank {
+    pub above: usize,
+    pub tied: usize,
+}
+
+impl Rank {
+    pub fn of(scores: &[f32], truth: usize) -> Rank {
+        let t = scores[truth];
+        Rank { above: scores.iter().filter(|&&s| s > t).count(), tied: scores.iter().filter(|&&s| s == t).count() - 1 }
+    }
+
+    /// P(rank ≤ n) when ties are broken uniformly at random: a camera that makes every
+    /// face alike (all scores tied) identifies no better than chance, not perfectly.
+    pub fn within(self, n: usize) -> f64 {
+        (n.saturating_sub(self.above) as f64 / (self.tied + 1) as f64).min(1.0)
+    }
 }
 
 /// Every name must be an LFW identity (checked before any model runs).
@@ -280,7 +324,8 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
         *e = (*e).max(n);
     };
     pools.iter().flatten().for_each(|p| need(p, Need::EndToEnd));
-    other_pools.iter().flatten().for_each(|p| need(p, Need::Raw));
+    let distractor_need = if o.enrolment == Enrolment::Camera { Need::Paper } else { Need::Raw };
+    other_pools.iter().flatten().for_each(|p| need(p, distractor_need));
     for p in &pairs {
         need(&p.a, Need::Paper);
         need(&p.b, Need::Paper);
@@ -330,24 +375,36 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
         let extra_picks: Vec<usize> = extra.iter().map(|v| rand::Rng::random_range(&mut rng, 0..v.len())).collect();
         for mi in 0..nm {
             let dim = usable[0][0].raw[mi].len();
-            let row = |c: usize| if c < classes { &usable[c][picks[c].0].raw[mi] } else { &extra[c - classes][extra_picks[c - classes]].raw[mi] };
-            let gallery = Array2::from_shape_fn((gallery_size, dim), |(c, k)| row(c)[k]);
-            // The linear classifier's training set: every usable raw image but the probe.
-            let mut xs = Vec::new();
-            let mut ys = Vec::new();
-            for (c, v) in usable.iter().chain(&extra).enumerate() {
-                for (j, r) in v.iter().enumerate() {
-                    if c >= classes || j != picks[c].1 {
-                        xs.extend_from_slice(&r.raw[mi]);
-                        ys.push(c);
+            // The adversary's gallery and linear classifier, from raw photos (one for every
+            // condition) or through each condition's camera.
+            let enrol = |view: Option<usize>| {
+                let e = |r: &'_ Record| -> Vec<f32> { enrolled(r, mi, view).to_vec() };
+                let row = |c: usize| if c < classes { e(usable[c][picks[c].0]) } else { e(extra[c - classes][extra_picks[c - classes]]) };
+                let rows: Vec<Vec<f32>> = (0..gallery_size).map(row).collect();
+                let gallery = Array2::from_shape_fn((gallery_size, dim), |(c, k)| rows[c][k]);
+                // The linear classifier's training set: every usable image but the probe.
+                let mut xs = Vec::new();
+                let mut ys = Vec::new();
+                for (c, v) in usable.iter().chain(&extra).enumerate() {
+                    for (j, r) in v.iter().enumerate() {
+                        if c >= classes || j != picks[c].1 {
+                            xs.extend_from_slice(enrolled(r, mi, view));
+                            ys.push(c);
+                        }
                     }
                 }
-            }
-            let x = Array2::from_shape_vec((ys.len(), dim), xs).expect("rows of equal length");
-            let lin = linear::train(&x, &ys, gallery_size, &o.linear);
+                let x = Array2::from_shape_vec((ys.len(), dim), xs).expect("rows of equal length");
+                (gallery, linear::train(&x, &ys, gallery_size, &o.linear))
+            };
+            let galleries: Vec<_> = match o.enrolment {
+                Enrolment::Raw => vec![enrol(None)],
+                Enrolment::Camera => (0..conds.len()).map(|ci| enrol(Some(ci))).collect(),
+            };
             for ci in 0..conds.len() {
+                let (gallery, lin) = &galleries[ci.min(galleries.len() - 1)];
                 for (oi, &order) in orders.iter().enumerate() {
-                    let mut ranks: [Vec<usize>; 2] = [Vec::new(), Vec::new()];
+                    // None: the attacker found no face, so the probe is not identified.
+                    let mut ranks: [Vec<Option<Rank>>; 2] = [Vec::new(), Vec::new()];
                     let mut found = 0usize;
                     for c in 0..classes {
                         let rec = usable[c][picks[c].1];
@@ -356,17 +413,17 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
                             Order::EndToEnd => rec.prot[ci].e2e.as_ref().map(|e| &e[mi]),
                         };
                         let Some(q) = probe else {
-                            ranks[0].push(usize::MAX);
-                            ranks[1].push(usize::MAX);
+                            ranks[0].push(None);
+                            ranks[1].push(None);
                             continue;
                         };
                         found += 1;
                         let near: Vec<f32> = gallery.rows().into_iter().map(|g| cosine(g.as_slice().unwrap(), q)).collect();
-                        ranks[0].push(rank_of(&near, c));
-                        ranks[1].push(rank_of(&lin.scores(q), c));
+                        ranks[0].push(Some(Rank::of(&near, c)));
+                        ranks[1].push(Some(Rank::of(&lin.scores(q), c)));
                     }
                     for (k, r) in ranks.iter().enumerate() {
-                        let cmc: Vec<f64> = (1..=o.cmc_ranks).map(|n| r.iter().filter(|&&x| x <= n).count() as f64 / classes as f64).collect();
+                        let cmc: Vec<f64> = (1..=o.cmc_ranks).map(|n| r.iter().flatten().map(|x| x.within(n)).sum::<f64>() / classes as f64).collect();
                         per_run.entry((ci, oi, mi, k)).or_default().push((cmc[0], cmc, found as f64 / classes as f64));
                     }
                 }
@@ -398,15 +455,17 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
             }
         }
     }
-    // Verification: the first photo raw (enrolled), the second protected (paper order).
+    // Verification: the first photo as enrolled (raw, or through the camera), the second
+    // protected (paper order).
     let mut verification = Vec::new();
     let usable_pairs: Vec<_> = pairs.iter().filter(|p| records.contains_key(&p.a) && records.contains_key(&p.b)).collect();
+    let view = |ci: usize| (o.enrolment == Enrolment::Camera).then_some(ci);
     if o.verification {
         for (ci, c) in conds.iter().enumerate() {
             for (mi, e) in models.embedders.iter().enumerate() {
                 let scored: Vec<(usize, bool, f32)> = usable_pairs
                     .iter()
-                    .map(|p| (p.fold, p.same, cosine(&records[&p.a].raw[mi], &records[&p.b].prot[ci].paper[mi])))
+                    .map(|p| (p.fold, p.same, cosine(enrolled(&records[&p.a], mi, view(ci)), &records[&p.b].prot[ci].paper[mi])))
                     .collect();
                 let (accuracy_mean, accuracy_std) = mean_std(&kfold_accuracy(&scored));
                 verification.push(VerifRow {
@@ -477,9 +536,19 @@ mod tests {
 
     #[test]
     fn ranks_by_hand() {
-        assert_eq!(rank_of(&[0.1, 0.9, 0.5], 1), 1);
-        assert_eq!(rank_of(&[0.1, 0.9, 0.5], 0), 3);
-        assert_eq!(rank_of(&[0.5, 0.5], 1), 1); // ties in its favour
+        let r = Rank::of(&[0.1, 0.9, 0.5], 1);
+        assert_eq!(r, Rank { above: 0, tied: 0 });
+        assert_eq!((r.within(1), r.within(2)), (1.0, 1.0));
+        let r = Rank::of(&[0.1, 0.9, 0.5], 0);
+        assert_eq!(r, Rank { above: 2, tied: 0 });
+        assert_eq!((r.within(1), r.within(2), r.within(3)), (0.0, 0.0, 1.0));
+        // Ties are broken at random: the truth and 3 others tie below one better score, so
+        // it is at rank 2, 3, 4 or 5 with probability 1/4 each.
+        let r = Rank::of(&[0.5, 0.5, 0.9, 0.5, 0.5], 0);
+        assert_eq!(r, Rank { above: 1, tied: 3 });
+        assert_eq!([1, 2, 3, 4, 5, 6].map(|n| r.within(n)), [0.0, 0.25, 0.5, 0.75, 1.0, 1.0]);
+        // Every score alike (a camera that makes all faces the same): chance, 1 / 4.
+        assert_eq!(Rank::of(&[0.3; 4], 2).within(1), 0.25);
     }
 
     #[test]

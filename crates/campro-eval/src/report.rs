@@ -5,7 +5,7 @@
 
 use crate::error::{EvalError, Result};
 use crate::plot::{chart, Series, Style};
-use crate::privacy::{Order, PrivacyReport};
+use crate::privacy::{Enrolment, Order, PrivacyReport};
 use crate::quality::QualityReport;
 use crate::utility::UtilityReport;
 use std::fmt::Write as _;
@@ -99,14 +99,20 @@ pub fn write_privacy(r: &PrivacyReport, dir: &Path) -> Result<()> {
 pub fn privacy_markdown(r: &PrivacyReport) -> String {
     let models = models_of(r);
     let mut s = String::from("# Privacy: face identification on LFW\n\n");
+    let camera = r.options.enrolment == Enrolment::Camera;
     let gallery = if r.gallery > r.identities {
-        format!("; gallery of {} identities, {} of them distractors (raw, never probed)", r.gallery, r.gallery - r.identities)
+        format!("; gallery of {} identities, {} of them distractors (never probed)", r.gallery, r.gallery - r.identities)
     } else {
         String::new()
     };
+    let enrolled = if camera {
+        "Enrolled through the camera: the gallery and the linear classifier's photos are each image type's own protected photos (paper order), not raw ones (the re-enrolment attacker). "
+    } else {
+        "Enrolled raw: the gallery and the linear classifier's photos are raw. "
+    };
     let _ = writeln!(
         s,
-        "Closed set: {} identities, {} photos (pool ≤ {} per identity; {} pool photos without a face in the raw photo left out){gallery}, {} runs (seed {}), top-1 in % as mean ± std over runs (chance {:.2}%). Lower is better protection.\n",
+        "{enrolled}Closed set: {} identities, {} photos (pool ≤ {} per identity; {} pool photos without a face in the raw photo left out){gallery}, {} runs (seed {}), top-1 in % as mean ± std over runs (chance {:.2}%). Lower is better protection.\n",
         r.identities,
         r.images,
         r.options.pool,
@@ -134,7 +140,8 @@ pub fn privacy_markdown(r: &PrivacyReport) -> String {
     if !r.verification.is_empty() {
         let _ = writeln!(
             s,
-            "\n## Verification (pairs.txt, first photo raw, second under the image type)\n\n{} pairs used; {} skipped (image absent from this copy), {} skipped (no face in a raw photo).\n",
+            "\n## Verification (pairs.txt, first photo {}, second under the image type)\n\n{} pairs used; {} skipped (image absent from this copy), {} skipped (no face in a raw photo).\n",
+            if camera { "through the camera too" } else { "raw" },
             r.verification.first().map_or(0, |v| v.pairs),
             r.pairs_skipped_absent,
             r.pairs_skipped_undetected

@@ -10,7 +10,7 @@ use campro_eval::face::{Embedder, FaceDetector};
 use campro_eval::manifest::Manifest;
 use campro_eval::model::Model;
 use campro_eval::person::PersonDetector;
-use campro_eval::privacy::{FaceModels, PrivacyOptions};
+use campro_eval::privacy::{Enrolment, FaceModels, PrivacyOptions};
 use campro_eval::utility::UtilityOptions;
 use campro_eval::{data, privacy, quality, report, utility, Condition};
 use clap::{Args, Subcommand};
@@ -128,6 +128,18 @@ pub struct PrivacyArgs {
     /// (default: SHARED/data/coco-person/images, people but not LFW's).
     #[arg(long, value_name = "DIR")]
     restore_prior: Option<PathBuf>,
+    /// How the attacker enrolled its gallery and classifier photos: `raw` (the paper's
+    /// protocol) or `camera` (through the same camera as the probes: the re-enrolment
+    /// attacker, who matches protected to protected).
+    #[arg(long, value_enum, default_value = "raw")]
+    enrol: EnrolArg,
+}
+
+/// `--enrol` (campro_eval::privacy::Enrolment).
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum EnrolArg {
+    Raw,
+    Camera,
 }
 
 #[derive(Args)]
@@ -275,6 +287,10 @@ fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<priva
         distractors: a.distractors,
         verification: !a.no_verification,
         pairs_per_fold: a.pairs_per_fold.or(c.limit.map(|l| l.div_ceil(10).max(1))),
+        enrolment: match a.enrol {
+            EnrolArg::Raw => Enrolment::Raw,
+            EnrolArg::Camera => Enrolment::Camera,
+        },
         ..Default::default()
     };
     let r = privacy::evaluate(&lfw, &fm, conds, &o)?;

@@ -72,7 +72,29 @@ impl Model {
             .plan
             .run(tvec!(self.tensor(img).into()))
             .map_err(|e| EvalError::Model { path: self.manifest.file.clone(), message: format!("{e:#}") })?;
+        release_freed_memory();
         Ok(Outputs { names: self.outputs.clone(), values: out.into_iter().map(|t| t.into_tensor()).collect(), path: self.manifest.file.clone() })
+    }
+}
+
+/// Hands the memory freed by a model run back to the system. tract allocates every
+/// intermediate tensor anew (sizes from kilobytes to megabytes, on several threads), and
+/// glibc's malloc keeps what it frees: `eval privacy` over 1,239 identities grew to 9.9 GB
+/// resident for 52 MB of live heap. `malloc_trim` returns the free pages; another
+/// allocator would too, but made candle's training steps 35–80% slower here.
+/// Trimming after every run cost 40% of `eval privacy`'s time; every 64th run costs little
+/// and bounds what accumulates.
+fn release_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        static RUNS: AtomicUsize = AtomicUsize::new(0);
+        if RUNS.fetch_add(1, Ordering::Relaxed) % 64 == 63 {
+            // SAFETY: malloc_trim only releases free memory of the process's own allocator.
+            unsafe {
+                libc::malloc_trim(0);
+            }
+        }
     }
 }
 

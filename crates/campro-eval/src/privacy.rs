@@ -3,9 +3,9 @@
 //!
 //! Identification: identities with ≥ 2 images; per run one random gallery image and a
 //! different random probe image per identity. The gallery (the adversary's) is raw (see
-//! Enrolment below), the probes are protected. Top-1 and CMC with (a) the nearest gallery embedding by cosine and
-//! (b) a softmax linear classifier trained on the adversary's raw images (every pool image
-//! of each identity except the probe). Two protection orders:
+//! Enrolment below), the probes are protected. Top-1 and CMC with (a) the nearest gallery
+//! embedding by cosine and (b) a softmax linear classifier trained on the adversary's raw
+//! images (every pool image of each identity except the probe). Two protection orders:
 //! - `paper`: landmarks from the raw photo, the aligned crop is protected (the paper's order);
 //! - `end-to-end`: the whole photo is protected, then the attacker detects and aligns; a
 //!   face not found is not identified, and the detection rate is reported.
@@ -378,10 +378,8 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
             // The adversary's gallery and linear classifier, from raw photos (one for every
             // condition) or through each condition's camera.
             let enrol = |view: Option<usize>| {
-                let e = |r: &'_ Record| -> Vec<f32> { enrolled(r, mi, view).to_vec() };
-                let row = |c: usize| if c < classes { e(usable[c][picks[c].0]) } else { e(extra[c - classes][extra_picks[c - classes]]) };
-                let rows: Vec<Vec<f32>> = (0..gallery_size).map(row).collect();
-                let gallery = Array2::from_shape_fn((gallery_size, dim), |(c, k)| rows[c][k]);
+                let row = |c: usize| if c < classes { enrolled(usable[c][picks[c].0], mi, view) } else { enrolled(extra[c - classes][extra_picks[c - classes]], mi, view) };
+                let gallery = Array2::from_shape_fn((gallery_size, dim), |(c, k)| row(c)[k]);
                 // The linear classifier's training set: every usable image but the probe.
                 let mut xs = Vec::new();
                 let mut ys = Vec::new();

@@ -299,10 +299,7 @@ fn file_targets_convert_compare_and_refuse() {
 /// `eval all` on a few images and identities: every report is written, laid out as stated.
 #[test]
 fn eval_all_with_a_limit_writes_every_report() {
-    let Some(models) = common::shared("models/yunet_s_640_640.onnx") else { return };
-    let Some(_) = common::shared("data/lfw/pairs.txt") else { return };
-    let Some(_) = common::shared("data/coco-person/instances_person.json") else { return };
-    let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
+    let Some(shared) = common::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt", "data/coco-person/instances_person.json"]) else { return };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ev");
     campro()
@@ -348,9 +345,7 @@ fn eval_all_with_a_limit_writes_every_report() {
 /// can improve: every CMC point is at most the one without distractors.
 #[test]
 fn privacy_distractors_only_enlarge_the_gallery() {
-    let Some(models) = common::shared("models/yunet_s_640_640.onnx") else { return };
-    let Some(_) = common::shared("data/lfw/pairs.txt") else { return };
-    let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
+    let Some(shared) = common::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else { return };
     let dir = tempfile::tempdir().unwrap();
     let run = |extra: &[&str], out: &str| -> serde_json::Value {
         let out = dir.path().join(out);
@@ -396,10 +391,7 @@ fn privacy_distractors_only_enlarge_the_gallery() {
 /// is a bijection, so restoring it gives most of the raw accuracy back; baselines get none.
 #[test]
 fn privacy_restore_undoes_a_bijective_camera() {
-    let Some(models) = common::shared("models/yunet_s_640_640.onnx") else { return };
-    let Some(_) = common::shared("data/lfw/pairs.txt") else { return };
-    let Some(_) = common::shared("data/coco-person/instances_person.json") else { return };
-    let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
+    let Some(shared) = common::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt", "data/coco-person/instances_person.json"]) else { return };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("r");
     campro()
@@ -437,9 +429,7 @@ fn privacy_restore_undoes_a_bijective_camera() {
 /// so matching inverted to inverted identifies more than matching it to raw faces.
 #[test]
 fn privacy_camera_enrolment_matches_protected_to_protected() {
-    let Some(models) = common::shared("models/yunet_s_640_640.onnx") else { return };
-    let Some(_) = common::shared("data/lfw/pairs.txt") else { return };
-    let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
+    let Some(shared) = common::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else { return };
     let dir = tempfile::tempdir().unwrap();
     let mut flat: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(bundled("color-inversion.json")).unwrap()).unwrap();
     flat["name"] = "flat-grey".into();

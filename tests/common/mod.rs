@@ -3,7 +3,7 @@
 
 mod shared;
 #[allow(unused_imports)]
-pub use shared::{shared, workspace_root};
+pub use shared::{shared, shared_root, workspace_root};
 
 /// Reads an .npy array: (shape, values as f64).
 pub fn npy(path: &std::path::Path) -> (Vec<usize>, Vec<f64>) {

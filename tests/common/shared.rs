@@ -30,10 +30,8 @@ pub fn shared(rel: &str) -> Option<PathBuf> {
 /// The `../shared` root, if every file of `needs` is there (each checked as `shared` does:
 /// skipped with a message when absent, a failure under CI).
 pub fn shared_root(needs: &[&str]) -> Option<PathBuf> {
-    let mut root = None;
     for rel in needs {
-        let p = shared(rel)?;
-        root = Some(p.ancestors().nth(rel.split('/').count()).expect("a shared file lies below the root").to_path_buf());
+        shared(rel)?;
     }
-    root
+    shared("")
 }

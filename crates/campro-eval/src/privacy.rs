@@ -355,6 +355,9 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     let gallery_size = classes + extra.len();
     let nm = models.embedders.len();
     let orders = [Order::Paper, Order::EndToEnd];
+    // How condition `ci`'s adversary enrolled: through its camera, or raw (always for the
+    // raw condition, whose camera is the identity).
+    let view = |ci: usize| (o.enrolment == Enrolment::Camera && conds[ci].protect.is_some()).then_some(ci);
     // results[(cond, order, model, classifier)] = per-run (top1, cmc, detection rate)
     type Key = (usize, usize, usize, usize);
     let mut per_run: HashMap<Key, Vec<(f64, Vec<f64>, f64)>> = HashMap::new();
@@ -394,12 +397,10 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
                 let x = Array2::from_shape_vec((ys.len(), dim), xs).expect("rows of equal length");
                 (gallery, linear::train(&x, &ys, gallery_size, &o.linear))
             };
-            let galleries: Vec<_> = match o.enrolment {
-                Enrolment::Raw => vec![enrol(None)],
-                Enrolment::Camera => (0..conds.len()).map(|ci| enrol(Some(ci))).collect(),
-            };
+            let raw_enrolled = enrol(None);
+            let camera_enrolled: Vec<_> = (0..conds.len()).map(|ci| view(ci).map(|v| enrol(Some(v)))).collect();
             for ci in 0..conds.len() {
-                let (gallery, lin) = &galleries[ci.min(galleries.len() - 1)];
+                let (gallery, lin) = camera_enrolled[ci].as_ref().unwrap_or(&raw_enrolled);
                 for (oi, &order) in orders.iter().enumerate() {
                     // None: the attacker found no face, so the probe is not identified.
                     let mut ranks: [Vec<Option<Rank>>; 2] = [Vec::new(), Vec::new()];
@@ -457,7 +458,6 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     // protected (paper order).
     let mut verification = Vec::new();
     let usable_pairs: Vec<_> = pairs.iter().filter(|p| records.contains_key(&p.a) && records.contains_key(&p.b)).collect();
-    let view = |ci: usize| (o.enrolment == Enrolment::Camera).then_some(ci);
     if o.verification {
         for (ci, c) in conds.iter().enumerate() {
             for (mi, e) in models.embedders.iter().enumerate() {

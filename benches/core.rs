@@ -2,9 +2,9 @@
 //! against a plain copy of the same frame measured in the same run. `campro bench`
 //! prints the same rows with their errors as one table.
 
-use campro::camera_loop::{Camera2Loop, DEFAULT_TOLERANCE};
+use campro::targets::camera2::{Camera2Loop, DEFAULT_TOLERANCE};
 use campro::ccm;
-use campro::compare::test_frame;
+use campro_testkit::bench::test_frame;
 use campro::pipeline::fast::{Exact8, F32Path};
 use campro::pipeline::{Depth, Prepared};
 use campro::targets::camera2::{convert, Options};
@@ -15,7 +15,7 @@ use std::hint::black_box;
 const PHONE: campro::Mat3 = [[1.78, -0.62, -0.16], [-0.28, 1.62, -0.34], [0.02, -0.71, 1.69]];
 
 fn params() -> Params {
-    campro::compare::bench_params()
+    campro_testkit::bench::bench_params()
 }
 
 fn bench_convert(c: &mut Criterion) {

@@ -1,6 +1,6 @@
 //! Times the default exact 8-bit path against a copy on one 1080p frame (one thread):
 //! `cargo run --release --example exact8_time [-- RUNS]`. Medians of the same run.
-use campro::compare::{bench_params, median_seconds as median, test_frame};
+use campro_testkit::bench::{bench_params, median_seconds as median, test_frame};
 use campro::pipeline::fast::Exact8;
 use std::hint::black_box;
 

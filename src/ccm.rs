@@ -7,6 +7,11 @@
 /// A 3x3 matrix, row-major: `m[row][col]`.
 pub type Mat3 = [[f64; 3]; 3];
 
+/// Largest |entry| accepted anywhere a matrix is read (parameter sets, device
+/// transforms, calibrations). CamPro clamps to ±5 while training; no ISP register holds
+/// more than ±8. Larger values are a sign of a broken file.
+pub const CCM_LIMIT: f64 = 32.0;
+
 /// The identity matrix.
 pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 

@@ -15,6 +15,9 @@
 use crate::ccm::{self, Mat3};
 use crate::error::{check_matrix, check_range, ValidationError};
 
+/// Accepted calibration colour temperatures, kelvin.
+pub const CT_RANGE: (f64, f64) = (1000.0, 40000.0);
+
 /// One calibrated CCM: sensor RGB -> linear sRGB at colour temperature `ct_kelvin`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CtCcm {
@@ -24,13 +27,13 @@ pub struct CtCcm {
     pub ccm: Mat3,
 }
 
-/// Rules: CTs finite, in [`crate::params::CT_RANGE`], strictly increasing; matrices finite
-/// and inside ±[`crate::params::CCM_LIMIT`]. An empty list is valid (no calibration).
+/// Rules: CTs finite, in [`CT_RANGE`], strictly increasing; matrices finite
+/// and inside ±[`ccm::CCM_LIMIT`]. An empty list is valid (no calibration).
 pub fn validate_calibration(cal: &[CtCcm]) -> Result<(), ValidationError> {
-    let (lo, hi) = crate::params::CT_RANGE;
+    let (lo, hi) = CT_RANGE;
     for (i, c) in cal.iter().enumerate() {
         check_range(|| format!("[{i}].ct_kelvin"), c.ct_kelvin, lo, hi)?;
-        check_matrix(&format!("[{i}].ccm"), &c.ccm, crate::params::CCM_LIMIT)?;
+        check_matrix(&format!("[{i}].ccm"), &c.ccm, ccm::CCM_LIMIT)?;
         if i > 0 && c.ct_kelvin <= cal[i - 1].ct_kelvin {
             return Err(ValidationError::NotIncreasing {
                 field: "[].ct_kelvin".into(),
@@ -129,8 +132,8 @@ impl DngCalibration {
         };
         let ct1 = ct("illuminant1", self.illuminant1)?;
         let ct2 = ct("illuminant2", self.illuminant2)?;
-        check_matrix("forward_matrix1", &self.forward_matrix1, crate::params::CCM_LIMIT)?;
-        check_matrix("forward_matrix2", &self.forward_matrix2, crate::params::CCM_LIMIT)?;
+        check_matrix("forward_matrix1", &self.forward_matrix1, ccm::CCM_LIMIT)?;
+        check_matrix("forward_matrix2", &self.forward_matrix2, ccm::CCM_LIMIT)?;
         Ok((ct1, ct2))
     }
 

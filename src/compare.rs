@@ -5,12 +5,11 @@
 //! pipeline runs on the same pixel in f64. Errors are in output units (1 = full scale)
 //! and reported in 8-bit LSB (x255) and PSNR.
 
-use crate::ccm::{self, Mat3};
-use crate::emulate::{Camera2Device, DeviceModel, Emulator};
+use crate::ccm;
+use crate::emulate::Emulator;
 use crate::error::ValidationError;
 use crate::params::Params;
 use crate::pipeline::{degamma, process_f64};
-use crate::targets::camera2::Camera2Values;
 use crate::targets::Feed;
 
 /// Running error statistics over pixel channels.
@@ -90,78 +89,6 @@ pub fn code_cube(step: usize) -> Vec<[u8; 3]> {
         }
     }
     out
-}
-
-/// The benchmarks' parameter set ("bench"), like the paper's strong checkpoints: CCM
-/// entries to ±4.4 and a 32-knot curve with slopes to 3.5.
-pub fn bench_params() -> Params {
-    let ccm = [[1.2101, 0.0430, -0.6679], [-4.3933, 1.1114, -2.2755], [0.2930, 1.3570, 1.3287]];
-    let mut p = Params::new(ccm, crate::ToneCurve::from_fn(32, |t| (7.0 * t).sin() * 0.5 + 0.5), 2.2).expect("valid");
-    p.name = "bench".into();
-    p
-}
-
-/// Median seconds of `f` over `runs` runs, after one warm-up run (the benchmarks' timer:
-/// medians, since the machines they run on are shared and noisy).
-pub fn median_seconds(runs: usize, mut f: impl FnMut()) -> f64 {
-    f();
-    let mut t: Vec<f64> = (0..runs.max(1))
-        .map(|_| {
-            let s = std::time::Instant::now();
-            f();
-            s.elapsed().as_secs_f64()
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
-}
-
-/// A `w` x `h` interleaved RGB8 test frame that looks like a photo to a cache: smooth
-/// colour gradients, a few flat regions and fine texture (deterministic).
-pub fn test_frame(w: usize, h: usize) -> Vec<u8> {
-    let mut out = Vec::with_capacity(w * h * 3);
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    for y in 0..h {
-        for x in 0..w {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            let noise = ((state >> 59) as i32) - 16; // texture, ±16 codes
-            let (u, v) = (x as f64 / w as f64, y as f64 / h as f64);
-            let flat = (x / 240 + y / 270) % 5 == 0; // flat patches (walls, sky)
-            let base = if flat {
-                [0.8, 0.75, 0.7]
-            } else {
-                [0.5 + 0.4 * (6.0 * u).sin(), 0.5 + 0.4 * (5.0 * v + 1.0).sin(), 0.5 + 0.4 * (4.0 * (u + v)).cos()]
-            };
-            for c in base {
-                let n = if flat { 0 } else { noise };
-                out.push(((c * 255.0) as i32 + n).clamp(0, 255) as u8);
-            }
-        }
-    }
-    out
-}
-
-/// Result of comparing a deployment on a set of pixels.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct DeviceError {
-    /// Measured differences.
-    pub stats: Stats,
-    /// A priori bound on |device - desktop| for every sRGB input (output units).
-    pub bound: f64,
-}
-
-/// Simulates a Camera2 device (matrix `device`, sent `values`, HAL `model`) on sRGB
-/// `pixels` and compares it with the desktop pipeline. Fails if `device` is singular
-/// (no sensor RGB can be synthesised).
-pub fn camera2_vs_desktop(params: &Params, device: &Mat3, values: &Camera2Values, model: &DeviceModel, pixels: &[[u8; 3]]) -> Result<DeviceError, ValidationError> {
-    let dev = Camera2Device::new(values, model);
-    let stats = deployment_vs_desktop(params, &Feed::Sensor(*device), &dev, pixels)?;
-    let inv = ccm::inverse(device).expect("checked invertible above");
-    // Sensor RGB synthesised from linear sRGB in [0,1]^3 stays within these magnitudes.
-    let range = inv.map(|row| row.iter().map(|v| v.abs()).sum::<f64>());
-    let ideal = ccm::scale(&values.composed, 1.0 / values.scale);
-    let bound = dev.error_bound(&ideal, &params.tone_curve.fold_scale(values.scale), range);
-    Ok(DeviceError { stats, bound })
 }
 
 /// Any deployment against the desktop pipeline on sRGB `pixels`. With

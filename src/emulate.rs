@@ -1,13 +1,12 @@
 //! What a device does with exported values: the emulators.
 //!
-//! A device sees linear sensor RGB. The Camera2 emulator applies the received rational
-//! matrix (optionally rounded to `n` fractional bits, as a fixed-point HAL would),
-//! clips to [0, 1], and applies the received curve by linear interpolation (optionally
-//! first resampled to an evenly spaced LUT of the device's size).
+//! A device sees linear sensor RGB. Every ISP stage CamPro uses is a matrix, a clip to
+//! [0, 1] and a curve applied by linear interpolation ([`Isp`]); each target builds one
+//! from the values it read back (Camera2 in [`crate::targets::camera2::device`], with the
+//! HAL's rounding from a [`DeviceModel`]). 3D LUTs bring their own [`Emulator`].
 
 use crate::ccm::{self, Mat3};
 use crate::pipeline::clip01;
-use crate::targets::camera2::{self, Camera2Values};
 use crate::tone_curve::ToneCurve;
 
 /// Something that turns linear sensor RGB into output RGB in [0, 1].
@@ -27,51 +26,39 @@ pub struct DeviceModel {
     pub lut_size: Option<usize>,
 }
 
-/// A Camera2 device as emulated from the values of a `CaptureRequest`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Camera2Device {
-    /// The matrix the device applies.
-    pub matrix: Mat3,
-    /// The curve the device applies.
-    pub curve: ToneCurve,
-}
-
-impl Camera2Device {
-    /// The device that received `values` and treats them as `model` says.
-    pub fn new(values: &Camera2Values, model: &DeviceModel) -> Self {
-        let mut matrix = values.matrix();
-        if let Some(bits) = model.matrix_frac_bits {
-            let q = (2.0f64).powi(bits.min(52) as i32);
-            matrix = matrix.map(|r| r.map(|v| (v * q).round() / q));
-        }
-        let mut curve = values.curve();
-        if let Some(n) = model.lut_size {
-            curve = curve.resample_uniform(n.max(2));
-        }
-        Self { matrix, curve }
-    }
-
-    /// Guaranteed bound on |device - ideal| where the ideal applies `ideal_matrix`, clip
-    /// and `ideal_curve`, for sensor inputs with |sensor_j| <= `range[j]`:
-    /// `|curve - ideal_curve|_inf + L(curve) · max_i Σ_j |ΔM_ij| · range_j`.
-    pub fn error_bound(&self, ideal_matrix: &Mat3, ideal_curve: &ToneCurve, range: [f64; 3]) -> f64 {
-        camera2::error_bound(self.curve.max_abs_diff(ideal_curve), self.curve.max_slope(), &self.matrix, ideal_matrix, range)
-    }
-}
-
-impl Emulator for Camera2Device {
-    #[inline]
-    fn sensor_to_output(&self, sensor: [f64; 3]) -> [f64; 3] {
-        clip01(ccm::apply(&self.matrix, sensor)).map(|c| self.curve.eval(c))
-    }
-}
-
 /// A generic ISP: a matrix on sensor RGB, a clip to [0, 1], a curve. What every
-/// file-based target (Raspberry Pi, Rockchip) applies once its values are read back.
+/// camera target (Camera2, Raspberry Pi, Rockchip) applies once its values are read back.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Isp {
+    /// The matrix the ISP applies to sensor RGB.
     pub matrix: Mat3,
+    /// The curve it applies after clipping to [0, 1].
     pub curve: ToneCurve,
+}
+
+impl Isp {
+    /// Guaranteed bound on |this - ideal| where the ideal applies `ideal_matrix`, clip
+    /// and `ideal_curve`, for sensor inputs with |sensor_j| <= `range[j]`:
+    /// `|curve - ideal_curve|_inf + L(curve) · max_i Σ_j |ΔM_ij| · range_j` (clipping is
+    /// 1-Lipschitz, so a row error of δ moves the curve's input by at most δ).
+    pub fn error_bound(&self, ideal_matrix: &Mat3, ideal_curve: &ToneCurve, range: [f64; 3]) -> f64 {
+        error_bound(self.curve.max_abs_diff(ideal_curve), self.curve.max_slope(), &self.matrix, ideal_matrix, range)
+    }
+}
+
+/// The bound every matrix-clip-curve deployment states:
+/// `E_curve + L' · max_i Σ_j |sent_ij - ideal_ij| · range_j` for sensor inputs with
+/// |sensor_j| <= `range[j]`, where `E_curve` is the largest difference between the curve
+/// applied and the ideal one and `L'` the applied curve's largest slope. The ISP clips to
+/// [0, 1] before the curve (clipping is 1-Lipschitz), so a row error of δ moves the
+/// curve's input by at most δ and its output by at most `L' · δ`.
+pub fn error_bound(curve_max_abs: f64, lipschitz: f64, sent: &Mat3, ideal: &Mat3, range: [f64; 3]) -> f64 {
+    let worst = sent
+        .iter()
+        .zip(ideal)
+        .map(|(got, want)| (0..3).map(|j| (got[j] - want[j]).abs() * range[j]).sum::<f64>())
+        .fold(0.0, f64::max);
+    curve_max_abs + lipschitz * worst
 }
 
 impl Emulator for Isp {

@@ -11,7 +11,7 @@
 //! ```
 //! Unknown fields are rejected; every rule broken is reported with its field path.
 
-use crate::ccm::Mat3;
+use crate::ccm::{Mat3, CCM_LIMIT};
 use crate::color_temp::CtCcm;
 use crate::error::{check_matrix, check_range, ValidationError};
 use crate::tone_curve::ToneCurve;
@@ -21,13 +21,8 @@ use serde::{Deserialize, Serialize};
 pub const FORMAT: &str = "campro-params";
 /// The only format version this build reads and writes.
 pub const VERSION: u32 = 1;
-/// Largest |CCM entry| accepted. CamPro clamps to ±5 while training; no ISP register
-/// holds more than ±8. Larger values are a sign of a broken file.
-pub const CCM_LIMIT: f64 = 32.0;
 /// Accepted degamma exponents.
 pub const DEGAMMA_RANGE: (f64, f64) = (0.2, 5.0);
-/// Accepted calibration colour temperatures, kelvin.
-pub const CT_RANGE: (f64, f64) = (1000.0, 40000.0);
 /// Largest parameter file read (bytes); a real one is a few KiB.
 pub const MAX_JSON_BYTES: usize = 4 << 20;
 
@@ -53,6 +48,7 @@ pub struct Params {
 
 /// Errors reading or checking a parameter set.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum ParamsError {
     #[error("invalid JSON at {path}: {message}")]
     Json { path: String, message: String },
@@ -60,6 +56,8 @@ pub enum ParamsError {
     Invalid(#[from] ValidationError),
     #[error("parameter file is {size} bytes; the limit is {limit}")]
     TooLarge { size: usize, limit: usize },
+    #[error(transparent)]
+    File(#[from] crate::file::FileError),
 }
 
 #[derive(Serialize, Deserialize)]
@@ -163,13 +161,9 @@ impl Params {
     }
 
     /// Reads a parameter file (size-limited) and parses it.
-    pub fn from_file(path: &std::path::Path) -> Result<Self, crate::Error> {
-        let meta = std::fs::metadata(path).map_err(|e| crate::Error::io(path, e))?;
-        if meta.len() > MAX_JSON_BYTES as u64 {
-            return Err(ParamsError::TooLarge { size: meta.len() as usize, limit: MAX_JSON_BYTES }.into());
-        }
-        let text = std::fs::read_to_string(path).map_err(|e| crate::Error::io(path, e))?;
-        Ok(Self::from_json(&text)?)
+    pub fn from_file(path: &std::path::Path) -> Result<Self, ParamsError> {
+        let text = crate::file::read_text_capped(path, MAX_JSON_BYTES as u64, "a parameter file")?;
+        Self::from_json(&text)
     }
 
     fn from_raw(raw: ParamsJson) -> Result<Self, ValidationError> {

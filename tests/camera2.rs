@@ -1,11 +1,12 @@
 //! Camera2 mapping: the range-scaling proof, emulated device vs desktop pipeline against
 //! the stated bound, colour-temperature deployment, capture results.
 
-mod common;
 
 use campro::ccm::{self, Mat3};
 use campro::color_temp::{self, CtCcm, DngCalibration};
-use campro::compare::{camera2_vs_desktop, code_cube, grey_levels, random_pixels};
+use campro::compare::{code_cube, deployment_vs_desktop, grey_levels, random_pixels};
+use campro::targets::camera2::Camera2;
+use campro::targets::Target;
 use campro::emulate::DeviceModel;
 use campro::pipeline::{clip01, from_linear};
 use campro::targets::camera2::{self, convert, Options, RationalMode, MATRIX_RANGE};
@@ -66,23 +67,26 @@ fn range_scaling_is_exact() {
 fn fixture_pixels() -> Vec<[u8; 3]> {
     let mut px = Vec::new();
     for name in ["image_random.npy", "image_gradient.npy"] {
-        if let Some(path) = common::shared(&format!("fixtures/campro-pt/{name}")) {
-            px.extend(common::npy(&path).1.chunks(3).map(|c| [c[0] as u8, c[1] as u8, c[2] as u8]));
+        if let Some(path) = campro_testkit::shared(&format!("fixtures/campro-pt/{name}")) {
+            px.extend(campro_testkit::npy(&path).1.chunks(3).map(|c| [c[0] as u8, c[1] as u8, c[2] as u8]));
         }
     }
     px
 }
 
+/// Camera2 through the same path as every target: export, read back, emulate, compare.
 fn check_bound(p: &Params, dev: &Mat3, opts: &Options, model: &DeviceModel) -> (f64, f64) {
-    let v = convert(p, dev, opts).unwrap();
+    let t = Camera2::new(*dev, *opts, *model);
+    let exported = t.export(p, None).unwrap();
+    let conditions = t.emulate(p, &exported, None).unwrap();
+    let [c] = &conditions[..] else { panic!("camera2 is checked under one condition") };
+    let bound = c.bound.expect("camera2 states a bound");
     let mut worst = 0.0f64;
-    let mut bound = 0.0f64;
     for px in [grey_levels(), code_cube(15), random_pixels(20_000, 9), fixture_pixels()] {
-        let e = camera2_vs_desktop(p, dev, &v, model, &px).unwrap();
+        let s = deployment_vs_desktop(p, &c.feed, c.emulator.as_ref(), &px).unwrap();
         // 1e-12: f64 rounding when synthesising sensor RGB through the inverse matrix.
-        assert!(e.stats.max_abs <= e.bound + 1e-12, "{}: measured {} > bound {}", p.name, e.stats.max_abs, e.bound);
-        worst = worst.max(e.stats.max_abs);
-        bound = bound.max(e.bound);
+        assert!(s.max_abs <= bound + 1e-12, "{}: measured {} > bound {}", p.name, s.max_abs, bound);
+        worst = worst.max(s.max_abs);
     }
     (worst * 255.0, bound * 255.0)
 }
@@ -91,9 +95,9 @@ fn check_bound(p: &Params, dev: &Mat3, opts: &Options, model: &DeviceModel) -> (
 /// a phone-like device, stays within its bound and within 0.5 LSB.
 #[test]
 fn default_settings_stay_within_half_an_lsb() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("params");
+    let dir = campro_testkit::workspace_root().join("params");
     let mut sets: Vec<Params> = std::fs::read_dir(dir).unwrap().map(|e| Params::from_file(&e.unwrap().path()).unwrap()).collect();
-    if let Some(fx) = common::shared("fixtures/campro-pt") {
+    if let Some(fx) = campro_testkit::shared("fixtures/campro-pt") {
         for e in std::fs::read_dir(fx).unwrap() {
             let path = e.unwrap().path();
             if path.extension().is_some_and(|x| x == "pt") {
@@ -186,7 +190,10 @@ fn capture_result_forms() {
 fn singular_device_matrix_cannot_be_compared() {
     let p = Params::identity_curve(32);
     let sing = [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
-    let v = convert(&p, &sing, &Options::default()).unwrap();
-    let e = camera2_vs_desktop(&p, &sing, &v, &DeviceModel::default(), &grey_levels()).unwrap_err();
+    let t = Camera2::new(sing, Options::default(), DeviceModel::default());
+    let conditions = t.emulate(&p, &t.export(&p, None).unwrap(), None).unwrap();
+    assert_eq!(conditions[0].bound, None, "no bound without sensor RGB to synthesise");
+    let c = &conditions[0];
+    let e = deployment_vs_desktop(&p, &c.feed, c.emulator.as_ref(), &grey_levels()).unwrap_err();
     assert_eq!(e.field(), "device_ccm");
 }

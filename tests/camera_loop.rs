@@ -1,10 +1,10 @@
 //! The camera loop: skipped updates stay within the stated bound, recomputed ones equal
 //! the one-shot conversion, and the counters say what was saved.
 
-use campro::camera_loop::{Camera2Loop, DEFAULT_TOLERANCE};
+use campro::targets::camera2::{Camera2Loop, DEFAULT_TOLERANCE};
 use campro::ccm::{self, Mat3};
 use campro::color_temp::{CtCcm, DngCalibration};
-use campro::emulate::{Camera2Device, DeviceModel, Emulator};
+use campro::emulate::{DeviceModel, Emulator};
 use campro::pipeline::from_linear;
 use campro::targets::camera2::{convert, Camera2Values, Options};
 use campro::{Params, ToneCurve};
@@ -29,7 +29,7 @@ fn nudge(m: &Mat3, eps: f64) -> Mat3 {
 /// Largest |device - desktop| over a grid of sensor RGB in [0, 1]^3, for a device that
 /// received `values` while its true transform is `device`.
 fn measured(p: &Params, device: &Mat3, values: &Camera2Values) -> f64 {
-    let dev = Camera2Device::new(values, &DeviceModel::default());
+    let dev = campro::targets::camera2::device(values.matrix(), values.curve(), &DeviceModel::default());
     let mut worst: f64 = 0.0;
     let n = 24;
     for r in 0..=n {

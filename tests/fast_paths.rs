@@ -100,7 +100,7 @@ fn block_engine_is_chosen_where_it_applies() {
 /// block engine answers them itself instead of flagging every pixel.
 #[test]
 fn clipped_pixels_at_a_tie_end_stay_in_the_block_engine() {
-    let frame = campro::compare::test_frame(320, 64);
+    let frame = campro_testkit::bench::test_frame(320, 64);
     let half = |low: bool| ToneCurve::from_fn(32, move |t| if low { 0.5 + 0.3 * t } else { 0.8 - 0.3 * t });
     let neg = [[-1.0, -0.5, -0.2], [-0.3, -1.0, 0.0], [0.0, -0.2, -1.0]];
     let big = [[3.0, 2.0, 2.0], [2.0, 3.0, 2.0], [2.0, 2.0, 3.0]];
@@ -128,7 +128,7 @@ fn clipped_pixels_at_a_tie_end_stay_in_the_block_engine() {
 /// being flagged.
 #[test]
 fn every_knot_count_is_exact_with_both_ends_clipped_on_a_tie() {
-    let mut px = campro::compare::test_frame(256, 64);
+    let mut px = campro_testkit::bench::test_frame(256, 64);
     px.extend(random_pixels(20_000, 11).into_iter().flatten());
     let ccm = [[3.0, -2.5, 0.5], [-2.0, 3.5, -1.0], [0.6, -3.0, 3.2]];
     let mut out = vec![0u8; px.len()];
@@ -161,7 +161,7 @@ fn every_knot_count_is_exact_with_both_ends_clipped_on_a_tie() {
 /// must be redone), and the matrix rows' error bounds differ widely (row sums 0.6 to 9).
 #[test]
 fn shared_end_slot_with_one_ambiguous_end_stays_exact() {
-    let mut px = campro::compare::test_frame(256, 64);
+    let mut px = campro_testkit::bench::test_frame(256, 64);
     px.extend(random_pixels(20_000, 3).into_iter().flatten());
     let ccm = [[0.3, 0.2, 0.1], [4.5, -3.0, 1.5], [-1.0, 3.0, -0.5]];
     let mut out = vec![0u8; px.len()];
@@ -257,7 +257,7 @@ fn f32_path_on_16_bit_input() {
 
 #[test]
 fn run_reuse_gives_the_same_image() {
-    let frame = campro::compare::test_frame(640, 360);
+    let frame = campro_testkit::bench::test_frame(640, 360);
     for p in sets() {
         let f = Exact8::new(&p);
         let (mut a, mut b) = (vec![0u8; frame.len()], vec![0u8; frame.len()]);

@@ -1,14 +1,13 @@
 //! CamPro's own checkpoints and float32 PyTorch outputs (../shared/fixtures/campro-pt):
 //! the importer must read the exact numbers and the pipeline must reproduce the outputs.
 
-mod common;
 
 use campro::import_pt::read_checkpoint;
 use campro::pipeline::{campro_f32_after_degamma, process_f32_campro, process_f64};
 use campro::Params;
 
 fn index() -> Option<(std::path::PathBuf, serde_json::Value)> {
-    let dir = common::shared("fixtures/campro-pt/index.json")?.parent().unwrap().to_path_buf();
+    let dir = campro_testkit::shared("fixtures/campro-pt/index.json")?.parent().unwrap().to_path_buf();
     let index: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("index.json")).unwrap()).unwrap();
     Some((dir, index))
 }
@@ -58,8 +57,8 @@ fn load_all() -> Option<Vec<Fixture>> {
         let kp32 = params.tone_curve.y().iter().map(|&v| v as f32).collect();
         let mut images = Vec::new();
         for (image, file) in e["outputs"].as_object().unwrap() {
-            let (shape, img) = common::npy(&dir.join(format!("image_{image}.npy")));
-            let (oshape, want) = common::npy(&dir.join(file.as_str().unwrap()));
+            let (shape, img) = campro_testkit::npy(&dir.join(format!("image_{image}.npy")));
+            let (oshape, want) = campro_testkit::npy(&dir.join(file.as_str().unwrap()));
             assert_eq!(shape, oshape);
             let px = img.chunks(3).map(|c| [c[0] as u8, c[1] as u8, c[2] as u8]).collect();
             let w = want.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();

@@ -3,13 +3,13 @@
 //! Failing inputs proptest finds are kept in `proptest-regressions/` and replayed.
 
 use campro::params::Params;
-use campro::stress::{check, random_case, Outcome};
+use campro_testkit::stress::{check, random_case, Outcome};
 use proptest::prelude::*;
 
 proptest! {
     #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
 
-    /// Every invariant of `campro::stress::check` on adversarial cases.
+    /// Every invariant of `campro_testkit::stress::check` on adversarial cases.
     #[test]
     fn invariants_hold(seed in any::<u64>()) {
         let case = random_case(seed);
@@ -59,7 +59,7 @@ proptest! {
         edits in proptest::collection::vec((any::<usize>(), any::<u8>()), 1..16),
     ) {
         let _ = campro::import_pt::read_checkpoint_bytes(&bytes);
-        if let Some(dir) = common::shared("fixtures/campro-pt") {
+        if let Some(dir) = campro_testkit::shared("fixtures/campro-pt") {
             let mut b = std::fs::read(dir.join("params_01_strong.pt")).unwrap();
             for (at, v) in edits {
                 let i = at % b.len();
@@ -72,7 +72,6 @@ proptest! {
     }
 }
 
-mod common;
 
 /// Found by `invariants_hold`: a 1/1 denominator rounded an in-range entry to -2,
 /// outside Camera2's [-1.5, 3]. The range scale now leaves room for the rounding.

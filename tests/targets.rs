@@ -1,7 +1,6 @@
 //! File-based deployment targets (Raspberry Pi, Rockchip, 3D LUTs) against the real
 //! reference files in ../shared/fixtures/targets and against hand-derived values.
 
-mod common;
 
 use campro::ccm::{self, Mat3};
 use campro::compare::{deployment_vs_desktop, random_pixels};
@@ -11,14 +10,14 @@ use campro::targets::rkaiq::Rkaiq;
 use campro::targets::rpi::{self, Rpi};
 use campro::targets::{Feed, Target, TargetError};
 use campro::{Params, ToneCurve};
-use common::shared;
+use campro_testkit::shared;
 
 fn fixture(name: &str) -> Option<String> {
     shared(&format!("fixtures/targets/{name}")).map(|p| std::fs::read_to_string(p).unwrap())
 }
 
 fn bundled(name: &str) -> Params {
-    Params::from_file(&common::workspace_root().join(format!("params/{name}.json"))).unwrap()
+    Params::from_file(&campro_testkit::workspace_root().join(format!("params/{name}.json"))).unwrap()
 }
 
 /// A paper-like set: strong CCM, jagged (non-monotonic) curve.
@@ -34,7 +33,7 @@ fn isp_bound(hw: &ToneCurve, ideal: &ToneCurve, mq: &Mat3, m: &Mat3, device: &Ma
     let range = inv.map(|r| r.iter().map(|v| v.abs()).sum::<f64>());
     // Curve difference on a fine grid plus every knot of both (exact for piecewise-linear).
     let curve_diff = (0..=65535).map(|i| i as f64 / 65535.0).chain(hw.x().iter().copied()).chain(ideal.x().iter().copied()).map(|t| (hw.eval(t) - ideal.eval(t)).abs()).fold(0.0, f64::max);
-    campro::targets::camera2::error_bound(curve_diff, hw.max_slope(), mq, m, range) + 1e-9
+    campro::emulate::error_bound(curve_diff, hw.max_slope(), mq, m, range) + 1e-9
 }
 
 #[test]
@@ -101,7 +100,7 @@ fn rpi_matrices_are_quantised_and_clamped() {
     assert_eq!(v.quantize(1.23456), 1.235);
     // 4 · 2.12 > 8: clamped, so the measured error must be large for bright reds.
     let out = Rpi::Pisp.export(&p, Some(&base)).unwrap();
-    let conds = Rpi::Pisp.emulate(&out, Some(&base)).unwrap();
+    let conds = Rpi::Pisp.emulate(&p, &out, Some(&base)).unwrap();
     let s = deployment_vs_desktop(&p, &conds[0].feed, conds[0].emulator.as_ref(), &[[255, 40, 40]]).unwrap();
     assert!(s.max_lsb() > 1.0, "{}", s.max_lsb());
 }
@@ -119,7 +118,7 @@ fn isp_targets_stay_within_their_stated_bound() {
         let Some(base) = fixture(file) else { return };
         for p in [bundled("identity"), bundled("srgb-passthrough"), strong()] {
             let out = t.export(&p, Some(&base)).unwrap();
-            let conds = t.emulate(&out, Some(&base)).unwrap();
+            let conds = t.emulate(&p, &out, Some(&base)).unwrap();
             assert!(!conds.is_empty());
             for c in &conds {
                 let Feed::Sensor(device) = c.feed else { panic!("ISP targets take sensor RGB") };
@@ -194,7 +193,7 @@ fn cube_and_hald_parse_back_and_errors_shrink_with_size() {
         // Red fastest: the second node is (r = 1 step, g = 0, b = 0).
         let second = campro::pipeline::process_f64(&p, [1.0 / (n - 1) as f64, 0.0, 0.0]);
         assert!((lut.data()[1][0] as f64 - second[0]).abs() < 1e-6);
-        let conds = t.emulate(text.as_bytes(), None).unwrap();
+        let conds = t.emulate(&p, text.as_bytes(), None).unwrap();
         assert_eq!(conds.len(), 2);
         let mut here = 0f64;
         for c in &conds {

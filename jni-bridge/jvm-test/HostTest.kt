@@ -6,6 +6,7 @@ import org.campro.CamProController
 import org.campro.CamProNative
 import org.campro.CamProSession
 import org.campro.DeviceSupport
+import org.campro.TestHooks
 import java.io.File
 import java.util.concurrent.atomic.AtomicInteger
 import kotlin.concurrent.thread
@@ -163,7 +164,7 @@ fun badInput(paramsJson: String) {
         throws<IllegalArgumentException>("assetManager: must not be null") { CamProNative.createFromAsset(null, "x", 64, 65536, 0.0) }
     }
     check("a native panic arrives as RuntimeException and the library keeps working") {
-        throws<RuntimeException>("campro internal error: self-test panic: boom") { CamProNative.selfTestPanic("boom") }
+        throws<RuntimeException>("campro internal error: self-test panic: boom") { TestHooks.selfTestPanic("boom") }
         CamProSession.fromJson(paramsJson).use { s -> expect(s.updateFromTransform(PHONE)) { "works after a panic" } }
     }
 }

@@ -2,7 +2,7 @@
 //! `org.campro.CamProNative` (wrapped by `org.campro.CamProSession`).
 //!
 //! Thin by design: every function parses its arguments, calls the core
-//! ([`campro::camera_loop::Camera2Loop`], [`campro::targets::camera2`]) and copies the
+//! ([`campro::targets::camera2::Camera2Loop`], [`campro::targets::camera2`]) and copies the
 //! results into caller-provided primitive arrays. Nothing is allocated on the Java heap
 //! per update, and no local reference is created in a loop.
 //!
@@ -18,7 +18,7 @@
 //! update is safe: the update finishes on its reference and later calls see the handle
 //! closed.
 
-use campro::camera_loop::{Camera2Loop, Update};
+use campro::targets::camera2::{Camera2Loop, Update};
 use campro::color_temp::DngCalibration;
 use campro::targets::camera2::{self, ConvertError, Options, RationalMode};
 use campro::{Params, ValidationError};
@@ -91,9 +91,10 @@ impl From<jni::errors::Error> for BridgeError {
 }
 
 impl From<ConvertError> for BridgeError {
+    /// By kind: a missing calibration is the session's state, not the caller's argument.
     fn from(e: ConvertError) -> Self {
         match &e {
-            ConvertError::Invalid(v) if v.field() == "ct_calibration" => Self::State(e.to_string()),
+            ConvertError::NoCalibration => Self::State(e.to_string()),
             _ => Self::Argument(e.to_string()),
         }
     }
@@ -476,10 +477,13 @@ pub extern "system" fn Java_org_campro_CamProNative_readback<'local>(
     .resolve::<ThrowJava>()
 }
 
-/// `selfTestPanic(message: String)`: panics inside a native method, so tests can check
-/// that the panic arrives as a `RuntimeException` and the library keeps working.
+/// `org.campro.TestHooks.selfTestPanic(message: String)`: panics inside a native method,
+/// so the host test can check that the panic arrives as a `RuntimeException` and the
+/// library keeps working. Only in builds with the `test-exports` feature (never in the
+/// production `.so`).
+#[cfg(feature = "test-exports")]
 #[unsafe(no_mangle)]
-pub extern "system" fn Java_org_campro_CamProNative_selfTestPanic<'local>(mut env: EnvUnowned<'local>, _class: JClass<'local>, message: JString<'local>) {
+pub extern "system" fn Java_org_campro_TestHooks_selfTestPanic<'local>(mut env: EnvUnowned<'local>, _class: JClass<'local>, message: JString<'local>) {
     env.with_env(|env| -> Result<()> {
         let m = if message.is_null() { "null".to_string() } else { message.try_to_string(env)? };
         panic!("self-test panic: {m}");

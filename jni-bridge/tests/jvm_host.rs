@@ -9,8 +9,7 @@
 //! Needs `java` and a Kotlin compiler (`$KOTLINC`, `kotlinc` on PATH, or
 //! `npm ci --prefix jni-bridge/jvm-test`); skips without them unless `CI=true`.
 
-#[path = "../../tests/common/shared.rs"]
-mod shared;
+use campro_testkit as shared;
 
 use campro::ccm::Mat3;
 use campro::color_temp::DngCalibration;
@@ -144,7 +143,7 @@ fn kotlin_wrapper_through_jni_on_the_host_jvm() {
     // folder so it does not wait on the outer cargo's lock.
     let target = tmp.join("cargo-target");
     let status = Command::new(env!("CARGO"))
-        .args(["build", "--release", "--lib", "-p", "campro-jni", "--manifest-path"])
+        .args(["build", "--release", "--lib", "-p", "campro-jni", "--features", "test-exports", "--manifest-path"])
         .arg(root.join("Cargo.toml"))
         .arg("--target-dir")
         .arg(&target)
@@ -162,6 +161,7 @@ fn kotlin_wrapper_through_jni_on_the_host_jvm() {
     let wrapper = root.join("android/campro/src/main/kotlin/org/campro");
     let mut sources: Vec<PathBuf> = std::fs::read_dir(&wrapper).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "kt")).collect();
     sources.sort();
+    sources.push(root.join("jni-bridge/jvm-test/TestHooks.kt"));
     sources.push(root.join("jni-bridge/jvm-test/HostTest.kt"));
     let jar = tmp.join("host-test.jar");
     let out = Command::new(&kotlinc).args(&sources).args(["-include-runtime", "-nowarn", "-d"]).arg(&jar).output().unwrap();

@@ -7,7 +7,7 @@
 //! players use) plus the file's value precision (6 decimals in `.cube`, 1/65535 in the
 //! PPM).
 
-use super::{Condition, CurveFormat, Feed, Format, Target, TargetError};
+use super::target::{MatrixBy, StageOrder, Condition, CurveFormat, Feed, Format, Target, TargetError};
 use crate::emulate::Emulator;
 use crate::lut3d::{Interp, Lut3d};
 use crate::params::Params;
@@ -169,8 +169,8 @@ impl Target for CubeFile {
         Format {
             matrix: None,
             curve: CurveFormat { grid: (0..self.size).map(|i| i as f64 / (self.size - 1) as f64).collect(), y_step, monotonic: false },
-            matrix_by: "baked in (one LUT for the scene it was made for)",
-            order: "gamma-encoded RGB -> 3D LUT (degamma, CCM, clip, curve baked in)",
+            matrix_by: MatrixBy::Baked,
+            order: StageOrder::EncodedLut,
         }
     }
 
@@ -203,7 +203,7 @@ impl Target for CubeFile {
         }
     }
 
-    fn emulate(&self, exported: &[u8], _base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
+    fn emulate(&self, _params: &Params, exported: &[u8], _base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
         let lut = match self.kind {
             Kind::Cube => parse_cube(std::str::from_utf8(exported).map_err(|e| parse_err(e.to_string(), ".cube"))?)?,
             Kind::Hald => parse_hald(exported)?,
@@ -211,7 +211,7 @@ impl Target for CubeFile {
         let n = lut.size();
         Ok([Interp::Trilinear, Interp::Tetrahedral]
             .into_iter()
-            .map(|interp| Condition { label: format!("{n}^3 {interp:?}").to_lowercase(), feed: Feed::Encoded, emulator: Box::new(Applied { lut: lut.clone(), interp }) })
+            .map(|interp| Condition { bound: None, label: format!("{n}^3 {interp:?}").to_lowercase(), feed: Feed::Encoded, emulator: Box::new(Applied { lut: lut.clone(), interp }) })
             .collect())
     }
 }

@@ -13,7 +13,7 @@
 //! every calibrated matrix (rkaiq blends them by illuminant and saturation; blending is
 //! linear, which commutes with the composition).
 
-use super::{resample_on_grid, Condition, CurveFormat, Feed, Format, MatrixFormat, Target, TargetError};
+use super::target::{MatrixBy, StageOrder, resample_on_grid, Condition, CurveFormat, Feed, Format, MatrixFormat, Target, TargetError};
 use crate::ccm::{self, Mat3};
 use crate::emulate::Isp;
 use crate::params::Params;
@@ -189,8 +189,8 @@ impl Target for Rkaiq {
         Format {
             matrix: Some(MATRIX),
             curve: CurveFormat { grid: self.grid().iter().map(|x| x / FULL).collect(), y_step: 1.0 / FULL, monotonic: false },
-            matrix_by: "one CCM per illuminant and saturation, blended by AWB gains",
-            order: "white balance -> CCM -> clip -> gamma (12-bit, fixed log-spaced inputs)",
+            matrix_by: MatrixBy::IlluminantBlend,
+            order: StageOrder::MatrixClipCurve { clip_bits: None },
         }
     }
 
@@ -212,7 +212,7 @@ impl Target for Rkaiq {
         Ok(text.into_bytes())
     }
 
-    fn emulate(&self, exported: &[u8], base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
+    fn emulate(&self, _params: &Params, exported: &[u8], base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
         let text = std::str::from_utf8(exported).map_err(|e| TargetError::Parse { file: "export".into(), format: "UTF-8", message: e.to_string() })?;
         let (_, ours) = self.parse(text, "export")?;
         let base = base.ok_or(TargetError::NeedsBase { target: self.name() })?;
@@ -227,7 +227,7 @@ impl Target for Rkaiq {
             .matrices
             .iter()
             .zip(&theirs.matrices)
-            .map(|((name, _, m), (_, _, device))| Condition { label: name.clone(), feed: Feed::Sensor(*device), emulator: Box::new(Isp { matrix: MATRIX.apply(m), curve: curve.clone() }) })
+            .map(|((name, _, m), (_, _, device))| Condition { bound: None, label: name.clone(), feed: Feed::Sensor(*device), emulator: Box::new(Isp { matrix: MATRIX.apply(m), curve: curve.clone() }) })
             .collect())
     }
 }

@@ -19,7 +19,7 @@
 //! Between calibrated CTs libcamera interpolates the matrices linearly, which commutes
 //! with the composition, so the check runs at each calibrated CT.
 
-use super::{curve_from_points, Condition, CurveFormat, Feed, Format, MatrixFormat, Target, TargetError};
+use super::target::{MatrixBy, StageOrder, curve_from_points, Condition, CurveFormat, Feed, Format, MatrixFormat, Target, TargetError};
 use crate::ccm::{self, Mat3};
 use crate::emulate::Isp;
 use crate::params::Params;
@@ -176,8 +176,8 @@ impl Target for Rpi {
         Format {
             matrix: Some(self.matrix_format()),
             curve: CurveFormat { grid: self.grid().iter().map(|x| x / FULL).collect(), y_step: 1.0 / FULL, monotonic: *self == Rpi::Pisp },
-            matrix_by: "one CCM per calibrated CT, interpolated linearly in CT",
-            order: "white balance -> CCM -> clip to 16 bits -> gamma curve",
+            matrix_by: MatrixBy::CtInterpolated,
+            order: StageOrder::MatrixClipCurve { clip_bits: Some(16) },
         }
     }
 
@@ -213,7 +213,7 @@ impl Target for Rpi {
         Ok(text.into_bytes())
     }
 
-    fn emulate(&self, exported: &[u8], base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
+    fn emulate(&self, _params: &Params, exported: &[u8], base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
         let text = std::str::from_utf8(exported).map_err(|e| TargetError::Parse { file: "export".into(), format: "UTF-8", message: e.to_string() })?;
         let (_, ours) = parse(text, "export")?;
         let base = base.ok_or(TargetError::NeedsBase { target: self.name() })?;
@@ -231,7 +231,7 @@ impl Target for Rpi {
             .ccms
             .iter()
             .zip(&theirs.ccms)
-            .map(|((ct, m), (_, device))| Condition { label: format!("ct {ct}"), feed: Feed::Sensor(*device), emulator: Box::new(Isp { matrix: fmt.apply(m), curve: curve.clone() }) })
+            .map(|((ct, m), (_, device))| Condition { bound: None, label: format!("ct {ct}"), feed: Feed::Sensor(*device), emulator: Box::new(Isp { matrix: fmt.apply(m), curve: curve.clone() }) })
             .collect())
     }
 }

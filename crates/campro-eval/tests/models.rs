@@ -1,8 +1,7 @@
 //! The shipped manifests and the model decoders on real images from `../shared` (skipped
 //! with a message when it is absent; required under CI=true), and manifest errors.
 
-#[path = "../../../tests/common/shared.rs"]
-mod shared;
+use campro_testkit as shared;
 
 use campro_eval::data::{coco_person, read_rgb8};
 use campro_eval::face::{central_face, cosine, Embedder, FaceDetector};

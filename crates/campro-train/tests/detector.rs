@@ -2,8 +2,7 @@
 //! against the same ONNX file run by tract (forward, and after an edit written back as ONNX),
 //! the detection loss's assignment and IoU by hand.
 
-#[path = "../../../tests/common/shared.rs"]
-mod shared;
+use campro_testkit as shared;
 
 use campro_eval::manifest::Manifest;
 use campro_eval::model::Model;

@@ -1,8 +1,7 @@
 //! The detector's own split of the COCO person set and the post-hoc fine-tune behind a fixed
 //! camera (skipped without ../shared, required under CI=true).
 
-#[path = "../../../tests/common/shared.rs"]
-mod shared;
+use campro_testkit as shared;
 
 use campro_eval::data::{coco_person, detector_held_out};
 use campro_train::config::DetectorConfig;

@@ -2,8 +2,7 @@
 //! PyTorch checkpoint against the ONNX export run by tract; the depthwise convolution
 //! against candle's grouped convolution; the camera against campro's f64 pipeline.
 
-#[path = "../../../tests/common/shared.rs"]
-mod shared;
+use campro_testkit as shared;
 
 use campro_train::camera::Camera;
 use campro_train::mobilefacenet::{dense, depthwise, normalise_unit, MobileFaceNet};

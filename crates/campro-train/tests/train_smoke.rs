@@ -2,8 +2,7 @@
 //! required under CI=true): the protector's loss must fall and the frozen attacker's
 //! accuracy through the camera must drop, and the result must be a valid camera.
 
-#[path = "../../../tests/common/shared.rs"]
-mod shared;
+use campro_testkit as shared;
 
 use campro_train::config::Config;
 use std::path::Path;

@@ -48,6 +48,4 @@ object CamProNative {
         reportedTransform: IntArray?, reportedCurve: FloatArray?, reportedCount: Int,
         out: DoubleArray?,
     )
-    /** Panics inside native code on purpose (tests: the panic must arrive as an exception). */
-    @JvmStatic external fun selfTestPanic(message: String?)
 }

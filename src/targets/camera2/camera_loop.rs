@@ -17,7 +17,8 @@ use crate::ccm::{self, Mat3};
 use crate::color_temp::{self, DngCalibration};
 use crate::error::{check_matrix, check_range, ValidationError};
 use crate::params::Params;
-use crate::targets::camera2::{self, Camera2Values, ConvertError, CurvePart, Options};
+use super::{check_options, convert_with, Camera2Values, ConvertError, CurvePart, Options};
+use crate::emulate::error_bound;
 
 /// Default skip tolerance: a quarter of an 8-bit LSB.
 pub const DEFAULT_TOLERANCE: f64 = 0.25 / 255.0;
@@ -69,7 +70,7 @@ impl Camera2Loop {
     /// recomputes on any change of the device transform.
     pub fn new(params: Params, opts: Options, tolerance: f64) -> Result<Self, ValidationError> {
         params.validate()?;
-        camera2::check_options(&opts)?;
+        check_options(&opts)?;
         check_range(|| "skip_tolerance".into(), tolerance, 0.0, 1.0)?;
         Ok(Self { params, opts, tolerance, ct_source: CtSource::Params, curve: None, current: None, stats: LoopStats::default() })
     }
@@ -94,7 +95,7 @@ impl Camera2Loop {
     /// Changes the device's `TONEMAP_MAX_CURVE_POINTS`; the next update recomputes.
     pub fn set_max_curve_points(&mut self, n: usize) -> Result<(), ValidationError> {
         let opts = Options { max_curve_points: n, ..self.opts };
-        camera2::check_options(&opts)?;
+        check_options(&opts)?;
         if opts != self.opts {
             self.opts = opts;
             self.current = None;
@@ -111,15 +112,12 @@ impl Camera2Loop {
 
     /// The device transform at colour temperature `ct` (kelvin) from the DNG
     /// calibration if one was set, else from the parameter set's `ct_calibration`.
-    pub fn device_at(&self, ct: f64) -> Result<Mat3, ValidationError> {
+    pub fn device_at(&self, ct: f64) -> Result<Mat3, ConvertError> {
         match &self.ct_source {
-            CtSource::Dng(cal) => cal.device_transform(ct),
+            CtSource::Dng(cal) => Ok(cal.device_transform(ct)?),
             CtSource::Params => color_temp::interpolate(&self.params.ct_calibration, ct).map_err(|e| match e {
-                ValidationError::WrongLength { .. } => ValidationError::Rule {
-                    field: "ct_calibration".into(),
-                    rule: "a colour temperature needs a calibration: set a DNG calibration or give the parameter set ct_calibration".into(),
-                },
-                e => e,
+                ValidationError::WrongLength { .. } => ConvertError::NoCalibration,
+                e => e.into(),
             }),
         }
     }
@@ -129,12 +127,12 @@ impl Camera2Loop {
         let (_, v) = self.current.as_ref()?;
         let ideal = ccm::scale(&ccm::mul(&self.params.ccm, device), 1.0 / v.scale);
         let sent = v.matrix();
-        Some(camera2::error_bound(v.report.curve_max_abs, v.report.curve_lipschitz, &sent, &ideal, [1.0; 3]))
+        Some(error_bound(v.report.curve_max_abs, v.report.curve_lipschitz, &sent, &ideal, [1.0; 3]))
     }
 
     /// One frame's update from the device transform (sensor RGB -> linear sRGB).
     pub fn update(&mut self, device: &Mat3) -> Result<Update<'_>, ConvertError> {
-        check_matrix("device_ccm", device, crate::params::CCM_LIMIT)?;
+        check_matrix("device_ccm", device, ccm::CCM_LIMIT)?;
         self.stats.updates += 1;
         let keep = match (self.stale_bound(device), &self.current) {
             (Some(stale), Some((_, v))) if stale <= v.report.bound + self.tolerance => Some(stale),
@@ -146,7 +144,7 @@ impl Camera2Loop {
         }
         let key = |c: &Option<CurvePart>| c.as_ref().map(|c| (c.scale, c.max_points));
         let before = key(&self.curve);
-        let values = camera2::convert_with(&self.params, device, &self.opts, &mut self.curve)?;
+        let values = convert_with(&self.params, device, &self.opts, &mut self.curve)?;
         if key(&self.curve) != before {
             self.stats.curve_fits += 1;
         }

@@ -7,12 +7,14 @@ mod train;
 
 use anyhow::{anyhow, bail, Context, Result};
 use campro::ccm::{self, Mat3};
-use campro::compare::{self, DeviceError};
+use campro::compare;
 use campro::emulate::DeviceModel;
 use campro::pipeline::fast::Exact8;
 use campro::pipeline::{Depth, Prepared};
-use campro::targets::camera2::{self, Camera2Values, Options, RationalMode};
+use campro::targets::camera2::{self, Camera2, Options, RationalMode};
+use campro::targets::{Condition, Support};
 use campro::Params;
+use campro_testkit::stress;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use rayon::prelude::*;
 use std::io::Write;
@@ -51,8 +53,8 @@ enum Cmd {
     /// Map parameters onto a camera stack (Camera2: COLOR_CORRECTION_TRANSFORM, TONEMAP_CURVE).
     Convert {
         params: PathBuf,
-        #[arg(long, value_enum, default_value_t = Target::Camera2)]
-        target: Target,
+        #[arg(long, default_value = "camera2", value_parser = target_names())]
+        target: String,
         #[command(flatten)]
         device: DeviceArgs,
         #[command(flatten)]
@@ -86,8 +88,8 @@ enum Cmd {
     /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
     Compare {
         params: PathBuf,
-        #[arg(long, value_enum, default_value_t = Target::Camera2)]
-        target: Target,
+        #[arg(long, default_value = "camera2", value_parser = target_names())]
+        target: String,
         #[command(flatten)]
         files: FileTargetArgs,
         #[command(flatten)]
@@ -208,45 +210,11 @@ struct DeviceArgs {
     fixed_denominator: Option<u32>,
 }
 
-#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
-enum Target {
-    /// Android Camera2: COLOR_CORRECTION_TRANSFORM + TONEMAP_CURVE.
-    Camera2,
-    /// Raspberry Pi 4 and earlier: patched libcamera tuning file (--base).
-    RpiVc4,
-    /// Raspberry Pi 5: patched libcamera tuning file (--base).
-    RpiPisp,
-    /// Rockchip RV1109/RV1126: patched rkaiq IQ file (--base).
-    RkaiqIsp20,
-    /// Rockchip ISP3x (RK3568/RK3588 class): patched rkaiq IQ file (--base).
-    RkaiqIsp3x,
-    /// .cube 3D LUT on gamma-encoded RGB (--cube-size).
-    Cube,
-    /// Hald CLUT, 16-bit PPM (--hald-level).
-    Hald,
-    /// libcamera rkisp1 (refused: scalar gamma only).
-    Rkisp1,
-    /// libcamera simple / software ISP (refused: scalar gamma only).
-    Simple,
-    /// Plain V4L2 / UVC webcams (refused: scalar gamma only).
-    Uvc,
-}
-
-impl Target {
-    fn name(self) -> &'static str {
-        match self {
-            Target::Camera2 => "camera2",
-            Target::RpiVc4 => "rpi-vc4",
-            Target::RpiPisp => "rpi-pisp",
-            Target::RkaiqIsp20 => "rkaiq-isp20",
-            Target::RkaiqIsp3x => "rkaiq-isp3x",
-            Target::Cube => "cube",
-            Target::Hald => "hald",
-            Target::Rkisp1 => "rkisp1",
-            Target::Simple => "simple",
-            Target::Uvc => "uvc",
-        }
-    }
+/// The registered stack names, for `--target` (`campro convert --help` lists them).
+fn target_names() -> clap::builder::PossibleValuesParser {
+    clap::builder::PossibleValuesParser::new(
+        campro::targets::REGISTRY.iter().map(|e| clap::builder::PossibleValue::new(e.name).help(e.about)),
+    )
 }
 
 /// Options of the file-based targets.
@@ -264,25 +232,26 @@ struct FileTargetArgs {
 }
 
 impl FileTargetArgs {
-    /// The core target for `t`, refusing the stacks that cannot hold a curve.
-    fn target(&self, t: Target) -> Result<Box<dyn campro::targets::Target>> {
-        if let Some(why) = campro::targets::refusal(t.name()) {
-            bail!("{why}");
-        }
-        match t {
-            Target::Cube => {
+    /// The core target called `name` with these options (and `camera2`'s device
+    /// settings), refusing the stacks that cannot hold a curve.
+    fn target(&self, name: &str, camera2: Camera2) -> Result<Box<dyn campro::targets::Target>> {
+        let entry = campro::targets::entry(name).ok_or_else(|| anyhow!("--target: unknown target {name}"))?;
+        match (entry.name, entry.support) {
+            (_, Support::Refused(_)) => bail!("{}", campro::targets::refusal(name).unwrap_or_default()),
+            ("camera2", _) => Ok(Box::new(camera2)),
+            ("cube", _) => {
                 if !(2..=256).contains(&self.cube_size) {
                     bail!("--cube-size must be in 2..=256, got {}", self.cube_size);
                 }
                 Ok(Box::new(campro::targets::cube::CubeFile { kind: campro::targets::cube::Kind::Cube, size: self.cube_size }))
             }
-            Target::Hald => {
+            ("hald", _) => {
                 if !(2..=16).contains(&self.hald_level) {
                     bail!("--hald-level must be in 2..=16, got {}", self.hald_level);
                 }
                 Ok(Box::new(campro::targets::cube::CubeFile::hald(self.hald_level)))
             }
-            _ => campro::targets::by_name(t.name()).ok_or_else(|| anyhow!("{} is not a file target", t.name())),
+            (_, Support::Deploy(make)) => Ok(make()),
         }
     }
 
@@ -353,49 +322,39 @@ fn run(cli: Cli) -> Result<()> {
             eprintln!("wrote {} ({} knots)", output.display(), p.tone_curve.len());
             Ok(())
         }
-        Cmd::Convert { params, target, files, output, force, .. } if target != Target::Camera2 => {
+        Cmd::Convert { params, target, files, output, force, .. } if target != "camera2" => {
             let p = load_params(&params)?;
-            let t = files.target(target)?;
+            let t = files.target(&target, Camera2::default())?;
             let bytes = t.export(&p, files.base_text()?.as_deref())?;
             match output {
                 Some(o) => write_atomic(&o, &bytes, force),
-                None if target == Target::Hald => bail!("a Hald image is binary: pass --output FILE.ppm"),
+                None if target == "hald" => bail!("a Hald image is binary: pass --output FILE.ppm"),
                 None => {
                     std::io::stdout().write_all(&bytes)?;
                     Ok(())
                 }
             }
         }
-        Cmd::Compare { params, target, files, random, seed, format, .. } if target != Target::Camera2 => {
+        Cmd::Compare { params, target, files, device, matrix_frac_bits, lut_size, random, seed, format } => {
             let p = load_params(&params)?;
-            let t = files.target(target)?;
+            let (m, options) = device_setup(&p, &device)?;
+            let t = files.target(&target, Camera2::new(m, options, DeviceModel { matrix_frac_bits, lut_size }))?;
             let base = files.base_text()?;
             let exported = t.export(&p, base.as_deref())?;
-            let conditions = t.emulate(&exported, base.as_deref())?;
-            let sets = pixel_sets(random, seed);
-            let mut rows = Vec::new();
-            for c in &conditions {
-                for (name, px) in &sets {
-                    rows.push((c.label.clone(), name.clone(), compare::deployment_vs_desktop(&p, &c.feed, c.emulator.as_ref(), px)?));
-                }
-            }
+            let conditions = t.emulate(&p, &exported, base.as_deref())?;
+            let rows = comparison(&p, &conditions, random, seed)?;
             match format {
                 Report::Text => {
                     println!("target {} ({} bytes exported)", t.name(), exported.len());
-                    println!("{:<16} {:<22} {:>10} {:>10} {:>10}", "condition", "pixels", "max LSB", "mean LSB", "PSNR dB");
-                    for (c, n, s) in &rows {
-                        println!("{:<16} {:<22} {:>10.4} {:>10.5} {:>10.2}", c, n, s.max_lsb(), s.mean_lsb(), s.psnr());
-                    }
+                    print_comparison(&rows);
                 }
-                Report::Json => println!(
-                    "{}",
-                    serde_json::to_string_pretty(&serde_json::json!({
-                        "target": t.name(), "exportedBytes": exported.len(),
-                        "comparison": rows.iter().map(|(c, n, s)| serde_json::json!({
-                            "condition": c, "pixels": n, "count": s.count / 3, "maxLsb": s.max_lsb(), "meanLsb": s.mean_lsb(), "psnrDb": s.psnr(),
-                        })).collect::<Vec<_>>(),
-                    }))?
-                ),
+                Report::Json => {
+                    let mut json = comparison_json(t.name(), exported.len(), &rows);
+                    if target == "camera2" {
+                        json["camera2"] = serde_json::from_slice(&exported)?;
+                    }
+                    println!("{}", serde_json::to_string_pretty(&json)?)
+                }
             }
             Ok(())
         }
@@ -419,18 +378,6 @@ fn run(cli: Cli) -> Result<()> {
             let p = load_params(&params)?;
             simulate(&p, &inputs, &output, match bit_depth { BitDepth::Eight => Depth::Eight, BitDepth::Sixteen => Depth::Sixteen }, force, jobs)
         }
-        Cmd::Compare { params, device, matrix_frac_bits, lut_size, random, seed, format, .. } => {
-            let p = load_params(&params)?;
-            let (m, opts) = device_setup(&p, &device)?;
-            let model = DeviceModel { matrix_frac_bits, lut_size };
-            let v = camera2::convert(&p, &m, &opts)?;
-            let rows = comparison(&p, &m, &v, &model, random, seed)?;
-            match format {
-                Report::Text => print_comparison(&rows),
-                Report::Json => println!("{}", serde_json::to_string_pretty(&comparison_json(&v, &rows))?),
-            }
-            Ok(())
-        }
         Cmd::Demo { output, params } => demo(&output, params.as_deref()),
         Cmd::Bench { params, quick } => {
             let p = match params {
@@ -447,7 +394,11 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 pub(crate) fn load_params(path: &Path) -> Result<Params> {
-    Params::from_file(path).map_err(|e| anyhow!("{}: {e}", path.display()))
+    Params::from_file(path).map_err(|e| match e {
+        // The file error names the path already.
+        campro::params::ParamsError::File(f) => anyhow!("{f}"),
+        e => anyhow!("{}: {e}", path.display()),
+    })
 }
 
 /// The device matrix and conversion options from the command line.
@@ -602,30 +553,54 @@ fn encode_png(samples: &[u16], w: u32, h: u32, depth: Depth) -> Result<Vec<u8>> 
     Ok(buf)
 }
 
-fn comparison(p: &Params, m: &Mat3, v: &Camera2Values, model: &DeviceModel, random: usize, seed: u64) -> Result<Vec<(String, DeviceError)>> {
-    let sets = std::iter::once(("every grey level".to_string(), compare::grey_levels())).chain(pixel_sets(random, seed));
-    sets.map(|(name, px)| Ok((name, compare::camera2_vs_desktop(p, m, v, model, &px)?))).collect()
+/// One row of a comparison: the condition, the pixel set, the measured error and the
+/// condition's stated bound (output units), if any.
+struct Row {
+    condition: String,
+    pixels: String,
+    stats: compare::Stats,
+    bound: Option<f64>,
+}
+
+/// Every condition on every test pixel set (every grey level first).
+fn comparison(p: &Params, conditions: &[Condition], random: usize, seed: u64) -> Result<Vec<Row>> {
+    let sets: Vec<(String, Vec<[u8; 3]>)> =
+        std::iter::once(("every grey level".to_string(), compare::grey_levels())).chain(pixel_sets(random, seed)).collect();
+    let mut rows = Vec::new();
+    for c in conditions {
+        for (name, px) in &sets {
+            let stats = compare::deployment_vs_desktop(p, &c.feed, c.emulator.as_ref(), px)?;
+            rows.push(Row { condition: c.label.clone(), pixels: name.clone(), stats, bound: c.bound });
+        }
+    }
+    Ok(rows)
 }
 
 /// The test pixels every comparison uses: the RGB cube, random pixels, the chart.
 fn pixel_sets(random: usize, seed: u64) -> [(String, Vec<[u8; 3]>); 3] {
     let chart: Vec<[u8; 3]> = campro::chart::render().chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
-    [("RGB cube, step 5".to_string(), compare::code_cube(5)), (format!("{random} random pixels"), compare::random_pixels(random, seed)), ("built-in chart".to_string(), chart)]
+    [
+        ("RGB cube, step 5".to_string(), compare::code_cube(5)),
+        (format!("{random} random pixels"), compare::random_pixels(random, seed)),
+        ("built-in chart".to_string(), chart),
+    ]
 }
 
-fn print_comparison(rows: &[(String, DeviceError)]) {
-    println!("{:<22} {:>10} {:>10} {:>10} {:>12}", "pixels", "max LSB", "mean LSB", "PSNR dB", "bound LSB");
-    for (name, e) in rows {
-        println!("{:<22} {:>10.4} {:>10.5} {:>10.2} {:>12.4}", name, e.stats.max_lsb(), e.stats.mean_lsb(), e.stats.psnr(), e.bound * 255.0);
+fn print_comparison(rows: &[Row]) {
+    println!("{:<16} {:<22} {:>10} {:>10} {:>10} {:>12}", "condition", "pixels", "max LSB", "mean LSB", "PSNR dB", "bound LSB");
+    for r in rows {
+        let bound = r.bound.map_or("-".to_string(), |b| format!("{:.4}", b * 255.0));
+        let s = &r.stats;
+        println!("{:<16} {:<22} {:>10.4} {:>10.5} {:>10.2} {:>12}", r.condition, r.pixels, s.max_lsb(), s.mean_lsb(), s.psnr(), bound);
     }
 }
 
-fn comparison_json(v: &Camera2Values, rows: &[(String, DeviceError)]) -> serde_json::Value {
+fn comparison_json(target: &str, exported_bytes: usize, rows: &[Row]) -> serde_json::Value {
     serde_json::json!({
-        "camera2": v.to_json(),
-        "comparison": rows.iter().map(|(n, e)| serde_json::json!({
-            "pixels": n, "count": e.stats.count / 3,
-            "maxLsb": e.stats.max_lsb(), "meanLsb": e.stats.mean_lsb(), "psnrDb": e.stats.psnr(), "boundLsb": e.bound * 255.0,
+        "target": target, "exportedBytes": exported_bytes,
+        "comparison": rows.iter().map(|r| serde_json::json!({
+            "condition": r.condition, "pixels": r.pixels, "count": r.stats.count / 3,
+            "maxLsb": r.stats.max_lsb(), "meanLsb": r.stats.mean_lsb(), "psnrDb": r.stats.psnr(), "boundLsb": r.bound.map(|b| b * 255.0),
         })).collect::<Vec<_>>(),
     })
 }
@@ -657,7 +632,9 @@ fn demo(out: &Path, params: Option<&Path>) -> Result<()> {
         v.scale, v.report.matrix_max_abs, v.report.curve_max_abs, v.report.bound_lsb()
     );
     println!("\nSimulated device vs desktop pipeline:");
-    print_comparison(&comparison(&p, &ccm::IDENTITY, &v, &DeviceModel::default(), 100_000, 1)?);
+    let device = Camera2::default();
+    let conditions = campro::targets::Target::emulate(&device, &p, &serde_json::to_vec(&v.to_json())?, None)?;
+    print_comparison(&comparison(&p, &conditions, 100_000, 1)?);
     Ok(())
 }
 
@@ -669,9 +646,9 @@ fn stress(seconds: f64, seed: u64) -> Result<()> {
     let (mut converted, mut refused) = (0u64, 0u64);
     let mut s = seed;
     while start.elapsed().as_secs_f64() < seconds {
-        match campro::stress::check(&campro::stress::random_case(s)) {
-            Ok(campro::stress::Outcome::Converted) => converted += 1,
-            Ok(campro::stress::Outcome::Refused) => refused += 1,
+        match stress::check(&stress::random_case(s)) {
+            Ok(stress::Outcome::Converted) => converted += 1,
+            Ok(stress::Outcome::Refused) => refused += 1,
             Err(e) => bail!("invariant broken after {} cases: {e}", converted + refused),
         }
         s = s.wrapping_add(1);

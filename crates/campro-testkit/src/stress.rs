@@ -2,15 +2,15 @@
 //! The property tests (`tests/stress.rs`) and the soak (`campro stress --seconds N`) both
 //! draw cases here and call [`check`], so they test the same things.
 
-use crate::camera_loop::Camera2Loop;
-use crate::ccm::{self, Mat3};
-use crate::compare::random_pixels;
-use crate::emulate::{Camera2Device, DeviceModel, Emulator};
-use crate::params::Params;
-use crate::pipeline::fast::{Exact8, F32Path};
-use crate::pipeline::{from_linear, Depth, Prepared};
-use crate::targets::camera2::{self, ConvertError, Options, RationalMode, MATRIX_RANGE};
-use crate::tone_curve::ToneCurve;
+use crate::{Error, Result};
+use campro::ccm::{self, Mat3};
+use campro::compare::random_pixels;
+use campro::emulate::{DeviceModel, Emulator};
+use campro::params::Params;
+use campro::pipeline::fast::{Exact8, F32Path};
+use campro::pipeline::{from_linear, Depth, Prepared};
+use campro::targets::camera2::{self, Camera2Loop, ConvertError, Options, RationalMode, MATRIX_RANGE};
+use campro::tone_curve::ToneCurve;
 
 /// One stress case.
 #[derive(Debug, Clone)]
@@ -128,11 +128,12 @@ pub enum Outcome {
 }
 
 /// Checks every invariant on `case`; `Err` says which one broke and how.
-pub fn check(case: &Case) -> Result<Outcome, String> {
+pub fn check(case: &Case) -> Result<Outcome> {
     let Case { params: p, device, opts, seed } = case;
-    let fail = |what: String| Err(format!("seed {seed}: {what}"));
+    let fail = |what: String| Err(Error::Invariant { seed: *seed, what });
     let v = match camera2::convert(p, device, opts) {
         Ok(v) => v,
+        // A rational that cannot fit 32 bits, refused with the entry named.
         Err(e @ ConvertError::Rational { .. }) => {
             let msg = e.to_string();
             return if msg.starts_with("colorCorrectionTransform[") { Ok(Outcome::Refused) } else { fail(format!("unnamed error {msg}")) };
@@ -161,7 +162,7 @@ pub fn check(case: &Case) -> Result<Outcome, String> {
         return fail("bound not finite".into());
     }
     // The stated bound holds on the emulated device, for sensor RGB in [0, 1]^3.
-    let dev = Camera2Device::new(&v, &DeviceModel::default());
+    let dev = camera2::device(v.matrix(), v.curve(), &DeviceModel::default());
     let mut r = Rng(seed ^ 0xA5A5);
     for _ in 0..400 {
         let s = [r.unit(), r.unit(), r.unit()];
@@ -177,9 +178,10 @@ pub fn check(case: &Case) -> Result<Outcome, String> {
         }
     }
     // The camera loop: an unchanged scene skips; a moved one stays within what it states.
-    let mut l = Camera2Loop::new(p.clone(), *opts, 1.0 / 255.0).map_err(|e| e.to_string())?;
-    l.update(device).map_err(|e| e.to_string())?;
-    if l.update(device).map_err(|e| e.to_string())?.recomputed {
+    let loop_err = |e: &dyn std::fmt::Display| Error::Invariant { seed: *seed, what: format!("camera loop: {e}") };
+    let mut l = Camera2Loop::new(p.clone(), *opts, 1.0 / 255.0).map_err(|e| loop_err(&e))?;
+    l.update(device).map_err(|e| loop_err(&e))?;
+    if l.update(device).map_err(|e| loop_err(&e))?.recomputed {
         return fail("an unchanged device transform recomputed".into());
     }
     // Fast image paths against the reference.

@@ -1,8 +1,10 @@
 //! Locating `../shared` (real data and models) for host tests of every workspace crate.
+//! A test that needs a file skips with a message when it is absent, except under
+//! `CI=true`, where a missing file fails the run.
 
 use std::path::PathBuf;
 
-/// The workspace root (the folder holding `Cargo.lock`), from the testing crate's manifest.
+/// The workspace root (the folder holding `Cargo.lock`).
 pub fn workspace_root() -> PathBuf {
     let here = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     here.ancestors().find(|d| d.join("Cargo.lock").exists()).unwrap_or(&here).to_path_buf()
@@ -34,4 +36,18 @@ pub fn shared_root(needs: &[&str]) -> Option<PathBuf> {
         shared(rel)?;
     }
     shared("")
+}
+
+/// Reads an .npy array (u8 or f32): (shape, values as f64).
+pub fn npy(path: &std::path::Path) -> (Vec<usize>, Vec<f64>) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let arr = npyz::NpyFile::new(&bytes[..]).expect("an .npy file");
+    let shape: Vec<usize> = arr.shape().iter().map(|&d| d as usize).collect();
+    let data = match arr.dtype() {
+        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Uint => {
+            arr.into_vec::<u8>().expect("u8 data").into_iter().map(f64::from).collect()
+        }
+        _ => arr.into_vec::<f32>().expect("f32 data").into_iter().map(f64::from).collect(),
+    };
+    (shape, data)
 }

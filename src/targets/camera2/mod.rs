@@ -17,7 +17,18 @@
 //! rounding of `M/s`, `L'` the largest slope of the sent curve and `E_curve` the exact
 //! maximum difference between the sent (f32, possibly simplified) curve and `curve'`.
 
+mod camera_loop;
+mod device;
+mod readback;
+mod wire;
+
+pub use camera_loop::{Camera2Loop, LoopStats, Update, DEFAULT_TOLERANCE};
+pub use device::{device, Camera2};
+pub use readback::{readback, Readback};
+pub use wire::{device_transform_from_capture_result, values_from_json};
+
 use crate::ccm::{self, Mat3};
+use crate::emulate::error_bound;
 use crate::error::{check_matrix, ValidationError};
 use crate::params::Params;
 use crate::rational::{self, Rational, RationalError};
@@ -117,11 +128,24 @@ impl Camera2Values {
 
 /// Why a conversion failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
 pub enum ConvertError {
+    /// An input broke a rule.
     #[error("{0}")]
     Invalid(#[from] ValidationError),
+    /// A matrix entry has no 32-bit rational within the bound.
     #[error("colorCorrectionTransform[{row}][{col}]: {source}")]
-    Rational { row: usize, col: usize, source: RationalError },
+    Rational {
+        /// Matrix row.
+        row: usize,
+        /// Matrix column.
+        col: usize,
+        /// Why the entry has no rational.
+        source: RationalError,
+    },
+    /// A colour temperature was given but no calibration maps it to a device transform.
+    #[error("ct_calibration: a colour temperature needs a calibration: set a DNG calibration or give the parameter set ct_calibration")]
+    NoCalibration,
 }
 
 /// A 3x3 matrix from `ColorSpaceTransform`'s 18 integers (row-major num/den pairs).
@@ -220,7 +244,7 @@ pub fn curve_part(params: &Params, scale: f64, max_points: usize) -> CurvePart {
 /// [`convert`] reusing `cache` when its scale and point budget still apply (and
 /// refilling it when not). `opts` must have passed [`check_options`].
 pub(crate) fn convert_with(params: &Params, device: &Mat3, opts: &Options, cache: &mut Option<CurvePart>) -> Result<Camera2Values, ConvertError> {
-    check_matrix("device_ccm", device, crate::params::CCM_LIMIT)?;
+    check_matrix("device_ccm", device, ccm::CCM_LIMIT)?;
     let composed = ccm::mul(&params.ccm, device);
     // Leave room for the rounding: coarse denominators (say 1/2) could otherwise round an
     // in-range entry out of Camera2's range.
@@ -266,44 +290,6 @@ pub(crate) fn convert_with(params: &Params, device: &Mat3, opts: &Options, cache
     })
 }
 
-/// The bound every Camera2 path states: `E_curve + L' · max_i Σ_j |sent_ij - ideal_ij| · range_j`
-/// for sensor inputs with |sensor_j| <= `range[j]`. The device clips to [0, 1] before
-/// the curve (clipping is 1-Lipschitz), so a row error of δ moves the curve's input by at
-/// most δ and its output by at most `L' · δ`.
-pub fn error_bound(curve_max_abs: f64, lipschitz: f64, sent: &Mat3, ideal: &Mat3, range: [f64; 3]) -> f64 {
-    let worst = sent.iter().zip(ideal).map(|(got, want)| (0..3).map(|j| (got[j] - want[j]).abs() * range[j]).sum::<f64>()).fold(0.0, f64::max);
-    curve_max_abs + lipschitz * worst
-}
-
-/// How far what a device reports in its `CaptureResult` is from what was requested.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Readback {
-    /// Largest |reported - requested| over the nine matrix entries.
-    pub matrix_max_abs: f64,
-    /// Exact max |reported curve - requested curve| over [0, 1].
-    pub curve_max_abs: f64,
-    /// Bound on how far the device's output moves because of both (output units), for
-    /// sensor RGB in [0, 1]^3: [`error_bound`] with the reported curve's slope.
-    pub bound: f64,
-}
-
-/// Compares a request's `COLOR_CORRECTION_TRANSFORM` and `TONEMAP_CURVE` (one channel,
-/// flat pairs) with those the `CaptureResult` reports.
-pub fn readback(requested_cst: &[i32; 18], requested_curve: &[f32], reported_cst: &[i32; 18], reported_curve: &[f32]) -> Result<Readback, ValidationError> {
-    let requested = |e: ValidationError| e.within("requested");
-    let reported = |e: ValidationError| e.within("reported");
-    let want = matrix_from_rationals(requested_cst).map_err(requested)?;
-    let got = matrix_from_rationals(reported_cst).map_err(reported)?;
-    let want_c = curve_from_pairs(requested_curve).map_err(requested)?;
-    let got_c = curve_from_pairs(reported_curve).map_err(reported)?;
-    let curve_max_abs = got_c.max_abs_diff(&want_c);
-    Ok(Readback {
-        matrix_max_abs: ccm::max_abs_diff(&got, &want),
-        curve_max_abs,
-        bound: error_bound(curve_max_abs, got_c.max_slope(), &got, &want, [1.0; 3]),
-    })
-}
-
 /// Flat f32 (Pin, Pout) pairs; a knot whose Pin rounds onto the previous one is dropped
 /// (its cost shows up in the measured curve error).
 fn to_f32_pairs(c: &ToneCurve) -> Vec<f32> {
@@ -325,90 +311,6 @@ fn to_f32_pairs(c: &ToneCurve) -> Vec<f32> {
         out.push(yf);
     }
     out
-}
-
-impl Camera2Values {
-    /// One JSON object: `colorCorrectionTransform` (18 integers), `tonemapCurve`
-    /// (`red`, `green`, `blue` flat pair arrays), the request modes, and the report.
-    pub fn to_json(&self) -> serde_json::Value {
-        let r = &self.report;
-        serde_json::json!({
-            "target": "camera2",
-            "colorCorrectionMode": "TRANSFORM_MATRIX",
-            "tonemapMode": "CONTRAST_CURVE",
-            "colorCorrectionTransform": self.color_correction_transform.to_vec(),
-            "tonemapCurve": {
-                "red": self.tonemap_curve.red,
-                "green": self.tonemap_curve.green,
-                "blue": self.tonemap_curve.blue,
-            },
-            "scale": self.scale,
-            "composedMatrix": self.composed,
-            "error": {
-                "matrixMaxAbs": r.matrix_max_abs,
-                "curveMaxAbs": r.curve_max_abs,
-                "curvePoints": r.curve_points,
-                "curveSimplified": r.curve_simplified,
-                "curveLipschitz": r.curve_lipschitz,
-                "bound": r.bound,
-                "boundLsb8": r.bound_lsb(),
-            }
-        })
-    }
-
-    /// Kotlin statements setting these values on a `CaptureRequest.Builder` named `builder`.
-    pub fn to_kotlin(&self) -> String {
-        let ints = self.color_correction_transform.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(", ");
-        let floats = |v: &[f32]| v.iter().map(|f| format!("{f:?}f")).collect::<Vec<_>>().join(", ");
-        let c = floats(&self.tonemap_curve.red);
-        format!(
-            "// CamPro via Camera2 (scale {scale}, bound {bound:.3} LSB). COLOR_CORRECTION_MODE is\n\
-             // only honoured with CONTROL_AWB_MODE_OFF: also set COLOR_CORRECTION_GAINS.\n\
-             val campro = floatArrayOf({c})\n\
-             builder.set(CaptureRequest.CONTROL_AWB_MODE, CaptureRequest.CONTROL_AWB_MODE_OFF)\n\
-             builder.set(CaptureRequest.COLOR_CORRECTION_MODE, CaptureRequest.COLOR_CORRECTION_MODE_TRANSFORM_MATRIX)\n\
-             builder.set(CaptureRequest.COLOR_CORRECTION_TRANSFORM, ColorSpaceTransform(intArrayOf({ints})))\n\
-             builder.set(CaptureRequest.TONEMAP_MODE, CaptureRequest.TONEMAP_MODE_CONTRAST_CURVE)\n\
-             builder.set(CaptureRequest.TONEMAP_CURVE, TonemapCurve(campro, campro, campro))\n",
-            scale = self.scale,
-            bound = self.report.bound_lsb(),
-        )
-    }
-}
-
-/// The device transform from a saved capture result: a JSON object whose
-/// `colorCorrectionTransform` (or `android.colorCorrection.transform`) is 18 integers
-/// (numerator/denominator pairs), 9 numbers, or 3 rows of 3.
-pub fn device_transform_from_capture_result(text: &str) -> Result<Mat3, ValidationError> {
-    let v: serde_json::Value = serde_json::from_str(text).map_err(|e| ValidationError::Rule { field: "<capture result>".into(), rule: format!("not JSON: {e}") })?;
-    let (key, t) = ["colorCorrectionTransform", "android.colorCorrection.transform"]
-        .iter()
-        .find_map(|k| v.get(*k).map(|t| (*k, t)))
-        .ok_or_else(|| ValidationError::Rule { field: "colorCorrectionTransform".into(), rule: "missing from the capture result".into() })?;
-    let flat: Vec<&serde_json::Value> = match t.as_array() {
-        Some(a) if a.len() == 3 && a.iter().all(|r| r.is_array()) => a.iter().flat_map(|r| r.as_array().unwrap().iter()).collect(),
-        Some(a) => a.iter().collect(),
-        None => return Err(ValidationError::Rule { field: key.into(), rule: "must be an array".into() }),
-    };
-    let num = |i: usize| flat[i].as_f64().ok_or_else(|| ValidationError::Rule { field: format!("{key}[{i}]"), rule: "must be a number".into() });
-    match flat.len() {
-        18 => {
-            let mut ints = [0i32; 18];
-            for (i, slot) in ints.iter_mut().enumerate() {
-                *slot = flat[i].as_i64().and_then(|v| i32::try_from(v).ok()).ok_or_else(|| ValidationError::Rule { field: format!("{key}[{i}]"), rule: "must be a 32-bit integer".into() })?;
-            }
-            matrix_from_rationals(&ints).map_err(|e| ValidationError::Rule { field: key.into(), rule: e.to_string() })
-        }
-        9 => {
-            let mut m = [[0.0; 3]; 3];
-            for i in 0..9 {
-                m[i / 3][i % 3] = num(i)?;
-            }
-            check_matrix(key, &m, crate::params::CCM_LIMIT)?;
-            Ok(m)
-        }
-        n => Err(ValidationError::WrongLength { field: key.into(), expected: "18 integers or 9 numbers".into(), got: n }),
-    }
 }
 
 #[cfg(test)]
@@ -470,27 +372,6 @@ mod tests {
         assert!(v.report.curve_simplified);
         let exact = p.tone_curve.max_abs_diff(&v.curve());
         assert!((exact - v.report.curve_max_abs).abs() < 1e-12 && exact > 0.0);
-    }
-
-    #[test]
-    fn readback_by_hand() {
-        let id = [1, 1, 0, 1, 0, 1, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1];
-        let mut got = id;
-        got[0] = 1023; // 1023/1024 instead of 1
-        got[1] = 1024;
-        got[2] = 1; // 1/1024 instead of 0
-        got[3] = 1024;
-        let line = [0.0, 0.0, 1.0, 1.0];
-        // Reported curve: (0,0) (0.5,0.55) (1,1): 0.05 off at 0.5, slope 1.1.
-        let bent = [0.0, 0.0, 0.5, 0.55, 1.0, 1.0];
-        let r = readback(&id, &line, &got, &bent).unwrap();
-        assert!((r.matrix_max_abs - 1.0 / 1024.0).abs() < 1e-15);
-        assert!((r.curve_max_abs - 0.05).abs() < 1e-7);
-        // Row 0 moves by 2/1024 in total.
-        assert!((r.bound - (r.curve_max_abs + 1.1 * 2.0 / 1024.0)).abs() < 1e-7, "{r:?}");
-        let mut bad = id;
-        bad[3] = 0;
-        assert!(readback(&id, &line, &bad, &line).unwrap_err().to_string().contains("reported"));
     }
 
     #[test]

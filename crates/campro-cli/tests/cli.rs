@@ -1,7 +1,6 @@
 //! The `campro` command line, end to end: outputs, bad input (one-line errors, non-zero
 //! exit, no panic, no partial files), overwrite rules.
 
-mod common;
 
 use assert_cmd::Command;
 use campro::Params;
@@ -13,7 +12,7 @@ fn campro() -> Command {
 }
 
 fn bundled(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("params").join(name)
+    campro_testkit::workspace_root().join("params").join(name)
 }
 
 /// Runs and expects failure with a one-line error that contains `needle`.
@@ -119,7 +118,7 @@ fn write_pt(path: &Path, pkl: &[u8], storages: &[(&str, Vec<u8>)]) {
 #[test]
 fn import_pt_reads_fixture_and_refuses_hostile_files() {
     let dir = tempfile::tempdir().unwrap();
-    if let Some(ck) = common::shared("fixtures/campro-pt/params_03_mixed.pt") {
+    if let Some(ck) = campro_testkit::shared("fixtures/campro-pt/params_03_mixed.pt") {
         let out = dir.path().join("p.json");
         campro().arg("import-pt").arg(&ck).arg("-o").arg(&out).assert().success();
         let p = Params::from_file(&out).unwrap();
@@ -299,7 +298,7 @@ fn file_targets_convert_compare_and_refuse() {
 /// `eval all` on a few images and identities: every report is written, laid out as stated.
 #[test]
 fn eval_all_with_a_limit_writes_every_report() {
-    let Some(shared) = common::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt", "data/coco-person/instances_person.json"]) else { return };
+    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt", "data/coco-person/instances_person.json"]) else { return };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ev");
     campro()
@@ -345,7 +344,7 @@ fn eval_all_with_a_limit_writes_every_report() {
 /// can improve: every CMC point is at most the one without distractors.
 #[test]
 fn privacy_distractors_only_enlarge_the_gallery() {
-    let Some(shared) = common::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else { return };
+    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else { return };
     let dir = tempfile::tempdir().unwrap();
     let run = |extra: &[&str], out: &str| -> serde_json::Value {
         let out = dir.path().join(out);
@@ -391,7 +390,7 @@ fn privacy_distractors_only_enlarge_the_gallery() {
 /// is a bijection, so restoring it gives most of the raw accuracy back; baselines get none.
 #[test]
 fn privacy_restore_undoes_a_bijective_camera() {
-    let Some(shared) = common::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt", "data/coco-person/instances_person.json"]) else { return };
+    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt", "data/coco-person/instances_person.json"]) else { return };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("r");
     campro()
@@ -429,7 +428,7 @@ fn privacy_restore_undoes_a_bijective_camera() {
 /// so matching inverted to inverted identifies more than matching it to raw faces.
 #[test]
 fn privacy_camera_enrolment_matches_protected_to_protected() {
-    let Some(shared) = common::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else { return };
+    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else { return };
     let dir = tempfile::tempdir().unwrap();
     let mut flat: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(bundled("color-inversion.json")).unwrap()).unwrap();
     flat["name"] = "flat-grey".into();
@@ -488,8 +487,8 @@ fn eval_refuses_bad_arguments_clearly() {
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("expected lowres-S (S ≥ 1)"));
     fails_with(campro().args(["eval", "quality", "--shared", "/nonexistent-shared"]), "/nonexistent-shared/data/coco-person/images");
     fails_with(campro().args(["eval", "utility", "--person-detector", "nosuchmodel", "--shared", "/nonexistent-shared"]), "reading the COCO person set");
-    let Some(_) = common::shared("data/coco-person/instances_person.json") else { return };
-    let shared = common::shared("").unwrap();
+    let Some(_) = campro_testkit::shared("data/coco-person/instances_person.json") else { return };
+    let shared = campro_testkit::shared("").unwrap();
     fails_with(campro().args(["eval", "utility", "--person-detector", "nosuchmodel", "--shared"]).arg(&shared), "neither a bundled model");
 }
 
@@ -498,9 +497,9 @@ fn eval_refuses_bad_arguments_clearly() {
 /// `eval privacy --identities` scores only the identities the run held out.
 #[test]
 fn train_writes_params_and_detector_that_eval_reads() {
-    let Some(models) = common::shared("models/yolox_nano.onnx") else { return };
-    let Some(lfw) = common::shared("data/lfw/pairs.txt") else { return };
-    let Some(coco) = common::shared("data/coco-person/instances_person.json") else { return };
+    let Some(models) = campro_testkit::shared("models/yolox_nano.onnx") else { return };
+    let Some(lfw) = campro_testkit::shared("data/lfw/pairs.txt") else { return };
+    let Some(coco) = campro_testkit::shared("data/coco-person/instances_person.json") else { return };
     let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
     let dir = tempfile::tempdir().unwrap();
     let q = |p: &std::path::Path| format!("{:?}", p.to_str().unwrap());
@@ -548,15 +547,15 @@ fn train_writes_params_and_detector_that_eval_reads() {
 
 #[test]
 fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
-    let Some(models) = common::shared("models/yolox_nano.onnx") else { return };
-    let Some(coco) = common::shared("data/coco-person/instances_person.json") else { return };
+    let Some(models) = campro_testkit::shared("models/yolox_nano.onnx") else { return };
+    let Some(coco) = campro_testkit::shared("data/coco-person/instances_person.json") else { return };
     let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
     let dir = tempfile::tempdir().unwrap();
     let q = |p: &std::path::Path| format!("{:?}", p.to_str().unwrap());
     let cfg = format!("seed = 3\n[detector]\nmodel = {}\ndata = {}\nsize = 128\nbatch = 2\nmax_images = 2\n", q(&models), q(coco.parent().unwrap()));
     std::fs::write(dir.path().join("ft.toml"), cfg).unwrap();
     let p = dir.path().join("inv.json");
-    std::fs::copy(env!("CARGO_MANIFEST_DIR").to_string() + "/params/campro-omega-1.json", &p).unwrap();
+    std::fs::copy(campro_testkit::workspace_root().join("params/campro-omega-1.json"), &p).unwrap();
     let before: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
     let run = || {
         let mut c = campro();

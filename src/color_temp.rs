@@ -118,9 +118,13 @@ pub const XYZ_D50_TO_SRGB: Mat3 = [
 /// and `SENSOR_FORWARD_MATRIX1/2` (white-balanced sensor RGB -> XYZ D50).
 #[derive(Debug, Clone, PartialEq)]
 pub struct DngCalibration {
+    /// `SENSOR_REFERENCE_ILLUMINANT1` (an EXIF LightSource code, e.g. 17 = Standard A).
     pub illuminant1: u8,
+    /// `SENSOR_FORWARD_MATRIX1`: white-balanced sensor RGB to XYZ D50 under illuminant 1.
     pub forward_matrix1: Mat3,
+    /// `SENSOR_REFERENCE_ILLUMINANT2` (e.g. 21 = D65).
     pub illuminant2: u8,
+    /// `SENSOR_FORWARD_MATRIX2`: the same under illuminant 2.
     pub forward_matrix2: Mat3,
 }
 

@@ -4,18 +4,28 @@
 use thiserror::Error;
 
 /// A value broke a rule of the parameter model or of a conversion input.
+///
+/// Every variant's `field` is the JSON path of the offending value (`ccm[1][2]`).
 #[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+#[allow(missing_docs)] // the fields are the same in every variant: documented above
 pub enum ValidationError {
+    /// NaN or infinite.
     #[error("{field}: must be a finite number, got {value}")]
     NonFinite { field: String, value: f64 },
+    /// Outside `[min, max]`.
     #[error("{field}: must be in [{min}, {max}], got {value}")]
     OutOfRange { field: String, value: f64, min: f64, max: f64 },
+    /// A list of the wrong length (`expected` says what it must be).
     #[error("{field}: must have {expected} entries, got {got}")]
     WrongLength { field: String, expected: String, got: usize },
+    /// Entry `index` is not larger than the one before.
     #[error("{field}: must be strictly increasing, but entry {index} ({value}) follows {prev}")]
     NotIncreasing { field: String, index: usize, prev: f64, value: f64 },
+    /// An end point (first or last knot input) is not where it must be.
     #[error("{field}: must be {expected}, got {value}")]
     WrongEndpoint { field: String, expected: f64, value: f64 },
+    /// Any other rule, in words.
     #[error("{field}: {rule}")]
     Rule { field: String, rule: String },
 }

@@ -15,7 +15,9 @@ use crate::pipeline::process_f64;
 /// Interpolation inside a LUT cell.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Interp {
+    /// Between the 8 corners of the cell (what most video tools do).
     Trilinear,
+    /// Between the 4 corners of the tetrahedron holding the point (ffmpeg `lut3d` default).
     Tetrahedral,
 }
 

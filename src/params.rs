@@ -9,7 +9,17 @@
 //!   "ct_calibration": [ { "ct_kelvin": 2856, "ccm": [[...]] }, ... ],  // optional
 //!   "provenance": { ... free-form ... } }
 //! ```
-//! Unknown fields are rejected; every rule broken is reported with its field path.
+//! Unknown fields are rejected; every rule broken is reported with its field path:
+//! - `format` is `campro-params` and `version` is 1;
+//! - every number is finite;
+//! - `ccm` is 3 rows of 3, entries within ±[`CCM_LIMIT`] (32), row-major, acting on
+//!   column vectors of linear RGB (`out = ccm · in`);
+//! - `tone_curve.y` has 2 to 4096 outputs in [0, 1]; `x`, when given, has as many inputs
+//!   strictly increasing from 0 to 1 (evenly spaced otherwise);
+//! - `degamma` is in [0.2, 5] (the desktop pipeline's `clamp(x^γ, 0, 1)`);
+//! - `ct_calibration` CTs are strictly increasing in [1000, 40000] K
+//!   ([`crate::color_temp::CT_RANGE`]), each with a 3x3 matrix within ±32;
+//! - the file is at most [`MAX_JSON_BYTES`] (4 MiB), read as a regular file.
 
 use crate::ccm::{Mat3, CCM_LIMIT};
 use crate::color_temp::CtCcm;
@@ -50,12 +60,26 @@ pub struct Params {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ParamsError {
+    /// Not JSON of the format, at this path inside the document.
     #[error("invalid JSON at {path}: {message}")]
-    Json { path: String, message: String },
+    Json {
+        /// Where in the document (`tone_curve.y[3]`, `.` for the top).
+        path: String,
+        /// What the parser said.
+        message: String,
+    },
+    /// JSON of the format, but a value breaks a rule.
     #[error("invalid parameters: {0}")]
     Invalid(#[from] ValidationError),
+    /// The text is larger than [`MAX_JSON_BYTES`].
     #[error("parameter file is {size} bytes; the limit is {limit}")]
-    TooLarge { size: usize, limit: usize },
+    TooLarge {
+        /// Its size, bytes.
+        size: usize,
+        /// The limit, bytes.
+        limit: usize,
+    },
+    /// The file could not be read.
     #[error(transparent)]
     File(#[from] crate::file::FileError),
 }

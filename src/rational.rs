@@ -8,7 +8,9 @@
 /// A rational number `num / den` with `den > 0`, both fitting in i32.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Rational {
+    /// Numerator.
     pub num: i32,
+    /// Denominator (> 0).
     pub den: i32,
 }
 
@@ -22,12 +24,23 @@ impl Rational {
 /// Why a value has no rational approximation within i32.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RationalError {
+    /// The value is NaN or infinite.
     #[error("value {0} is not finite")]
     NonFinite(f64),
+    /// The denominator (bound) is 0 or does not fit an `i32`.
     #[error("denominator bound must be in [1, {max}], got {got}", max = i32::MAX)]
-    BadDenominator { got: u64 },
+    BadDenominator {
+        /// The denominator given.
+        got: u64,
+    },
+    /// The numerator would not fit an `i32`.
     #[error("value {value} times denominator {den} overflows a 32-bit numerator")]
-    Overflow { value: f64, den: u64 },
+    Overflow {
+        /// The value.
+        value: f64,
+        /// The denominator.
+        den: u64,
+    },
 }
 
 fn check(x: f64, den: u64) -> Result<(), RationalError> {

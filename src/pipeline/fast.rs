@@ -50,6 +50,7 @@ pub struct Elision {
 }
 
 impl Elision {
+    /// What `p` lets the pipeline skip.
     pub fn of(p: &Params) -> Self {
         Self { matrix: p.ccm == ccm::IDENTITY, curve: p.tone_curve.is_identity(0.0) }
     }
@@ -236,6 +237,7 @@ pub struct F32Path {
 const GRID: usize = 1024;
 
 impl F32Path {
+    /// The f32 path for `params` on inputs of depth `input` (tables built here).
     pub fn new(params: &Params, input: Depth) -> Self {
         let max = input.max();
         let degamma = (0..=max).map(|c| degamma(c as f64 / max as f64, params.degamma) as f32).collect();

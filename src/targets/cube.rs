@@ -25,6 +25,7 @@ pub enum Kind {
 /// A LUT file target of one size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CubeFile {
+    /// `.cube` text or Hald PPM.
     pub kind: Kind,
     /// Points per axis (for Hald: a square, L^2).
     pub size: usize,

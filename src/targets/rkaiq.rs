@@ -24,6 +24,7 @@ const FULL: f64 = 4095.0;
 const MATRIX: MatrixFormat = MatrixFormat { min: -8.0, max: 8.0 - 1.0 / 128.0, step: 1.0 / 128.0 };
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// A Rockchip ISP generation.
 pub enum Rkaiq {
     /// RV1109/RV1126 (rkaiq V10 gamma, 45 knots).
     Isp20,

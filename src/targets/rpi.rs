@@ -30,6 +30,7 @@ use serde_json::Value;
 const FULL: f64 = 65535.0;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// A Raspberry Pi ISP.
 pub enum Rpi {
     /// Pi 4 and earlier (VideoCore IV ISP).
     Vc4,

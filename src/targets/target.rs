@@ -113,16 +113,44 @@ pub enum Feed {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum TargetError {
+    /// The file is not of its format.
     #[error("{file}: not valid {format}: {message}")]
-    Parse { file: String, format: &'static str, message: String },
+    Parse {
+        /// Which file (`base`, `exported`).
+        file: String,
+        /// The format expected.
+        format: &'static str,
+        /// What the parser said.
+        message: String,
+    },
+    /// A field of the file breaks the stack's rule.
     #[error("{file}: {field}: {rule}")]
-    Field { file: String, field: String, rule: String },
+    Field {
+        /// Which file.
+        file: String,
+        /// The field's path in it.
+        field: String,
+        /// The rule broken.
+        rule: String,
+    },
+    /// The target patches a tuning file and none was given.
     #[error("{target} needs its tuning file to patch (pass --base FILE)")]
-    NeedsBase { target: &'static str },
+    NeedsBase {
+        /// The target's name.
+        target: &'static str,
+    },
+    /// The stack cannot hold what CamPro needs.
     #[error("{target} cannot hold a CamPro tone curve: {why}")]
-    Unsupported { target: &'static str, why: String },
+    Unsupported {
+        /// The target's name.
+        target: &'static str,
+        /// Why.
+        why: String,
+    },
+    /// A value breaks a rule.
     #[error(transparent)]
     Invalid(#[from] ValidationError),
+    /// The Camera2 conversion failed.
     #[error(transparent)]
     Convert(#[from] crate::targets::camera2::ConvertError),
 }

@@ -21,8 +21,11 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// The bundled default parameter set of `campro demo`.
-const DEFAULT_PARAMS: &str = include_str!("../../../params/color-inversion.json");
+/// The recommended preset: `campro demo`'s default. Of the learnt sets it is the most
+/// useful one that meets both privacy targets on the paper's protocol (trained/README.md).
+const DEFAULT_PARAMS: &str = include_str!("../../../params/campro-omega-0.5.json");
+/// The file name [`DEFAULT_PARAMS`] is bundled as, for messages.
+const DEFAULT_PARAMS_FILE: &str = "params/campro-omega-0.5.json";
 
 #[derive(Parser)]
 #[command(name = "campro", version, about = "CamPro anti-facial-recognition ISP parameters: simulate, convert to Camera2, compare")]
@@ -177,12 +180,12 @@ enum Cmd {
         #[arg(long)]
         force: bool,
     },
-    /// Run on the bundled default (colour inversion) and a built-in chart: before/after PNGs, Camera2 values, error report.
+    /// Run the recommended learnt preset (or --params) on a built-in chart: before/after PNGs, Camera2 values, error report.
     Demo {
         /// Output folder.
         #[arg(short, long, default_value = "campro-demo")]
         output: PathBuf,
-        /// Parameters to use instead of the bundled default.
+        /// Parameters to use instead of the recommended preset.
         #[arg(long)]
         params: Option<PathBuf>,
     },
@@ -606,9 +609,9 @@ fn comparison_json(target: &str, exported_bytes: usize, rows: &[Row]) -> serde_j
 }
 
 fn demo(out: &Path, params: Option<&Path>) -> Result<()> {
-    let p = match params {
-        Some(path) => load_params(path)?,
-        None => Params::from_json(DEFAULT_PARAMS)?,
+    let (p, file) = match params {
+        Some(path) => (load_params(path)?, path.display().to_string()),
+        None => (Params::from_json(DEFAULT_PARAMS)?, format!("{DEFAULT_PARAMS_FILE} (the recommended preset)")),
     };
     let chart = campro::chart::render();
     let (w, h) = (campro::chart::WIDTH, campro::chart::HEIGHT);
@@ -616,10 +619,12 @@ fn demo(out: &Path, params: Option<&Path>) -> Result<()> {
     let mut dst = vec![0u16; src.len()];
     Prepared::new(&p, Depth::Eight).run(&src, &mut dst, Depth::Eight);
     let before = out.join("chart.png");
-    let after = out.join(format!("chart_{}.png", if p.name.is_empty() { "campro" } else { &p.name }));
+    // Fixed names: never built from the file's contents.
+    let after = out.join("chart-protected.png");
     write_atomic(&before, &encode_png(&src, w, h, Depth::Eight)?, true)?;
     write_atomic(&after, &encode_png(&dst, w, h, Depth::Eight)?, true)?;
-    println!("parameters: {} - {}", p.name, p.description);
+    println!("preset: {file}");
+    println!("parameters: {} - {}", escape(&p.name), escape(&p.description));
     println!("wrote {} (input) and {} (desktop pipeline output)\n", before.display(), after.display());
     let v = camera2::convert(&p, &ccm::IDENTITY, &Options::default())?;
     println!("Camera2 values (device transform: identity; `campro convert --device-ccm ...` for yours):");
@@ -655,4 +660,10 @@ fn stress(seconds: f64, seed: u64) -> Result<()> {
     }
     println!("stress: {} cases in {:.1} s (seeds {seed}..{s}): {converted} converted, {refused} refused with a named error, 0 invariants broken", converted + refused, start.elapsed().as_secs_f64());
     Ok(())
+}
+
+/// `text` with control characters escaped, for echoing what a file says (a name or
+/// description must not move the cursor, retitle the terminal or forge a line).
+pub(crate) fn escape(text: &str) -> String {
+    text.chars().flat_map(|c| if c.is_control() { c.escape_default().collect::<Vec<_>>() } else { vec![c] }).collect()
 }

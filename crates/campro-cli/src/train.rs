@@ -2,17 +2,13 @@
 
 use crate::{eval, load_params, write_atomic};
 use anyhow::{bail, Result};
-use campro::Params;
 use campro_train::yolox::Yolox;
 use std::path::{Path, PathBuf};
 
 pub fn train(config: &Path, output: &Path, log: Option<&Path>, checkpoints: Option<PathBuf>, resume: Option<PathBuf>, init: Option<&Path>, force: bool) -> Result<()> {
     let cfg = campro_train::config::Config::load(config)?;
     let init = match init {
-        Some(p) => {
-            let (ccm, curve, gamma) = camera_values(&load_params(p)?, p)?;
-            Some(campro_train::train::Initial { ccm, curve, gamma, origin: p.display().to_string() })
-        }
+        Some(p) => Some(campro_train::train::Initial::from_params(&load_params(p)?, &p.display().to_string())?),
         None => None,
     };
     let opts = &campro_train::train::RunOptions { checkpoints, resume, init };
@@ -38,23 +34,15 @@ pub fn train(config: &Path, output: &Path, log: Option<&Path>, checkpoints: Opti
     })?;
     pb.finish_and_clear();
     if let Some(l) = log {
-        let csv = campro_train::train::log_csv(&out.log);
+        let csv = campro_train::log::log_csv(&out.log);
         write_atomic(l, csv.as_bytes(), force)?;
-        let (losses, acc) = campro_train::train::plot_log(&out.log);
+        let (losses, acc) = campro_train::log::plot_log(&out.log);
         let stem = l.with_extension("");
         write_atomic(&PathBuf::from(format!("{}-losses.svg", stem.display())), losses.as_bytes(), true)?;
         write_atomic(&PathBuf::from(format!("{}-accuracy.svg", stem.display())), acc.as_bytes(), true)?;
     }
-    let curve = campro::tone_curve::ToneCurve::uniform(out.curve.clone())?;
-    let mut params = Params::new(out.ccm, curve, out.gamma)?;
-    params.name = output.file_stem().map_or("campro-trained".into(), |s| s.to_string_lossy().into_owned());
-    params.description = format!(
-        "learnt by campro train from {} ({}{})",
-        config.display(),
-        if cfg.protector.omega > 0.0 { format!("privacy and utility players, omega {}", cfg.protector.omega) } else { "privacy player".into() },
-        if cfg.protector.protector_only { ", protector only" } else { "" }
-    );
-    params.provenance = out.provenance.clone();
+    let name = output.file_stem().map_or("campro-trained".into(), |s| s.to_string_lossy().into_owned());
+    let mut params = out.params(&cfg, &name, &config.display().to_string())?;
     if let Some(det) = &out.detector {
         let entry = write_detector(det, output, &params.name, force)?;
         params.provenance.insert("detector".into(), entry);
@@ -96,13 +84,6 @@ fn write_detector(det: &Yolox, params_path: &Path, name: &str, force: bool) -> R
 
 /// The optimiser's camera values of `params` (read from `path`): CCM rows, curve outputs,
 /// degamma exponent; its curve must have evenly spaced knots.
-fn camera_values(params: &Params, path: &Path) -> Result<([[f64; 3]; 3], Vec<f64>, f64)> {
-    if !params.tone_curve.is_uniform() {
-        bail!("{}: tone_curve: the optimiser's camera needs evenly spaced knots", path.display());
-    }
-    Ok((params.ccm, params.tone_curve.y().to_vec(), params.degamma))
-}
-
 /// Fine-tunes YOLOX-Nano behind the camera of `params_path` and records it in that file.
 pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize, seconds: f64, log: Option<&Path>, force: bool) -> Result<()> {
     if steps == 0 {
@@ -121,7 +102,7 @@ pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize
         }
     }
     let mut params = load_params(params_path)?;
-    let (ccm, curve, gamma) = camera_values(&params, params_path)?;
+    let campro_train::train::Initial { ccm, curve, gamma, .. } = campro_train::train::Initial::from_params(&params, &params_path.display().to_string())?;
     let imaging = campro_train::finetune::Imaging::Camera { ccm, curve, gamma };
     let opts = campro_train::finetune::FinetuneOptions { steps, seconds, seed: cfg.seed };
     let pb = indicatif::ProgressBar::new(steps as u64);

@@ -259,9 +259,27 @@ fn compare_reports_within_bound() {
 fn demo_writes_before_and_after() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
-    campro().arg("demo").arg("-o").arg(&out).assert().success().stdout(predicates::str::contains("COLOR_CORRECTION_TRANSFORM"));
+    // The default: the recommended preset, named on stdout, its pipeline on the chart.
+    campro()
+        .arg("demo")
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success()
+        .stdout(predicates::str::contains("COLOR_CORRECTION_TRANSFORM"))
+        .stdout(predicates::str::contains("preset: params/campro-omega-0.5.json (the recommended preset)"));
+    let preset = Params::from_file(&bundled("campro-omega-0.5.json")).unwrap();
+    let chart = image::open(out.join("chart.png")).unwrap().into_rgb8();
+    let protected = image::open(out.join("chart-protected.png")).unwrap().into_rgb8();
+    for (x, y) in [(32, 3 * 64 + 32), (0, 4 * 64 + 5), (200, 100)] {
+        let want = campro::pipeline::process_f64(&preset, chart.get_pixel(x, y).0.map(|c| c as f64 / 255.0));
+        assert_eq!(protected.get_pixel(x, y).0, want.map(|v| (v * 255.0).round() as u8), "({x}, {y})");
+    }
+    // Another set, by --params: colour inversion.
+    let out = dir.path().join("demo-inversion");
+    campro().arg("demo").arg("-o").arg(&out).arg("--params").arg(bundled("color-inversion.json")).assert().success();
     let before = image::open(out.join("chart.png")).unwrap().into_rgb8();
-    let after = image::open(out.join("chart_color-inversion.png")).unwrap().into_rgb8();
+    let after = image::open(out.join("chart-protected.png")).unwrap().into_rgb8();
     // Colour inversion: white patch (243) becomes dark, black ramp start becomes white.
     assert_eq!(before.get_pixel(32, 3 * 64 + 32).0, [243, 243, 242]);
     assert!(after.get_pixel(32, 3 * 64 + 32).0[0] < 20);
@@ -286,7 +304,7 @@ fn file_targets_convert_compare_and_refuse() {
     assert!(out.status.success());
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["target"], "cube");
-    assert_eq!(v["comparison"].as_array().unwrap().len(), 6, "2 interpolations x 3 pixel sets");
+    assert_eq!(v["comparison"].as_array().unwrap().len(), 8, "2 interpolations x 4 pixel sets (every grey level first)");
     fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "rkisp1"]), "--target cube");
     fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "rpi-vc4"]), "--base");
     fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "hald"]), "binary");

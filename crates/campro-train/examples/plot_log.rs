@@ -12,11 +12,11 @@ fn main() {
         eprintln!("{}: {e}", path.display());
         std::process::exit(1)
     });
-    let log = campro_train::train::parse_log_csv(&text).unwrap_or_else(|e| {
+    let log = campro_train::log::parse_log_csv(&text).unwrap_or_else(|e| {
         eprintln!("{}: {e}", path.display());
         std::process::exit(1)
     });
-    let (losses, acc) = campro_train::train::plot_log(&log);
+    let (losses, acc) = campro_train::log::plot_log(&log);
     let stem = path.with_extension("");
     for (suffix, svg) in [("losses", losses), ("accuracy", acc)] {
         let out = std::path::PathBuf::from(format!("{}-{suffix}.svg", stem.display()));

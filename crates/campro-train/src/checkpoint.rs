@@ -27,7 +27,7 @@ pub struct State {
     pub classes: Vec<String>,
     /// The training log up to `round` (empty in checkpoints written before it was kept).
     #[serde(default)]
-    pub log: Vec<crate::train::LogRow>,
+    pub log: Vec<crate::log::LogRow>,
 }
 
 const TENSORS: &str = "tensors.safetensors";

@@ -12,8 +12,10 @@ pub mod checkpoint;
 pub mod detection;
 pub mod config;
 pub mod dwconv;
+pub mod error;
 pub mod faces;
 pub mod finetune;
+pub mod log;
 pub mod mobilefacenet;
 pub mod persons;
 pub mod torch_legacy;
@@ -21,3 +23,5 @@ pub mod train;
 pub mod yolox;
 
 pub use candle_core::{Device, Tensor};
+pub use error::{Result, TrainError};
+pub use log::LogRow;

@@ -46,7 +46,7 @@ impl PersonSet {
     }
 
     /// Decodes and letterboxes the images `idx` (in parallel).
-    pub fn batch(&self, idx: &[usize], dev: &Device) -> Result<PersonBatch, crate::train::TrainError> {
+    pub fn batch(&self, idx: &[usize], dev: &Device) -> Result<PersonBatch, crate::error::TrainError> {
         let s = self.size;
         let items: Vec<(Vec<f32>, Vec<f32>, Vec<[f32; 4]>)> = idx
             .par_iter()

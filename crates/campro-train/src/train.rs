@@ -12,12 +12,13 @@ use crate::config::{Config, Head};
 use crate::faces::{FaceSet, Selection};
 use crate::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet, EMBEDDING};
 use crate::persons::PersonSet;
-use crate::yolox::{Yolox, YoloxError};
+use crate::error::TrainError;
+use crate::log::LogRow;
+use crate::yolox::Yolox;
 use candle_core::{DType, Device, Tensor, Var, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW, SGD};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
-use serde::{Deserialize, Deserializer, Serialize};
 
 /// Where checkpoints go, and which one to resume from.
 #[derive(Debug, Clone, Default)]
@@ -44,56 +45,6 @@ pub struct Initial {
     pub origin: String,
 }
 
-#[derive(Debug, thiserror::Error)]
-pub enum TrainError {
-    #[error(transparent)]
-    Checkpoint(#[from] crate::checkpoint::CheckpointError),
-    #[error(transparent)]
-    Faces(#[from] crate::faces::FacesError),
-    #[error(transparent)]
-    Torch(#[from] crate::torch_legacy::TorchError),
-    #[error("tensor: {0}")]
-    Tensor(#[from] candle_core::Error),
-    #[error(transparent)]
-    Eval(#[from] campro_eval::EvalError),
-    #[error(transparent)]
-    Detector(#[from] YoloxError),
-    #[error("{0}")]
-    Unsupported(String),
-    #[error("training diverged: {0}")]
-    Diverged(String),
-}
-
-/// One line of the training log. Checkpoints keep the log, so a resumed run's log (and its
-/// plots) covers the whole run. Values not measured are NaN (`null` in a checkpoint).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LogRow {
-    /// 0 for pretraining (or the round a checkpoint without a log was resumed from), then 1, 2, ...
-    pub round: usize,
-    /// Training time since round 0, over all resumed parts (s).
-    #[serde(deserialize_with = "nan_if_null")]
-    pub seconds: f64,
-    /// Attacker cross-entropy on its last batch.
-    #[serde(deserialize_with = "nan_if_null")]
-    pub attacker_ce: f64,
-    /// Attacker top-1 on its last batch.
-    #[serde(deserialize_with = "nan_if_null")]
-    pub attacker_accuracy: f64,
-    /// Protector loss `−log(1 − p_y)` on its last batch (rounds ≥ 1).
-    #[serde(deserialize_with = "nan_if_null")]
-    pub privacy_loss: f64,
-    /// Detection loss L_det on the protector's last person batch (ω > 0, rounds ≥ 1).
-    #[serde(deserialize_with = "nan_if_null")]
-    pub detection_loss: f64,
-    /// Top-1 of the attacker on the held-aside photos through the current camera.
-    pub check_accuracy: Option<f64>,
-}
-
-/// JSON has no NaN: serde_json writes it as `null`, read back here as NaN.
-fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
-}
-
 /// The learnt camera (campro's parameter model is built from it by the caller, which keeps
 /// this crate independent of the core) and how it was learnt.
 pub struct Outcome {
@@ -113,6 +64,36 @@ pub struct Outcome {
     pub check_faces: usize,
     /// The fine-tuned person detector (ω > 0), to write as ONNX beside the parameters.
     pub detector: Option<Yolox>,
+}
+
+impl Initial {
+    /// The camera of a parameter set, to continue from; `origin` names it in the
+    /// provenance. The optimiser's curve has evenly spaced knots.
+    pub fn from_params(params: &campro::Params, origin: &str) -> Result<Self, TrainError> {
+        if !params.tone_curve.is_uniform() {
+            return Err(TrainError::Unsupported(format!("{origin}: tone_curve: the optimiser's camera needs evenly spaced knots")));
+        }
+        Ok(Self { ccm: params.ccm, curve: params.tone_curve.y().to_vec(), gamma: params.degamma, origin: origin.into() })
+    }
+}
+
+impl Outcome {
+    /// The learnt camera as a parameter set called `name`, described by the run's
+    /// configuration (`config_name`: the file it was read from) and carrying the run's
+    /// provenance.
+    pub fn params(&self, cfg: &Config, name: &str, config_name: &str) -> Result<campro::Params, TrainError> {
+        let invalid = |e: campro::ValidationError| TrainError::Unsupported(format!("the learnt camera: {e}"));
+        let curve = campro::ToneCurve::uniform(self.curve.clone()).map_err(invalid)?;
+        let mut params = campro::Params::new(self.ccm, curve, self.gamma).map_err(invalid)?;
+        params.name = name.into();
+        params.description = format!(
+            "learnt by campro train from {config_name} ({}{})",
+            if cfg.protector.omega > 0.0 { format!("privacy and utility players, omega {}", cfg.protector.omega) } else { "privacy player".into() },
+            if cfg.protector.protector_only { ", protector only" } else { "" }
+        );
+        params.provenance = self.provenance.clone();
+        Ok(params)
+    }
 }
 
 /// The proxy head H: a linear layer (softmax) or cosine logits with an angular margin
@@ -416,103 +397,3 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     Ok(Outcome { ccm: cam.ccm_values()?, curve: cam.curve_values()?, gamma: cfg.camera.gamma, provenance, log, seconds: seconds(), classes, train_faces: train.len(), check_faces: check.len(), detector: utility.map(|(_, d)| d) })
 }
 
-const LOG_HEADER: &str = "round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy";
-
-/// The log as CSV (one line per round, a header, `NaN` where not measured, an empty
-/// `check_accuracy` where not checked).
-pub fn log_csv(log: &[LogRow]) -> String {
-    let mut csv = format!("{LOG_HEADER}\n");
-    for r in log {
-        csv += &format!(
-            "{},{:.3},{:.6},{:.4},{:.6},{:.6},{}\n",
-            r.round,
-            r.seconds,
-            r.attacker_ce,
-            r.attacker_accuracy,
-            r.privacy_loss,
-            r.detection_loss,
-            r.check_accuracy.map_or(String::new(), |c| format!("{c:.4}"))
-        );
-    }
-    csv
-}
-
-/// Reads a log written by [`log_csv`]; the error names the line and the field.
-pub fn parse_log_csv(text: &str) -> Result<Vec<LogRow>, String> {
-    let mut lines = text.lines().enumerate();
-    match lines.next() {
-        Some((_, h)) if h.trim() == LOG_HEADER => {}
-        _ => return Err(format!("line 1: expected the header {LOG_HEADER}")),
-    }
-    lines
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(i, line)| {
-            let f: Vec<&str> = line.split(',').map(str::trim).collect();
-            if f.len() != 7 {
-                return Err(format!("line {}: {} fields, expected 7", i + 1, f.len()));
-            }
-            let num = |k: usize| f[k].parse::<f64>().map_err(|e| format!("line {}: {}: {e}", i + 1, LOG_HEADER.split(',').nth(k).unwrap_or("?")));
-            Ok(LogRow {
-                round: f[0].parse().map_err(|e| format!("line {}: round: {e}", i + 1))?,
-                seconds: num(1)?,
-                attacker_ce: num(2)?,
-                attacker_accuracy: num(3)?,
-                privacy_loss: num(4)?,
-                detection_loss: num(5)?,
-                check_accuracy: if f[6].is_empty() { None } else { Some(num(6)?) },
-            })
-        })
-        .collect()
-}
-
-/// The log as two SVG charts: the losses (attacker cross-entropy, privacy loss) and the
-/// attacker's accuracies (last batch, held-aside photos through the camera), by round.
-pub fn plot_log(log: &[LogRow]) -> (String, String) {
-    use campro_eval::plot::{chart, Series, Style};
-    let series = |name: &str, f: &dyn Fn(&LogRow) -> Option<f64>| Series { name: name.into(), points: log.iter().filter_map(|r| f(r).map(|v| (r.round as f64, v))).collect() };
-    let losses = chart(
-        "campro train: losses",
-        "round",
-        "loss",
-        &[
-            series("attacker CE", &|r| Some(r.attacker_ce)),
-            series("privacy −log(1 − p_y)", &|r| Some(r.privacy_loss)),
-            series("detection L_det", &|r| r.detection_loss.is_finite().then_some(r.detection_loss)),
-        ],
-        Style::Lines,
-        None,
-        None,
-    );
-    let acc = chart(
-        "campro train: attacker accuracy",
-        "round",
-        "top-1",
-        &[series("last batch", &|r| Some(r.attacker_accuracy)), series("held-aside, through camera", &|r| r.check_accuracy)],
-        Style::Lines,
-        None,
-        Some((0.0, 1.0)),
-    );
-    (losses, acc)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_csv_log_reads_back_with_its_nans_and_gaps() {
-        let rows = vec![
-            LogRow { round: 0, seconds: 1.5, attacker_ce: 2.25, attacker_accuracy: 0.5, privacy_loss: f64::NAN, detection_loss: f64::NAN, check_accuracy: Some(0.875) },
-            LogRow { round: 1, seconds: 7.125, attacker_ce: 3.0, attacker_accuracy: 0.25, privacy_loss: 0.5, detection_loss: 4.0, check_accuracy: None },
-        ];
-        let csv = log_csv(&rows);
-        assert_eq!(csv.lines().nth(1), Some("0,1.500,2.250000,0.5000,NaN,NaN,0.8750"));
-        let back = parse_log_csv(&csv).unwrap();
-        assert_eq!(back[1], rows[1]);
-        assert!(back[0].privacy_loss.is_nan() && back[0].check_accuracy == Some(0.875));
-        let bad = csv.replace("7.125", "x");
-        assert!(parse_log_csv(&bad).unwrap_err().starts_with("line 3: seconds"), "{}", parse_log_csv(&bad).unwrap_err());
-        assert!(parse_log_csv("round,seconds\n").unwrap_err().contains("header"));
-        assert!(parse_log_csv(&format!("{LOG_HEADER}\n1,2\n")).unwrap_err().contains("2 fields"));
-    }
-}

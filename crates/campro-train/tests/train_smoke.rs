@@ -78,7 +78,7 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     c.seed = 2;
     let err = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts), init: None }, |_| {}).err().unwrap().to_string();
     assert!(err.contains("another face set or seed"), "{err}");
-    let (losses, acc) = campro_train::train::plot_log(&out.log);
+    let (losses, acc) = campro_train::log::plot_log(&out.log);
     assert!(losses.starts_with("<svg") && losses.contains("privacy") && acc.contains("held-aside"));
     assert_eq!((a.classes.len(), a.validation.len()), (4, 1));
     assert_eq!(a.len(), out.train_faces + out.check_faces);
@@ -159,7 +159,7 @@ fn a_diverging_run_stops_with_a_named_error_and_no_parameters() {
     c.attacker.pretrain_steps = 5;
     c.budget.rounds = 5;
     let err = campro_train::train::run(&c, &Default::default(), |_| {}).err().expect("a learning rate of 1e36 diverges");
-    assert!(matches!(err, campro_train::train::TrainError::Diverged(_)), "{err}");
+    assert!(matches!(err, campro_train::TrainError::Diverged(_)), "{err}");
     assert!(err.to_string().contains("is NaN") || err.to_string().contains("is inf"), "{err}");
 }
 

@@ -47,8 +47,11 @@ pub struct Update<'a> {
 /// Counters since creation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct LoopStats {
+    /// Updates asked for.
     pub updates: u64,
+    /// Updates that computed new values (the others kept the old ones).
     pub recomputes: u64,
+    /// Times the curve half was fitted again (a new range scale or point budget).
     pub curve_fits: u64,
 }
 
@@ -75,14 +78,17 @@ impl Camera2Loop {
         Ok(Self { params, opts, tolerance, ct_source: CtSource::Params, curve: None, current: None, stats: LoopStats::default() })
     }
 
+    /// The parameter set.
     pub fn params(&self) -> &Params {
         &self.params
     }
 
+    /// The conversion options.
     pub fn options(&self) -> &Options {
         &self.opts
     }
 
+    /// What the loop has done so far.
     pub fn stats(&self) -> LoopStats {
         self.stats
     }

@@ -46,9 +46,15 @@ pub const DEFAULT_MAX_CURVE_POINTS: usize = 64;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RationalMode {
     /// Closest fraction with a denominator up to the bound.
-    Best { max_denominator: u32 },
+    Best {
+        /// Largest denominator allowed (1 to `i32::MAX`).
+        max_denominator: u32,
+    },
     /// Every entry over this one denominator, like a fixed-point ISP.
-    Fixed { denominator: u32 },
+    Fixed {
+        /// The denominator (1 to `i32::MAX`).
+        denominator: u32,
+    },
 }
 
 /// Conversion settings.
@@ -69,8 +75,11 @@ impl Default for Options {
 /// `TonemapCurve`: per channel a flat array of (Pin, Pout) pairs, Pin ascending from 0 to 1.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TonemapCurve {
+    /// Red channel pairs.
     pub red: Vec<f32>,
+    /// Green channel pairs (campro sends the same curve on all three).
     pub green: Vec<f32>,
+    /// Blue channel pairs.
     pub blue: Vec<f32>,
 }
 

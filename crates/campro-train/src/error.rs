@@ -1,0 +1,33 @@
+//! The optimiser's one error enum, [`TrainError`], and its `Result` alias.
+
+/// Any error of the optimiser: one variant per kind.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TrainError {
+    #[error(transparent)]
+    Checkpoint(#[from] crate::checkpoint::CheckpointError),
+    #[error(transparent)]
+    Faces(#[from] crate::faces::FacesError),
+    #[error(transparent)]
+    Torch(#[from] crate::torch_legacy::TorchError),
+    #[error("tensor: {0}")]
+    Tensor(#[from] candle_core::Error),
+    #[error(transparent)]
+    Eval(#[from] campro_eval::EvalError),
+    #[error(transparent)]
+    Detector(#[from] crate::yolox::YoloxError),
+    #[error("{0}")]
+    Unsupported(String),
+    #[error("training diverged: {0}")]
+    Diverged(String),
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// A training log (CSV) that does not read back: the line (1-based) and the rule.
+    #[error("line {line}: {rule}")]
+    Log { line: usize, rule: String },
+}
+
+/// `Result` with this crate's [`TrainError`].
+pub type Result<T, E = TrainError> = std::result::Result<T, E>;
+
+

@@ -2,13 +2,13 @@
 //! against a plain copy of the same frame measured in the same run. `campro bench`
 //! prints the same rows with their errors as one table.
 
-use campro::targets::camera2::{Camera2Loop, DEFAULT_TOLERANCE};
 use campro::ccm;
-use campro_testkit::bench::test_frame;
 use campro::pipeline::fast::{Exact8, F32Path};
 use campro::pipeline::{Depth, Prepared};
 use campro::targets::camera2::{convert, Options};
+use campro::targets::camera2::{Camera2Loop, DEFAULT_TOLERANCE};
 use campro::Params;
+use campro_testkit::bench::test_frame;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
 
@@ -21,13 +21,17 @@ fn params() -> Params {
 fn bench_convert(c: &mut Criterion) {
     let p = params();
     let mut g = c.benchmark_group("convert");
-    g.bench_function("camera2 (32 knots, scaled)", |b| b.iter(|| convert(black_box(&p), black_box(&PHONE), &Options::default()).unwrap()));
+    g.bench_function("camera2 (32 knots, scaled)", |b| {
+        b.iter(|| convert(black_box(&p), black_box(&PHONE), &Options::default()).unwrap())
+    });
     g.bench_function("camera2 (32 knots -> 16 points)", |b| {
         let o = Options { max_curve_points: 16, ..Options::default() };
         b.iter(|| convert(black_box(&p), black_box(&PHONE), &o).unwrap())
     });
     let id = Params::identity_curve(32);
-    g.bench_function("camera2 (identity)", |b| b.iter(|| convert(black_box(&id), black_box(&ccm::IDENTITY), &Options::default()).unwrap()));
+    g.bench_function("camera2 (identity)", |b| {
+        b.iter(|| convert(black_box(&id), black_box(&ccm::IDENTITY), &Options::default()).unwrap())
+    });
     g.bench_function("loop update, scene unchanged (skip)", |b| {
         let mut l = Camera2Loop::new(p.clone(), Options::default(), DEFAULT_TOLERANCE).unwrap();
         l.update(&PHONE).unwrap();
@@ -62,7 +66,9 @@ fn bench_simulate(c: &mut Criterion) {
     g.sample_size(10);
     g.bench_function("copy (baseline)", |b| b.iter(|| dst8.copy_from_slice(black_box(&src8))));
     g.bench_function("f64 reference, 1 thread", |b| b.iter(|| prep.run(black_box(&src), &mut dst, Depth::Eight)));
-    g.bench_function(format!("exact 8-bit ({:?} engine), 1 thread", exact.engine()), |b| b.iter(|| exact.run(black_box(&src8), &mut dst8)));
+    g.bench_function(format!("exact 8-bit ({:?} engine), 1 thread", exact.engine()), |b| {
+        b.iter(|| exact.run(black_box(&src8), &mut dst8))
+    });
     g.bench_function("exact 8-bit scalar tables, 1 thread", |b| b.iter(|| scalar.run(black_box(&src8), &mut dst8)));
     g.bench_function("f32, 1 thread", |b| b.iter(|| f32p.run(black_box(&src8), &mut dst8, Depth::Eight)));
     g.finish();

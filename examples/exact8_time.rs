@@ -1,7 +1,7 @@
 //! Times the default exact 8-bit path against a copy on one 1080p frame (one thread):
 //! `cargo run --release --example exact8_time [-- RUNS]`. Medians of the same run.
-use campro_testkit::bench::{bench_params, median_seconds as median, test_frame};
 use campro::pipeline::fast::Exact8;
+use campro_testkit::bench::{bench_params, median_seconds as median, test_frame};
 use std::hint::black_box;
 
 fn main() {
@@ -13,5 +13,12 @@ fn main() {
     let mut fell = Default::default();
     let copy = median(runs, || out.copy_from_slice(black_box(&frame)));
     let t = median(runs, || fell = exact.run(black_box(&frame), &mut out));
-    println!("copy {:.3} ms, exact8 ({:?}) {:.3} ms = {:.2}x copy, {:?}", copy * 1e3, exact.engine(), t * 1e3, t / copy, fell);
+    println!(
+        "copy {:.3} ms, exact8 ({:?}) {:.3} ms = {:.2}x copy, {:?}",
+        copy * 1e3,
+        exact.engine(),
+        t * 1e3,
+        t / copy,
+        fell
+    );
 }

@@ -55,7 +55,13 @@ pub fn interpolate(cal: &[CtCcm], ct: f64) -> Result<Mat3, ValidationError> {
     }
     let (first, last) = match (cal.first(), cal.last()) {
         (Some(f), Some(l)) => (f, l),
-        _ => return Err(ValidationError::WrongLength { field: "ct_calibration".into(), expected: "at least 1".into(), got: 0 }),
+        _ => {
+            return Err(ValidationError::WrongLength {
+                field: "ct_calibration".into(),
+                expected: "at least 1".into(),
+                got: 0,
+            })
+        }
     };
     if ct <= first.ct_kelvin {
         return Ok(first.ccm);
@@ -91,28 +97,25 @@ pub fn interpolate_dng(ct: f64, (ct1, m1): (f64, &Mat3), (ct2, m2): (f64, &Mat3)
 /// LightSource codes), as the DNG SDK assigns them; `None` for unknown codes.
 pub fn illuminant_ct(code: u8) -> Option<f64> {
     Some(match code {
-        17 | 3 => 2850.0,           // STANDARD_A, TUNGSTEN
-        24 => 3200.0,                // ISO_STUDIO_TUNGSTEN
-        23 => 5000.0,                // D50
+        17 | 3 => 2850.0,              // STANDARD_A, TUNGSTEN
+        24 => 3200.0,                  // ISO_STUDIO_TUNGSTEN
+        23 => 5000.0,                  // D50
         20 | 1 | 9 | 4 | 18 => 5500.0, // D55, DAYLIGHT, FINE_WEATHER, FLASH, STANDARD_B
-        21 | 19 | 10 => 6500.0,      // D65, STANDARD_C, CLOUDY_WEATHER
-        22 | 11 => 7500.0,           // D75, SHADE
-        12 => 6400.0,                // DAYLIGHT_FLUORESCENT (5700-7100 K)
-        13 => 5050.0,                // DAY_WHITE_FLUORESCENT (4600-5500 K)
-        14 | 2 => 4150.0,            // COOL_WHITE_FLUORESCENT, FLUORESCENT (3800-4500 K)
-        15 => 3525.0,                // WHITE_FLUORESCENT (3250-3800 K)
-        16 => 2925.0,                // WARM_WHITE_FLUORESCENT (2600-3250 K)
+        21 | 19 | 10 => 6500.0,        // D65, STANDARD_C, CLOUDY_WEATHER
+        22 | 11 => 7500.0,             // D75, SHADE
+        12 => 6400.0,                  // DAYLIGHT_FLUORESCENT (5700-7100 K)
+        13 => 5050.0,                  // DAY_WHITE_FLUORESCENT (4600-5500 K)
+        14 | 2 => 4150.0,              // COOL_WHITE_FLUORESCENT, FLUORESCENT (3800-4500 K)
+        15 => 3525.0,                  // WHITE_FLUORESCENT (3250-3800 K)
+        16 => 2925.0,                  // WARM_WHITE_FLUORESCENT (2600-3250 K)
         _ => return None,
     })
 }
 
 /// CIE XYZ (D50, the DNG/Android profile connection space) -> linear sRGB (D65),
 /// with Bradford chromatic adaptation (Lindbloom's table).
-pub const XYZ_D50_TO_SRGB: Mat3 = [
-    [3.1338561, -1.6168667, -0.4906146],
-    [-0.9787684, 1.9161415, 0.0334540],
-    [0.0719453, -0.2289914, 1.4052427],
-];
+pub const XYZ_D50_TO_SRGB: Mat3 =
+    [[3.1338561, -1.6168667, -0.4906146], [-0.9787684, 1.9161415, 0.0334540], [0.0719453, -0.2289914, 1.4052427]];
 
 /// An Android device's two-illuminant calibration: `SENSOR_REFERENCE_ILLUMINANT1/2`
 /// and `SENSOR_FORWARD_MATRIX1/2` (white-balanced sensor RGB -> XYZ D50).
@@ -132,7 +135,10 @@ impl DngCalibration {
     /// Checks both illuminant codes are known and both matrices finite.
     pub fn validate(&self) -> Result<(f64, f64), ValidationError> {
         let ct = |field: &str, code: u8| {
-            illuminant_ct(code).ok_or_else(|| ValidationError::Rule { field: field.into(), rule: format!("unknown reference illuminant code {code}") })
+            illuminant_ct(code).ok_or_else(|| ValidationError::Rule {
+                field: field.into(),
+                rule: format!("unknown reference illuminant code {code}"),
+            })
         };
         let ct1 = ct("illuminant1", self.illuminant1)?;
         let ct2 = ct("illuminant2", self.illuminant2)?;

@@ -37,7 +37,11 @@ impl Stats {
     }
     /// Mean absolute difference.
     pub fn mean_abs(&self) -> f64 {
-        if self.count == 0 { 0.0 } else { self.sum_abs / self.count as f64 }
+        if self.count == 0 {
+            0.0
+        } else {
+            self.sum_abs / self.count as f64
+        }
     }
     /// Max in 8-bit LSB.
     pub fn max_lsb(&self) -> f64 {
@@ -96,7 +100,12 @@ pub fn code_cube(step: usize) -> Vec<[u8; 3]> {
 /// seen (`device^-1 · degamma(pixel)`); with [`Feed::Encoded`] the emulator gets the
 /// pixel itself in [0, 1]. Outputs are compared with [`process_f64`]. Fails if the
 /// device is singular.
-pub fn deployment_vs_desktop(params: &Params, feed: &Feed, emulator: &dyn Emulator, pixels: &[[u8; 3]]) -> Result<Stats, ValidationError> {
+pub fn deployment_vs_desktop(
+    params: &Params,
+    feed: &Feed,
+    emulator: &dyn Emulator,
+    pixels: &[[u8; 3]],
+) -> Result<Stats, ValidationError> {
     let inv = match feed {
         Feed::Sensor(device) => Some(ccm::inverse(device).ok_or_else(|| ValidationError::Rule {
             field: "device_ccm".into(),

@@ -74,8 +74,14 @@ pub fn read_checkpoint(path: &Path) -> Result<Params, CheckpointError> {
     let mut p = read_checkpoint_bytes(&bytes)?;
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     p.name = name.clone();
-    p.description = format!("Imported from the CamPro checkpoint {}", path.file_name().map(|s| s.to_string_lossy()).unwrap_or_default());
-    p.provenance.insert("checkpoint".into(), serde_json::Value::String(path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()));
+    p.description = format!(
+        "Imported from the CamPro checkpoint {}",
+        path.file_name().map(|s| s.to_string_lossy()).unwrap_or_default()
+    );
+    p.provenance.insert(
+        "checkpoint".into(),
+        serde_json::Value::String(path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()),
+    );
     Ok(p)
 }
 
@@ -157,7 +163,10 @@ pub fn read_checkpoint_bytes(bytes: &[u8]) -> Result<Params, CheckpointError> {
 fn read_entry(zip: &mut zip::ZipArchive<Cursor<&[u8]>>, name: &str) -> Result<Vec<u8>, CheckpointError> {
     let f = zip.by_name(name).map_err(|e| CheckpointError::Zip(format!("{name}: {e}")))?;
     if f.size() > MAX_ENTRY_BYTES {
-        return Err(CheckpointError::TooLarge { what: format!("entry {name} is {} bytes", f.size()), limit: MAX_ENTRY_BYTES });
+        return Err(CheckpointError::TooLarge {
+            what: format!("entry {name} is {} bytes", f.size()),
+            limit: MAX_ENTRY_BYTES,
+        });
     }
     let mut buf = Vec::with_capacity(f.size() as usize);
     // take() guards against a size field that lies.
@@ -231,7 +240,9 @@ fn check_globals(o: &Object) -> Result<(), CheckpointError> {
     let mut todo = vec![o];
     while let Some(o) = todo.pop() {
         match o {
-            Object::Class { module_name, class_name } if !ALLOWED_GLOBALS.iter().any(|(m, c)| m == module_name && c == class_name) => {
+            Object::Class { module_name, class_name }
+                if !ALLOWED_GLOBALS.iter().any(|(m, c)| m == module_name && c == class_name) =>
+            {
                 return Err(CheckpointError::ForbiddenGlobal { module: module_name.clone(), name: class_name.clone() });
             }
             Object::Tuple(v) | Object::List(v) => todo.extend(v.iter()),
@@ -271,7 +282,14 @@ fn kind(o: &Object) -> &'static str {
 }
 
 /// The tensor `key` of the state dict of `stage`.
-fn state_tensor(zip: &mut zip::ZipArchive<Cursor<&[u8]>>, prefix: &str, big_endian: bool, state: Object, stage: &str, key: &str) -> Result<Tensor, CheckpointError> {
+fn state_tensor(
+    zip: &mut zip::ZipArchive<Cursor<&[u8]>>,
+    prefix: &str,
+    big_endian: bool,
+    state: Object,
+    stage: &str,
+    key: &str,
+) -> Result<Tensor, CheckpointError> {
     let at = format!("{stage}.{key}");
     let kv = match state {
         Object::Dict(kv) => kv,
@@ -329,7 +347,11 @@ fn state_tensor(zip: &mut zip::ZipArchive<Cursor<&[u8]>>, prefix: &str, big_endi
     if shape.len() != stride.len() || shape.len() > 4 {
         return Err(layout(&at, "shape and stride must have the same rank (at most 4)"));
     }
-    let numel: usize = shape.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).filter(|&n| n <= 1 << 20).ok_or_else(|| layout(&at, "tensor is too large"))?;
+    let numel: usize = shape
+        .iter()
+        .try_fold(1usize, |a, &d| a.checked_mul(d))
+        .filter(|&n| n <= 1 << 20)
+        .ok_or_else(|| layout(&at, "tensor is too large"))?;
     let bytes = read_entry(zip, &format!("{prefix}data/{skey}"))?;
     let count = bytes.len() / width;
     let mut data = Vec::with_capacity(numel);

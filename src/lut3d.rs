@@ -53,10 +53,19 @@ impl Lut3d {
     pub fn from_data(n: usize, data: Vec<[f32; 3]>) -> Result<Self, crate::error::ValidationError> {
         use crate::error::ValidationError;
         if !(2..=256).contains(&n) {
-            return Err(ValidationError::OutOfRange { field: "LUT_3D_SIZE".into(), value: n as f64, min: 2.0, max: 256.0 });
+            return Err(ValidationError::OutOfRange {
+                field: "LUT_3D_SIZE".into(),
+                value: n as f64,
+                min: 2.0,
+                max: 256.0,
+            });
         }
         if data.len() != n * n * n {
-            return Err(ValidationError::WrongLength { field: "LUT entries".into(), expected: format!("{n}^3 = {}", n * n * n), got: data.len() });
+            return Err(ValidationError::WrongLength {
+                field: "LUT entries".into(),
+                expected: format!("{n}^3 = {}", n * n * n),
+                got: data.len(),
+            });
         }
         if let Some(v) = data.iter().flatten().find(|v| !v.is_finite()) {
             return Err(ValidationError::NonFinite { field: "LUT entry".into(), value: *v as f64 });
@@ -158,7 +167,12 @@ mod tests {
 
     #[test]
     fn nodes_are_exact_and_both_interpolations_agree_on_them() {
-        let p = Params::new([[0.9, 0.2, -0.1], [0.1, 0.8, 0.1], [-0.2, 0.1, 1.1]], ToneCurve::from_fn(32, |t| 1.0 - t), 2.2).unwrap();
+        let p = Params::new(
+            [[0.9, 0.2, -0.1], [0.1, 0.8, 0.1], [-0.2, 0.1, 1.1]],
+            ToneCurve::from_fn(32, |t| 1.0 - t),
+            2.2,
+        )
+        .unwrap();
         let lut = Lut3d::bake(&p, 5);
         for (r, g, b) in [(0, 0, 0), (1, 2, 3), (4, 4, 4), (4, 0, 2)] {
             let x = [r as f32 / 4.0, g as f32 / 4.0, b as f32 / 4.0];

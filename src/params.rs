@@ -130,7 +130,11 @@ pub fn matrix_from_rows(field: &str, rows: &[Vec<f64>]) -> Result<Mat3, Validati
     let mut m = [[0.0; 3]; 3];
     for (i, row) in rows.iter().enumerate() {
         if row.len() != 3 {
-            return Err(ValidationError::WrongLength { field: format!("{field}[{i}]"), expected: "3".into(), got: row.len() });
+            return Err(ValidationError::WrongLength {
+                field: format!("{field}[{i}]"),
+                expected: "3".into(),
+                got: row.len(),
+            });
         }
         m[i].copy_from_slice(row);
     }
@@ -177,10 +181,8 @@ impl Params {
             return Err(ParamsError::TooLarge { size: text.len(), limit: MAX_JSON_BYTES });
         }
         let de = &mut serde_json::Deserializer::from_str(text);
-        let raw: ParamsJson = serde_path_to_error::deserialize(de).map_err(|e| ParamsError::Json {
-            path: e.path().to_string(),
-            message: e.inner().to_string(),
-        })?;
+        let raw: ParamsJson = serde_path_to_error::deserialize(de)
+            .map_err(|e| ParamsError::Json { path: e.path().to_string(), message: e.inner().to_string() })?;
         Ok(Self::from_raw(raw)?)
     }
 
@@ -192,10 +194,16 @@ impl Params {
 
     fn from_raw(raw: ParamsJson) -> Result<Self, ValidationError> {
         if raw.format != FORMAT {
-            return Err(ValidationError::Rule { field: "format".into(), rule: format!("must be \"{FORMAT}\", got \"{}\"", raw.format) });
+            return Err(ValidationError::Rule {
+                field: "format".into(),
+                rule: format!("must be \"{FORMAT}\", got \"{}\"", raw.format),
+            });
         }
         if raw.version != VERSION {
-            return Err(ValidationError::Rule { field: "version".into(), rule: format!("must be {VERSION} (the only version this build reads), got {}", raw.version) });
+            return Err(ValidationError::Rule {
+                field: "version".into(),
+                rule: format!("must be {VERSION} (the only version this build reads), got {}", raw.version),
+            });
         }
         let ccm = matrix_from_rows("ccm", &raw.ccm)?;
         let tone_curve = match raw.tone_curve.x {
@@ -205,7 +213,10 @@ impl Params {
         .map_err(|e| e.within("tone_curve"))?;
         let mut ct_calibration = Vec::with_capacity(raw.ct_calibration.len());
         for (i, c) in raw.ct_calibration.iter().enumerate() {
-            ct_calibration.push(CtCcm { ct_kelvin: c.ct_kelvin, ccm: matrix_from_rows(&format!("ct_calibration[{i}].ccm"), &c.ccm)? });
+            ct_calibration.push(CtCcm {
+                ct_kelvin: c.ct_kelvin,
+                ccm: matrix_from_rows(&format!("ct_calibration[{i}].ccm"), &c.ccm)?,
+            });
         }
         let p = Self {
             name: raw.name,
@@ -233,7 +244,11 @@ impl Params {
                 y: self.tone_curve.y().to_vec(),
             },
             degamma: self.degamma,
-            ct_calibration: self.ct_calibration.iter().map(|c| CtCcmJson { ct_kelvin: c.ct_kelvin, ccm: rows(&c.ccm) }).collect(),
+            ct_calibration: self
+                .ct_calibration
+                .iter()
+                .map(|c| CtCcmJson { ct_kelvin: c.ct_kelvin, ccm: rows(&c.ccm) })
+                .collect(),
             provenance: self.provenance.clone(),
         };
         let mut s = serde_json::to_string_pretty(&raw).expect("plain data serialises");

@@ -158,7 +158,12 @@ mod tests {
 
     #[test]
     fn prepared_matches_reference_within_half_lsb() {
-        let p = Params::new([[1.2, -0.3, 0.1], [0.2, 0.9, -0.1], [-0.4, 0.3, 1.1]], ToneCurve::from_fn(32, |t| (6.0 * t).sin().abs()), 2.2).unwrap();
+        let p = Params::new(
+            [[1.2, -0.3, 0.1], [0.2, 0.9, -0.1], [-0.4, 0.3, 1.1]],
+            ToneCurve::from_fn(32, |t| (6.0 * t).sin().abs()),
+            2.2,
+        )
+        .unwrap();
         let prep = Prepared::new(&p, Depth::Eight);
         let mut src = Vec::new();
         for r in (0..256).step_by(5) {

@@ -23,13 +23,25 @@ impl ToneCurve {
     /// Builds a curve from knots; errors name `x[i]` / `y[i]` and the rule broken.
     pub fn new(x: Vec<f64>, y: Vec<f64>) -> Result<Self, ValidationError> {
         if y.len() < 2 {
-            return Err(ValidationError::WrongLength { field: "y".into(), expected: "at least 2".into(), got: y.len() });
+            return Err(ValidationError::WrongLength {
+                field: "y".into(),
+                expected: "at least 2".into(),
+                got: y.len(),
+            });
         }
         if y.len() > MAX_KNOTS {
-            return Err(ValidationError::WrongLength { field: "y".into(), expected: format!("at most {MAX_KNOTS}"), got: y.len() });
+            return Err(ValidationError::WrongLength {
+                field: "y".into(),
+                expected: format!("at most {MAX_KNOTS}"),
+                got: y.len(),
+            });
         }
         if x.len() != y.len() {
-            return Err(ValidationError::WrongLength { field: "x".into(), expected: format!("{} (as many as y)", y.len()), got: x.len() });
+            return Err(ValidationError::WrongLength {
+                field: "x".into(),
+                expected: format!("{} (as many as y)", y.len()),
+                got: x.len(),
+            });
         }
         for (i, &v) in x.iter().enumerate() {
             check_range(|| format!("x[{i}]"), v, 0.0, 1.0)?;
@@ -46,7 +58,12 @@ impl ToneCurve {
         }
         for i in 1..x.len() {
             if x[i] <= x[i - 1] {
-                return Err(ValidationError::NotIncreasing { field: "x".into(), index: i, prev: x[i - 1], value: x[i] });
+                return Err(ValidationError::NotIncreasing {
+                    field: "x".into(),
+                    index: i,
+                    prev: x[i - 1],
+                    value: x[i],
+                });
             }
         }
         let n = (x.len() - 1) as f64;
@@ -123,11 +140,7 @@ impl ToneCurve {
     /// Largest |slope| of any segment: the curve's Lipschitz constant, which bounds how
     /// much an input error grows in the output.
     pub fn max_slope(&self) -> f64 {
-        self.x
-            .windows(2)
-            .zip(self.y.windows(2))
-            .map(|(x, y)| ((y[1] - y[0]) / (x[1] - x[0])).abs())
-            .fold(0.0, f64::max)
+        self.x.windows(2).zip(self.y.windows(2)).map(|(x, y)| ((y[1] - y[0]) / (x[1] - x[0])).abs()).fold(0.0, f64::max)
     }
 
     /// Whether this is the identity line (every knot within `tol` of `y = x`).
@@ -152,11 +165,7 @@ impl ToneCurve {
     /// Exact `max_t |self(t) - other(t)|` over [0, 1]: both are piecewise linear, so
     /// the maximum sits at a knot of one of them.
     pub fn max_abs_diff(&self, other: &Self) -> f64 {
-        self.x
-            .iter()
-            .chain(other.x.iter())
-            .map(|&t| (self.eval(t) - other.eval(t)).abs())
-            .fold(0.0, f64::max)
+        self.x.iter().chain(other.x.iter()).map(|&t| (self.eval(t) - other.eval(t)).abs()).fold(0.0, f64::max)
     }
 
     /// `n` evenly spaced samples of the curve, as a fixed-grid LUT of `n` entries.
@@ -320,7 +329,10 @@ mod tests {
     #[test]
     fn validation_names_the_rule() {
         assert!(matches!(ToneCurve::uniform(vec![0.5]), Err(ValidationError::WrongLength { .. })));
-        assert!(matches!(ToneCurve::new(vec![0.0, 0.5, 0.5, 1.0], vec![0.0; 4]), Err(ValidationError::NotIncreasing { index: 2, .. })));
+        assert!(matches!(
+            ToneCurve::new(vec![0.0, 0.5, 0.5, 1.0], vec![0.0; 4]),
+            Err(ValidationError::NotIncreasing { index: 2, .. })
+        ));
         assert!(matches!(ToneCurve::new(vec![0.1, 1.0], vec![0.0; 2]), Err(ValidationError::WrongEndpoint { .. })));
         assert!(matches!(ToneCurve::new(vec![0.0, 0.9], vec![0.0; 2]), Err(ValidationError::WrongEndpoint { .. })));
         let e = ToneCurve::uniform(vec![0.0, 1.2]).unwrap_err();
@@ -343,7 +355,15 @@ mod tests {
     #[test]
     fn simplify_drops_collinear_knots_exactly() {
         // A polyline with 3 real corners sampled at 33 knots: 4 points represent it exactly.
-        let f = |t: f64| if t < 0.25 { 2.0 * t } else if t < 0.75 { 0.5 + (0.25 - t) } else { t - 0.75 };
+        let f = |t: f64| {
+            if t < 0.25 {
+                2.0 * t
+            } else if t < 0.75 {
+                0.5 + (0.25 - t)
+            } else {
+                t - 0.75
+            }
+        };
         let c = ToneCurve::from_fn(33, f);
         let (s, e) = c.simplify(4);
         assert_eq!(s.len(), 4);

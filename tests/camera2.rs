@@ -1,15 +1,14 @@
 //! Camera2 mapping: the range-scaling proof, emulated device vs desktop pipeline against
 //! the stated bound, colour-temperature deployment, capture results.
 
-
 use campro::ccm::{self, Mat3};
 use campro::color_temp::{self, CtCcm, DngCalibration};
 use campro::compare::{code_cube, deployment_vs_desktop, grey_levels, random_pixels};
-use campro::targets::camera2::Camera2;
-use campro::targets::Target;
 use campro::emulate::DeviceModel;
 use campro::pipeline::{clip01, from_linear};
+use campro::targets::camera2::Camera2;
 use campro::targets::camera2::{self, convert, Options, RationalMode, MATRIX_RANGE};
+use campro::targets::Target;
 use campro::{Params, ToneCurve};
 
 /// A typical phone sensor -> sRGB matrix (rows sum to 1, strong off-diagonals).
@@ -56,7 +55,10 @@ fn range_scaling_is_exact() {
             let device = clip01(ccm::apply(&m, sensor)).map(|t| folded.eval(t));
             let desktop = from_linear(&p, lin);
             for k in 0..3 {
-                assert!((device[k] - desktop[k]).abs() < 1e-9 * s * p.tone_curve.max_slope().max(1.0), "s={s} {device:?} vs {desktop:?}");
+                assert!(
+                    (device[k] - desktop[k]).abs() < 1e-9 * s * p.tone_curve.max_slope().max(1.0),
+                    "s={s} {device:?} vs {desktop:?}"
+                );
             }
         }
     }
@@ -96,7 +98,8 @@ fn check_bound(p: &Params, dev: &Mat3, opts: &Options, model: &DeviceModel) -> (
 #[test]
 fn default_settings_stay_within_half_an_lsb() {
     let dir = campro_testkit::workspace_root().join("params");
-    let mut sets: Vec<Params> = std::fs::read_dir(dir).unwrap().map(|e| Params::from_file(&e.unwrap().path()).unwrap()).collect();
+    let mut sets: Vec<Params> =
+        std::fs::read_dir(dir).unwrap().map(|e| Params::from_file(&e.unwrap().path()).unwrap()).collect();
     if let Some(fx) = campro_testkit::shared("fixtures/campro-pt") {
         for e in std::fs::read_dir(fx).unwrap() {
             let path = e.unwrap().path();
@@ -123,9 +126,16 @@ fn bound_holds_for_coarse_devices() {
         let p = random_params(&mut rng, if i % 2 == 0 { 1.5 } else { 5.0 }, 32);
         let opts = Options {
             max_curve_points: [64, 16, 8][i % 3],
-            rational: if i % 4 < 2 { RationalMode::Fixed { denominator: 1024 } } else { RationalMode::Best { max_denominator: 100 } },
+            rational: if i % 4 < 2 {
+                RationalMode::Fixed { denominator: 1024 }
+            } else {
+                RationalMode::Best { max_denominator: 100 }
+            },
         };
-        let model = DeviceModel { matrix_frac_bits: [None, Some(10), Some(7)][i % 3], lut_size: [None, Some(256), Some(64), Some(1024)][i % 4] };
+        let model = DeviceModel {
+            matrix_frac_bits: [None, Some(10), Some(7)][i % 3],
+            lut_size: [None, Some(256), Some(64), Some(1024)][i % 4],
+        };
         let (max, bound) = check_bound(&p, &PHONE, &opts, &model);
         assert!(max > 0.0 && bound >= max);
     }
@@ -133,9 +143,16 @@ fn bound_holds_for_coarse_devices() {
 
 #[test]
 fn fixed_denominators_cost_more_than_best_rationals() {
-    let p = Params::new([[1.3137, -0.2071, -0.1066], [-0.1777, 1.4131, -0.2365], [0.0123, -0.4567, 1.4444]], ToneCurve::from_fn(32, |t| t.powf(0.45)), 2.2).unwrap();
+    let p = Params::new(
+        [[1.3137, -0.2071, -0.1066], [-0.1777, 1.4131, -0.2365], [0.0123, -0.4567, 1.4444]],
+        ToneCurve::from_fn(32, |t| t.powf(0.45)),
+        2.2,
+    )
+    .unwrap();
     let best = convert(&p, &PHONE, &Options::default()).unwrap();
-    let fixed = convert(&p, &PHONE, &Options { rational: RationalMode::Fixed { denominator: 1024 }, ..Options::default() }).unwrap();
+    let fixed =
+        convert(&p, &PHONE, &Options { rational: RationalMode::Fixed { denominator: 1024 }, ..Options::default() })
+            .unwrap();
     assert!(best.report.matrix_max_abs <= 0.5 / camera2::DEFAULT_MAX_DENOMINATOR as f64);
     assert!(fixed.report.matrix_max_abs <= 0.5 / 1024.0);
     assert!(fixed.report.matrix_max_abs > 10.0 * best.report.matrix_max_abs);
@@ -170,8 +187,13 @@ fn dng_two_illuminant_device_transform() {
     // Different ones: at the illuminants' own CTs, each one alone.
     let fm2 = ccm::scale(&fm, 1.1);
     let cal = DngCalibration { forward_matrix2: fm2, ..cal };
-    assert!(ccm::max_abs_diff(&cal.device_transform(2850.0).unwrap(), &ccm::mul(&color_temp::XYZ_D50_TO_SRGB, &fm)) < 1e-15);
-    assert!(ccm::max_abs_diff(&cal.device_transform(6500.0).unwrap(), &ccm::mul(&color_temp::XYZ_D50_TO_SRGB, &fm2)) < 1e-15);
+    assert!(
+        ccm::max_abs_diff(&cal.device_transform(2850.0).unwrap(), &ccm::mul(&color_temp::XYZ_D50_TO_SRGB, &fm)) < 1e-15
+    );
+    assert!(
+        ccm::max_abs_diff(&cal.device_transform(6500.0).unwrap(), &ccm::mul(&color_temp::XYZ_D50_TO_SRGB, &fm2))
+            < 1e-15
+    );
     assert!(DngCalibration { illuminant1: 99, ..cal.clone() }.device_transform(5000.0).is_err());
 }
 
@@ -179,9 +201,17 @@ fn dng_two_illuminant_device_transform() {
 fn capture_result_forms() {
     let m = camera2::device_transform_from_capture_result(r#"{"android.colorCorrection.transform": [178,100,-62,100,-16,100,-28,100,162,100,-34,100,2,100,-71,100,169,100]}"#).unwrap();
     assert!(ccm::max_abs_diff(&m, &PHONE) < 1e-15);
-    let m = camera2::device_transform_from_capture_result(r#"{"colorCorrectionTransform": [[1.78,-0.62,-0.16],[-0.28,1.62,-0.34],[0.02,-0.71,1.69]]}"#).unwrap();
+    let m = camera2::device_transform_from_capture_result(
+        r#"{"colorCorrectionTransform": [[1.78,-0.62,-0.16],[-0.28,1.62,-0.34],[0.02,-0.71,1.69]]}"#,
+    )
+    .unwrap();
     assert_eq!(m, PHONE);
-    for bad in [r#"{}"#, r#"{"colorCorrectionTransform": [1, 2]}"#, r#"{"colorCorrectionTransform": [1,0,0,1,0,1,0,1,1,1,0,1,0,1,0,1,1,0]}"#, "not json"] {
+    for bad in [
+        r#"{}"#,
+        r#"{"colorCorrectionTransform": [1, 2]}"#,
+        r#"{"colorCorrectionTransform": [1,0,0,1,0,1,0,1,1,1,0,1,0,1,0,1,1,0]}"#,
+        "not json",
+    ] {
         assert!(camera2::device_transform_from_capture_result(bad).is_err(), "{bad}");
     }
 }

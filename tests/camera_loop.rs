@@ -1,12 +1,12 @@
 //! The camera loop: skipped updates stay within the stated bound, recomputed ones equal
 //! the one-shot conversion, and the counters say what was saved.
 
-use campro::targets::camera2::{Camera2Loop, DEFAULT_TOLERANCE};
 use campro::ccm::{self, Mat3};
 use campro::color_temp::{CtCcm, DngCalibration};
 use campro::emulate::{DeviceModel, Emulator};
 use campro::pipeline::from_linear;
 use campro::targets::camera2::{convert, Camera2Values, Options};
+use campro::targets::camera2::{Camera2Loop, DEFAULT_TOLERANCE};
 use campro::{Params, ToneCurve};
 
 const PHONE: Mat3 = [[1.78, -0.62, -0.16], [-0.28, 1.62, -0.34], [0.02, -0.71, 1.69]];
@@ -135,14 +135,16 @@ fn colour_temperature_sources() {
 
     // The parameter set's calibration: linear in CT.
     let mut pc = p.clone();
-    pc.ct_calibration = vec![CtCcm { ct_kelvin: 2856.0, ccm: PHONE }, CtCcm { ct_kelvin: 6504.0, ccm: nudge(&PHONE, 0.1) }];
+    pc.ct_calibration =
+        vec![CtCcm { ct_kelvin: 2856.0, ccm: PHONE }, CtCcm { ct_kelvin: 6504.0, ccm: nudge(&PHONE, 0.1) }];
     let mut l2 = Camera2Loop::new(pc.clone(), Options::default(), 0.0).unwrap();
     let dev = campro::color_temp::interpolate(&pc.ct_calibration, 4000.0).unwrap();
     assert_eq!(l2.update_ct(4000.0).unwrap().values, &convert(&pc, &dev, &Options::default()).unwrap());
 
     // Android's: linear in inverse CT over forward matrices.
     let fm = [[0.6, 0.3, 0.06], [0.25, 0.7, 0.05], [0.03, 0.1, 0.7]];
-    let cal = DngCalibration { illuminant1: 17, forward_matrix1: fm, illuminant2: 21, forward_matrix2: nudge(&fm, 0.05) };
+    let cal =
+        DngCalibration { illuminant1: 17, forward_matrix1: fm, illuminant2: 21, forward_matrix2: nudge(&fm, 0.05) };
     l.set_dng_calibration(cal.clone()).unwrap();
     let dev = cal.device_transform(4000.0).unwrap();
     assert_eq!(l.update_ct(4000.0).unwrap().values, &convert(&p, &dev, &Options::default()).unwrap());
@@ -152,7 +154,10 @@ fn colour_temperature_sources() {
 
 #[test]
 fn bad_inputs_are_named() {
-    assert!(Camera2Loop::new(params(), Options::default(), f64::NAN).unwrap_err().to_string().contains("skip_tolerance"));
+    assert!(Camera2Loop::new(params(), Options::default(), f64::NAN)
+        .unwrap_err()
+        .to_string()
+        .contains("skip_tolerance"));
     assert!(Camera2Loop::new(params(), Options { max_curve_points: 0, ..Options::default() }, 0.0).is_err());
     let mut l = Camera2Loop::new(params(), Options::default(), 0.0).unwrap();
     let mut dev = PHONE;

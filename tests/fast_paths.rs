@@ -20,10 +20,16 @@ fn all_triples() -> Vec<u8> {
 
 fn sets() -> Vec<Params> {
     let root = concat!(env!("CARGO_MANIFEST_DIR"), "/params/");
-    let mut v: Vec<Params> = ["identity", "color-inversion", "srgb-passthrough"].iter().map(|n| Params::from_file(std::path::Path::new(&format!("{root}{n}.json"))).unwrap()).collect();
+    let mut v: Vec<Params> = ["identity", "color-inversion", "srgb-passthrough"]
+        .iter()
+        .map(|n| Params::from_file(std::path::Path::new(&format!("{root}{n}.json"))).unwrap())
+        .collect();
     // Like the paper's strong checkpoints: entries near ±5, a jagged curve (slopes ~30).
     let strong = [[1.2101, 0.0430, -4.6679], [-4.3933, 4.1114, -2.2755], [0.2930, -3.3570, 4.9287]];
-    let jag = ToneCurve::uniform((0..32).map(|i| if i % 2 == 0 { 0.05 * (i % 7) as f64 } else { 1.0 - 0.03 * i as f64 }).collect()).unwrap();
+    let jag = ToneCurve::uniform(
+        (0..32).map(|i| if i % 2 == 0 { 0.05 * (i % 7) as f64 } else { 1.0 - 0.03 * i as f64 }).collect(),
+    )
+    .unwrap();
     v.push(Params::new(strong, jag, 2.2).unwrap());
     // Jumps and plateaus on a non-uniform grid.
     let steps = ToneCurve::new(vec![0.0, 0.2, 0.2001, 0.5, 0.50001, 1.0], vec![0.0, 0.0, 1.0, 1.0, 0.3, 0.9]).unwrap();
@@ -34,7 +40,11 @@ fn sets() -> Vec<Params> {
     v.push(Params::new([[2.5, 1.5, -1.0], [-2.0, 3.0, 1.0], [1.0, -3.0, 4.0]], short, 2.2).unwrap());
     // 2, 30 and 31 knots (the engine's end slots: 2 and 30 have separate ones, 31 shares
     // one between both ends, like 32), matrices clipping at both ends.
-    for (k, ccm) in [(2, [[1.8, -0.9, 0.4], [-1.2, 2.6, -0.7], [0.3, -1.5, 2.9]]), (30, [[-2.0, 4.0, -1.0], [3.5, -3.0, 1.5], [0.5, 0.5, -0.8]]), (31, [[4.9, -4.9, 1.0], [-0.4, 1.1, 0.2], [2.0, 2.0, -3.5]])] {
+    for (k, ccm) in [
+        (2, [[1.8, -0.9, 0.4], [-1.2, 2.6, -0.7], [0.3, -1.5, 2.9]]),
+        (30, [[-2.0, 4.0, -1.0], [3.5, -3.0, 1.5], [0.5, 0.5, -0.8]]),
+        (31, [[4.9, -4.9, 1.0], [-0.4, 1.1, 0.2], [2.0, 2.0, -3.5]]),
+    ] {
         let c = ToneCurve::from_fn(k, |t| 0.5 + 0.45 * (11.0 * t + 0.3).sin());
         v.push(Params::new(ccm, c, 2.2).unwrap());
     }
@@ -117,7 +127,12 @@ fn clipped_pixels_at_a_tie_end_stay_in_the_block_engine() {
         // Pixels with a zero code in some channel do not clip (0 · anything = 0 is the
         // boundary itself), so a few may still be flagged.
         if f.engine() == campro::pipeline::fast::Engine::Avx512 {
-            assert!(fell.flagged * 100 < frame.len() / 3, "{name}: {} of {} pixels flagged", fell.flagged, frame.len() / 3);
+            assert!(
+                fell.flagged * 100 < frame.len() / 3,
+                "{name}: {} of {} pixels flagged",
+                fell.flagged,
+                frame.len() / 3
+            );
         }
     }
 }
@@ -179,7 +194,12 @@ fn shared_end_slot_with_one_ambiguous_end_stays_exact() {
             Exact8::new(&p).run(&px, &mut out);
             for (s, o) in px.chunks_exact(3).zip(out.chunks_exact(3)) {
                 let want = reference.pixel([s[0], s[1], s[2]].map(u16::from)).map(|v| (v * 255.0 + 0.5) as u8);
-                assert_eq!(o, want, "{k} knots, tie at the {} end: pixel {s:?}", if top_tie { "top" } else { "bottom" });
+                assert_eq!(
+                    o,
+                    want,
+                    "{k} knots, tie at the {} end: pixel {s:?}",
+                    if top_tie { "top" } else { "bottom" }
+                );
             }
         }
     }
@@ -242,7 +262,11 @@ fn f32_path_on_16_bit_input() {
     for p in sets() {
         let reference = Prepared::new(&p, Depth::Sixteen);
         let f = F32Path::new(&p, Depth::Sixteen);
-        let px: Vec<u16> = random_pixels(200_000, 9).iter().zip(random_pixels(200_000, 10)).flat_map(|(a, b)| [0, 1, 2].map(|k| (a[k] as u16) << 8 | b[k] as u16)).collect();
+        let px: Vec<u16> = random_pixels(200_000, 9)
+            .iter()
+            .zip(random_pixels(200_000, 10))
+            .flat_map(|(a, b)| [0, 1, 2].map(|k| (a[k] as u16) << 8 | b[k] as u16))
+            .collect();
         let mut out = vec![0u16; px.len()];
         f.run(&px, &mut out, Depth::Sixteen);
         for (s, o) in px.chunks_exact(3).zip(out.chunks_exact(3)) {
@@ -287,7 +311,11 @@ fn lut3d_errors_within_their_bound_and_shrink_with_size() {
                     })
                     .fold(0.0, f64::max);
                 assert!(worst <= lut.error_bound(), "{} {interp:?} {n}: {worst} > {}", p.name, lut.error_bound());
-                assert!(worst <= prev * 1.05 + 1e-6, "{} {interp:?}: error grew with size ({prev} -> {worst} at {n})", p.name);
+                assert!(
+                    worst <= prev * 1.05 + 1e-6,
+                    "{} {interp:?}: error grew with size ({prev} -> {worst} at {n})",
+                    p.name
+                );
                 prev = worst;
             }
         }

@@ -1,14 +1,14 @@
 //! CamPro's own checkpoints and float32 PyTorch outputs (../shared/fixtures/campro-pt):
 //! the importer must read the exact numbers and the pipeline must reproduce the outputs.
 
-
 use campro::import_pt::read_checkpoint;
 use campro::pipeline::{campro_f32_after_degamma, process_f32_campro, process_f64};
 use campro::Params;
 
 fn index() -> Option<(std::path::PathBuf, serde_json::Value)> {
     let dir = campro_testkit::shared("fixtures/campro-pt/index.json")?.parent().unwrap().to_path_buf();
-    let index: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("index.json")).unwrap()).unwrap();
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("index.json")).unwrap()).unwrap();
     Some((dir, index))
 }
 
@@ -85,7 +85,8 @@ fn pipeline_reproduces_gentle_checkpoints_within_1e6() {
             for (p, w) in px.iter().zip(want) {
                 e32 = e32.max(max_err(process_f32_campro(&f.ccm32, &f.kp32, 2.2, *p), *w));
                 let o = process_f64(&f.params, p.map(|c| c as f64 / 255.0));
-                e64 = e64.max(max_err(o.map(|v| v as f32), *w).max((0..3).map(|k| (o[k] - w[k]).abs()).fold(0.0, f64::max)));
+                e64 = e64
+                    .max(max_err(o.map(|v| v as f32), *w).max((0..3).map(|k| (o[k] - w[k]).abs()).fold(0.0, f64::max)));
             }
             assert!(e32 <= 1e-6 && e64 <= 1e-6, "{} {name}: f32 {e32:e}, f64 {e64:e}", f.params.name);
         }
@@ -110,10 +111,16 @@ fn pipeline_reproduces_every_checkpoint_up_to_pow_ulps() {
         let fits = |d: f32| {
             fx.iter().all(|f| {
                 let (_, px, want) = f.images.iter().find(|(n, _, _)| n == "grey_ramp").unwrap();
-                px.iter().zip(want).filter(|(p, _)| p[0] == code).all(|(_, w)| max_err(campro_f32_after_degamma(&f.ccm32, &f.kp32, [d; 3]), *w) == 0.0)
+                px.iter()
+                    .zip(want)
+                    .filter(|(p, _)| p[0] == code)
+                    .all(|(_, w)| max_err(campro_f32_after_degamma(&f.ccm32, &f.kp32, [d; 3]), *w) == 0.0)
             })
         };
-        let pick = candidates.iter().position(|&d| fits(d)).unwrap_or_else(|| panic!("no pow value within one ulp explains code {code}"));
+        let pick = candidates
+            .iter()
+            .position(|&d| fits(d))
+            .unwrap_or_else(|| panic!("no pow value within one ulp explains code {code}"));
         table[code as usize] = candidates[pick];
         off_by_one += (pick != 0) as usize;
     }

@@ -103,7 +103,10 @@ fn non_finite_numbers_are_rejected() {
     let text = base().to_string().replace("\"y\":[0.0,0.5,1.0]", "\"y\":[0.0,1e999,1.0]");
     let e = Params::from_json(&text).unwrap_err().to_string();
     assert!(e.contains("tone_curve.y"), "{e}");
-    assert!(matches!(Params::from_json(&base().to_string().replace("1.0,0.0,0.0]", "NaN,0.0,0.0]")), Err(ParamsError::Json { .. })));
+    assert!(matches!(
+        Params::from_json(&base().to_string().replace("1.0,0.0,0.0]", "NaN,0.0,0.0]")),
+        Err(ParamsError::Json { .. })
+    ));
 }
 
 #[test]
@@ -115,7 +118,10 @@ fn format_and_version() {
 
 #[test]
 fn ccm_shape_and_range() {
-    assert!(matches!(invalid(|v| v["ccm"] = serde_json::json!([[1, 0, 0], [0, 1, 0]])), ValidationError::WrongLength { .. }));
+    assert!(matches!(
+        invalid(|v| v["ccm"] = serde_json::json!([[1, 0, 0], [0, 1, 0]])),
+        ValidationError::WrongLength { .. }
+    ));
     assert_eq!(invalid(|v| v["ccm"][2] = serde_json::json!([0, 1])).field(), "ccm[2]");
     let e = invalid(|v| v["ccm"][0][1] = 40.0.into());
     assert!(matches!(e, ValidationError::OutOfRange { .. }) && e.field() == "ccm[0][1]");
@@ -123,14 +129,29 @@ fn ccm_shape_and_range() {
 
 #[test]
 fn tone_curve_rules() {
-    assert!(matches!(invalid(|v| v["tone_curve"]["y"] = serde_json::json!([0.5])), ValidationError::WrongLength { .. }));
+    assert!(matches!(
+        invalid(|v| v["tone_curve"]["y"] = serde_json::json!([0.5])),
+        ValidationError::WrongLength { .. }
+    ));
     assert_eq!(invalid(|v| v["tone_curve"]["y"][1] = 1.5.into()).field(), "tone_curve.y[1]");
     assert_eq!(invalid(|v| v["tone_curve"]["y"][0] = (-0.1).into()).field(), "tone_curve.y[0]");
-    assert!(matches!(invalid(|v| v["tone_curve"]["x"] = serde_json::json!([0.0, 1.0])), ValidationError::WrongLength { .. }));
-    assert!(matches!(invalid(|v| v["tone_curve"]["x"] = serde_json::json!([0.0, 0.0, 1.0])), ValidationError::NotIncreasing { .. }));
-    assert!(matches!(invalid(|v| v["tone_curve"]["x"] = serde_json::json!([0.0, 0.7, 0.5])), ValidationError::WrongEndpoint { .. }));
+    assert!(matches!(
+        invalid(|v| v["tone_curve"]["x"] = serde_json::json!([0.0, 1.0])),
+        ValidationError::WrongLength { .. }
+    ));
+    assert!(matches!(
+        invalid(|v| v["tone_curve"]["x"] = serde_json::json!([0.0, 0.0, 1.0])),
+        ValidationError::NotIncreasing { .. }
+    ));
+    assert!(matches!(
+        invalid(|v| v["tone_curve"]["x"] = serde_json::json!([0.0, 0.7, 0.5])),
+        ValidationError::WrongEndpoint { .. }
+    ));
     assert_eq!(invalid(|v| v["tone_curve"]["x"] = serde_json::json!([0.1, 0.5, 1.0])).field(), "tone_curve.x[0]");
-    assert!(matches!(invalid(|v| v["tone_curve"]["y"] = serde_json::json!(vec![0.5; 5000])), ValidationError::WrongLength { .. }));
+    assert!(matches!(
+        invalid(|v| v["tone_curve"]["y"] = serde_json::json!(vec![0.5; 5000])),
+        ValidationError::WrongLength { .. }
+    ));
 }
 
 #[test]
@@ -145,7 +166,10 @@ fn ct_calibration_rules() {
     assert!(matches!(invalid(|v| v["ct_calibration"] = cal(5000.0, 5000.0)), ValidationError::NotIncreasing { .. }));
     assert!(matches!(invalid(|v| v["ct_calibration"] = cal(6000.0, 3000.0)), ValidationError::NotIncreasing { .. }));
     assert_eq!(invalid(|v| v["ct_calibration"] = cal(10.0, 3000.0)).field(), "ct_calibration[0].ct_kelvin");
-    assert_eq!(invalid(|v| v["ct_calibration"] = serde_json::json!([{"ct_kelvin": 3000, "ccm": [[1,0,0],[0,1,0]]}])).field(), "ct_calibration[0].ccm");
+    assert_eq!(
+        invalid(|v| v["ct_calibration"] = serde_json::json!([{"ct_kelvin": 3000, "ccm": [[1,0,0],[0,1,0]]}])).field(),
+        "ct_calibration[0].ccm"
+    );
     assert!(err(|v| v["ct_calibration"] = serde_json::json!([{"ct_kelvin": 3000}])).contains("ccm"));
 }
 

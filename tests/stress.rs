@@ -72,7 +72,6 @@ proptest! {
     }
 }
 
-
 /// Found by `invariants_hold`: a 1/1 denominator rounded an in-range entry to -2,
 /// outside Camera2's [-1.5, 3]. The range scale now leaves room for the rounding.
 #[test]

@@ -1,7 +1,6 @@
 //! File-based deployment targets (Raspberry Pi, Rockchip, 3D LUTs) against the real
 //! reference files in ../shared/fixtures/targets and against hand-derived values.
 
-
 use campro::ccm::{self, Mat3};
 use campro::compare::{deployment_vs_desktop, random_pixels};
 use campro::lut3d::Lut3d;
@@ -32,7 +31,12 @@ fn isp_bound(hw: &ToneCurve, ideal: &ToneCurve, mq: &Mat3, m: &Mat3, device: &Ma
     let inv = ccm::inverse(device).unwrap();
     let range = inv.map(|r| r.iter().map(|v| v.abs()).sum::<f64>());
     // Curve difference on a fine grid plus every knot of both (exact for piecewise-linear).
-    let curve_diff = (0..=65535).map(|i| i as f64 / 65535.0).chain(hw.x().iter().copied()).chain(ideal.x().iter().copied()).map(|t| (hw.eval(t) - ideal.eval(t)).abs()).fold(0.0, f64::max);
+    let curve_diff = (0..=65535)
+        .map(|i| i as f64 / 65535.0)
+        .chain(hw.x().iter().copied())
+        .chain(ideal.x().iter().copied())
+        .map(|t| (hw.eval(t) - ideal.eval(t)).abs())
+        .fold(0.0, f64::max);
     campro::emulate::error_bound(curve_diff, hw.max_slope(), mq, m, range) + 1e-9
 }
 
@@ -57,7 +61,15 @@ fn rpi_export_patches_only_ccm_and_gamma_and_parses_back() {
         assert_eq!(tuning.gamma[31], (65535.0, (p.tone_curve.y()[31] * 65535.0).round()));
         assert_eq!(tuning.gamma[1].0, (65535.0f64 / 31.0).round());
         // Every other algorithm block is untouched.
-        let others = |r: &serde_json::Value| r["algorithms"].as_array().unwrap().iter().filter(|a| a.get("rpi.ccm").is_none() && a.get("rpi.contrast").is_none()).cloned().collect::<Vec<_>>();
+        let others = |r: &serde_json::Value| {
+            r["algorithms"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .filter(|a| a.get("rpi.ccm").is_none() && a.get("rpi.contrast").is_none())
+                .cloned()
+                .collect::<Vec<_>>()
+        };
         assert_eq!(others(&root), others(&base_root), "{file}");
         assert_eq!(root["target"], base_root["target"]);
     }
@@ -127,8 +139,17 @@ fn isp_targets_stay_within_their_stated_bound() {
                 let hw = match t.name() {
                     "rpi-vc4" | "rpi-pisp" => {
                         let r = if t.name() == "rpi-vc4" { Rpi::Vc4 } else { Rpi::Pisp };
-                        let pts: Vec<(f64, f64)> = p.tone_curve.x().iter().zip(p.tone_curve.y()).map(|(x, y)| ((x * 65535.0).round() / 65535.0, (y * 65535.0).round() / 65535.0)).collect();
-                        r.hardware_curve(&ToneCurve::new(pts.iter().map(|p| p.0).collect(), pts.iter().map(|p| p.1).collect()).unwrap())
+                        let pts: Vec<(f64, f64)> = p
+                            .tone_curve
+                            .x()
+                            .iter()
+                            .zip(p.tone_curve.y())
+                            .map(|(x, y)| ((x * 65535.0).round() / 65535.0, (y * 65535.0).round() / 65535.0))
+                            .collect();
+                        r.hardware_curve(
+                            &ToneCurve::new(pts.iter().map(|p| p.0).collect(), pts.iter().map(|p| p.1).collect())
+                                .unwrap(),
+                        )
                     }
                     "rkaiq-isp20" => Rkaiq::Isp20.hardware_curve(&p.tone_curve),
                     _ => Rkaiq::Isp3x.hardware_curve(&p.tone_curve),
@@ -150,7 +171,10 @@ fn rkaiq_grids_and_export() {
     assert_eq!(&g20[..14], &[0., 1., 2., 3., 4., 5., 6., 7., 8., 10., 12., 14., 16., 20.]);
     assert_eq!(&g20[40..], &[2048., 2560., 3072., 3584., 4095.]);
     assert_eq!(&g3x[40..], &[2048., 2304., 2560., 2816., 3072., 3328., 3584., 3840., 4095.]);
-    for (t, file, curves) in [(Rkaiq::Isp20, "rkaiq_isp20_imx415_ccm_gamma_excerpt.json", 5), (Rkaiq::Isp3x, "rkaiq_isp3x_imx415_ccm_gamma_excerpt.json", 1)] {
+    for (t, file, curves) in [
+        (Rkaiq::Isp20, "rkaiq_isp20_imx415_ccm_gamma_excerpt.json", 5),
+        (Rkaiq::Isp3x, "rkaiq_isp3x_imx415_ccm_gamma_excerpt.json", 1),
+    ] {
         let Some(base) = fixture(file) else { return };
         let (_, theirs) = t.parse(&base, file).unwrap();
         assert_eq!(theirs.curves.len(), curves, "{file}");
@@ -188,7 +212,12 @@ fn cube_and_hald_parse_back_and_errors_shrink_with_size() {
         assert!(text.lines().any(|l| l == format!("LUT_3D_SIZE {n}")));
         let lut = parse_cube(text).unwrap();
         let baked = Lut3d::bake(&p, n);
-        let worst = lut.data().iter().zip(baked.data()).flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs())).fold(0f32, f32::max);
+        let worst = lut
+            .data()
+            .iter()
+            .zip(baked.data())
+            .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()))
+            .fold(0f32, f32::max);
         assert!(worst <= 5.1e-7, "{n}: {worst}");
         // Red fastest: the second node is (r = 1 step, g = 0, b = 0).
         let second = campro::pipeline::process_f64(&p, [1.0 / (n - 1) as f64, 0.0, 0.0]);
@@ -198,7 +227,13 @@ fn cube_and_hald_parse_back_and_errors_shrink_with_size() {
         let mut here = 0f64;
         for c in &conds {
             let s = deployment_vs_desktop(&p, &c.feed, c.emulator.as_ref(), &px).unwrap();
-            assert!(s.max_abs <= baked.error_bound() + 1e-6, "{n} {}: {} > {}", c.label, s.max_abs, baked.error_bound());
+            assert!(
+                s.max_abs <= baked.error_bound() + 1e-6,
+                "{n} {}: {} > {}",
+                c.label,
+                s.max_abs,
+                baked.error_bound()
+            );
             here = here.max(s.max_abs);
         }
         assert!(here < prev, "error did not shrink at {n}: {here} vs {prev}");
@@ -210,7 +245,12 @@ fn cube_and_hald_parse_back_and_errors_shrink_with_size() {
     let lut = parse_hald(&img).unwrap();
     assert_eq!(lut.size(), 16);
     let baked = Lut3d::bake(&p, 16);
-    let worst = lut.data().iter().zip(baked.data()).flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k].clamp(0.0, 1.0)).abs())).fold(0f32, f32::max);
+    let worst = lut
+        .data()
+        .iter()
+        .zip(baked.data())
+        .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k].clamp(0.0, 1.0)).abs()))
+        .fold(0f32, f32::max);
     assert!(worst <= 0.5 / 65535.0 + 1e-7, "{worst}");
 }
 

@@ -18,12 +18,14 @@
 //! update is safe: the update finishes on its reference and later calls see the handle
 //! closed.
 
-use campro::targets::camera2::{Camera2Loop, Update};
 use campro::color_temp::DngCalibration;
 use campro::targets::camera2::{self, ConvertError, Options, RationalMode};
+use campro::targets::camera2::{Camera2Loop, Update};
 use campro::{Params, ValidationError};
 use jni::errors::ErrorPolicy;
-use jni::objects::{JByteArray, JClass, JDoubleArray, JFloatArray, JIntArray, JObject, JPrimitiveArray, JString, TypeArray};
+use jni::objects::{
+    JByteArray, JClass, JDoubleArray, JFloatArray, JIntArray, JObject, JPrimitiveArray, JString, TypeArray,
+};
 use jni::refs::Reference;
 use jni::sys::{jboolean, jdouble, jint, jlong};
 use jni::{jni_str, Env, EnvUnowned};
@@ -112,7 +114,11 @@ struct ThrowJava;
 impl<T: Default> ErrorPolicy<T, BridgeError> for ThrowJava {
     type Captures<'unowned_env_local: 'native_method, 'native_method> = ();
 
-    fn on_error<'unowned_env_local: 'native_method, 'native_method>(env: &mut Env<'unowned_env_local>, _: &mut (), err: BridgeError) -> jni::errors::Result<T> {
+    fn on_error<'unowned_env_local: 'native_method, 'native_method>(
+        env: &mut Env<'unowned_env_local>,
+        _: &mut (),
+        err: BridgeError,
+    ) -> jni::errors::Result<T> {
         if env.exception_check() {
             return Ok(T::default()); // the JNI failure already threw
         }
@@ -139,7 +145,10 @@ impl<T: Default> ErrorPolicy<T, BridgeError> for ThrowJava {
         std::mem::forget(payload);
         log::error!("campro internal error: {what}");
         if !env.exception_check() {
-            let _ = env.throw_new(jni_str!("java/lang/RuntimeException"), jni::strings::JNIString::new(format!("campro internal error: {what}")));
+            let _ = env.throw_new(
+                jni_str!("java/lang/RuntimeException"),
+                jni::strings::JNIString::new(format!("campro internal error: {what}")),
+            );
         }
         Ok(T::default())
     }
@@ -165,12 +174,17 @@ fn register(l: Camera2Loop) -> jlong {
 }
 
 fn lookup(handle: jlong) -> Result<Arc<Mutex<Camera2Loop>>> {
-    registry().get(&handle).cloned().ok_or_else(|| BridgeError::State(format!("handle {handle:#x} is closed or was never issued by campro")))
+    registry()
+        .get(&handle)
+        .cloned()
+        .ok_or_else(|| BridgeError::State(format!("handle {handle:#x} is closed or was never issued by campro")))
 }
 
 fn with_loop<T>(handle: jlong, f: impl FnOnce(&mut Camera2Loop) -> Result<T>) -> Result<T> {
     let l = lookup(handle)?;
-    let mut guard = l.lock().map_err(|_| BridgeError::State(format!("handle {handle:#x} was left inconsistent by an internal error; close it")))?;
+    let mut guard = l.lock().map_err(|_| {
+        BridgeError::State(format!("handle {handle:#x} was left inconsistent by an internal error; close it"))
+    })?;
     f(&mut guard)
 }
 
@@ -179,7 +193,10 @@ fn with_loop<T>(handle: jlong, f: impl FnOnce(&mut Camera2Loop) -> Result<T>) ->
 
 fn options(max_curve_points: jint, max_denominator: jint) -> Result<Options> {
     let positive = |name: &str, v: jint| {
-        u32::try_from(v).ok().filter(|&v| v > 0).ok_or_else(|| BridgeError::Argument(format!("{name}: must be positive, got {v}")))
+        u32::try_from(v)
+            .ok()
+            .filter(|&v| v > 0)
+            .ok_or_else(|| BridgeError::Argument(format!("{name}: must be positive, got {v}")))
     };
     let o = Options {
         max_curve_points: positive("maxCurvePoints", max_curve_points)? as usize,
@@ -210,7 +227,9 @@ fn read_ints<const N: usize>(env: &Env, name: &str, a: &JIntArray) -> Result<[i3
 fn read_floats(env: &Env, name: &str, a: &JFloatArray, count: jint) -> Result<Vec<f32>> {
     non_null(name, a)?;
     let len = a.len(env)?;
-    let n = usize::try_from(count).ok().filter(|&n| n <= len).ok_or_else(|| BridgeError::Argument(format!("{name}: count {count} is negative or exceeds the array's {len} elements")))?;
+    let n = usize::try_from(count).ok().filter(|&n| n <= len).ok_or_else(|| {
+        BridgeError::Argument(format!("{name}: count {count} is negative or exceeds the array's {len} elements"))
+    })?;
     let mut out = vec![0f32; n];
     a.get_region(env, 0, &mut out)?;
     Ok(out)
@@ -276,7 +295,12 @@ impl Outputs<'_, '_> {
     }
 }
 
-fn update(env: &Env, handle: jlong, out: Outputs<'_, '_>, step: impl FnOnce(&mut Camera2Loop) -> std::result::Result<Update<'_>, ConvertError>) -> Result<jboolean> {
+fn update(
+    env: &Env,
+    handle: jlong,
+    out: Outputs<'_, '_>,
+    step: impl FnOnce(&mut Camera2Loop) -> std::result::Result<Update<'_>, ConvertError>,
+) -> Result<jboolean> {
     with_loop(handle, |l| {
         out.check(env, l.options().max_curve_points)?;
         let u = step(l)?;
@@ -319,7 +343,10 @@ pub extern "system" fn Java_org_campro_CamProNative_createFromBytes<'local>(
         non_null("paramsJson", &bytes)?;
         let len = bytes.len(env)?;
         if len > campro::params::MAX_JSON_BYTES {
-            return Err(BridgeError::Argument(format!("paramsJson: {len} bytes; the limit is {}", campro::params::MAX_JSON_BYTES)));
+            return Err(BridgeError::Argument(format!(
+                "paramsJson: {len} bytes; the limit is {}",
+                campro::params::MAX_JSON_BYTES
+            )));
         }
         let data = env.convert_byte_array(&bytes)?;
         create(&data, max_curve_points, max_denominator, skip_tolerance)
@@ -352,24 +379,40 @@ pub extern "system" fn Java_org_campro_CamProNative_createFromAsset<'local>(
 
 /// `close(handle: Long)`: frees the handle; a closed or unknown handle throws.
 #[unsafe(no_mangle)]
-pub extern "system" fn Java_org_campro_CamProNative_close<'local>(mut env: EnvUnowned<'local>, _class: JClass<'local>, handle: jlong) {
+pub extern "system" fn Java_org_campro_CamProNative_close<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    handle: jlong,
+) {
     env.with_env(|_env| -> Result<()> {
-        registry().remove(&handle).map(drop).ok_or_else(|| BridgeError::State(format!("handle {handle:#x} is closed or was never issued by campro")))
+        registry()
+            .remove(&handle)
+            .map(drop)
+            .ok_or_else(|| BridgeError::State(format!("handle {handle:#x} is closed or was never issued by campro")))
     })
     .resolve::<ThrowJava>()
 }
 
 /// `liveHandles(): Int`: handles created and not yet closed (leak checks).
 #[unsafe(no_mangle)]
-pub extern "system" fn Java_org_campro_CamProNative_liveHandles<'local>(mut env: EnvUnowned<'local>, _class: JClass<'local>) -> jint {
+pub extern "system" fn Java_org_campro_CamProNative_liveHandles<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+) -> jint {
     env.with_env(|_env| -> Result<jint> { Ok(registry().len() as jint) }).resolve::<ThrowJava>()
 }
 
 /// `setMaxCurvePoints(handle: Long, n: Int)`: the device's `TONEMAP_MAX_CURVE_POINTS`.
 #[unsafe(no_mangle)]
-pub extern "system" fn Java_org_campro_CamProNative_setMaxCurvePoints<'local>(mut env: EnvUnowned<'local>, _class: JClass<'local>, handle: jlong, n: jint) {
+pub extern "system" fn Java_org_campro_CamProNative_setMaxCurvePoints<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    handle: jlong,
+    n: jint,
+) {
     env.with_env(|_env| -> Result<()> {
-        let n = usize::try_from(n).map_err(|_| BridgeError::Argument(format!("maxCurvePoints: must be positive, got {n}")))?;
+        let n = usize::try_from(n)
+            .map_err(|_| BridgeError::Argument(format!("maxCurvePoints: must be positive, got {n}")))?;
         with_loop(handle, |l| l.set_max_curve_points(n).map_err(|e| arg(e.within("maxCurvePoints"))))
     })
     .resolve::<ThrowJava>()
@@ -483,7 +526,11 @@ pub extern "system" fn Java_org_campro_CamProNative_readback<'local>(
 /// production `.so`).
 #[cfg(feature = "test-exports")]
 #[unsafe(no_mangle)]
-pub extern "system" fn Java_org_campro_TestHooks_selfTestPanic<'local>(mut env: EnvUnowned<'local>, _class: JClass<'local>, message: JString<'local>) {
+pub extern "system" fn Java_org_campro_TestHooks_selfTestPanic<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    message: JString<'local>,
+) {
     env.with_env(|env| -> Result<()> {
         let m = if message.is_null() { "null".to_string() } else { message.try_to_string(env)? };
         panic!("self-test panic: {m}");
@@ -504,7 +551,9 @@ mod android {
 
     /// Routes `log` to logcat under the tag `campro` (idempotent).
     pub fn init_logging() {
-        android_logger::init_once(android_logger::Config::default().with_tag("campro").with_max_level(log::LevelFilter::Info));
+        android_logger::init_once(
+            android_logger::Config::default().with_tag("campro").with_max_level(log::LevelFilter::Info),
+        );
     }
 
     pub fn read_asset(env: &mut Env, manager: &JObject, path: &str) -> Result<Vec<u8>> {
@@ -512,17 +561,24 @@ mod android {
         // SAFETY: `manager` is a live local reference to an android.content.res.AssetManager
         // for the duration of this native call, and `env` is this thread's JNIEnv.
         let raw = unsafe { ndk_sys::AAssetManager_fromJava(env.get_raw() as *mut _, manager.as_raw() as _) };
-        let raw = NonNull::new(raw).ok_or_else(|| BridgeError::Argument("assetManager: not an android.content.res.AssetManager".into()))?;
+        let raw = NonNull::new(raw)
+            .ok_or_else(|| BridgeError::Argument("assetManager: not an android.content.res.AssetManager".into()))?;
         // SAFETY: the pointer came from AAssetManager_fromJava and outlives this call.
         let mgr = unsafe { ndk::asset::AssetManager::from_ptr(raw) };
         let c = CString::new(path).map_err(|_| BridgeError::Argument("path: contains a NUL byte".into()))?;
         let asset = mgr.open(&c).ok_or_else(|| BridgeError::Argument(format!("path: no asset named '{path}'")))?;
         let limit = campro::params::MAX_JSON_BYTES;
         if asset.length() > limit {
-            return Err(BridgeError::Argument(format!("path: asset '{path}' is {} bytes; the limit is {limit}", asset.length())));
+            return Err(BridgeError::Argument(format!(
+                "path: asset '{path}' is {} bytes; the limit is {limit}",
+                asset.length()
+            )));
         }
         let mut data = Vec::with_capacity(asset.length());
-        asset.take(limit as u64 + 1).read_to_end(&mut data).map_err(|e| BridgeError::Argument(format!("path: reading '{path}': {e}")))?;
+        asset
+            .take(limit as u64 + 1)
+            .read_to_end(&mut data)
+            .map_err(|e| BridgeError::Argument(format!("path: reading '{path}': {e}")))?;
         Ok(data)
     }
 }
@@ -534,6 +590,8 @@ mod android {
     use jni::Env;
 
     pub fn read_asset(_env: &mut Env, _manager: &JObject, path: &str) -> Result<Vec<u8>> {
-        Err(BridgeError::State(format!("createFromAsset('{path}'): APK assets exist only on Android; use create or createFromBytes")))
+        Err(BridgeError::State(format!(
+            "createFromAsset('{path}'): APK assets exist only on Android; use create or createFromBytes"
+        )))
     }
 }

@@ -40,12 +40,18 @@ fn runs(cmd: &Path) -> bool {
 fn kotlinc(root: &Path) -> Option<PathBuf> {
     let npm_dir = root.join("jni-bridge/jvm-test");
     let from_npm = npm_dir.join("node_modules/kotlin-compiler/bin/kotlinc");
-    let candidates = [std::env::var_os("KOTLINC").map(PathBuf::from), Some(PathBuf::from("kotlinc")), Some(from_npm.clone())];
+    let candidates =
+        [std::env::var_os("KOTLINC").map(PathBuf::from), Some(PathBuf::from("kotlinc")), Some(from_npm.clone())];
     if let Some(k) = candidates.into_iter().flatten().find(|c| runs(c)) {
         return Some(k);
     }
     eprintln!("no Kotlin compiler found: npm ci --prefix {}", npm_dir.display());
-    let ok = Command::new("npm").args(["ci", "--no-audit", "--no-fund", "--prefix"]).arg(&npm_dir).status().map(|s| s.success()).unwrap_or(false);
+    let ok = Command::new("npm")
+        .args(["ci", "--no-audit", "--no-fund", "--prefix"])
+        .arg(&npm_dir)
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false);
     (ok && runs(&from_npm)).then_some(from_npm)
 }
 
@@ -59,7 +65,16 @@ fn write_case(out: &mut String, name: &str, params: &Path, opts: &Options, input
         RationalMode::Fixed { .. } => unreachable!("the bridge uses best rationals"),
     };
     let r = &v.report;
-    let report = [1.0, r.bound, r.matrix_max_abs, r.curve_max_abs, r.curve_lipschitz, v.scale, r.curve_points as f64, r.curve_simplified as u8 as f64];
+    let report = [
+        1.0,
+        r.bound,
+        r.matrix_max_abs,
+        r.curve_max_abs,
+        r.curve_lipschitz,
+        v.scale,
+        r.curve_points as f64,
+        r.curve_simplified as u8 as f64,
+    ];
     writeln!(out, "case {name}\nparams {}\nopts {} {den}\n{input}", params.display(), opts.max_curve_points).unwrap();
     writeln!(out, "transform {}", ints(&v.color_correction_transform)).unwrap();
     let curve: Vec<i32> = v.tonemap_curve.red.iter().map(|f| f.to_bits() as i32).collect();
@@ -78,7 +93,11 @@ fn parameter_files(root: &Path, tmp: &Path) -> Vec<(String, PathBuf)> {
         .collect();
     files.sort();
     if let Some(dir) = shared::shared("fixtures/campro-pt") {
-        let mut pts: Vec<PathBuf> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "pt")).collect();
+        let mut pts: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "pt"))
+            .collect();
         pts.sort();
         assert!(!pts.is_empty(), "no checkpoints in {}", dir.display());
         for pt in pts {
@@ -106,14 +125,26 @@ fn cases(root: &Path, tmp: &Path) -> (String, usize) {
         v
     };
     let (fq1, fq2) = (q(&fm1), q(&fm2));
-    let cal = DngCalibration { illuminant1: 17, forward_matrix1: matrix_from_rationals(&fq1).unwrap(), illuminant2: 21, forward_matrix2: matrix_from_rationals(&fq2).unwrap() };
+    let cal = DngCalibration {
+        illuminant1: 17,
+        forward_matrix1: matrix_from_rationals(&fq1).unwrap(),
+        illuminant2: 21,
+        forward_matrix2: matrix_from_rationals(&fq2).unwrap(),
+    };
     for (name, path) in parameter_files(root, tmp) {
         let p = Params::from_file(&path).unwrap();
         for (pts, den) in [(64usize, 1u32 << 16), (16, 1024)] {
             let opts = Options { max_curve_points: pts, rational: RationalMode::Best { max_denominator: den } };
             for (dname, dev) in [("identity", ID), ("phone", PHONE)] {
                 let v = convert(&p, &matrix_from_rationals(&dev).unwrap(), &opts).unwrap();
-                write_case(&mut out, &format!("{name}/{dname}/{pts}pts/{den}"), &path, &opts, &format!("device {}", ints(&dev)), &v);
+                write_case(
+                    &mut out,
+                    &format!("{name}/{dname}/{pts}pts/{den}"),
+                    &path,
+                    &opts,
+                    &format!("device {}", ints(&dev)),
+                    &v,
+                );
                 n += 1;
             }
             let ct = 4300.0;
@@ -159,16 +190,35 @@ fn kotlin_wrapper_through_jni_on_the_host_jvm() {
 
     // The Android-free part of the library module, exactly as the app compiles it.
     let wrapper = root.join("android/campro/src/main/kotlin/org/campro");
-    let mut sources: Vec<PathBuf> = std::fs::read_dir(&wrapper).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "kt")).collect();
+    let mut sources: Vec<PathBuf> = std::fs::read_dir(&wrapper)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "kt"))
+        .collect();
     sources.sort();
     sources.push(root.join("jni-bridge/jvm-test/TestHooks.kt"));
     sources.push(root.join("jni-bridge/jvm-test/HostTest.kt"));
     let jar = tmp.join("host-test.jar");
-    let out = Command::new(&kotlinc).args(&sources).args(["-include-runtime", "-nowarn", "-d"]).arg(&jar).output().unwrap();
-    assert!(out.status.success(), "kotlinc failed:\n{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    let out =
+        Command::new(&kotlinc).args(&sources).args(["-include-runtime", "-nowarn", "-d"]).arg(&jar).output().unwrap();
+    assert!(
+        out.status.success(),
+        "kotlinc failed:\n{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
 
     let soak = std::env::var("CAMPRO_JVM_SOAK").unwrap_or_else(|_| "1000000".into());
-    let out = Command::new(&java).arg("-Xmx256m").arg("-cp").arg(&jar).arg("HostTestKt").arg(&lib).arg(&cases_file).arg(&soak).output().unwrap();
+    let out = Command::new(&java)
+        .arg("-Xmx256m")
+        .arg("-cp")
+        .arg(&jar)
+        .arg("HostTestKt")
+        .arg(&lib)
+        .arg(&cases_file)
+        .arg(&soak)
+        .output()
+        .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     println!("{stdout}{}", String::from_utf8_lossy(&out.stderr));
     assert!(out.status.success(), "host JVM test failed (see FAIL lines above)");

@@ -155,7 +155,8 @@ impl<'a> Exact8<'a> {
     /// One pixel, and whether it took the reference path.
     #[inline(always)]
     fn pixel_flagged(&self, rgb: [u8; 3]) -> ([u8; 3], bool) {
-        let (a, b, c) = (&self.terms[rgb[0] as usize], &self.terms[256 + rgb[1] as usize], &self.terms[512 + rgb[2] as usize]);
+        let (a, b, c) =
+            (&self.terms[rgb[0] as usize], &self.terms[256 + rgb[1] as usize], &self.terms[512 + rgb[2] as usize]);
         // Four lanes (the fourth is padding) so the sums, clamps and conversions vectorise.
         let mut idx = [0i32; 4];
         #[allow(clippy::manual_clamp)] // max/min vectorise to maxps/minps; no NaN can occur
@@ -358,7 +359,11 @@ fn constant_code(curve: &ToneCurve, lo: f64, hi: f64, knot: &mut usize) -> Optio
     let at = |t: f64| {
         let y = curve.eval(t);
         let exact = xs.binary_search_by(|v| v.total_cmp(&t)).is_ok();
-        if exact { (y, y) } else { (y - 1e-15, y + 1e-15) }
+        if exact {
+            (y, y)
+        } else {
+            (y - 1e-15, y + 1e-15)
+        }
     };
     let (a, b) = (at(lo), at(hi));
     let (mut ymin, mut ymax) = (a.0.min(b.0), a.1.max(b.1));

@@ -7,7 +7,7 @@
 //! players use) plus the file's value precision (6 decimals in `.cube`, 1/65535 in the
 //! PPM).
 
-use super::target::{MatrixBy, StageOrder, Condition, CurveFormat, Feed, Format, Target, TargetError};
+use super::target::{Condition, CurveFormat, Feed, Format, MatrixBy, StageOrder, Target, TargetError};
 use crate::emulate::Emulator;
 use crate::lut3d::{Interp, Lut3d};
 use crate::params::Params;
@@ -63,7 +63,10 @@ pub fn parse_cube(text: &str) -> Result<Lut3d, TargetError> {
         match first {
             "TITLE" => {}
             "LUT_3D_SIZE" => {
-                let v: usize = words.next().and_then(|w| w.parse().ok()).ok_or_else(|| at("LUT_3D_SIZE needs an integer".into()))?;
+                let v: usize = words
+                    .next()
+                    .and_then(|w| w.parse().ok())
+                    .ok_or_else(|| at("LUT_3D_SIZE needs an integer".into()))?;
                 if !(2..=256).contains(&v) {
                     return Err(at(format!("LUT_3D_SIZE must be in 2..=256, got {v}")));
                 }
@@ -79,7 +82,10 @@ pub fn parse_cube(text: &str) -> Result<Lut3d, TargetError> {
             }
             _ => {
                 let size = n.ok_or_else(|| at("LUT_3D_SIZE must come before the data".into()))?;
-                let v: Vec<f32> = std::iter::once(first).chain(words).map(|w| w.parse().map_err(|_| at(format!("not a number: {w}")))).collect::<Result<_, _>>()?;
+                let v: Vec<f32> = std::iter::once(first)
+                    .chain(words)
+                    .map(|w| w.parse().map_err(|_| at(format!("not a number: {w}"))))
+                    .collect::<Result<_, _>>()?;
                 if v.len() != 3 {
                     return Err(at(format!("a data line holds 3 numbers, got {}", v.len())));
                 }
@@ -128,7 +134,8 @@ pub fn parse_hald(bytes: &[u8]) -> Result<Lut3d, TargetError> {
     }
     let num = |s: &str| s.parse::<usize>().map_err(|_| err("bad header number"));
     let (w, h, max) = (num(&fields[1])?, num(&fields[2])?, num(&fields[3])?);
-    let level = (1..=16).find(|l| l * l * l == w).ok_or_else(|| err("width is not a cube L^3 (Hald level L in 1..=16)"))?;
+    let level =
+        (1..=16).find(|l| l * l * l == w).ok_or_else(|| err("width is not a cube L^3 (Hald level L in 1..=16)"))?;
     if h != w || !(max == 255 || max == 65535) {
         return Err(err("a Hald image is square, with maxval 255 or 65535"));
     }
@@ -137,7 +144,13 @@ pub fn parse_hald(bytes: &[u8]) -> Result<Lut3d, TargetError> {
     if body.len() != w * h * 3 * bps {
         return Err(err("pixel data length does not match the header"));
     }
-    let sample = |i: usize| if bps == 1 { body[i] as f32 / 255.0 } else { u16::from_be_bytes([body[2 * i], body[2 * i + 1]]) as f32 / 65535.0 };
+    let sample = |i: usize| {
+        if bps == 1 {
+            body[i] as f32 / 255.0
+        } else {
+            u16::from_be_bytes([body[2 * i], body[2 * i + 1]]) as f32 / 65535.0
+        }
+    };
     let data = (0..w * h).map(|p| [sample(3 * p), sample(3 * p + 1), sample(3 * p + 2)]).collect();
     Ok(Lut3d::from_data(level * level, data)?)
 }
@@ -169,7 +182,11 @@ impl Target for CubeFile {
         };
         Format {
             matrix: None,
-            curve: CurveFormat { grid: (0..self.size).map(|i| i as f64 / (self.size - 1) as f64).collect(), y_step, monotonic: false },
+            curve: CurveFormat {
+                grid: (0..self.size).map(|i| i as f64 / (self.size - 1) as f64).collect(),
+                y_step,
+                monotonic: false,
+            },
             matrix_by: MatrixBy::Baked,
             order: StageOrder::EncodedLut,
         }
@@ -190,7 +207,10 @@ impl Target for CubeFile {
                 Ok(s.into_bytes())
             }
             Kind::Hald => {
-                let level = (1..=16).find(|l| l * l == self.size).ok_or_else(|| TargetError::Unsupported { target: "hald", why: format!("size {} is not a square L^2", self.size) })?;
+                let level = (1..=16).find(|l| l * l == self.size).ok_or_else(|| TargetError::Unsupported {
+                    target: "hald",
+                    why: format!("size {} is not a square L^2", self.size),
+                })?;
                 let side = level * level * level;
                 let mut out = format!("P6\n{side} {side}\n65535\n").into_bytes();
                 out.reserve(side * side * 6);
@@ -212,7 +232,12 @@ impl Target for CubeFile {
         let n = lut.size();
         Ok([Interp::Trilinear, Interp::Tetrahedral]
             .into_iter()
-            .map(|interp| Condition { bound: None, label: format!("{n}^3 {interp:?}").to_lowercase(), feed: Feed::Encoded, emulator: Box::new(Applied { lut: lut.clone(), interp }) })
+            .map(|interp| Condition {
+                bound: None,
+                label: format!("{n}^3 {interp:?}").to_lowercase(),
+                feed: Feed::Encoded,
+                emulator: Box::new(Applied { lut: lut.clone(), interp }),
+            })
             .collect())
     }
 }

@@ -106,4 +106,3 @@ pub fn refusal(name: &str) -> Option<String> {
          (ffmpeg lut3d, GStreamer, OBS), accepting that the unprotected frame then exists in software for a moment."
     ))
 }
-

@@ -13,7 +13,9 @@
 //! every calibrated matrix (rkaiq blends them by illuminant and saturation; blending is
 //! linear, which commutes with the composition).
 
-use super::target::{MatrixBy, StageOrder, resample_on_grid, Condition, CurveFormat, Feed, Format, MatrixFormat, Target, TargetError};
+use super::target::{
+    resample_on_grid, Condition, CurveFormat, Feed, Format, MatrixBy, MatrixFormat, StageOrder, Target, TargetError,
+};
 use crate::ccm::{self, Mat3};
 use crate::emulate::Isp;
 use crate::params::Params;
@@ -84,7 +86,9 @@ fn field(file: &str, f: &str, rule: impl Into<String>) -> TargetError {
 fn numbers(v: &Value, file: &str, at: &str) -> Result<Vec<f64>, TargetError> {
     let out: Option<Vec<f64>> = match v {
         Value::Array(a) => a.iter().map(Value::as_f64).collect(),
-        Value::String(s) => s.trim().trim_start_matches('[').trim_end_matches(']').split_whitespace().map(|t| t.parse().ok()).collect(),
+        Value::String(s) => {
+            s.trim().trim_start_matches('[').trim_end_matches(']').split_whitespace().map(|t| t.parse().ok()).collect()
+        }
         _ => None,
     };
     let out = out.ok_or_else(|| field(file, at, "must be numbers (an array or a \"[a b c]\" string)"))?;
@@ -112,7 +116,13 @@ fn escape(key: &str) -> String {
 
 /// Walks the tree collecting `ccMatrix` and curve entries. A matrix's name is its
 /// object's `name`, or (XML-converted files: lists of one-key objects) a sibling's.
-fn walk(v: &Value, at: &str, keys: &[&str], sibling_name: Option<&str>, found: &mut (Vec<(String, String)>, Vec<String>)) {
+fn walk(
+    v: &Value,
+    at: &str,
+    keys: &[&str],
+    sibling_name: Option<&str>,
+    found: &mut (Vec<(String, String)>, Vec<String>),
+) {
     match v {
         Value::Object(o) => {
             let name = o.get("name").and_then(Value::as_str).or(sibling_name);
@@ -140,7 +150,11 @@ fn walk(v: &Value, at: &str, keys: &[&str], sibling_name: Option<&str>, found: &
 impl Rkaiq {
     /// Parses an IQ file (or excerpt) of this ISP generation.
     pub fn parse(self, text: &str, file: &str) -> Result<(Value, Iq), TargetError> {
-        let root: Value = serde_json::from_str(text).map_err(|e| TargetError::Parse { file: file.into(), format: "JSON", message: e.to_string() })?;
+        let root: Value = serde_json::from_str(text).map_err(|e| TargetError::Parse {
+            file: file.into(),
+            format: "JSON",
+            message: e.to_string(),
+        })?;
         let mut found = (Vec::new(), Vec::new());
         walk(&root, "", self.curve_keys(), None, &mut found);
         let mut matrices = Vec::new();
@@ -189,7 +203,11 @@ impl Target for Rkaiq {
     fn format(&self) -> Format {
         Format {
             matrix: Some(MATRIX),
-            curve: CurveFormat { grid: self.grid().iter().map(|x| x / FULL).collect(), y_step: 1.0 / FULL, monotonic: false },
+            curve: CurveFormat {
+                grid: self.grid().iter().map(|x| x / FULL).collect(),
+                y_step: 1.0 / FULL,
+                monotonic: false,
+            },
             matrix_by: MatrixBy::IlluminantBlend,
             order: StageOrder::MatrixClipCurve { clip_bits: None },
         }
@@ -208,13 +226,21 @@ impl Target for Rkaiq {
             let slot = root.pointer_mut(p).expect("found by the parser");
             *slot = write_numbers(slot, &y, 0);
         }
-        let mut text = serde_json::to_string_pretty(&root).map_err(|e| TargetError::Parse { file: self.file().into(), format: "JSON", message: e.to_string() })?;
+        let mut text = serde_json::to_string_pretty(&root).map_err(|e| TargetError::Parse {
+            file: self.file().into(),
+            format: "JSON",
+            message: e.to_string(),
+        })?;
         text.push('\n');
         Ok(text.into_bytes())
     }
 
     fn emulate(&self, _params: &Params, exported: &[u8], base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
-        let text = std::str::from_utf8(exported).map_err(|e| TargetError::Parse { file: "export".into(), format: "UTF-8", message: e.to_string() })?;
+        let text = std::str::from_utf8(exported).map_err(|e| TargetError::Parse {
+            file: "export".into(),
+            format: "UTF-8",
+            message: e.to_string(),
+        })?;
         let (_, ours) = self.parse(text, "export")?;
         let base = base.ok_or(TargetError::NeedsBase { target: self.name() })?;
         let (_, theirs) = self.parse(base, self.file())?;
@@ -228,7 +254,12 @@ impl Target for Rkaiq {
             .matrices
             .iter()
             .zip(&theirs.matrices)
-            .map(|((name, _, m), (_, _, device))| Condition { bound: None, label: name.clone(), feed: Feed::Sensor(*device), emulator: Box::new(Isp { matrix: MATRIX.apply(m), curve: curve.clone() }) })
+            .map(|((name, _, m), (_, _, device))| Condition {
+                bound: None,
+                label: name.clone(),
+                feed: Feed::Sensor(*device),
+                emulator: Box::new(Isp { matrix: MATRIX.apply(m), curve: curve.clone() }),
+            })
             .collect())
     }
 }

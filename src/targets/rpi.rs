@@ -19,7 +19,9 @@
 //! Between calibrated CTs libcamera interpolates the matrices linearly, which commutes
 //! with the composition, so the check runs at each calibrated CT.
 
-use super::target::{MatrixBy, StageOrder, curve_from_points, Condition, CurveFormat, Feed, Format, MatrixFormat, Target, TargetError};
+use super::target::{
+    curve_from_points, Condition, CurveFormat, Feed, Format, MatrixBy, MatrixFormat, StageOrder, Target, TargetError,
+};
 use crate::ccm::{self, Mat3};
 use crate::emulate::Isp;
 use crate::params::Params;
@@ -42,8 +44,17 @@ impl Rpi {
     /// The hardware curve inputs, 0..65535.
     pub fn grid(self) -> Vec<f64> {
         match self {
-            Rpi::Vc4 => (0..16).map(|i| i as f64 * 1024.0).chain((0..8).map(|i| 16384.0 + i as f64 * 2048.0)).chain((0..8).map(|i| 32768.0 + i as f64 * 4096.0)).chain([FULL]).collect(),
-            Rpi::Pisp => (0..32).map(|i| i as f64 * 512.0).chain((0..16).map(|i| 16384.0 + i as f64 * 1024.0)).chain((0..16).map(|i| 32768.0 + i as f64 * 2048.0)).collect(),
+            Rpi::Vc4 => (0..16)
+                .map(|i| i as f64 * 1024.0)
+                .chain((0..8).map(|i| 16384.0 + i as f64 * 2048.0))
+                .chain((0..8).map(|i| 32768.0 + i as f64 * 4096.0))
+                .chain([FULL])
+                .collect(),
+            Rpi::Pisp => (0..32)
+                .map(|i| i as f64 * 512.0)
+                .chain((0..16).map(|i| 16384.0 + i as f64 * 1024.0))
+                .chain((0..16).map(|i| 32768.0 + i as f64 * 2048.0))
+                .collect(),
         }
     }
 
@@ -113,7 +124,10 @@ fn field(file: &str, f: &str, rule: impl Into<String>) -> TargetError {
 
 /// The algorithm block `name` of a parsed tuning file.
 fn block<'a>(root: &'a mut Value, name: &str, file: &str) -> Result<&'a mut Value, TargetError> {
-    let algs = root.get_mut("algorithms").and_then(Value::as_array_mut).ok_or_else(|| field(file, "algorithms", "must be an array of algorithm blocks"))?;
+    let algs = root
+        .get_mut("algorithms")
+        .and_then(Value::as_array_mut)
+        .ok_or_else(|| field(file, "algorithms", "must be an array of algorithm blocks"))?;
     algs.iter_mut().find_map(|a| a.get_mut(name)).ok_or_else(|| field(file, name, "block is missing"))
 }
 
@@ -123,18 +137,34 @@ fn num(v: &Value, file: &str, f: &str) -> Result<f64, TargetError> {
 
 /// Parses a tuning file (any Raspberry Pi target) into [`Tuning`].
 pub fn parse(text: &str, file: &str) -> Result<(Value, Tuning), TargetError> {
-    let mut root: Value = serde_json::from_str(text).map_err(|e| TargetError::Parse { file: file.into(), format: "JSON", message: e.to_string() })?;
+    let mut root: Value = serde_json::from_str(text).map_err(|e| TargetError::Parse {
+        file: file.into(),
+        format: "JSON",
+        message: e.to_string(),
+    })?;
     let ccm_block = block(&mut root, "rpi.ccm", file)?;
-    let list = ccm_block.get("ccms").and_then(Value::as_array).ok_or_else(|| field(file, "rpi.ccm.ccms", "must be an array"))?;
+    let list = ccm_block
+        .get("ccms")
+        .and_then(Value::as_array)
+        .ok_or_else(|| field(file, "rpi.ccm.ccms", "must be an array"))?;
     let mut ccms = Vec::with_capacity(list.len());
     for (i, e) in list.iter().enumerate() {
         let f = format!("rpi.ccm.ccms[{i}]");
         let ct = num(e.get("ct").unwrap_or(&Value::Null), file, &format!("{f}.ct"))?;
-        let m = e.get("ccm").and_then(Value::as_array).filter(|a| a.len() == 9).ok_or_else(|| field(file, &format!("{f}.ccm"), "must be 9 numbers (row-major 3x3)"))?;
-        let v: Vec<f64> = m.iter().enumerate().map(|(j, x)| num(x, file, &format!("{f}.ccm[{j}]"))).collect::<Result<_, _>>()?;
+        let m = e
+            .get("ccm")
+            .and_then(Value::as_array)
+            .filter(|a| a.len() == 9)
+            .ok_or_else(|| field(file, &format!("{f}.ccm"), "must be 9 numbers (row-major 3x3)"))?;
+        let v: Vec<f64> =
+            m.iter().enumerate().map(|(j, x)| num(x, file, &format!("{f}.ccm[{j}]"))).collect::<Result<_, _>>()?;
         if let Some(&(prev, _)) = ccms.last() {
             if ct <= prev {
-                return Err(field(file, &format!("{f}.ct"), format!("must be strictly increasing ({ct} follows {prev})")));
+                return Err(field(
+                    file,
+                    &format!("{f}.ct"),
+                    format!("must be strictly increasing ({ct} follows {prev})"),
+                ));
             }
         }
         ccms.push((ct, [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]]));
@@ -143,9 +173,16 @@ pub fn parse(text: &str, file: &str) -> Result<(Value, Tuning), TargetError> {
         return Err(field(file, "rpi.ccm.ccms", "must not be empty"));
     }
     let contrast = block(&mut root, "rpi.contrast", file)?;
-    let g = contrast.get("gamma_curve").and_then(Value::as_array).ok_or_else(|| field(file, "rpi.contrast.gamma_curve", "must be an array"))?;
+    let g = contrast
+        .get("gamma_curve")
+        .and_then(Value::as_array)
+        .ok_or_else(|| field(file, "rpi.contrast.gamma_curve", "must be an array"))?;
     if g.len() < 4 || g.len() % 2 != 0 {
-        return Err(field(file, "rpi.contrast.gamma_curve", format!("must hold (x, y) pairs, at least two; got {} numbers", g.len())));
+        return Err(field(
+            file,
+            "rpi.contrast.gamma_curve",
+            format!("must hold (x, y) pairs, at least two; got {} numbers", g.len()),
+        ));
     }
     let mut gamma = Vec::with_capacity(g.len() / 2);
     for (i, pair) in g.chunks(2).enumerate() {
@@ -176,7 +213,11 @@ impl Target for Rpi {
     fn format(&self) -> Format {
         Format {
             matrix: Some(self.matrix_format()),
-            curve: CurveFormat { grid: self.grid().iter().map(|x| x / FULL).collect(), y_step: 1.0 / FULL, monotonic: *self == Rpi::Pisp },
+            curve: CurveFormat {
+                grid: self.grid().iter().map(|x| x / FULL).collect(),
+                y_step: 1.0 / FULL,
+                monotonic: *self == Rpi::Pisp,
+            },
             matrix_by: MatrixBy::CtInterpolated,
             order: StageOrder::MatrixClipCurve { clip_bits: Some(16) },
         }
@@ -200,7 +241,10 @@ impl Target for Rpi {
         for (&x, &y) in c.x().iter().zip(c.y()) {
             let xi = (x * FULL).round();
             if xi <= last_x {
-                return Err(TargetError::Unsupported { target: self.name(), why: format!("two knots fall on the same 16-bit input {xi}") });
+                return Err(TargetError::Unsupported {
+                    target: self.name(),
+                    why: format!("two knots fall on the same 16-bit input {xi}"),
+                });
             }
             last_x = xi;
             points.push(serde_json::json!(xi as u32));
@@ -209,13 +253,21 @@ impl Target for Rpi {
         let contrast = block(&mut root, "rpi.contrast", self.file())?;
         contrast["gamma_curve"] = Value::Array(points);
         contrast["ce_enable"] = serde_json::json!(0);
-        let mut text = serde_json::to_string_pretty(&root).map_err(|e| TargetError::Parse { file: self.file().into(), format: "JSON", message: e.to_string() })?;
+        let mut text = serde_json::to_string_pretty(&root).map_err(|e| TargetError::Parse {
+            file: self.file().into(),
+            format: "JSON",
+            message: e.to_string(),
+        })?;
         text.push('\n');
         Ok(text.into_bytes())
     }
 
     fn emulate(&self, _params: &Params, exported: &[u8], base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
-        let text = std::str::from_utf8(exported).map_err(|e| TargetError::Parse { file: "export".into(), format: "UTF-8", message: e.to_string() })?;
+        let text = std::str::from_utf8(exported).map_err(|e| TargetError::Parse {
+            file: "export".into(),
+            format: "UTF-8",
+            message: e.to_string(),
+        })?;
         let (_, ours) = parse(text, "export")?;
         let base = base.ok_or(TargetError::NeedsBase { target: self.name() })?;
         let (_, theirs) = parse(base, self.file())?;
@@ -224,7 +276,11 @@ impl Target for Rpi {
         }
         let given = curve_from_points(&ours.gamma, FULL, "rpi.contrast.gamma_curve")?;
         if ours.ce_enable.unwrap_or(1) != 0 {
-            return Err(field("export", "rpi.contrast.ce_enable", "must be 0: adaptive contrast enhancement would rewrite the curve per frame"));
+            return Err(field(
+                "export",
+                "rpi.contrast.ce_enable",
+                "must be 0: adaptive contrast enhancement would rewrite the curve per frame",
+            ));
         }
         let curve = self.hardware_curve(&given);
         let fmt = self.matrix_format();
@@ -232,7 +288,12 @@ impl Target for Rpi {
             .ccms
             .iter()
             .zip(&theirs.ccms)
-            .map(|((ct, m), (_, device))| Condition { bound: None, label: format!("ct {ct}"), feed: Feed::Sensor(*device), emulator: Box::new(Isp { matrix: fmt.apply(m), curve: curve.clone() }) })
+            .map(|((ct, m), (_, device))| Condition {
+                bound: None,
+                label: format!("ct {ct}"),
+                feed: Feed::Sensor(*device),
+                emulator: Box::new(Isp { matrix: fmt.apply(m), curve: curve.clone() }),
+            })
             .collect())
     }
 }
@@ -240,8 +301,13 @@ impl Target for Rpi {
 /// The ISP curve of a CamPro curve exported to `target`, against the CamPro curve:
 /// the largest difference (output units) on a fine grid and at every knot.
 pub fn curve_error(target: Rpi, curve: &ToneCurve) -> f64 {
-    let pts: Vec<(f64, f64)> = curve.x().iter().zip(curve.y()).map(|(x, y)| ((x * FULL).round(), (y * FULL).round())).collect();
+    let pts: Vec<(f64, f64)> =
+        curve.x().iter().zip(curve.y()).map(|(x, y)| ((x * FULL).round(), (y * FULL).round())).collect();
     let given = curve_from_points(&pts, FULL, "curve").expect("a valid curve stays valid on 16 bits");
     let hw = target.hardware_curve(&given);
-    (0..=4096).map(|i| i as f64 / 4096.0).chain(curve.x().iter().copied()).map(|t| (hw.eval(t) - curve.eval(t)).abs()).fold(0.0, f64::max)
+    (0..=4096)
+        .map(|i| i as f64 / 4096.0)
+        .chain(curve.x().iter().copied())
+        .map(|t| (hw.eval(t) - curve.eval(t)).abs())
+        .fold(0.0, f64::max)
 }

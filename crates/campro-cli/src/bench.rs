@@ -1,16 +1,16 @@
 //! `campro bench`: one table of run time against error for every path and setting,
 //! with the copy baseline measured in the same run. Medians over repeated runs.
 
-use campro::targets::camera2::Camera2Loop;
 use campro::ccm::{self, Mat3};
 use campro::color_temp::DngCalibration;
 use campro::compare::random_pixels;
-use campro_testkit::bench::test_frame;
 use campro::lut3d::{Interp, Lut3d};
 use campro::pipeline::fast::{Exact8, F32Path};
 use campro::pipeline::{Depth, Prepared};
+use campro::targets::camera2::Camera2Loop;
 use campro::targets::camera2::{convert, Options, RationalMode};
 use campro::Params;
+use campro_testkit::bench::test_frame;
 use rayon::prelude::*;
 use std::hint::black_box;
 use std::time::Instant;
@@ -65,11 +65,19 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
     let mut sample: Vec<u8> = frame.clone();
     sample.extend(random_pixels(if quick { 100_000 } else { 1_000_000 }, 7).into_iter().flatten());
     let reference = Prepared::new(params, Depth::Eight);
-    let want: Vec<[f64; 3]> = sample.chunks_exact(3).map(|c| reference.pixel([c[0] as u16, c[1] as u16, c[2] as u16])).collect();
+    let want: Vec<[f64; 3]> =
+        sample.chunks_exact(3).map(|c| reference.pixel([c[0] as u16, c[1] as u16, c[2] as u16])).collect();
     let mut sample_out = vec![0u8; sample.len()];
 
     let copy = median(many, || out.copy_from_slice(black_box(&frame)));
-    rows.push(Row { group: "image", name: "copy (baseline)".into(), time: ms(copy), max_lsb: 0.0, mean_lsb: 0.0, note: "1.00x".into() });
+    rows.push(Row {
+        group: "image",
+        name: "copy (baseline)".into(),
+        time: ms(copy),
+        max_lsb: 0.0,
+        mean_lsb: 0.0,
+        note: "1.00x".into(),
+    });
     let ratio = |s: f64| format!("{:.1}x copy", s / copy);
 
     let f16: Vec<u16> = frame.iter().map(|&v| v as u16).collect();
@@ -79,7 +87,14 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
     let t = median(runs.min(5), || reference.run(black_box(&f16), &mut o16, Depth::Eight));
     reference.run(&s16, &mut so16, Depth::Eight);
     let e = err8(&so16.iter().map(|&v| v as u8).collect::<Vec<_>>(), &want);
-    rows.push(Row { group: "image", name: "f64 reference, 1 thread".into(), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: ratio(t) });
+    rows.push(Row {
+        group: "image",
+        name: "f64 reference, 1 thread".into(),
+        time: ms(t),
+        max_lsb: e.0,
+        mean_lsb: e.1,
+        note: ratio(t),
+    });
 
     let exact = Exact8::new(params);
     let t = median(many, || {
@@ -89,23 +104,57 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
     exact.run(&sample, &mut sample_out);
     let e = err8(&sample_out, &want);
     let px = (w * h) as f64 / 100.0;
-    let fb = format!("{}, {:?} engine; {:.2}% px flagged to the reference, {:.3}% ambiguous in the tables", ratio(t), exact.engine(), fell.flagged as f64 / px, fell.ambiguous as f64 / px);
-    rows.push(Row { group: "image", name: "exact 8-bit, 1 thread (default)".into(), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: fb });
+    let fb = format!(
+        "{}, {:?} engine; {:.2}% px flagged to the reference, {:.3}% ambiguous in the tables",
+        ratio(t),
+        exact.engine(),
+        fell.flagged as f64 / px,
+        fell.ambiguous as f64 / px
+    );
+    rows.push(Row {
+        group: "image",
+        name: "exact 8-bit, 1 thread (default)".into(),
+        time: ms(t),
+        max_lsb: e.0,
+        mean_lsb: e.1,
+        note: fb,
+    });
     let scalar = Exact8::new(params).scalar();
     let t = median(runs, || {
         scalar.run(black_box(&frame), &mut out);
     });
     let fb = format!("{}, {:.2}% cells to reference", ratio(t), 100.0 * scalar.fallback_fraction());
-    rows.push(Row { group: "image", name: "exact 8-bit, scalar tables, 1 thread".into(), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: fb });
+    rows.push(Row {
+        group: "image",
+        name: "exact 8-bit, scalar tables, 1 thread".into(),
+        time: ms(t),
+        max_lsb: e.0,
+        mean_lsb: e.1,
+        note: fb,
+    });
     let t = median(runs, || {
         scalar.run_runs(black_box(&frame), &mut out);
     });
-    rows.push(Row { group: "skip", name: "exact 8-bit scalar + reuse repeated pixels, 1 thread".into(), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: ratio(t) });
+    rows.push(Row {
+        group: "skip",
+        name: "exact 8-bit scalar + reuse repeated pixels, 1 thread".into(),
+        time: ms(t),
+        max_lsb: e.0,
+        mean_lsb: e.1,
+        note: ratio(t),
+    });
     let f32p = F32Path::new(params, Depth::Eight);
     let t = median(runs, || f32p.run(black_box(&frame), &mut out, Depth::Eight));
     f32p.run(&sample, &mut sample_out, Depth::Eight);
     let e = err8(&sample_out, &want);
-    rows.push(Row { group: "image", name: "f32, 1 thread".into(), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: format!("{}, bound {:.1e} LSB + rounding", ratio(t), f32p.error_bound() * 255.0) });
+    rows.push(Row {
+        group: "image",
+        name: "f32, 1 thread".into(),
+        time: ms(t),
+        max_lsb: e.0,
+        mean_lsb: e.1,
+        note: format!("{}, bound {:.1e} LSB + rounding", ratio(t), f32p.error_bound() * 255.0),
+    });
 
     // Stage elision: the same output with an exactly-identity CCM, elided or not.
     let mut id_ccm = params.clone();
@@ -115,7 +164,14 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
     let (fa, fb2) = (F32Path::new(&id_ccm, Depth::Eight), F32Path::new(&almost, Depth::Eight));
     let ta = median(runs, || fa.run(black_box(&frame), &mut out, Depth::Eight));
     let tb = median(runs, || fb2.run(black_box(&frame), &mut out, Depth::Eight));
-    rows.push(Row { group: "skip", name: "f32, identity CCM elided".into(), time: ms(ta), max_lsb: f64::NAN, mean_lsb: f64::NAN, note: format!("vs {} not elided: saves {:.0}%", ms(tb), 100.0 * (1.0 - ta / tb)) });
+    rows.push(Row {
+        group: "skip",
+        name: "f32, identity CCM elided".into(),
+        time: ms(ta),
+        max_lsb: f64::NAN,
+        mean_lsb: f64::NAN,
+        note: format!("vs {} not elided: saves {:.0}%", ms(tb), 100.0 * (1.0 - ta / tb)),
+    });
 
     for n in [17, 33, 65] {
         let lut = Lut3d::bake(params, n);
@@ -123,7 +179,14 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
             let t = median(runs, || lut.run(black_box(&frame), &mut out, interp));
             lut.run(&sample, &mut sample_out, interp);
             let e = err8(&sample_out, &want);
-            rows.push(Row { group: "image", name: format!("3D LUT {n}^3 {interp:?}, 1 thread"), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: ratio(t) });
+            rows.push(Row {
+                group: "image",
+                name: format!("3D LUT {n}^3 {interp:?}, 1 thread"),
+                time: ms(t),
+                max_lsb: e.0,
+                mean_lsb: e.1,
+                note: ratio(t),
+            });
         }
     }
 
@@ -135,7 +198,14 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
             exact.run(s, d);
         })
     });
-    rows.push(Row { group: "image", name: format!("exact 8-bit, {threads} threads (simulate)"), time: ms(t), max_lsb: e.0, mean_lsb: e.1, note: ratio(t) });
+    rows.push(Row {
+        group: "image",
+        name: format!("exact 8-bit, {threads} threads (simulate)"),
+        time: ms(t),
+        max_lsb: e.0,
+        mean_lsb: e.1,
+        note: ratio(t),
+    });
 
     // Camera2 updates.
     let us = |s: f64| format!("{:.3} us/update", s * 1e6);
@@ -144,7 +214,14 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
         black_box(convert(black_box(params), black_box(&PHONE), &Options::default()).unwrap());
     });
     let v = convert(params, &PHONE, &Options::default()).unwrap();
-    rows.push(Row { group: "camera2", name: "full conversion (compose, scale, rationals, curve, bound)".into(), time: us(t), max_lsb: v.report.bound_lsb(), mean_lsb: f64::NAN, note: "max = stated bound".into() });
+    rows.push(Row {
+        group: "camera2",
+        name: "full conversion (compose, scale, rationals, curve, bound)".into(),
+        time: us(t),
+        max_lsb: v.report.bound_lsb(),
+        mean_lsb: f64::NAN,
+        note: "max = stated bound".into(),
+    });
     let mut l = Camera2Loop::new(params.clone(), Options::default(), 0.0).unwrap();
     let mut other = PHONE;
     other[0][0] += 0.01;
@@ -153,13 +230,27 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
         k += 1;
         black_box(l.update(if k.is_multiple_of(2) { &PHONE } else { &other }).unwrap().recomputed);
     });
-    rows.push(Row { group: "camera2", name: "loop update, scene moved (curve half cached)".into(), time: us(t), max_lsb: v.report.bound_lsb(), mean_lsb: f64::NAN, note: String::new() });
+    rows.push(Row {
+        group: "camera2",
+        name: "loop update, scene moved (curve half cached)".into(),
+        time: us(t),
+        max_lsb: v.report.bound_lsb(),
+        mean_lsb: f64::NAN,
+        note: String::new(),
+    });
     let mut l = Camera2Loop::new(params.clone(), Options::default(), 0.25 / 255.0).unwrap();
     l.update(&PHONE).unwrap();
     let t = per_call(batch * 10, runs, || {
         black_box(l.update(black_box(&PHONE)).unwrap().recomputed);
     });
-    rows.push(Row { group: "skip", name: "loop update, scene unchanged (skipped)".into(), time: us(t), max_lsb: v.report.bound_lsb(), mean_lsb: f64::NAN, note: String::new() });
+    rows.push(Row {
+        group: "skip",
+        name: "loop update, scene unchanged (skipped)".into(),
+        time: us(t),
+        max_lsb: v.report.bound_lsb(),
+        mean_lsb: f64::NAN,
+        note: String::new(),
+    });
 
     for d in [16u32, 256, 4096, 1 << 16, 1 << 24] {
         let o = Options { rational: RationalMode::Best { max_denominator: d }, ..Options::default() };
@@ -167,7 +258,14 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
             black_box(convert(params, &PHONE, &o).unwrap());
         });
         let v = convert(params, &PHONE, &o).unwrap();
-        rows.push(Row { group: "camera2", name: format!("rationals, denominator <= {d}"), time: us(t), max_lsb: v.report.bound_lsb(), mean_lsb: f64::NAN, note: format!("entry error {:.1e}", v.report.matrix_max_abs) });
+        rows.push(Row {
+            group: "camera2",
+            name: format!("rationals, denominator <= {d}"),
+            time: us(t),
+            max_lsb: v.report.bound_lsb(),
+            mean_lsb: f64::NAN,
+            note: format!("entry error {:.1e}", v.report.matrix_max_abs),
+        });
     }
     // Curve budgets on a fine (256-knot) version of the curve.
     let mut fine = params.clone();
@@ -178,11 +276,25 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
             black_box(convert(&fine, &PHONE, &o).unwrap());
         });
         let v = convert(&fine, &PHONE, &o).unwrap();
-        rows.push(Row { group: "camera2", name: format!("256-knot curve in {pts} points"), time: us(t), max_lsb: v.report.bound_lsb(), mean_lsb: f64::NAN, note: format!("curve error {:.3} LSB", v.report.curve_max_abs * 255.0) });
+        rows.push(Row {
+            group: "camera2",
+            name: format!("256-knot curve in {pts} points"),
+            time: us(t),
+            max_lsb: v.report.bound_lsb(),
+            mean_lsb: f64::NAN,
+            note: format!("curve error {:.3} LSB", v.report.curve_max_abs * 255.0),
+        });
     }
     for tol_lsb in [0.1, 0.5, 1.0] {
         let (c, e) = fine.tone_curve.simplify_within(tol_lsb / 255.0);
-        rows.push(Row { group: "skip", name: format!("fewest curve points within {tol_lsb} LSB"), time: "-".into(), max_lsb: e * 255.0, mean_lsb: f64::NAN, note: format!("{} of 256 points", c.len()) });
+        rows.push(Row {
+            group: "skip",
+            name: format!("fewest curve points within {tol_lsb} LSB"),
+            time: "-".into(),
+            max_lsb: e * 255.0,
+            mean_lsb: f64::NAN,
+            note: format!("{} of 256 points", c.len()),
+        });
     }
     // Colour temperature drifting 2800 K -> 6500 K over 1000 frames: recomputes saved by
     // the skip rule and the error it allowed.
@@ -204,14 +316,42 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
                 worst = worst.max(l.update_ct(ct_at(f)).unwrap().bound);
             }
             let t = s.elapsed().as_secs_f64() / 1000.0;
-            rows.push(Row { group: "skip", name: format!("{scene}, tolerance {tol} LSB"), time: us(t), max_lsb: worst * 255.0, mean_lsb: f64::NAN, note: format!("{} of 1000 frames recomputed", l.stats().recomputes) });
+            rows.push(Row {
+                group: "skip",
+                name: format!("{scene}, tolerance {tol} LSB"),
+                time: us(t),
+                max_lsb: worst * 255.0,
+                mean_lsb: f64::NAN,
+                note: format!("{} of 1000 frames recomputed", l.stats().recomputes),
+            });
         }
     }
 
-    let mut lines = vec![format!("| group | path / setting | median time | max err (LSB8) | mean err (LSB8) | note |"), "|---|---|---|---|---|---|".to_string()];
-    let f = |v: f64| if v.is_nan() { "-".to_string() } else if v == 0.0 { "0".into() } else if v < 0.01 { format!("{v:.1e}") } else { format!("{v:.3}") };
+    let mut lines = vec![
+        format!("| group | path / setting | median time | max err (LSB8) | mean err (LSB8) | note |"),
+        "|---|---|---|---|---|---|".to_string(),
+    ];
+    let f = |v: f64| {
+        if v.is_nan() {
+            "-".to_string()
+        } else if v == 0.0 {
+            "0".into()
+        } else if v < 0.01 {
+            format!("{v:.1e}")
+        } else {
+            format!("{v:.3}")
+        }
+    };
     for r in rows {
-        lines.push(format!("| {} | {} | {} | {} | {} | {} |", r.group, r.name, r.time, f(r.max_lsb), f(r.mean_lsb), r.note));
+        lines.push(format!(
+            "| {} | {} | {} | {} | {} | {} |",
+            r.group,
+            r.name,
+            r.time,
+            f(r.max_lsb),
+            f(r.mean_lsb),
+            r.note
+        ));
     }
     lines
 }

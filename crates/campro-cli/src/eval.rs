@@ -2,7 +2,6 @@
 //! (campro-eval), with CamPro parameter sets run through the exact 8-bit pipeline.
 
 use anyhow::{anyhow, bail, Context, Result};
-use std::collections::HashMap;
 use campro::pipeline::fast::Exact8;
 use campro::Params;
 use campro_eval::baselines::Baseline;
@@ -15,6 +14,7 @@ use campro_eval::utility::UtilityOptions;
 use campro_eval::{data, privacy, quality, report, utility, Condition};
 use clap::{Args, Subcommand};
 use image::RgbImage;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// The shipped manifests (files resolved against `--models`).
@@ -165,7 +165,10 @@ pub struct UtilityArgs {
 
 impl Common {
     fn shared(&self) -> PathBuf {
-        self.shared.clone().or_else(|| std::env::var_os("CAMPRO_SHARED").map(PathBuf::from)).unwrap_or_else(|| PathBuf::from("../shared"))
+        self.shared
+            .clone()
+            .or_else(|| std::env::var_os("CAMPRO_SHARED").map(PathBuf::from))
+            .unwrap_or_else(|| PathBuf::from("../shared"))
     }
 
     fn models_dir(&self) -> PathBuf {
@@ -251,9 +254,18 @@ fn read_identities(path: &Path) -> Result<Vec<String>> {
     let names: Vec<String> = if text.trim_start().starts_with('{') {
         let v: serde_json::Value = serde_json::from_str(&text).with_context(|| path.display().to_string())?;
         let list = v.pointer("/provenance/data/validation_identities").and_then(|l| l.as_array()).ok_or_else(|| {
-            anyhow!("{}: provenance.data.validation_identities: missing (not a parameter file from campro train)", path.display())
+            anyhow!(
+                "{}: provenance.data.validation_identities: missing (not a parameter file from campro train)",
+                path.display()
+            )
         })?;
-        list.iter().map(|n| n.as_str().map(str::to_string).ok_or_else(|| anyhow!("{}: validation_identities: names must be strings", path.display()))).collect::<Result<_>>()?
+        list.iter()
+            .map(|n| {
+                n.as_str()
+                    .map(str::to_string)
+                    .ok_or_else(|| anyhow!("{}: validation_identities: names must be strings", path.display()))
+            })
+            .collect::<Result<_>>()?
     } else {
         text.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('#')).map(str::to_string).collect()
     };
@@ -321,7 +333,8 @@ fn with_restorations(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result
 
 fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utility::UtilityReport> {
     let coco_dir = a.coco.clone().unwrap_or_else(|| c.shared().join("data/coco-person"));
-    let images = data::coco_person(&coco_dir).with_context(|| "reading the COCO person set (set --coco or --shared)")?;
+    let images =
+        data::coco_person(&coco_dir).with_context(|| "reading the COCO person set (set --coco or --shared)")?;
     let model = load(&a.person_detector, &c.models_dir())?;
     let name = model.manifest.name.clone();
     let det = PersonDetector::new(model)?;
@@ -339,7 +352,10 @@ fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utili
         r.rows.sort_by_key(|row| conds.iter().position(|x| x.name == row.condition));
         let mut names: Vec<&String> = own.keys().collect();
         names.sort();
-        r.detector = format!("{name}; {} each with its own fine-tuned detector", names.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", "));
+        r.detector = format!(
+            "{name}; {} each with its own fine-tuned detector",
+            names.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", ")
+        );
     }
     report::write_utility(&r, &c.output)?;
     eprintln!("utility: {} images, {:.0} s -> {}", r.images, r.seconds, c.output.join("utility.md").display());
@@ -351,7 +367,8 @@ fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utili
 fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBuf>> {
     let mut own = HashMap::new();
     for path in params {
-        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).with_context(|| path.display().to_string())?)?;
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(path).with_context(|| path.display().to_string())?)?;
         if let Some(m) = v.pointer("/provenance/detector/manifest").and_then(|m| m.as_str()) {
             let manifest = path.parent().unwrap_or(Path::new(".")).join(m);
             if !manifest.is_file() {

@@ -28,7 +28,11 @@ const DEFAULT_PARAMS: &str = include_str!("../../../params/campro-omega-0.5.json
 const DEFAULT_PARAMS_FILE: &str = "params/campro-omega-0.5.json";
 
 #[derive(Parser)]
-#[command(name = "campro", version, about = "CamPro anti-facial-recognition ISP parameters: simulate, convert to Camera2, compare")]
+#[command(
+    name = "campro",
+    version,
+    about = "CamPro anti-facial-recognition ISP parameters: simulate, convert to Camera2, compare"
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -246,7 +250,10 @@ impl FileTargetArgs {
                 if !(2..=256).contains(&self.cube_size) {
                     bail!("--cube-size must be in 2..=256, got {}", self.cube_size);
                 }
-                Ok(Box::new(campro::targets::cube::CubeFile { kind: campro::targets::cube::Kind::Cube, size: self.cube_size }))
+                Ok(Box::new(campro::targets::cube::CubeFile {
+                    kind: campro::targets::cube::Kind::Cube,
+                    size: self.cube_size,
+                }))
             }
             ("hald", _) => {
                 if !(2..=16).contains(&self.hald_level) {
@@ -300,8 +307,12 @@ fn main() {
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
         Cmd::Eval { what } => eval::run(what),
-        Cmd::Train { config, output, log, checkpoints, resume, init, force } => train::train(&config, &output, log.as_deref(), checkpoints, resume, init.as_deref(), force),
-        Cmd::FinetuneDetector { params, config, steps, seconds, log, force } => train::finetune_detector(&params, config.as_deref(), steps, seconds, log.as_deref(), force),
+        Cmd::Train { config, output, log, checkpoints, resume, init, force } => {
+            train::train(&config, &output, log.as_deref(), checkpoints, resume, init.as_deref(), force)
+        }
+        Cmd::FinetuneDetector { params, config, steps, seconds, log, force } => {
+            train::finetune_detector(&params, config.as_deref(), steps, seconds, log.as_deref(), force)
+        }
         Cmd::Validate { params } => {
             for p in params {
                 let v = load_params(&p)?;
@@ -320,7 +331,8 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Cmd::ImportPt { checkpoint, output, force } => {
-            let p = campro::import_pt::read_checkpoint(&checkpoint).map_err(|e| anyhow!("{}: {e}", checkpoint.display()))?;
+            let p = campro::import_pt::read_checkpoint(&checkpoint)
+                .map_err(|e| anyhow!("{}: {e}", checkpoint.display()))?;
             write_atomic(&output, p.to_json().as_bytes(), force)?;
             eprintln!("wrote {} ({} knots)", output.display(), p.tone_curve.len());
             Ok(())
@@ -379,7 +391,17 @@ fn run(cli: Cli) -> Result<()> {
         }
         Cmd::Simulate { params, inputs, output, bit_depth, force, jobs } => {
             let p = load_params(&params)?;
-            simulate(&p, &inputs, &output, match bit_depth { BitDepth::Eight => Depth::Eight, BitDepth::Sixteen => Depth::Sixteen }, force, jobs)
+            simulate(
+                &p,
+                &inputs,
+                &output,
+                match bit_depth {
+                    BitDepth::Eight => Depth::Eight,
+                    BitDepth::Sixteen => Depth::Sixteen,
+                },
+                force,
+                jobs,
+            )
         }
         Cmd::Demo { output, params } => demo(&output, params.as_deref()),
         Cmd::Bench { params, quick } => {
@@ -434,7 +456,9 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
 /// to replace `path` unless `force` (checked once, at the rename).
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()> {
     match campro_eval::atomic::write(path, bytes, force) {
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => bail!("{} exists (use --force to overwrite)", path.display()),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+            bail!("{} exists (use --force to overwrite)", path.display())
+        }
         r => r.with_context(|| path.display().to_string()),
     }
 }
@@ -471,7 +495,10 @@ fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Vec<(PathBuf, PathBu
 }
 
 fn is_image(path: &Path) -> bool {
-    path.extension().and_then(|e| e.to_str()).map(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str())).unwrap_or(false)
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+        .unwrap_or(false)
 }
 
 fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force: bool, jobs: Option<usize>) -> Result<()> {
@@ -481,7 +508,11 @@ fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force: boo
     for (i, _) in &others {
         eprintln!("warning: skipping {} (not a PNG, JPEG or TIFF file)", i.display());
     }
-    let bar = if images.len() > 4 { indicatif::ProgressBar::new(images.len() as u64) } else { indicatif::ProgressBar::hidden() };
+    let bar = if images.len() > 4 {
+        indicatif::ProgressBar::new(images.len() as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
     bar.set_style(indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta}").unwrap());
     // The 16-bit degamma table (65536 powers) is built only if a 16-bit image turns up.
     let prepared8 = Prepared::new(p, Depth::Eight);
@@ -511,7 +542,15 @@ fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force: boo
     Ok(())
 }
 
-fn simulate_one<'a>(fast8: &Exact8<'a>, p8: &Prepared<'a>, p16: &std::sync::OnceLock<Prepared<'a>>, input: &Path, output: &Path, depth: Depth, force: bool) -> Result<()> {
+fn simulate_one<'a>(
+    fast8: &Exact8<'a>,
+    p8: &Prepared<'a>,
+    p16: &std::sync::OnceLock<Prepared<'a>>,
+    input: &Path,
+    output: &Path,
+    depth: Depth,
+    force: bool,
+) -> Result<()> {
     let reader = image::ImageReader::open(input)?.with_guessed_format()?;
     let img = reader.decode()?;
     let (w, h) = (img.width(), img.height());
@@ -567,8 +606,9 @@ struct Row {
 
 /// Every condition on every test pixel set (every grey level first).
 fn comparison(p: &Params, conditions: &[Condition], random: usize, seed: u64) -> Result<Vec<Row>> {
-    let sets: Vec<(String, Vec<[u8; 3]>)> =
-        std::iter::once(("every grey level".to_string(), compare::grey_levels())).chain(pixel_sets(random, seed)).collect();
+    let sets: Vec<(String, Vec<[u8; 3]>)> = std::iter::once(("every grey level".to_string(), compare::grey_levels()))
+        .chain(pixel_sets(random, seed))
+        .collect();
     let mut rows = Vec::new();
     for c in conditions {
         for (name, px) in &sets {
@@ -590,11 +630,22 @@ fn pixel_sets(random: usize, seed: u64) -> [(String, Vec<[u8; 3]>); 3] {
 }
 
 fn print_comparison(rows: &[Row]) {
-    println!("{:<16} {:<22} {:>10} {:>10} {:>10} {:>12}", "condition", "pixels", "max LSB", "mean LSB", "PSNR dB", "bound LSB");
+    println!(
+        "{:<16} {:<22} {:>10} {:>10} {:>10} {:>12}",
+        "condition", "pixels", "max LSB", "mean LSB", "PSNR dB", "bound LSB"
+    );
     for r in rows {
         let bound = r.bound.map_or("-".to_string(), |b| format!("{:.4}", b * 255.0));
         let s = &r.stats;
-        println!("{:<16} {:<22} {:>10.4} {:>10.5} {:>10.2} {:>12}", r.condition, r.pixels, s.max_lsb(), s.mean_lsb(), s.psnr(), bound);
+        println!(
+            "{:<16} {:<22} {:>10.4} {:>10.5} {:>10.2} {:>12}",
+            r.condition,
+            r.pixels,
+            s.max_lsb(),
+            s.mean_lsb(),
+            s.psnr(),
+            bound
+        );
     }
 }
 
@@ -631,10 +682,19 @@ fn demo(out: &Path, params: Option<&Path>) -> Result<()> {
     println!("  COLOR_CORRECTION_TRANSFORM (num/den pairs): {:?}", v.color_correction_transform);
     let c = &v.tonemap_curve.red;
     let pts: Vec<String> = c.chunks(2).take(4).map(|p| format!("({:.4}, {:.4})", p[0], p[1])).collect();
-    println!("  TONEMAP_CURVE: {} points per channel: {}, ... ({:.4}, {:.4})", c.len() / 2, pts.join(", "), c[c.len() - 2], c[c.len() - 1]);
+    println!(
+        "  TONEMAP_CURVE: {} points per channel: {}, ... ({:.4}, {:.4})",
+        c.len() / 2,
+        pts.join(", "),
+        c[c.len() - 2],
+        c[c.len() - 1]
+    );
     println!(
         "  matrix scale {}, rational error {:.2e}, curve error {:.2e}, bound {:.2e} LSB over sensor RGB in [0,1]",
-        v.scale, v.report.matrix_max_abs, v.report.curve_max_abs, v.report.bound_lsb()
+        v.scale,
+        v.report.matrix_max_abs,
+        v.report.curve_max_abs,
+        v.report.bound_lsb()
     );
     println!("\nSimulated device vs desktop pipeline:");
     let device = Camera2::default();

@@ -5,7 +5,15 @@ use anyhow::{bail, Result};
 use campro_train::yolox::Yolox;
 use std::path::{Path, PathBuf};
 
-pub fn train(config: &Path, output: &Path, log: Option<&Path>, checkpoints: Option<PathBuf>, resume: Option<PathBuf>, init: Option<&Path>, force: bool) -> Result<()> {
+pub fn train(
+    config: &Path,
+    output: &Path,
+    log: Option<&Path>,
+    checkpoints: Option<PathBuf>,
+    resume: Option<PathBuf>,
+    init: Option<&Path>,
+    force: bool,
+) -> Result<()> {
     let cfg = campro_train::config::Config::load(config)?;
     let init = match init {
         Some(p) => Some(campro_train::train::Initial::from_params(&load_params(p)?, &p.display().to_string())?),
@@ -18,12 +26,22 @@ pub fn train(config: &Path, output: &Path, log: Option<&Path>, checkpoints: Opti
         }
     }
     let pb = indicatif::ProgressBar::new(cfg.budget.rounds as u64);
-    pb.set_style(indicatif::ProgressStyle::with_template("train [{bar:30}] round {pos}/{len} {elapsed_precise} eta {eta} {msg}").unwrap().progress_chars("=> "));
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("train [{bar:30}] round {pos}/{len} {elapsed_precise} eta {eta} {msg}")
+            .unwrap()
+            .progress_chars("=> "),
+    );
     let out = campro_train::train::run(&cfg, opts, |r| {
         pb.set_position(r.round as u64);
-        pb.set_message(format!("L_ns {:.4} L_det {:.3} attacker acc {:.2}", r.privacy_loss, r.detection_loss, r.attacker_accuracy));
+        pb.set_message(format!(
+            "L_ns {:.4} L_det {:.3} attacker acc {:.2}",
+            r.privacy_loss, r.detection_loss, r.attacker_accuracy
+        ));
         if let Some(c) = r.check_accuracy {
-            let line = format!("round {}: check accuracy {:.3} (attacker CE {:.3}, L_ns {:.4}, L_det {:.3}, {:.0} s)", r.round, c, r.attacker_ce, r.privacy_loss, r.detection_loss, r.seconds);
+            let line = format!(
+                "round {}: check accuracy {:.3} (attacker CE {:.3}, L_ns {:.4}, L_det {:.3}, {:.0} s)",
+                r.round, c, r.attacker_ce, r.privacy_loss, r.detection_loss, r.seconds
+            );
             // A hidden bar (not a terminal: logs, CI) prints nothing: the line goes to stderr.
             if pb.is_hidden() {
                 eprintln!("{line}");
@@ -60,7 +78,6 @@ pub fn train(config: &Path, output: &Path, log: Option<&Path>, checkpoints: Opti
     Ok(())
 }
 
-
 /// Writes a fine-tuned detector beside the parameter file `params_path` (`.detector.onnx`)
 /// with a manifest `eval utility --person-detector` reads (the bundled one naming the new
 /// file, `.detector.json`); returns the provenance entry naming both.
@@ -78,14 +95,23 @@ fn write_detector(det: &Yolox, params_path: &Path, name: &str, force: bool) -> R
     m["name"] = format!("yolox-nano fine-tuned ({name})").into();
     m["file"] = file.clone().into();
     write_atomic(&manifest_path, (serde_json::to_string_pretty(&m)? + "\n").as_bytes(), force)?;
-    Ok(serde_json::json!({ "onnx": file, "manifest": manifest_path.file_name().map(|f| f.to_string_lossy().into_owned()),
-                           "held_out_images": format!("COCO id % {} == 0 (never trained on)", campro_eval::data::HOLDOUT_EVERY) }))
+    Ok(
+        serde_json::json!({ "onnx": file, "manifest": manifest_path.file_name().map(|f| f.to_string_lossy().into_owned()),
+                           "held_out_images": format!("COCO id % {} == 0 (never trained on)", campro_eval::data::HOLDOUT_EVERY) }),
+    )
 }
 
 /// The optimiser's camera values of `params` (read from `path`): CCM rows, curve outputs,
 /// degamma exponent; its curve must have evenly spaced knots.
 /// Fine-tunes YOLOX-Nano behind the camera of `params_path` and records it in that file.
-pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize, seconds: f64, log: Option<&Path>, force: bool) -> Result<()> {
+pub fn finetune_detector(
+    params_path: &Path,
+    config: Option<&Path>,
+    steps: usize,
+    seconds: f64,
+    log: Option<&Path>,
+    force: bool,
+) -> Result<()> {
     if steps == 0 {
         bail!("--steps: must be at least 1");
     }
@@ -102,11 +128,18 @@ pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize
         }
     }
     let mut params = load_params(params_path)?;
-    let campro_train::train::Initial { ccm, curve, gamma, .. } = campro_train::train::Initial::from_params(&params, &params_path.display().to_string())?;
+    let campro_train::train::Initial { ccm, curve, gamma, .. } =
+        campro_train::train::Initial::from_params(&params, &params_path.display().to_string())?;
     let imaging = campro_train::finetune::Imaging::Camera { ccm, curve, gamma };
     let opts = campro_train::finetune::FinetuneOptions { steps, seconds, seed: cfg.seed };
     let pb = indicatif::ProgressBar::new(steps as u64);
-    pb.set_style(indicatif::ProgressStyle::with_template("finetune-detector [{bar:30}] step {pos}/{len} {elapsed_precise} eta {eta} {msg}").unwrap().progress_chars("=> "));
+    pb.set_style(
+        indicatif::ProgressStyle::with_template(
+            "finetune-detector [{bar:30}] step {pos}/{len} {elapsed_precise} eta {eta} {msg}",
+        )
+        .unwrap()
+        .progress_chars("=> "),
+    );
     let every = (steps / 20).max(1);
     let done = campro_train::finetune::run(&imaging, &cfg.detector, &opts, |r| {
         pb.set_position(r.step as u64);
@@ -123,7 +156,10 @@ pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize
     if let Some(l) = log {
         let mut csv = String::from("step,seconds,loss,iou,obj,cls,positives,kd\n");
         for r in &done.log {
-            csv += &format!("{},{:.3},{:.6},{:.6},{:.6},{:.6},{},{:.6}\n", r.step, r.seconds, r.loss, r.iou, r.obj, r.cls, r.positives, r.kd);
+            csv += &format!(
+                "{},{:.3},{:.6},{:.6},{:.6},{:.6},{},{:.6}\n",
+                r.step, r.seconds, r.loss, r.iou, r.obj, r.cls, r.positives, r.kd
+            );
         }
         write_atomic(l, csv.as_bytes(), force)?;
     }
@@ -136,6 +172,12 @@ pub fn finetune_detector(params_path: &Path, config: Option<&Path>, steps: usize
     });
     params.provenance.insert("detector".into(), entry);
     write_atomic(params_path, params.to_json().as_bytes(), true)?;
-    eprintln!("fine-tuned the detector {} steps on {} images in {:.0} s -> {}", done.log.len(), done.images, done.log.last().map_or(0.0, |r| r.seconds), params_path.with_extension("detector.json").display());
+    eprintln!(
+        "fine-tuned the detector {} steps on {} images in {:.0} s -> {}",
+        done.log.len(),
+        done.images,
+        done.log.last().map_or(0.0, |r| r.seconds),
+        params_path.with_extension("detector.json").display()
+    );
     Ok(())
 }

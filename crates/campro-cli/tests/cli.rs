@@ -1,7 +1,6 @@
 //! The `campro` command line, end to end: outputs, bad input (one-line errors, non-zero
 //! exit, no panic, no partial files), overwrite rules.
 
-
 use assert_cmd::Command;
 use campro::Params;
 use std::io::Write;
@@ -23,11 +22,15 @@ fn fails_with(cmd: &mut Command, needle: &str) {
     assert!(!err.contains("panicked"), "panic: {err}");
     assert!(err.contains(needle), "stderr {err:?} lacks {needle:?}");
     assert!(!err.contains("Caused by") && !err.contains("backtrace"), "{err}");
-    assert!(err.lines().all(|l| l.starts_with("error") || l.starts_with("warning") || l.starts_with("simulated")), "one line per error: {err}");
+    assert!(
+        err.lines().all(|l| l.starts_with("error") || l.starts_with("warning") || l.starts_with("simulated")),
+        "one line per error: {err}"
+    );
 }
 
 fn files_in(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = walk(dir).into_iter().map(|p| p.strip_prefix(dir).unwrap().display().to_string()).collect();
+    let mut v: Vec<String> =
+        walk(dir).into_iter().map(|p| p.strip_prefix(dir).unwrap().display().to_string()).collect();
     v.sort();
     v
 }
@@ -36,7 +39,11 @@ fn walk(dir: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
     for e in std::fs::read_dir(dir).unwrap() {
         let p = e.unwrap().path();
-        if p.is_dir() { out.extend(walk(&p)) } else { out.push(p) }
+        if p.is_dir() {
+            out.extend(walk(&p))
+        } else {
+            out.push(p)
+        }
     }
     out
 }
@@ -46,7 +53,11 @@ fn validate_bundled_and_bad_files() {
     campro().arg("validate").arg(bundled("identity.json")).arg(bundled("color-inversion.json")).assert().success();
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.json");
-    std::fs::write(&bad, r#"{"format":"campro-params","version":1,"ccm":[[1,0,0],[0,1,0],[0,0,1]],"tone_curve":{"y":[0,2]}}"#).unwrap();
+    std::fs::write(
+        &bad,
+        r#"{"format":"campro-params","version":1,"ccm":[[1,0,0],[0,1,0],[0,0,1]],"tone_curve":{"y":[0,2]}}"#,
+    )
+    .unwrap();
     fails_with(campro().arg("validate").arg(&bad), "tone_curve.y[1]");
     std::fs::write(&bad, "{ not json").unwrap();
     fails_with(campro().arg("validate").arg(&bad), "invalid JSON");
@@ -55,7 +66,25 @@ fn validate_bundled_and_bad_files() {
 
 #[test]
 fn convert_json_has_camera2_keys() {
-    let out = campro().args(["convert", "--target", "camera2", "--device-ccm", "1.78", "-0.62", "-0.16", "-0.28", "1.62", "-0.34", "0.02", "-0.71", "1.69"]).arg(bundled("color-inversion.json")).output().unwrap();
+    let out = campro()
+        .args([
+            "convert",
+            "--target",
+            "camera2",
+            "--device-ccm",
+            "1.78",
+            "-0.62",
+            "-0.16",
+            "-0.28",
+            "1.62",
+            "-0.34",
+            "0.02",
+            "-0.71",
+            "1.69",
+        ])
+        .arg(bundled("color-inversion.json"))
+        .output()
+        .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let cst: Vec<i64> = v["colorCorrectionTransform"].as_array().unwrap().iter().map(|x| x.as_i64().unwrap()).collect();
@@ -70,7 +99,10 @@ fn convert_json_has_camera2_keys() {
     }
     let kt = campro().args(["convert", "--format", "kotlin"]).arg(bundled("identity.json")).output().unwrap();
     let kt = String::from_utf8(kt.stdout).unwrap();
-    assert!(kt.contains("ColorSpaceTransform(intArrayOf(1, 1, 0, 1,") && kt.contains("TonemapCurve(campro, campro, campro)"));
+    assert!(
+        kt.contains("ColorSpaceTransform(intArrayOf(1, 1, 0, 1,")
+            && kt.contains("TonemapCurve(campro, campro, campro)")
+    );
 }
 
 #[test]
@@ -82,9 +114,29 @@ fn convert_capture_result_and_bad_device_input() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["colorCorrectionTransform"][0], 2);
     std::fs::write(&cr, r#"{"colorCorrectionTransform": [1,0]}"#).unwrap();
-    fails_with(campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&cr), "colorCorrectionTransform");
-    fails_with(campro().arg("convert").arg(bundled("identity.json")).args(["--device-ccm", "1", "0", "0", "0", "1", "0", "0", "0", "NaN"]), "device_ccm[2][2]");
-    fails_with(campro().arg("convert").arg(bundled("identity.json")).args(["--max-curve-points", "1"]), "max_curve_points");
+    fails_with(
+        campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&cr),
+        "colorCorrectionTransform",
+    );
+    fails_with(
+        campro().arg("convert").arg(bundled("identity.json")).args([
+            "--device-ccm",
+            "1",
+            "0",
+            "0",
+            "0",
+            "1",
+            "0",
+            "0",
+            "0",
+            "NaN",
+        ]),
+        "device_ccm[2][2]",
+    );
+    fails_with(
+        campro().arg("convert").arg(bundled("identity.json")).args(["--max-curve-points", "1"]),
+        "max_curve_points",
+    );
     fails_with(campro().arg("convert").arg(bundled("identity.json")).args(["--ct", "5000"]), "ct_calibration");
 }
 
@@ -199,13 +251,24 @@ fn simulate_folders_depths_and_bad_files() {
     write_png8(&input.join("a.png"), 4, 3, &px);
     image::save_buffer(input.join("sub/b.jpg"), &px, 4, 3, image::ExtendedColorType::Rgb8).unwrap();
     let px16: Vec<u16> = (0..4 * 3 * 3).map(|i| (i * 1777 % 65536) as u16).collect();
-    image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(4, 3, px16.clone()).unwrap().save(input.join("sub/c.tif")).unwrap();
+    image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(4, 3, px16.clone())
+        .unwrap()
+        .save(input.join("sub/c.tif"))
+        .unwrap();
     std::fs::write(input.join("notes.txt"), "hello").unwrap();
     std::fs::write(input.join("broken.png"), b"\x89PNG\r\n\x1a\n garbage").unwrap();
     let out = dir.path().join("out");
     let params = bundled("color-inversion.json");
 
-    let run = campro().arg("simulate").arg(&params).arg(&input).arg("-o").arg(&out).args(["--bit-depth", "16"]).output().unwrap();
+    let run = campro()
+        .arg("simulate")
+        .arg(&params)
+        .arg(&input)
+        .arg("-o")
+        .arg(&out)
+        .args(["--bit-depth", "16"])
+        .output()
+        .unwrap();
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(!run.status.success(), "a corrupt image makes the run fail");
     assert!(err.contains("notes.txt") && err.contains("warning"), "{err}");
@@ -224,7 +287,8 @@ fn simulate_folders_depths_and_bad_files() {
     // 16-bit TIFF input is read at 16 bits.
     let got = image::open(out.join("sub/c.png")).unwrap().into_rgb16().into_raw();
     for (s, d) in px16.chunks(3).zip(got.chunks(3)) {
-        let want = campro::pipeline::process_f64(&p, [s[0] as f64 / 65535.0, s[1] as f64 / 65535.0, s[2] as f64 / 65535.0]);
+        let want =
+            campro::pipeline::process_f64(&p, [s[0] as f64 / 65535.0, s[1] as f64 / 65535.0, s[2] as f64 / 65535.0]);
         for k in 0..3 {
             assert!((d[k] as f64 - want[k] * 65535.0).abs() <= 0.5 + 1e-9);
         }
@@ -235,7 +299,15 @@ fn simulate_folders_depths_and_bad_files() {
     let before = std::fs::read(out.join("a.png")).unwrap();
     fails_with(campro().arg("simulate").arg(&params).arg(input.join("a.png")).arg("-o").arg(&out), "exists");
     assert_eq!(std::fs::read(out.join("a.png")).unwrap(), before);
-    campro().arg("simulate").arg(&params).arg(input.join("a.png")).arg("-o").arg(&out).arg("--force").assert().success();
+    campro()
+        .arg("simulate")
+        .arg(&params)
+        .arg(input.join("a.png"))
+        .arg("-o")
+        .arg(&out)
+        .arg("--force")
+        .assert()
+        .success();
     let eight = image::open(out.join("a.png")).unwrap();
     assert_eq!(eight.color(), image::ColorType::Rgb8);
     assert_eq!(files_in(&out), vec!["a.png", "sub/b.png", "sub/c.png"]);
@@ -243,7 +315,13 @@ fn simulate_folders_depths_and_bad_files() {
 
 #[test]
 fn compare_reports_within_bound() {
-    let out = campro().arg("compare").arg(bundled("color-inversion.json")).args(["--format", "json", "--random", "2000", "--lut-size", "256", "--matrix-frac-bits", "10"]).args(["--device-ccm", "1.78", "-0.62", "-0.16", "-0.28", "1.62", "-0.34", "0.02", "-0.71", "1.69"]).output().unwrap();
+    let out = campro()
+        .arg("compare")
+        .arg(bundled("color-inversion.json"))
+        .args(["--format", "json", "--random", "2000", "--lut-size", "256", "--matrix-frac-bits", "10"])
+        .args(["--device-ccm", "1.78", "-0.62", "-0.16", "-0.28", "1.62", "-0.34", "0.02", "-0.71", "1.69"])
+        .output()
+        .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let rows = v["comparison"].as_array().unwrap();
@@ -252,7 +330,12 @@ fn compare_reports_within_bound() {
         assert!(r["maxLsb"].as_f64().unwrap() <= r["boundLsb"].as_f64().unwrap() + 1e-9, "{r}");
         assert!(r["maxLsb"].as_f64().unwrap() > 0.0, "a 256-entry LUT and Q10 matrix cost something");
     }
-    campro().arg("compare").arg(bundled("identity.json")).assert().success().stdout(predicates::str::contains("every grey level"));
+    campro()
+        .arg("compare")
+        .arg(bundled("identity.json"))
+        .assert()
+        .success()
+        .stdout(predicates::str::contains("every grey level"));
 }
 
 #[test]
@@ -297,26 +380,54 @@ fn help_for_every_command() {
 fn file_targets_convert_compare_and_refuse() {
     let dir = tempfile::tempdir().unwrap();
     let cube = dir.path().join("campro.cube");
-    campro().args(["convert"]).arg(bundled("srgb-passthrough.json")).args(["--target", "cube", "--cube-size", "9", "-o"]).arg(&cube).assert().success();
+    campro()
+        .args(["convert"])
+        .arg(bundled("srgb-passthrough.json"))
+        .args(["--target", "cube", "--cube-size", "9", "-o"])
+        .arg(&cube)
+        .assert()
+        .success();
     let text = std::fs::read_to_string(&cube).unwrap();
     assert_eq!(campro::targets::cube::parse_cube(&text).unwrap().size(), 9);
-    let out = campro().args(["compare"]).arg(bundled("srgb-passthrough.json")).args(["--target", "cube", "--random", "500", "--format", "json"]).output().unwrap();
+    let out = campro()
+        .args(["compare"])
+        .arg(bundled("srgb-passthrough.json"))
+        .args(["--target", "cube", "--random", "500", "--format", "json"])
+        .output()
+        .unwrap();
     assert!(out.status.success());
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["target"], "cube");
-    assert_eq!(v["comparison"].as_array().unwrap().len(), 8, "2 interpolations x 4 pixel sets (every grey level first)");
+    assert_eq!(
+        v["comparison"].as_array().unwrap().len(),
+        8,
+        "2 interpolations x 4 pixel sets (every grey level first)"
+    );
     fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "rkisp1"]), "--target cube");
     fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "rpi-vc4"]), "--base");
     fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "hald"]), "binary");
     // Nothing half-written on a refusal.
-    fails_with(campro().args(["convert"]).arg(bundled("identity.json")).args(["--target", "uvc", "-o"]).arg(dir.path().join("x.json")), "scalar gamma");
+    fails_with(
+        campro()
+            .args(["convert"])
+            .arg(bundled("identity.json"))
+            .args(["--target", "uvc", "-o"])
+            .arg(dir.path().join("x.json")),
+        "scalar gamma",
+    );
     assert!(!dir.path().join("x.json").exists());
 }
 
 /// `eval all` on a few images and identities: every report is written, laid out as stated.
 #[test]
 fn eval_all_with_a_limit_writes_every_report() {
-    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt", "data/coco-person/instances_person.json"]) else { return };
+    let Some(shared) = campro_testkit::shared_root(&[
+        "models/yunet_s_640_640.onnx",
+        "data/lfw/pairs.txt",
+        "data/coco-person/instances_person.json",
+    ]) else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ev");
     campro()
@@ -329,11 +440,24 @@ fn eval_all_with_a_limit_writes_every_report() {
         .arg(&out)
         .assert()
         .success();
-    for f in ["privacy.csv", "privacy.md", "verification.csv", "cmc.svg", "utility.csv", "quality.csv", "report.md", "tradeoff.svg"] {
+    for f in [
+        "privacy.csv",
+        "privacy.md",
+        "verification.csv",
+        "cmc.svg",
+        "utility.csv",
+        "quality.csv",
+        "report.md",
+        "tradeoff.svg",
+    ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
     let csv = |name: &str| -> Vec<Vec<String>> {
-        std::fs::read_to_string(out.join(name)).unwrap().lines().map(|l| l.split(',').map(String::from).collect()).collect()
+        std::fs::read_to_string(out.join(name))
+            .unwrap()
+            .lines()
+            .map(|l| l.split(',').map(String::from).collect())
+            .collect()
     };
     // Table I layout: dataset, order, image type, classifier, one column per model, average.
     let p = csv("privacy.csv");
@@ -352,7 +476,10 @@ fn eval_all_with_a_limit_writes_every_report() {
     assert_eq!(u[1][0], "raw");
     // Quality compares protected images with raw: no raw row.
     let q = csv("quality.csv");
-    assert_eq!(q.iter().skip(1).map(|r| r[0].as_str()).collect::<Vec<_>>(), ["identity", "color-inversion", "lowres-8"]);
+    assert_eq!(
+        q.iter().skip(1).map(|r| r[0].as_str()).collect::<Vec<_>>(),
+        ["identity", "color-inversion", "lowres-8"]
+    );
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("tradeoff.svg") && report.contains("| lowres-8 |"));
 }
@@ -362,7 +489,9 @@ fn eval_all_with_a_limit_writes_every_report() {
 /// can improve: every CMC point is at most the one without distractors.
 #[test]
 fn privacy_distractors_only_enlarge_the_gallery() {
-    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else { return };
+    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let run = |extra: &[&str], out: &str| -> serde_json::Value {
         let out = dir.path().join(out);
@@ -391,7 +520,10 @@ fn privacy_distractors_only_enlarge_the_gallery() {
     assert_eq!(ra.len(), rb.len());
     let mut compared = 0;
     for (x, y) in ra.iter().zip(&rb) {
-        assert_eq!((&x["condition"], &x["order"], &x["model"], &x["classifier"]), (&y["condition"], &y["order"], &y["model"], &y["classifier"]));
+        assert_eq!(
+            (&x["condition"], &x["order"], &x["model"], &x["classifier"]),
+            (&y["condition"], &y["order"], &y["model"], &y["classifier"])
+        );
         if x["classifier"] == "nearest" {
             for (p, q) in x["cmc"].as_array().unwrap().iter().zip(y["cmc"].as_array().unwrap()) {
                 assert!(q.as_f64().unwrap() <= p.as_f64().unwrap() + 1e-12, "{x} vs {y}");
@@ -401,14 +533,23 @@ fn privacy_distractors_only_enlarge_the_gallery() {
     }
     assert_eq!(compared, 2 * 2 * 2, "2 conditions x 2 orders x 2 models");
     let bad = campro().args(["eval", "privacy", "--distractors", "many"]).output().unwrap();
-    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("expected a count or `all`, got \"many\""));
+    assert!(
+        !bad.status.success()
+            && String::from_utf8_lossy(&bad.stderr).contains("expected a count or `all`, got \"many\"")
+    );
 }
 
 /// `eval privacy --restore`: each parameter set gets a "NAME restored" row. Colour inversion
 /// is a bijection, so restoring it gives most of the raw accuracy back; baselines get none.
 #[test]
 fn privacy_restore_undoes_a_bijective_camera() {
-    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt", "data/coco-person/instances_person.json"]) else { return };
+    let Some(shared) = campro_testkit::shared_root(&[
+        "models/yunet_s_640_640.onnx",
+        "data/lfw/pairs.txt",
+        "data/coco-person/instances_person.json",
+    ]) else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("r");
     campro()
@@ -420,7 +561,8 @@ fn privacy_restore_undoes_a_bijective_camera() {
         .arg(&out)
         .assert()
         .success();
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap();
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap();
     let top1 = |cond: &str| -> f64 {
         let rows: Vec<f64> = v["identification"]
             .as_array()
@@ -434,7 +576,8 @@ fn privacy_restore_undoes_a_bijective_camera() {
     };
     let (inverted, restored, raw) = (top1("color-inversion"), top1("color-inversion restored"), top1("raw"));
     assert!(restored > inverted + 30.0 && restored > 0.6 * raw, "inverted {inverted}, restored {restored}, raw {raw}");
-    let names: Vec<&str> = v["identification"].as_array().unwrap().iter().map(|r| r["condition"].as_str().unwrap()).collect();
+    let names: Vec<&str> =
+        v["identification"].as_array().unwrap().iter().map(|r| r["condition"].as_str().unwrap()).collect();
     assert!(!names.contains(&"lowres-8 restored"), "only parameter sets are restored");
 }
 
@@ -446,9 +589,12 @@ fn privacy_restore_undoes_a_bijective_camera() {
 /// so matching inverted to inverted identifies more than matching it to raw faces.
 #[test]
 fn privacy_camera_enrolment_matches_protected_to_protected() {
-    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else { return };
+    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
-    let mut flat: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(bundled("color-inversion.json")).unwrap()).unwrap();
+    let mut flat: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(bundled("color-inversion.json")).unwrap()).unwrap();
     flat["name"] = "flat-grey".into();
     flat["tone_curve"]["y"] = serde_json::json!(vec![0.5; 32]);
     let flat_path = dir.path().join("flat-grey.json");
@@ -487,13 +633,18 @@ fn privacy_camera_enrolment_matches_protected_to_protected() {
     }
     let gallery = cam["gallery"].as_f64().unwrap();
     for t in rows(&cam, "flat-grey", "nearest") {
-        assert!((t - 1.0 / gallery).abs() < 1e-12, "flat camera enrolled through itself: {t}, chance {}", 1.0 / gallery);
+        assert!(
+            (t - 1.0 / gallery).abs() < 1e-12,
+            "flat camera enrolled through itself: {t}, chance {}",
+            1.0 / gallery
+        );
     }
     for t in rows(&raw, "flat-grey", "nearest") {
         assert!(t <= 1.0 / gallery + 1e-12, "every probe goes to the same gallery face: {t}");
     }
     let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
-    let (as_raw, as_cam) = (mean(rows(&raw, "color-inversion", "nearest")), mean(rows(&cam, "color-inversion", "nearest")));
+    let (as_raw, as_cam) =
+        (mean(rows(&raw, "color-inversion", "nearest")), mean(rows(&cam, "color-inversion", "nearest")));
     assert!(as_cam > as_raw + 0.2, "colour inversion enrolled raw {as_raw}, through the camera {as_cam}");
     let bad = campro().args(["eval", "privacy", "--enrol", "sideways"]).output().unwrap();
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("sideways"));
@@ -503,11 +654,20 @@ fn privacy_camera_enrolment_matches_protected_to_protected() {
 fn eval_refuses_bad_arguments_clearly() {
     let out = campro().args(["eval", "quality", "--baseline", "lowres-0"]).output().unwrap();
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("expected lowres-S (S ≥ 1)"));
-    fails_with(campro().args(["eval", "quality", "--shared", "/nonexistent-shared"]), "/nonexistent-shared/data/coco-person/images");
-    fails_with(campro().args(["eval", "utility", "--person-detector", "nosuchmodel", "--shared", "/nonexistent-shared"]), "reading the COCO person set");
+    fails_with(
+        campro().args(["eval", "quality", "--shared", "/nonexistent-shared"]),
+        "/nonexistent-shared/data/coco-person/images",
+    );
+    fails_with(
+        campro().args(["eval", "utility", "--person-detector", "nosuchmodel", "--shared", "/nonexistent-shared"]),
+        "reading the COCO person set",
+    );
     let Some(_) = campro_testkit::shared("data/coco-person/instances_person.json") else { return };
     let shared = campro_testkit::shared("").unwrap();
-    fails_with(campro().args(["eval", "utility", "--person-detector", "nosuchmodel", "--shared"]).arg(&shared), "neither a bundled model");
+    fails_with(
+        campro().args(["eval", "utility", "--person-detector", "nosuchmodel", "--shared"]).arg(&shared),
+        "neither a bundled model",
+    );
 }
 
 /// `train` with all three players on tiny data writes a parameter set, the fine-tuned
@@ -532,10 +692,22 @@ fn train_writes_params_and_detector_that_eval_reads() {
     );
     std::fs::write(dir.path().join("tiny.toml"), cfg).unwrap();
     let p = dir.path().join("p.json");
-    campro().arg("train").arg(dir.path().join("tiny.toml")).arg("-o").arg(&p).arg("--log").arg(dir.path().join("log.csv")).assert().success();
+    campro()
+        .arg("train")
+        .arg(dir.path().join("tiny.toml"))
+        .arg("-o")
+        .arg(&p)
+        .arg("--log")
+        .arg(dir.path().join("log.csv"))
+        .assert()
+        .success();
     campro().arg("validate").arg(&p).assert().success();
     let log = std::fs::read_to_string(dir.path().join("log.csv")).unwrap();
-    assert!(log.starts_with("round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy\n") && log.lines().count() == 4, "{log}");
+    assert!(
+        log.starts_with("round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy\n")
+            && log.lines().count() == 4,
+        "{log}"
+    );
     let manifest = dir.path().join("p.detector.json");
     assert!(dir.path().join("p.detector.onnx").is_file() && manifest.is_file());
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
@@ -544,23 +716,64 @@ fn train_writes_params_and_detector_that_eval_reads() {
     assert_eq!(held_out, 1);
     // Run from another folder: the manifest finds its ONNX beside itself.
     let out = dir.path().join("ev");
-    campro().current_dir("/").args(["eval", "utility"]).arg(&p).arg("--person-detector").arg(&manifest).args(["--limit", "2", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
+    campro()
+        .current_dir("/")
+        .args(["eval", "utility"])
+        .arg(&p)
+        .arg("--person-detector")
+        .arg(&manifest)
+        .args(["--limit", "2", "--shared"])
+        .arg(&shared)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
     assert!(std::fs::read_to_string(out.join("utility.md")).unwrap().contains("fine-tuned (p)"));
     // --own-detector: raw with the bundled detector, p with its own, rows in order.
-    campro().args(["eval", "utility"]).arg(&p).args(["--own-detector", "--limit", "2", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
+    campro()
+        .args(["eval", "utility"])
+        .arg(&p)
+        .args(["--own-detector", "--limit", "2", "--shared"])
+        .arg(&shared)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
     let md = std::fs::read_to_string(out.join("utility.md")).unwrap();
     assert!(md.contains("yolox-nano; p each with its own fine-tuned detector"), "{md}");
     assert!(md.contains("2 images (those held out of detector fine-tuning: COCO id % 5 == 0)"), "{md}");
-    let scored: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("utility.json")).unwrap()).unwrap();
+    let scored: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("utility.json")).unwrap()).unwrap();
     assert_eq!(scored["options"]["held_out"], true);
     let rows: Vec<&str> = md.lines().filter(|l| l.starts_with("| raw") || l.starts_with("| p ")).collect();
     assert_eq!(rows.len(), 2, "{md}");
     assert!(rows[0].starts_with("| raw"));
-    campro().args(["eval", "privacy"]).arg(&p).arg("--identities").arg(&p).args(["--runs", "1", "--no-verification", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
+    campro()
+        .args(["eval", "privacy"])
+        .arg(&p)
+        .arg("--identities")
+        .arg(&p)
+        .args(["--runs", "1", "--no-verification", "--shared"])
+        .arg(&shared)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
     assert!(std::fs::read_to_string(out.join("privacy.md")).unwrap().contains("Closed set: 1 identities"));
     let names = dir.path().join("names.txt");
     std::fs::write(&names, "# two people\nNo_Such_Person\n").unwrap();
-    fails_with(campro().args(["eval", "privacy"]).arg(&p).arg("--identities").arg(&names).args(["--shared"]).arg(&shared).arg("-o").arg(&out), "\"No_Such_Person\" is not in LFW");
+    fails_with(
+        campro()
+            .args(["eval", "privacy"])
+            .arg(&p)
+            .arg("--identities")
+            .arg(&names)
+            .args(["--shared"])
+            .arg(&shared)
+            .arg("-o")
+            .arg(&out),
+        "\"No_Such_Person\" is not in LFW",
+    );
 }
 
 #[test]
@@ -570,14 +783,23 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
     let dir = tempfile::tempdir().unwrap();
     let q = |p: &std::path::Path| format!("{:?}", p.to_str().unwrap());
-    let cfg = format!("seed = 3\n[detector]\nmodel = {}\ndata = {}\nsize = 128\nbatch = 2\nmax_images = 2\n", q(&models), q(coco.parent().unwrap()));
+    let cfg = format!(
+        "seed = 3\n[detector]\nmodel = {}\ndata = {}\nsize = 128\nbatch = 2\nmax_images = 2\n",
+        q(&models),
+        q(coco.parent().unwrap())
+    );
     std::fs::write(dir.path().join("ft.toml"), cfg).unwrap();
     let p = dir.path().join("inv.json");
     std::fs::copy(campro_testkit::workspace_root().join("params/campro-omega-1.json"), &p).unwrap();
     let before: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
     let run = || {
         let mut c = campro();
-        c.arg("finetune-detector").arg(&p).arg("--config").arg(dir.path().join("ft.toml")).args(["--steps", "2", "--log"]).arg(dir.path().join("ft.csv"));
+        c.arg("finetune-detector")
+            .arg(&p)
+            .arg("--config")
+            .arg(dir.path().join("ft.toml"))
+            .args(["--steps", "2", "--log"])
+            .arg(dir.path().join("ft.csv"));
         c
     };
     run().assert().success();
@@ -585,15 +807,28 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     assert_eq!(v["ccm"], before["ccm"], "the camera is not touched");
     let d = &v["provenance"]["detector"];
     assert_eq!((d["onnx"].as_str(), d["manifest"].as_str()), (Some("inv.detector.onnx"), Some("inv.detector.json")));
-    assert_eq!((d["finetune"]["steps"].as_u64(), d["finetune"]["images"].as_u64(), d["finetune"]["seed"].as_u64()), (Some(2), Some(2), Some(3)));
+    assert_eq!(
+        (d["finetune"]["steps"].as_u64(), d["finetune"]["images"].as_u64(), d["finetune"]["seed"].as_u64()),
+        (Some(2), Some(2), Some(3))
+    );
     assert!(d["held_out_images"].as_str().unwrap().contains("% 5 == 0"));
     assert_eq!(std::fs::read_to_string(dir.path().join("ft.csv")).unwrap().lines().count(), 3);
     // Existing outputs are kept unless --force.
     fails_with(&mut run(), "exists (use --force");
     run().arg("--force").assert().success();
     let out = dir.path().join("ev");
-    campro().args(["eval", "utility"]).arg(&p).args(["--own-detector", "--limit", "2", "--shared"]).arg(&shared).arg("-o").arg(&out).assert().success();
-    assert!(std::fs::read_to_string(out.join("utility.md")).unwrap().contains("inv each with its own fine-tuned detector"));
+    campro()
+        .args(["eval", "utility"])
+        .arg(&p)
+        .args(["--own-detector", "--limit", "2", "--shared"])
+        .arg(&shared)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    assert!(std::fs::read_to_string(out.join("utility.md"))
+        .unwrap()
+        .contains("inv each with its own fine-tuned detector"));
     fails_with(campro().arg("finetune-detector").arg(&p).args(["--steps", "0"]), "--steps: must be at least 1");
     fails_with(campro().arg("finetune-detector").arg(&p).args(["--seconds", "NaN"]), "--seconds: must be > 0");
     // A curve with uneven knots cannot drive the optimiser's camera.
@@ -601,7 +836,15 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     let mut u = before.clone();
     u["tone_curve"] = serde_json::json!({ "x": [0.0, 0.3, 1.0], "y": [0.0, 0.5, 1.0] });
     std::fs::write(&uneven, u.to_string()).unwrap();
-    fails_with(campro().arg("finetune-detector").arg(&uneven).arg("--config").arg(dir.path().join("ft.toml")).args(["--steps", "1"]), "tone_curve: the optimiser's camera needs evenly spaced knots");
+    fails_with(
+        campro()
+            .arg("finetune-detector")
+            .arg(&uneven)
+            .arg("--config")
+            .arg(dir.path().join("ft.toml"))
+            .args(["--steps", "1"]),
+        "tone_curve: the optimiser's camera needs evenly spaced knots",
+    );
     // ... nor start it (train --init), which also excludes --resume; no output is written.
     let trained = dir.path().join("t.json");
     let train = |init: &Path| {
@@ -611,6 +854,10 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     };
     fails_with(&mut train(&uneven), "tone_curve: the optimiser's camera needs evenly spaced knots");
     let both = train(&p).arg("--resume").arg(dir.path()).output().unwrap();
-    assert!(!both.status.success() && String::from_utf8_lossy(&both.stderr).contains("'--init <INIT>' cannot be used with '--resume <RESUME>'"));
+    assert!(
+        !both.status.success()
+            && String::from_utf8_lossy(&both.stderr)
+                .contains("'--init <INIT>' cannot be used with '--resume <RESUME>'")
+    );
     assert!(!trained.exists());
 }

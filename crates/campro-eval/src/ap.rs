@@ -39,7 +39,11 @@ pub fn coco_iou(d: [f32; 4], g: [f32; 4], crowd: bool) -> f64 {
     let ih = ((d[1] + d[3]).min(g[1] + g[3]) - d[1].max(g[1])).max(0.0);
     let inter = iw * ih;
     let union = if crowd { d[2] * d[3] } else { d[2] * d[3] + g[2] * g[3] - inter };
-    if union > 0.0 { inter / union } else { 0.0 }
+    if union > 0.0 {
+        inter / union
+    } else {
+        0.0
+    }
 }
 
 /// IoU thresholds 0.50, 0.55, ..., 0.95 (computed as numpy's `linspace` does).

@@ -52,14 +52,17 @@ impl FromStr for Baseline {
     /// `lowres-S` or `defocus-K-SIGMA`, as printed.
     fn from_str(s: &str) -> Result<Self, String> {
         let parts: Vec<&str> = s.split('-').collect();
-        let bad = || format!("baseline {s:?}: expected lowres-S (S ≥ 1) or defocus-K-SIGMA (odd K in 1..=101, SIGMA > 0)");
+        let bad =
+            || format!("baseline {s:?}: expected lowres-S (S ≥ 1) or defocus-K-SIGMA (odd K in 1..=101, SIGMA > 0)");
         match parts.as_slice() {
             ["lowres", f] => match f.parse::<u32>() {
                 Ok(f) if (1..=256).contains(&f) => Ok(Baseline::LowRes(f)),
                 _ => Err(bad()),
             },
             ["defocus", k, sg] => match (k.parse::<u32>(), sg.parse::<f64>()) {
-                (Ok(k), Ok(sg)) if k % 2 == 1 && k <= 101 && sg.is_finite() && sg > 0.0 => Ok(Baseline::Defocus { kernel: k, sigma: sg }),
+                (Ok(k), Ok(sg)) if k % 2 == 1 && k <= 101 && sg.is_finite() && sg > 0.0 => {
+                    Ok(Baseline::Defocus { kernel: k, sigma: sg })
+                }
                 _ => Err(bad()),
             },
             _ => Err(bad()),

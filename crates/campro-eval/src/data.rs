@@ -35,7 +35,11 @@ pub struct Pair {
 
 impl Lfw {
     pub fn open(root: &Path) -> Result<Self> {
-        let images = if root.join("images_deepfunneled").is_dir() { root.join("images_deepfunneled") } else { root.to_path_buf() };
+        let images = if root.join("images_deepfunneled").is_dir() {
+            root.join("images_deepfunneled")
+        } else {
+            root.to_path_buf()
+        };
         let mut people = BTreeMap::new();
         for e in std::fs::read_dir(&images).map_err(EvalError::io(&images))? {
             let e = e.map_err(EvalError::io(&images))?;
@@ -75,23 +79,40 @@ impl Lfw {
 }
 
 /// Parses the `pairs.txt` format; `find` resolves (name, number) to a path or None.
-pub fn parse_pairs(text: &str, path: &Path, find: impl Fn(&str, usize) -> Option<PathBuf>) -> Result<(Vec<Pair>, usize)> {
+pub fn parse_pairs(
+    text: &str,
+    path: &Path,
+    find: impl Fn(&str, usize) -> Option<PathBuf>,
+) -> Result<(Vec<Pair>, usize)> {
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
     let bad = |line: usize, message: String| EvalError::Data { path: path.into(), line: line + 1, message };
     let (hl, head) = lines.next().ok_or_else(|| bad(0, "empty file".into()))?;
-    let nums: Vec<usize> = head.split_whitespace().map(|t| t.parse()).collect::<std::result::Result<_, _>>().map_err(|_| bad(hl, "header must be 'FOLDS PAIRS'".into()))?;
+    let nums: Vec<usize> = head
+        .split_whitespace()
+        .map(|t| t.parse())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| bad(hl, "header must be 'FOLDS PAIRS'".into()))?;
     let [folds, per] = nums[..] else { return Err(bad(hl, "header must be 'FOLDS PAIRS'".into())) };
     let (mut pairs, mut skipped) = (Vec::new(), 0);
     for fold in 0..folds {
         for same in [true, false] {
             for _ in 0..per {
-                let (ln, l) = lines.next().ok_or_else(|| bad(usize::MAX - 1, format!("file ends inside fold {}", fold + 1)))?;
+                let (ln, l) =
+                    lines.next().ok_or_else(|| bad(usize::MAX - 1, format!("file ends inside fold {}", fold + 1)))?;
                 let t: Vec<&str> = l.split_whitespace().collect();
                 let num = |s: &str| s.parse::<usize>().map_err(|_| bad(ln, format!("{s:?} is not an image number")));
                 let (a, b) = match (same, t.as_slice()) {
                     (true, [n, i, j]) => (find(n, num(i)?), find(n, num(j)?)),
                     (false, [n, i, m, j]) => (find(n, num(i)?), find(m, num(j)?)),
-                    _ => return Err(bad(ln, format!("expected a {} pair line", if same { "same (name n1 n2)" } else { "different (name1 n1 name2 n2)" }))),
+                    _ => {
+                        return Err(bad(
+                            ln,
+                            format!(
+                                "expected a {} pair line",
+                                if same { "same (name n1 n2)" } else { "different (name1 n1 name2 n2)" }
+                            ),
+                        ))
+                    }
                 };
                 match (a, b) {
                     (Some(a), Some(b)) => pairs.push(Pair { fold, a, b, same }),
@@ -145,8 +166,11 @@ pub fn coco_person(root: &Path) -> Result<Vec<CocoImage>> {
     let path = root.join("instances_person.json");
     let text = std::fs::read_to_string(&path).map_err(EvalError::io(&path))?;
     let de = &mut serde_json::Deserializer::from_str(&text);
-    let file: CocoFile = serde_path_to_error::deserialize(de)
-        .map_err(|e| EvalError::Data { path: path.clone(), line: e.inner().line(), message: format!("{}: {}", e.path(), e.inner()) })?;
+    let file: CocoFile = serde_path_to_error::deserialize(de).map_err(|e| EvalError::Data {
+        path: path.clone(),
+        line: e.inner().line(),
+        message: format!("{}: {}", e.path(), e.inner()),
+    })?;
     let mut by_id: BTreeMap<u64, CocoImage> = file
         .images
         .into_iter()
@@ -157,9 +181,16 @@ pub fn coco_person(root: &Path) -> Result<Vec<CocoImage>> {
             continue;
         }
         if a.bbox.iter().any(|v| !v.is_finite()) || a.bbox[2] < 0.0 || a.bbox[3] < 0.0 {
-            return Err(EvalError::Invalid(format!("{}: annotation of image {} has a bad bbox {:?}", path.display(), a.image_id, a.bbox)));
+            return Err(EvalError::Invalid(format!(
+                "{}: annotation of image {} has a bad bbox {:?}",
+                path.display(),
+                a.image_id,
+                a.bbox
+            )));
         }
-        let img = by_id.get_mut(&a.image_id).ok_or_else(|| EvalError::Invalid(format!("{}: annotation names unknown image {}", path.display(), a.image_id)))?;
+        let img = by_id.get_mut(&a.image_id).ok_or_else(|| {
+            EvalError::Invalid(format!("{}: annotation names unknown image {}", path.display(), a.image_id))
+        })?;
         img.gts.push(GroundTruth { bbox: a.bbox, crowd: a.iscrowd != 0 });
     }
     Ok(by_id.into_values().collect())

@@ -20,7 +20,16 @@ pub struct Face {
 /// Decodes one stride of a YuNet head (`n = cols · rows` anchors, row-major) into `out`:
 /// score = sqrt(clamp(cls)·clamp(obj)); centre = (col + dx, row + dy)·s; size = exp(dw, dh)·s;
 /// landmark k = (col + kx, row + ky)·s.
-pub fn decode_yunet_stride(stride: usize, cols: usize, cls: &[f32], obj: &[f32], bbox: &[f32], kps: &[f32], threshold: f32, out: &mut Vec<Face>) {
+pub fn decode_yunet_stride(
+    stride: usize,
+    cols: usize,
+    cls: &[f32],
+    obj: &[f32],
+    bbox: &[f32],
+    kps: &[f32],
+    threshold: f32,
+    out: &mut Vec<Face>,
+) {
     let s = stride as f32;
     for i in 0..cls.len() {
         let score = (cls[i].clamp(0.0, 1.0) * obj[i].clamp(0.0, 1.0)).sqrt();
@@ -84,7 +93,11 @@ impl FaceDetector {
             .into_iter()
             .map(|i| {
                 let f = faces[i];
-                Face { bbox: f.bbox.map(|v| v * inv), score: f.score, landmarks: f.landmarks.map(|p| [p[0] * inv, p[1] * inv]) }
+                Face {
+                    bbox: f.bbox.map(|v| v * inv),
+                    score: f.score,
+                    landmarks: f.landmarks.map(|p| [p[0] * inv, p[1] * inv]),
+                }
             })
             .collect())
     }
@@ -133,7 +146,10 @@ impl Embedder {
         let mut v = out.any(&self.output)?.to_vec();
         let n = v.iter().map(|x| x * x).sum::<f32>().sqrt();
         if !(n > 0.0 && n.is_finite()) {
-            return Err(EvalError::Model { path: self.model.manifest.file.clone(), message: "embedding has zero or non-finite norm".into() });
+            return Err(EvalError::Model {
+                path: self.model.manifest.file.clone(),
+                message: "embedding has zero or non-finite norm".into(),
+            });
         }
         v.iter_mut().for_each(|x| *x /= n);
         Ok(v)
@@ -165,7 +181,7 @@ mod tests {
         assert_eq!(faces.len(), 1);
         let f = faces[0];
         assert!((f.score - 0.9).abs() < 1e-6); // sqrt(0.81 · 1)
-        // centre (1.5·8, 1.25·8) = (12, 10); size (8, 16).
+                                               // centre (1.5·8, 1.25·8) = (12, 10); size (8, 16).
         assert_eq!(f.bbox, [8.0, 2.0, 16.0, 18.0]);
         assert_eq!(f.landmarks[0], [8.0, 8.0]);
         assert_eq!(f.landmarks[2], [12.0, 12.0]);

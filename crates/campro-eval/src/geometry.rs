@@ -48,7 +48,10 @@ pub fn resize_bilinear(img: &RgbImage, width: u32, height: u32) -> RgbImage {
 
 /// The size (width, height) the image of `dims` takes on a [`letterbox`] canvas.
 pub fn letterbox_size(dims: (u32, u32), width: u32, height: u32, scale: f64) -> (u32, u32) {
-    (((dims.0 as f64 * scale).round() as u32).clamp(1, width), ((dims.1 as f64 * scale).round() as u32).clamp(1, height))
+    (
+        ((dims.0 as f64 * scale).round() as u32).clamp(1, width),
+        ((dims.1 as f64 * scale).round() as u32).clamp(1, height),
+    )
 }
 
 /// Scales `img` by `scale` (bilinear) and places it at the top-left of a `width x height`
@@ -117,7 +120,11 @@ pub fn iou(a: [f32; 4], b: [f32; 4]) -> f32 {
     let inter = iw * ih;
     let area = |r: [f32; 4]| (r[2] - r[0]).max(0.0) * (r[3] - r[1]).max(0.0);
     let union = area(a) + area(b) - inter;
-    if union > 0.0 { inter / union } else { 0.0 }
+    if union > 0.0 {
+        inter / union
+    } else {
+        0.0
+    }
 }
 
 /// Greedy non-maximum suppression: indices of kept boxes, by descending score.

@@ -36,7 +36,11 @@ use std::sync::Arc;
 
 /// Maps `f` over `items` in parallel (rayon) behind a progress bar named `label`; the first
 /// error stops the map.
-pub fn par_map_progress<I: Sync, T: Send>(items: &[I], label: &str, f: impl Fn(&I) -> Result<T> + Sync) -> Result<Vec<T>> {
+pub fn par_map_progress<I: Sync, T: Send>(
+    items: &[I],
+    label: &str,
+    f: impl Fn(&I) -> Result<T> + Sync,
+) -> Result<Vec<T>> {
     use rayon::prelude::*;
     let pb = indicatif::ProgressBar::new(items.len() as u64);
     let style = format!("{label} [{{bar:30}}] {{pos}}/{{len}} {{elapsed_precise}} eta {{eta}}");

@@ -78,8 +78,14 @@ pub fn train(x: &Array2<f32>, y: &[usize], classes: usize, o: &LinearOptions) ->
         mb.zip_mut_with(&gb, |m, &g| *m = b1 * *m + (1.0 - b1) * g);
         vb.zip_mut_with(&gb, |v, &g| *v = b2 * *v + (1.0 - b2) * g * g);
         let lr = o.learning_rate;
-        ndarray::Zip::from(&mut model.w).and(&mw).and(&vw).for_each(|w, &m, &v| *w -= lr * (m / c1) / ((v / c2).sqrt() + eps));
-        ndarray::Zip::from(&mut model.b).and(&mb).and(&vb).for_each(|b, &m, &v| *b -= lr * (m / c1) / ((v / c2).sqrt() + eps));
+        ndarray::Zip::from(&mut model.w)
+            .and(&mw)
+            .and(&vw)
+            .for_each(|w, &m, &v| *w -= lr * (m / c1) / ((v / c2).sqrt() + eps));
+        ndarray::Zip::from(&mut model.b)
+            .and(&mb)
+            .and(&vb)
+            .for_each(|b, &m, &v| *b -= lr * (m / c1) / ((v / c2).sqrt() + eps));
     }
     model
 }

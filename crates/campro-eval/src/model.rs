@@ -49,7 +49,11 @@ impl Model {
     /// The input tensor for an image of exactly the manifest's size.
     pub fn tensor(&self, img: &RgbImage) -> Tensor {
         let i = &self.manifest.input;
-        assert_eq!((img.width() as usize, img.height() as usize), (i.width, i.height), "image not resized for the model");
+        assert_eq!(
+            (img.width() as usize, img.height() as usize),
+            (i.width, i.height),
+            "image not resized for the model"
+        );
         let order = match i.channels {
             Channels::Rgb => [0, 1, 2],
             Channels::Bgr => [2, 1, 0],
@@ -73,7 +77,11 @@ impl Model {
             .run(tvec!(self.tensor(img).into()))
             .map_err(|e| EvalError::Model { path: self.manifest.file.clone(), message: format!("{e:#}") })?;
         release_freed_memory();
-        Ok(Outputs { names: self.outputs.clone(), values: out.into_iter().map(|t| t.into_tensor()).collect(), path: self.manifest.file.clone() })
+        Ok(Outputs {
+            names: self.outputs.clone(),
+            values: out.into_iter().map(|t| t.into_tensor()).collect(),
+            path: self.manifest.file.clone(),
+        })
     }
 }
 
@@ -112,9 +120,15 @@ impl Outputs {
             path: self.path.clone(),
             message: format!("no output named {name:?} (outputs: {:?})", self.names),
         })?;
-        let s = self.values[i].try_as_plain_ram().and_then(|v| v.as_slice::<f32>()).map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e}") })?;
+        let s = self.values[i]
+            .try_as_plain_ram()
+            .and_then(|v| v.as_slice::<f32>())
+            .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e}") })?;
         if s.len() != len {
-            return Err(EvalError::Model { path: self.path.clone(), message: format!("output {name:?} has {} values, expected {len}", s.len()) });
+            return Err(EvalError::Model {
+                path: self.path.clone(),
+                message: format!("output {name:?} has {} values, expected {len}", s.len()),
+            });
         }
         Ok(s)
     }
@@ -125,6 +139,9 @@ impl Outputs {
             path: self.path.clone(),
             message: format!("no output named {name:?} (outputs: {:?})", self.names),
         })?;
-        self.values[i].try_as_plain_ram().and_then(|v| v.as_slice::<f32>()).map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e}") })
+        self.values[i]
+            .try_as_plain_ram()
+            .and_then(|v| v.as_slice::<f32>())
+            .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e}") })
     }
 }

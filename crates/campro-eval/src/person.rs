@@ -16,7 +16,14 @@ pub struct Detection {
 /// Decodes a YOLOX head `[n, 5 + classes]` over grids of `strides` (row-major, strides in
 /// order) for input `width x height`: centre = (x + col, y + row)·s, size = exp(log w, log h)·s,
 /// score = objectness · p(class). Keeps scores ≥ `threshold`; coordinates in input pixels.
-pub fn decode_yolox(head: &[f32], width: usize, height: usize, strides: &[usize], class: usize, threshold: f32) -> Result<Vec<Detection>> {
+pub fn decode_yolox(
+    head: &[f32],
+    width: usize,
+    height: usize,
+    strides: &[usize],
+    class: usize,
+    threshold: f32,
+) -> Result<Vec<Detection>> {
     let n: usize = strides.iter().map(|s| (width / s) * (height / s)).sum();
     if n == 0 || head.len() % n != 0 || head.len() / n <= 5 + class {
         return Err(EvalError::Invalid(format!(
@@ -60,7 +67,8 @@ impl PersonDetector {
 
     /// People in `img` (image pixels, clipped to the image), best first, after NMS.
     pub fn detect(&self, img: &RgbImage) -> Result<Vec<Detection>> {
-        let Task::PersonDetector { output, strides, class_index, score_threshold, nms_iou, max_detections, pad_value } = &self.model.manifest.task
+        let Task::PersonDetector { output, strides, class_index, score_threshold, nms_iou, max_detections, pad_value } =
+            &self.model.manifest.task
         else {
             unreachable!("checked in new")
         };
@@ -77,7 +85,12 @@ impl PersonDetector {
             .take(*max_detections)
             .map(|i| {
                 let b = dets[i].bbox;
-                let bbox = [(b[0] * inv).clamp(0.0, w), (b[1] * inv).clamp(0.0, h), (b[2] * inv).clamp(0.0, w), (b[3] * inv).clamp(0.0, h)];
+                let bbox = [
+                    (b[0] * inv).clamp(0.0, w),
+                    (b[1] * inv).clamp(0.0, h),
+                    (b[2] * inv).clamp(0.0, w),
+                    (b[3] * inv).clamp(0.0, h),
+                ];
                 Detection { bbox, score: dets[i].score }
             })
             .collect())

@@ -184,7 +184,11 @@ struct Record {
 
 fn progress(len: usize, what: &str) -> ProgressBar {
     let pb = ProgressBar::new(len as u64);
-    pb.set_style(ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {elapsed_precise} eta {eta}").unwrap().progress_chars("=> "));
+    pb.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {elapsed_precise} eta {eta}")
+            .unwrap()
+            .progress_chars("=> "),
+    );
     pb.set_message(what.to_string());
     pb
 }
@@ -223,7 +227,9 @@ fn embed_photo(path: &Path, m: &FaceModels, conds: &[Condition], need: Need) -> 
             let pimg = p(&img);
             let found: Option<Face> = central_face(&m.detector.detect(&pimg)?, pimg.width(), pimg.height());
             match found {
-                Some(f) => Some(m.embedders.iter().map(|e| e.embed(&e.align(&pimg, &f.landmarks))).collect::<Result<_>>()?),
+                Some(f) => {
+                    Some(m.embedders.iter().map(|e| e.embed(&e.align(&pimg, &f.landmarks))).collect::<Result<_>>()?)
+                }
                 None => None,
             }
         } else {
@@ -298,15 +304,18 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
         ids.truncate(l);
         ids.sort();
     }
-    let pools: Vec<Vec<PathBuf>> = ids.iter().map(|(_, v)| v.choose_multiple(&mut rng, o.pool.min(v.len())).cloned().collect()).collect();
+    let pools: Vec<Vec<PathBuf>> =
+        ids.iter().map(|(_, v)| v.choose_multiple(&mut rng, o.pool.min(v.len())).cloned().collect()).collect();
     // Distractors, drawn after the probed identities' pools so that those stay the same.
-    let mut others: Vec<&Vec<PathBuf>> = lfw.people.iter().filter(|(n, v)| v.len() >= 2 && !ids.iter().any(|(m, _)| m == n)).map(|(_, v)| v).collect();
+    let mut others: Vec<&Vec<PathBuf>> =
+        lfw.people.iter().filter(|(n, v)| v.len() >= 2 && !ids.iter().any(|(m, _)| m == n)).map(|(_, v)| v).collect();
     if o.distractors < others.len() {
         others.shuffle(&mut rng);
         others.truncate(o.distractors);
         others.sort();
     }
-    let other_pools: Vec<Vec<PathBuf>> = others.iter().map(|v| v.choose_multiple(&mut rng, o.pool.min(v.len())).cloned().collect()).collect();
+    let other_pools: Vec<Vec<PathBuf>> =
+        others.iter().map(|v| v.choose_multiple(&mut rng, o.pool.min(v.len())).cloned().collect()).collect();
     // Verification pairs (optionally capped per fold and kind).
     let (mut pairs, absent) = if o.verification { lfw.pairs()? } else { (Vec::new(), 0) };
     if let Some(cap) = o.pairs_per_fold {
@@ -345,13 +354,19 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     let records = records.into_inner().unwrap();
     let raw_undetected = pools.iter().flatten().filter(|p| !records.contains_key(*p)).count();
     // Identities usable: ≥ 2 pool images with a raw face.
-    let usable: Vec<Vec<&Record>> =
-        pools.iter().map(|p| p.iter().filter_map(|x| records.get(x)).collect::<Vec<_>>()).filter(|v| v.len() >= 2).collect();
+    let usable: Vec<Vec<&Record>> = pools
+        .iter()
+        .map(|p| p.iter().filter_map(|x| records.get(x)).collect::<Vec<_>>())
+        .filter(|v| v.len() >= 2)
+        .collect();
     let classes = usable.len();
     // Distractors usable by the same rule; gallery rows and classifier classes after the
     // probed identities'.
-    let extra: Vec<Vec<&Record>> =
-        other_pools.iter().map(|p| p.iter().filter_map(|x| records.get(x)).collect::<Vec<_>>()).filter(|v| v.len() >= 2).collect();
+    let extra: Vec<Vec<&Record>> = other_pools
+        .iter()
+        .map(|p| p.iter().filter_map(|x| records.get(x)).collect::<Vec<_>>())
+        .filter(|v| v.len() >= 2)
+        .collect();
     let gallery_size = classes + extra.len();
     let nm = models.embedders.len();
     let orders = [Order::Paper, Order::EndToEnd];
@@ -381,7 +396,13 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
             // The adversary's gallery and linear classifier, from raw photos (one for every
             // condition) or through each condition's camera.
             let enrol = |view: Option<usize>| {
-                let row = |c: usize| if c < classes { enrolled(usable[c][picks[c].0], mi, view) } else { enrolled(extra[c - classes][extra_picks[c - classes]], mi, view) };
+                let row = |c: usize| {
+                    if c < classes {
+                        enrolled(usable[c][picks[c].0], mi, view)
+                    } else {
+                        enrolled(extra[c - classes][extra_picks[c - classes]], mi, view)
+                    }
+                };
                 let gallery = Array2::from_shape_fn((gallery_size, dim), |(c, k)| row(c)[k]);
                 // The linear classifier's training set: every usable image but the probe.
                 let mut xs = Vec::new();
@@ -417,12 +438,15 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
                             continue;
                         };
                         found += 1;
-                        let near: Vec<f32> = gallery.rows().into_iter().map(|g| cosine(g.as_slice().unwrap(), q)).collect();
+                        let near: Vec<f32> =
+                            gallery.rows().into_iter().map(|g| cosine(g.as_slice().unwrap(), q)).collect();
                         ranks[0].push(Some(Rank::of(&near, c)));
                         ranks[1].push(Some(Rank::of(&lin.scores(q), c)));
                     }
                     for (k, r) in ranks.iter().enumerate() {
-                        let cmc: Vec<f64> = (1..=o.cmc_ranks).map(|n| r.iter().flatten().map(|x| x.within(n)).sum::<f64>() / classes as f64).collect();
+                        let cmc: Vec<f64> = (1..=o.cmc_ranks)
+                            .map(|n| r.iter().flatten().map(|x| x.within(n)).sum::<f64>() / classes as f64)
+                            .collect();
                         per_run.entry((ci, oi, mi, k)).or_default().push((cmc[0], cmc, found as f64 / classes as f64));
                     }
                 }
@@ -438,7 +462,8 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
                 for (k, cls) in ["nearest", "linear"].iter().enumerate() {
                     let v = &per_run[&(ci, oi, mi, k)];
                     let (top1_mean, top1_std) = mean_std(&v.iter().map(|r| r.0).collect::<Vec<_>>());
-                    let cmc = (0..o.cmc_ranks).map(|i| v.iter().map(|r| r.1[i]).sum::<f64>() / v.len() as f64).collect();
+                    let cmc =
+                        (0..o.cmc_ranks).map(|i| v.iter().map(|r| r.1[i]).sum::<f64>() / v.len() as f64).collect();
                     let det = v.iter().map(|r| r.2).sum::<f64>() / v.len() as f64;
                     identification.push(IdentRow {
                         condition: conds[ci].name.clone(),
@@ -457,13 +482,20 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     // Verification: the first photo as enrolled (raw, or through the camera), the second
     // protected (paper order).
     let mut verification = Vec::new();
-    let usable_pairs: Vec<_> = pairs.iter().filter(|p| records.contains_key(&p.a) && records.contains_key(&p.b)).collect();
+    let usable_pairs: Vec<_> =
+        pairs.iter().filter(|p| records.contains_key(&p.a) && records.contains_key(&p.b)).collect();
     if o.verification {
         for (ci, c) in conds.iter().enumerate() {
             for (mi, e) in models.embedders.iter().enumerate() {
                 let scored: Vec<(usize, bool, f32)> = usable_pairs
                     .iter()
-                    .map(|p| (p.fold, p.same, cosine(enrolled(&records[&p.a], mi, view(ci)), &records[&p.b].prot[ci].paper[mi])))
+                    .map(|p| {
+                        (
+                            p.fold,
+                            p.same,
+                            cosine(enrolled(&records[&p.a], mi, view(ci)), &records[&p.b].prot[ci].paper[mi]),
+                        )
+                    })
                     .collect();
                 let (accuracy_mean, accuracy_std) = mean_std(&kfold_accuracy(&scored));
                 verification.push(VerifRow {
@@ -509,7 +541,11 @@ pub fn kfold_accuracy(scored: &[(usize, bool, f32)]) -> Vec<f64> {
             let test: Vec<_> = scored.iter().filter(|s| s.0 == f).collect();
             let mut cands: Vec<f32> = train.iter().map(|s| s.2).collect();
             cands.push(f32::NEG_INFINITY);
-            let best = cands.iter().copied().max_by(|&a, &b| accuracy_at(&train, a).total_cmp(&accuracy_at(&train, b)).then(a.total_cmp(&b))).unwrap();
+            let best = cands
+                .iter()
+                .copied()
+                .max_by(|&a, &b| accuracy_at(&train, a).total_cmp(&accuracy_at(&train, b)).then(a.total_cmp(&b)))
+                .unwrap();
             accuracy_at(&test, best)
         })
         .collect()
@@ -553,7 +589,16 @@ mod tests {
     fn kfold_and_tar_by_hand() {
         // Two folds. Fold 0: same 0.9, 0.8; different 0.2, 0.85. Fold 1: same 0.7, 0.6;
         // different 0.1, 0.3.
-        let s = [(0, true, 0.9), (0, true, 0.8), (0, false, 0.2), (0, false, 0.85), (1, true, 0.7), (1, true, 0.6), (1, false, 0.1), (1, false, 0.3)];
+        let s = [
+            (0, true, 0.9),
+            (0, true, 0.8),
+            (0, false, 0.2),
+            (0, false, 0.85),
+            (1, true, 0.7),
+            (1, true, 0.6),
+            (1, false, 0.1),
+            (1, false, 0.3),
+        ];
         // Fold 0 is scored at fold 1's best threshold, 0.3 (the only perfect candidate):
         // 0.9, 0.8 pass, 0.2 is rejected, 0.85 wrongly passes: 3/4.
         // Fold 1 at fold 0's: candidates 0.85 and 0.2 both give 3/4 there; the largest wins,

@@ -83,7 +83,8 @@ fn filter_valid(p: &Plane, g: &[f64; 11]) -> Plane {
 fn ssim_cs(a: &Plane, b: &Plane) -> (f64, f64) {
     let g = gaussian_window();
     let (c1, c2) = ((0.01f64 * 255.0).powi(2), (0.03f64 * 255.0).powi(2));
-    let prod = |f: fn(f64, f64) -> f64| Plane { w: a.w, h: a.h, v: a.v.iter().zip(&b.v).map(|(&x, &y)| f(x, y)).collect() };
+    let prod =
+        |f: fn(f64, f64) -> f64| Plane { w: a.w, h: a.h, v: a.v.iter().zip(&b.v).map(|(&x, &y)| f(x, y)).collect() };
     let mu_a = filter_valid(a, &g);
     let mu_b = filter_valid(b, &g);
     let aa = filter_valid(&prod(|x, _| x * x), &g);
@@ -105,7 +106,13 @@ fn halve(p: &Plane) -> Plane {
     let (w, h) = (p.w / 2, p.h / 2);
     let v = (0..h)
         .flat_map(|y| (0..w).map(move |x| (y, x)))
-        .map(|(y, x)| (p.v[2 * y * p.w + 2 * x] + p.v[2 * y * p.w + 2 * x + 1] + p.v[(2 * y + 1) * p.w + 2 * x] + p.v[(2 * y + 1) * p.w + 2 * x + 1]) / 4.0)
+        .map(|(y, x)| {
+            (p.v[2 * y * p.w + 2 * x]
+                + p.v[2 * y * p.w + 2 * x + 1]
+                + p.v[(2 * y + 1) * p.w + 2 * x]
+                + p.v[(2 * y + 1) * p.w + 2 * x + 1])
+                / 4.0
+        })
         .collect();
     Plane { w, h, v }
 }
@@ -215,7 +222,8 @@ mod tests {
 
     #[test]
     fn identical_images_score_perfectly() {
-        let a = RgbImage::from_fn(176, 180, |x, y| Rgb([(x * 3 % 256) as u8, (y * 5 % 256) as u8, ((x + y) % 256) as u8]));
+        let a =
+            RgbImage::from_fn(176, 180, |x, y| Rgb([(x * 3 % 256) as u8, (y * 5 % 256) as u8, ((x + y) % 256) as u8]));
         let q = quality(&a, &a);
         assert_eq!(q.rmse, 0.0);
         assert!(q.psnr.is_infinite());

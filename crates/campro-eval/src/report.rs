@@ -63,7 +63,12 @@ pub fn privacy_csv(r: &PrivacyReport) -> String {
             for cls in ["nearest", "linear"] {
                 let vals: Vec<f64> = models
                     .iter()
-                    .map(|m| r.identification.iter().find(|x| x.order == order && x.condition == cond && x.classifier == cls && &x.model == m).map_or(f64::NAN, |x| 100.0 * x.top1_mean))
+                    .map(|m| {
+                        r.identification
+                            .iter()
+                            .find(|x| x.order == order && x.condition == cond && x.classifier == cls && &x.model == m)
+                            .map_or(f64::NAN, |x| 100.0 * x.top1_mean)
+                    })
                     .collect();
                 let avg = vals.iter().sum::<f64>() / vals.len() as f64;
                 let cells: Vec<String> = vals.iter().map(|v| format!("{v:.2}")).collect();
@@ -80,7 +85,11 @@ pub fn write_privacy(r: &PrivacyReport, dir: &Path) -> Result<()> {
     write_atomic(&dir.join("privacy.csv"), privacy_csv(r).as_bytes())?;
     let mut v = String::from("dataset,image_type,model,accuracy_mean,accuracy_std,tar_at_far_1e-3,pairs\n");
     for x in &r.verification {
-        let _ = writeln!(v, "LFW,{},{},{:.4},{:.4},{:.4},{}", x.condition, x.model, x.accuracy_mean, x.accuracy_std, x.tar_at_far_1e3, x.pairs);
+        let _ = writeln!(
+            v,
+            "LFW,{},{},{:.4},{:.4},{:.4},{}",
+            x.condition, x.model, x.accuracy_mean, x.accuracy_std, x.tar_at_far_1e3, x.pairs
+        );
     }
     write_atomic(&dir.join("verification.csv"), v.as_bytes())?;
     // CMC, paper order, nearest neighbour: one curve per condition x model.
@@ -88,9 +97,20 @@ pub fn write_privacy(r: &PrivacyReport, dir: &Path) -> Result<()> {
         .identification
         .iter()
         .filter(|x| x.order == Order::Paper && x.classifier == "nearest")
-        .map(|x| Series { name: format!("{} / {}", x.condition, x.model), points: x.cmc.iter().enumerate().map(|(k, &p)| ((k + 1) as f64, 100.0 * p)).collect() })
+        .map(|x| Series {
+            name: format!("{} / {}", x.condition, x.model),
+            points: x.cmc.iter().enumerate().map(|(k, &p)| ((k + 1) as f64, 100.0 * p)).collect(),
+        })
         .collect();
-    let svg = chart("CMC, LFW closed set (paper order, nearest)", "rank", "identification rate (%)", &series, Style::Lines, Some((1.0, r.options.cmc_ranks as f64)), Some((0.0, 100.0)));
+    let svg = chart(
+        "CMC, LFW closed set (paper order, nearest)",
+        "rank",
+        "identification rate (%)",
+        &series,
+        Style::Lines,
+        Some((1.0, r.options.cmc_ranks as f64)),
+        Some((0.0, 100.0)),
+    );
     write_atomic(&dir.join("cmc.svg"), svg.as_bytes())?;
     write_atomic(&dir.join("privacy.md"), privacy_markdown(r).as_bytes())
 }
@@ -101,7 +121,11 @@ pub fn privacy_markdown(r: &PrivacyReport) -> String {
     let mut s = String::from("# Privacy: face identification on LFW\n\n");
     let camera = r.options.enrolment == Enrolment::Camera;
     let gallery = if r.gallery > r.identities {
-        format!("; gallery of {} identities, {} of them distractors (never probed)", r.gallery, r.gallery - r.identities)
+        format!(
+            "; gallery of {} identities, {} of them distractors (never probed)",
+            r.gallery,
+            r.gallery - r.identities
+        )
     } else {
         String::new()
     };
@@ -128,12 +152,26 @@ pub fn privacy_markdown(r: &PrivacyReport) -> String {
             for cls in ["nearest", "linear"] {
                 let rows: Vec<_> = models
                     .iter()
-                    .filter_map(|m| r.identification.iter().find(|x| x.order == order && x.condition == cond && x.classifier == cls && &x.model == m))
+                    .filter_map(|m| {
+                        r.identification
+                            .iter()
+                            .find(|x| x.order == order && x.condition == cond && x.classifier == cls && &x.model == m)
+                    })
                     .collect();
-                let cells: Vec<String> = rows.iter().map(|x| format!("{:.2} ± {:.2}", 100.0 * x.top1_mean, 100.0 * x.top1_std)).collect();
+                let cells: Vec<String> =
+                    rows.iter().map(|x| format!("{:.2} ± {:.2}", 100.0 * x.top1_mean, 100.0 * x.top1_std)).collect();
                 let avg = rows.iter().map(|x| x.top1_mean).sum::<f64>() / rows.len().max(1) as f64;
-                let det = rows.first().and_then(|x| x.detection_rate).map_or(String::new(), |d| format!(" (faces found: {:.1}%)", 100.0 * d));
-                let _ = writeln!(s, "| {} | {cond}{det} | {cls} | {} | {:.2} |", order.name(), cells.join(" | "), 100.0 * avg);
+                let det = rows
+                    .first()
+                    .and_then(|x| x.detection_rate)
+                    .map_or(String::new(), |d| format!(" (faces found: {:.1}%)", 100.0 * d));
+                let _ = writeln!(
+                    s,
+                    "| {} | {cond}{det} | {cls} | {} | {:.2} |",
+                    order.name(),
+                    cells.join(" | "),
+                    100.0 * avg
+                );
             }
         }
     }
@@ -148,7 +186,11 @@ pub fn privacy_markdown(r: &PrivacyReport) -> String {
         );
         s.push_str("| image type | model | 10-fold accuracy | TAR @ FAR 1e-3 |\n|---|---|---|---|\n");
         for v in &r.verification {
-            let _ = writeln!(s, "| {} | {} | {:.4} ± {:.4} | {:.4} |", v.condition, v.model, v.accuracy_mean, v.accuracy_std, v.tar_at_far_1e3);
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.4} ± {:.4} | {:.4} |",
+                v.condition, v.model, v.accuracy_mean, v.accuracy_std, v.tar_at_far_1e3
+            );
         }
     }
     let _ = writeln!(s, "\n![CMC](cmc.svg)\n\nRun time: {:.0} s.", r.seconds);
@@ -168,8 +210,16 @@ pub fn write_utility(r: &UtilityReport, dir: &Path) -> Result<()> {
     );
     for x in &r.rows {
         let t = &x.metrics;
-        let _ = writeln!(c, "{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{}", x.condition, t.ap, t.ap50, t.ap75, t.precision, t.recall, t.f1, t.confidence, t.ground_truths, t.detections);
-        let _ = writeln!(m, "| {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |", x.condition, t.ap, t.ap50, t.ap75, t.precision, t.recall, t.f1);
+        let _ = writeln!(
+            c,
+            "{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{}",
+            x.condition, t.ap, t.ap50, t.ap75, t.precision, t.recall, t.f1, t.confidence, t.ground_truths, t.detections
+        );
+        let _ = writeln!(
+            m,
+            "| {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            x.condition, t.ap, t.ap50, t.ap75, t.precision, t.recall, t.f1
+        );
     }
     let _ = writeln!(m, "\nRun time: {:.0} s.", r.seconds);
     write_atomic(&dir.join("utility.csv"), c.as_bytes())?;
@@ -185,7 +235,11 @@ pub fn write_quality(r: &QualityReport, dir: &Path) -> Result<()> {
         r.images
     );
     for x in &r.rows {
-        let _ = writeln!(c, "{},{:.4},{:.4},{:.4},{:.4},{},{}", x.condition, x.rmse, x.psnr, x.ssim, x.ms_ssim, x.images, x.ms_ssim_images);
+        let _ = writeln!(
+            c,
+            "{},{:.4},{:.4},{:.4},{:.4},{},{}",
+            x.condition, x.rmse, x.psnr, x.ssim, x.ms_ssim, x.images, x.ms_ssim_images
+        );
         let _ = writeln!(m, "| {} | {:.2} | {:.2} | {:.3} | {:.3} |", x.condition, x.rmse, x.psnr, x.ssim, x.ms_ssim);
     }
     let _ = writeln!(m, "\nRun time: {:.0} s.", r.seconds);
@@ -196,14 +250,28 @@ pub fn write_quality(r: &QualityReport, dir: &Path) -> Result<()> {
 /// The privacy-utility trade-off (the paper's Figure 10): x = mean top-1 over the face
 /// models (paper order, nearest), y = person AP; one point per image type present in both.
 pub fn tradeoff(p: &PrivacyReport, u: &UtilityReport) -> Vec<(String, f64, f64)> {
-    u.rows.iter().filter_map(|row| mean_top1(p, &row.condition, Order::Paper, "nearest").map(|t| (row.condition.clone(), t, row.metrics.ap))).collect()
+    u.rows
+        .iter()
+        .filter_map(|row| {
+            mean_top1(p, &row.condition, Order::Paper, "nearest").map(|t| (row.condition.clone(), t, row.metrics.ap))
+        })
+        .collect()
 }
 
 /// Writes report.md (all three evaluations) and tradeoff.svg.
 pub fn write_summary(p: &PrivacyReport, u: &UtilityReport, q: &QualityReport, dir: &Path) -> Result<()> {
     let points = tradeoff(p, u);
-    let series: Vec<Series> = points.iter().map(|(n, x, y)| Series { name: n.clone(), points: vec![(100.0 * x, *y)] }).collect();
-    let svg = chart("Privacy vs utility (cf. the paper's Figure 10)", "face identification top-1 (%), lower = more private", "person AP", &series, Style::Points, Some((0.0, 100.0)), None);
+    let series: Vec<Series> =
+        points.iter().map(|(n, x, y)| Series { name: n.clone(), points: vec![(100.0 * x, *y)] }).collect();
+    let svg = chart(
+        "Privacy vs utility (cf. the paper's Figure 10)",
+        "face identification top-1 (%), lower = more private",
+        "person AP",
+        &series,
+        Style::Points,
+        Some((0.0, 100.0)),
+        None,
+    );
     write_atomic(&dir.join("tradeoff.svg"), svg.as_bytes())?;
     let mut s = String::from("# campro evaluation\n\n## Privacy vs utility\n\n| image type | top-1 (%, mean over models) | person AP |\n|---|---|---|\n");
     for (n, x, y) in &points {

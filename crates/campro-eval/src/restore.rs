@@ -51,7 +51,8 @@ impl Restorer {
             return Err(crate::EvalError::Invalid("restoration prior: no pixels".into()));
         }
         // Each filled bin's mean colour, through the camera as one row of pixels.
-        let reps: Vec<[u8; 3]> = filled.iter().map(|&b| std::array::from_fn(|c| ((sum[b][c] + count[b] / 2) / count[b]) as u8)).collect();
+        let reps: Vec<[u8; 3]> =
+            filled.iter().map(|&b| std::array::from_fn(|c| ((sum[b][c] + count[b] / 2) / count[b]) as u8)).collect();
         let row = RgbImage::from_raw(reps.len() as u32, 1, reps.iter().flatten().copied().collect()).expect("sized");
         let seen = protect(&row);
         if seen.dimensions() != row.dimensions() {
@@ -64,7 +65,9 @@ impl Restorer {
             w[o] += count[b];
             (0..3).for_each(|c| acc[o][c] += count[b] * rep[c] as u64);
         }
-        let lut = (0..w.len()).map(|o| (w[o] > 0).then(|| std::array::from_fn(|c| ((acc[o][c] + w[o] / 2) / w[o]) as u8))).collect();
+        let lut = (0..w.len())
+            .map(|o| (w[o] > 0).then(|| std::array::from_fn(|c| ((acc[o][c] + w[o] / 2) / w[o]) as u8)))
+            .collect();
         Ok(Self { lut })
     }
 
@@ -109,7 +112,8 @@ mod tests {
         // The identity camera restores to within a bin as well.
         let same: Box<ProtectFn> = Box::new(|img: &RgbImage| img.clone());
         let r = Restorer::fit(same.as_ref(), &prior()).unwrap();
-        let worst = img.as_raw().iter().zip(r.apply(img).as_raw()).map(|(a, b)| (*a as i32 - *b as i32).abs()).max().unwrap();
+        let worst =
+            img.as_raw().iter().zip(r.apply(img).as_raw()).map(|(a, b)| (*a as i32 - *b as i32).abs()).max().unwrap();
         assert!(worst <= 4, "{worst}");
     }
 

@@ -42,9 +42,16 @@ pub struct UtilityReport {
 }
 
 /// Detects people in every image under every condition and scores them.
-pub fn evaluate(images: &[CocoImage], detector: &PersonDetector, name: &str, conds: &[Condition], o: &UtilityOptions) -> Result<UtilityReport> {
+pub fn evaluate(
+    images: &[CocoImage],
+    detector: &PersonDetector,
+    name: &str,
+    conds: &[Condition],
+    o: &UtilityOptions,
+) -> Result<UtilityReport> {
     let start = std::time::Instant::now();
-    let kept: Vec<&CocoImage> = images.iter().filter(|im| !o.held_out || crate::data::detector_held_out(im.id)).collect();
+    let kept: Vec<&CocoImage> =
+        images.iter().filter(|im| !o.held_out || crate::data::detector_held_out(im.id)).collect();
     let images = &kept[..o.limit.unwrap_or(kept.len()).min(kept.len())];
     // dets[i][c]: detections of image i under condition c, as COCO [x, y, w, h].
     let dets: Vec<Vec<Vec<Scored>>> = crate::par_map_progress(images, "utility: detecting people", |im| {
@@ -53,7 +60,12 @@ pub fn evaluate(images: &[CocoImage], detector: &PersonDetector, name: &str, con
             .iter()
             .map(|c| {
                 let d = detector.detect(&c.apply(&img))?;
-                Ok(d.iter().map(|d| Scored { bbox: [d.bbox[0], d.bbox[1], d.bbox[2] - d.bbox[0], d.bbox[3] - d.bbox[1]], score: d.score }).collect())
+                Ok(d.iter()
+                    .map(|d| Scored {
+                        bbox: [d.bbox[0], d.bbox[1], d.bbox[2] - d.bbox[0], d.bbox[3] - d.bbox[1]],
+                        score: d.score,
+                    })
+                    .collect())
             })
             .collect::<Result<Vec<_>>>()
     })?;
@@ -61,9 +73,16 @@ pub fn evaluate(images: &[CocoImage], detector: &PersonDetector, name: &str, con
         .iter()
         .enumerate()
         .map(|(c, cond)| {
-            let per: Vec<(Vec<GroundTruth>, Vec<Scored>)> = images.iter().zip(&dets).map(|(im, d)| (im.gts.clone(), d[c].clone())).collect();
+            let per: Vec<(Vec<GroundTruth>, Vec<Scored>)> =
+                images.iter().zip(&dets).map(|(im, d)| (im.gts.clone(), d[c].clone())).collect();
             UtilityRow { condition: cond.name.clone(), metrics: ap::evaluate(&per, o.confidence) }
         })
         .collect();
-    Ok(UtilityReport { options: o.clone(), detector: name.to_string(), images: images.len(), rows, seconds: start.elapsed().as_secs_f64() })
+    Ok(UtilityReport {
+        options: o.clone(),
+        detector: name.to_string(),
+        images: images.len(),
+        rows,
+        seconds: start.elapsed().as_secs_f64(),
+    })
 }

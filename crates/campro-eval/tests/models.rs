@@ -26,13 +26,16 @@ fn lfw(person: &str, n: usize) -> Option<PathBuf> {
 
 #[test]
 fn yunet_finds_the_lfw_face_with_landmarks_in_place() {
-    let Some(models) = shared::shared("models/yunet_s_640_640.onnx").map(|p| p.parent().unwrap().to_path_buf()) else { return };
+    let Some(models) = shared::shared("models/yunet_s_640_640.onnx").map(|p| p.parent().unwrap().to_path_buf()) else {
+        return;
+    };
     let det = FaceDetector::new(load("yunet", &models)).unwrap();
     for (person, n) in [("George_W_Bush", 1), ("Colin_Powell", 1), ("Donald_Rumsfeld", 1), ("Hugo_Chavez", 2)] {
         let Some(path) = lfw(person, n) else { return };
         let img = read_rgb8(&path).unwrap();
         let faces = det.detect(&img).unwrap();
-        let f = central_face(&faces, img.width(), img.height()).unwrap_or_else(|| panic!("no face in {}", path.display()));
+        let f =
+            central_face(&faces, img.width(), img.height()).unwrap_or_else(|| panic!("no face in {}", path.display()));
         // Deep-funneled LFW centres the face in the 250x250 frame.
         let (cx, cy) = ((f.bbox[0] + f.bbox[2]) / 2.0, (f.bbox[1] + f.bbox[3]) / 2.0);
         assert!((cx - 125.0).abs() < 25.0 && (cy - 125.0).abs() < 35.0, "{person}: box {:?}", f.bbox);
@@ -45,7 +48,10 @@ fn yunet_finds_the_lfw_face_with_landmarks_in_place() {
         assert!(nose[1] > re[1].max(le[1]) && nose[1] < rm[1].min(lm[1]), "{person}: eyes, nose, mouth top to bottom");
         assert!(rm[0] < lm[0], "{person}: mouth corners in order");
         for p in f.landmarks {
-            assert!(p[0] >= f.bbox[0] && p[0] <= f.bbox[2] && p[1] >= f.bbox[1] && p[1] <= f.bbox[3], "{person}: landmark outside the box");
+            assert!(
+                p[0] >= f.bbox[0] && p[0] <= f.bbox[2] && p[1] >= f.bbox[1] && p[1] <= f.bbox[3],
+                "{person}: landmark outside the box"
+            );
         }
     }
     // A flat grey frame holds no face; a large frame is scaled down and the face still found.
@@ -58,9 +64,18 @@ fn yunet_finds_the_lfw_face_with_landmarks_in_place() {
 
 #[test]
 fn embeddings_put_the_same_person_closer_than_others() {
-    let Some(models) = shared::shared("models/yunet_s_640_640.onnx").map(|p| p.parent().unwrap().to_path_buf()) else { return };
+    let Some(models) = shared::shared("models/yunet_s_640_640.onnx").map(|p| p.parent().unwrap().to_path_buf()) else {
+        return;
+    };
     let det = FaceDetector::new(load("yunet", &models)).unwrap();
-    let photos = [("George_W_Bush", 1), ("George_W_Bush", 2), ("Colin_Powell", 1), ("Colin_Powell", 2), ("Donald_Rumsfeld", 1), ("Hugo_Chavez", 2)];
+    let photos = [
+        ("George_W_Bush", 1),
+        ("George_W_Bush", 2),
+        ("Colin_Powell", 1),
+        ("Colin_Powell", 2),
+        ("Donald_Rumsfeld", 1),
+        ("Hugo_Chavez", 2),
+    ];
     let mut faces = Vec::new();
     for (person, n) in photos {
         let Some(path) = lfw(person, n) else { return };
@@ -70,7 +85,8 @@ fn embeddings_put_the_same_person_closer_than_others() {
     }
     for name in ["faceplugin", "mobilefacenet_casia"] {
         let emb = Embedder::new(load(name, &models)).unwrap();
-        let e: Vec<Vec<f32>> = faces.iter().map(|(_, img, f)| emb.embed(&emb.align(img, &f.landmarks)).unwrap()).collect();
+        let e: Vec<Vec<f32>> =
+            faces.iter().map(|(_, img, f)| emb.embed(&emb.align(img, &f.landmarks)).unwrap()).collect();
         for v in &e {
             let norm = v.iter().map(|x| x * x).sum::<f32>().sqrt();
             assert!((norm - 1.0).abs() < 1e-4, "{name}: norm {norm}");
@@ -79,7 +95,11 @@ fn embeddings_put_the_same_person_closer_than_others() {
         for i in 0..e.len() {
             for j in i + 1..e.len() {
                 let c = cosine(&e[i], &e[j]);
-                if faces[i].0 == faces[j].0 { same = same.min(c) } else { other = other.max(c) }
+                if faces[i].0 == faces[j].0 {
+                    same = same.min(c)
+                } else {
+                    other = other.max(c)
+                }
             }
         }
         assert!(same > other + 0.1, "{name}: same person {same} vs others {other}");
@@ -94,7 +114,9 @@ fn embeddings_put_the_same_person_closer_than_others() {
 
 #[test]
 fn yolox_finds_the_coco_people() {
-    let Some(models) = shared::shared("models/yolox_nano.onnx").map(|p| p.parent().unwrap().to_path_buf()) else { return };
+    let Some(models) = shared::shared("models/yolox_nano.onnx").map(|p| p.parent().unwrap().to_path_buf()) else {
+        return;
+    };
     let Some(coco) = shared::shared("data/coco-person/instances_person.json") else { return };
     let det = PersonDetector::new(load("yolox_nano", &models)).unwrap();
     let images = coco_person(coco.parent().unwrap()).unwrap();
@@ -137,12 +159,18 @@ fn bad_manifests_name_the_field_and_the_rule() {
     assert_eq!((field.as_str(), rule.as_str()), ("input.std", "must be finite and > 0"));
     let (field, _) = manifest_error(&good.replace("\"face_embedder\"", "\"face_swapper\""));
     assert_eq!(field, "task.kind");
-    let (field, rule) = manifest_error(r#"{"name": "x", "file": "x.onnx", "input": {"width": 0, "height": 5, "channels": "rgb"}, "task": {"kind": "face_detector", "strides": [8], "score_threshold": 0.5, "nms_iou": 0.3}}"#);
+    let (field, rule) = manifest_error(
+        r#"{"name": "x", "file": "x.onnx", "input": {"width": 0, "height": 5, "channels": "rgb"}, "task": {"kind": "face_detector", "strides": [8], "score_threshold": 0.5, "nms_iou": 0.3}}"#,
+    );
     assert_eq!(field, "input", "{rule}");
-    let (field, _) = manifest_error(r#"{"name": "x", "file": "x.onnx", "input": {"width": 64, "height": 64, "channels": "rgb"}, "task": {"kind": "face_detector", "strides": [8], "score_threshold": 1.5, "nms_iou": 0.3}}"#);
+    let (field, _) = manifest_error(
+        r#"{"name": "x", "file": "x.onnx", "input": {"width": 64, "height": 64, "channels": "rgb"}, "task": {"kind": "face_detector", "strides": [8], "score_threshold": 1.5, "nms_iou": 0.3}}"#,
+    );
     assert_eq!(field, "task");
     // serde buffers a tagged enum, so inside `task` the rule carries the detail.
-    let (field, rule) = manifest_error(r#"{"name": "x", "file": "x.onnx", "input": {"width": 64, "height": 64, "channels": "rgb"}, "task": {"kind": "face_embedder", "output": "o", "template": [[1, 2]]}}"#);
+    let (field, rule) = manifest_error(
+        r#"{"name": "x", "file": "x.onnx", "input": {"width": 64, "height": 64, "channels": "rgb"}, "task": {"kind": "face_embedder", "output": "o", "template": [[1, 2]]}}"#,
+    );
     assert!(field == "task" && rule.contains("length 1") && rule.contains("5"), "{field}: {rule}");
     let (field, _) = manifest_error("{\"name\": \"x\", \"fil\": 1}");
     assert_eq!(field, "fil");

@@ -50,4 +50,3 @@ pub fn test_frame(w: usize, h: usize) -> Vec<u8> {
     }
     out
 }
-

@@ -14,9 +14,8 @@ pub fn workspace_root() -> PathBuf {
 /// Absent: prints why the test is skipped and returns `None`; under CI (`CI=true`) a
 /// missing file fails the test instead.
 pub fn shared(rel: &str) -> Option<PathBuf> {
-    let root = std::env::var_os("CAMPRO_SHARED")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace_root().join("../shared"));
+    let root =
+        std::env::var_os("CAMPRO_SHARED").map(PathBuf::from).unwrap_or_else(|| workspace_root().join("../shared"));
     let p = root.join(rel);
     if p.exists() {
         return Some(p);
@@ -27,7 +26,6 @@ pub fn shared(rel: &str) -> Option<PathBuf> {
     eprintln!("SKIP: {} not found (set CAMPRO_SHARED to the shared/ folder)", p.display());
     None
 }
-
 
 /// The `../shared` root, if every file of `needs` is there (each checked as `shared` does:
 /// skipped with a message when absent, a failure under CI).

@@ -107,7 +107,8 @@ fn device(r: &mut Rng) -> Mat3 {
 pub fn random_case(seed: u64) -> Case {
     let mut r = Rng(seed);
     let ccm = [[0.0; 3]; 3].map(|row: [f64; 3]| row.map(|_| entry(&mut r)));
-    let mut params = Params::new(ccm, curve(&mut r), r.pick(&[2.2, 2.2, 1.0, 2.4, 0.45])).expect("generated params are valid");
+    let mut params =
+        Params::new(ccm, curve(&mut r), r.pick(&[2.2, 2.2, 1.0, 2.4, 0.45])).expect("generated params are valid");
     params.name = format!("stress-{seed}");
     let rational = match r.next_u64() % 3 {
         0 => RationalMode::Best { max_denominator: r.pick(&[1, 2, 10, 256, 1 << 16, 1 << 24, i32::MAX as u32]) },
@@ -136,7 +137,11 @@ pub fn check(case: &Case) -> Result<Outcome> {
         // A rational that cannot fit 32 bits, refused with the entry named.
         Err(e @ ConvertError::Rational { .. }) => {
             let msg = e.to_string();
-            return if msg.starts_with("colorCorrectionTransform[") { Ok(Outcome::Refused) } else { fail(format!("unnamed error {msg}")) };
+            return if msg.starts_with("colorCorrectionTransform[") {
+                Ok(Outcome::Refused)
+            } else {
+                fail(format!("unnamed error {msg}"))
+            };
         }
         Err(e) => return fail(format!("unexpected error: {e}")),
     };
@@ -196,12 +201,20 @@ pub fn check(case: &Case) -> Result<Outcome> {
         let want = reference.pixel(px.map(u16::from));
         let q = want.map(|x| (x * 255.0 + 0.5) as u8);
         if exact.pixel(px) != q || got != q {
-            return fail(format!("exact 8-bit path differs at {px:?}: {:?} / {got:?} ({:?}) vs {q:?}", exact.pixel(px), exact.engine()));
+            return fail(format!(
+                "exact 8-bit path differs at {px:?}: {:?} / {got:?} ({:?}) vs {q:?}",
+                exact.pixel(px),
+                exact.engine()
+            ));
         }
         let g = f32p.pixel(px.map(u16::from));
         for k in 0..3 {
             if (g[k] as f64 - want[k]).abs() > f32p.error_bound() {
-                return fail(format!("f32 path error {} > its bound {}", (g[k] as f64 - want[k]).abs(), f32p.error_bound()));
+                return fail(format!(
+                    "f32 path error {} > its bound {}",
+                    (g[k] as f64 - want[k]).abs(),
+                    f32p.error_bound()
+                ));
             }
         }
     }

@@ -16,9 +16,20 @@ fn main() -> anyhow::Result<()> {
     let lr: f64 = a.next().map_or(Ok(1e-5), |s| s.parse())?;
     let images: usize = a.next().map_or(Ok(300), |s| s.parse())?;
     let size: usize = a.next().map_or(Ok(416), |s| s.parse())?;
-    let cfg = DetectorConfig { model: shared.join("models/yolox_nano.onnx"), data: shared.join("data/coco-person"), size, batch: 4, lr, max_images: Some(images), ..DetectorConfig::default() };
+    let cfg = DetectorConfig {
+        model: shared.join("models/yolox_nano.onnx"),
+        data: shared.join("data/coco-person"),
+        size,
+        batch: 4,
+        lr,
+        max_images: Some(images),
+        ..DetectorConfig::default()
+    };
     let done = run(&Imaging::Raw, &cfg, &FinetuneOptions { steps, seconds: f64::INFINITY, seed: 0 }, |r| {
-        println!("step {}: L_det {:.3} (iou {:.3} obj {:.3} cls {:.3}, {} positives)", r.step, r.loss, r.iou, r.obj, r.cls, r.positives)
+        println!(
+            "step {}: L_det {:.3} (iou {:.3} obj {:.3} cls {:.3}, {} positives)",
+            r.step, r.loss, r.iou, r.obj, r.cls, r.positives
+        )
     })?;
     done.detector.save_onnx(&out)?;
     Ok(())

@@ -59,7 +59,9 @@ fn main() -> anyhow::Result<()> {
     let people = Tensor::rand(0f32, 1f32, (pb, 3, size, size), &dev)?;
     let mask = Tensor::ones((pb, 1, size, size), DType::F32, &dev)?;
     let s = size as f32;
-    let boxes: Vec<Vec<[f32; 4]>> = (0..pb).map(|i| vec![[s * 0.5, s * 0.5, s * 0.3, s * 0.6], [s * 0.2, s * 0.3, s * 0.1, s * (0.2 + 0.05 * i as f32)]]).collect();
+    let boxes: Vec<Vec<[f32; 4]>> = (0..pb)
+        .map(|i| vec![[s * 0.5, s * 0.5, s * 0.3, s * 0.6], [s * 0.2, s * 0.3, s * 0.1, s * (0.2 + 0.05 * i as f32)]])
+        .collect();
     let detector = median(|| {
         let head = det.forward(&detector_input(&cam.forward(&people)?, &mask)?)?;
         let (l, _) = yolox_loss(&head, size, size, &boxes)?;

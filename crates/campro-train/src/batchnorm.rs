@@ -58,7 +58,9 @@ struct Normalise {
 impl Normalise {
     /// Per channel (mean, 1 / sqrt(var + eps), γ, β).
     fn coefs(&self, affine: &[f32], stats: &[f32], c: usize) -> Vec<[f32; 4]> {
-        (0..c).map(|ch| [stats[ch], (1.0 / (stats[c + ch] as f64 + self.eps).sqrt()) as f32, affine[ch], affine[c + ch]]).collect()
+        (0..c)
+            .map(|ch| [stats[ch], (1.0 / (stats[c + ch] as f64 + self.eps).sqrt()) as f32, affine[ch], affine[c + ch]])
+            .collect()
     }
 }
 
@@ -67,7 +69,15 @@ impl CustomOp3 for Normalise {
         "batch-norm-train"
     }
 
-    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout, s3: &CpuStorage, l3: &Layout) -> Result<(CpuStorage, Shape)> {
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
         let (_, c, n) = dims(l1)?;
         let (x, affine, stats) = (slice(s1, l1)?, slice(s2, l2)?, slice(s3, l3)?);
         if affine.len() != 2 * c || stats.len() != 2 * c {
@@ -84,7 +94,14 @@ impl CustomOp3 for Normalise {
         Ok((CpuStorage::F32(y), l1.shape().clone()))
     }
 
-    fn bwd(&self, x: &Tensor, affine: &Tensor, stats: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
+    fn bwd(
+        &self,
+        x: &Tensor,
+        affine: &Tensor,
+        stats: &Tensor,
+        _res: &Tensor,
+        grad: &Tensor,
+    ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
         let (b, c, h, w) = x.dims4()?;
         let n = h * w;
         let total = (b * n) as f32;

@@ -21,7 +21,9 @@ impl Camera {
     /// The paper's initialisation: identity CCM, identity curve with `k` knots.
     pub fn identity(k: usize, gamma: f64, device: &Device) -> Result<Self> {
         let ccm = Var::from_tensor(&Tensor::eye(3, DType::F32, device)?)?;
-        let curve = Var::from_tensor(&Tensor::arange(0u32, k as u32, device)?.to_dtype(DType::F32)?.affine(1.0 / (k - 1) as f64, 0.0)?)?;
+        let curve = Var::from_tensor(
+            &Tensor::arange(0u32, k as u32, device)?.to_dtype(DType::F32)?.affine(1.0 / (k - 1) as f64, 0.0)?,
+        )?;
         Ok(Self { ccm, curve, gamma })
     }
 

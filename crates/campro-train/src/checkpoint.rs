@@ -47,7 +47,8 @@ pub fn save(dir: &Path, tensors: &HashMap<String, Tensor>, state: &State) -> Res
 
 /// Writes `tensors` as `dir/name` (safetensors), whole or not at all.
 pub fn write_tensors(dir: &Path, name: &str, tensors: &HashMap<String, Tensor>) -> Result<(), CheckpointError> {
-    let bytes = safetensors::serialize(tensors, None).map_err(|e| CheckpointError::Format { path: dir.join(name), message: e.to_string() })?;
+    let bytes = safetensors::serialize(tensors, None)
+        .map_err(|e| CheckpointError::Format { path: dir.join(name), message: e.to_string() })?;
     atomic(dir, name, &bytes)
 }
 
@@ -55,8 +56,10 @@ pub fn write_tensors(dir: &Path, name: &str, tensors: &HashMap<String, Tensor>) 
 pub fn load(dir: &Path, device: &Device) -> Result<(HashMap<String, Tensor>, State), CheckpointError> {
     let sp = dir.join(STATE);
     let text = std::fs::read(&sp).map_err(|e| CheckpointError::Io { path: sp.clone(), message: e.to_string() })?;
-    let state: State = serde_json::from_slice(&text).map_err(|e| CheckpointError::Format { path: sp, message: e.to_string() })?;
+    let state: State =
+        serde_json::from_slice(&text).map_err(|e| CheckpointError::Format { path: sp, message: e.to_string() })?;
     let tp = dir.join(TENSORS);
-    let tensors = candle_core::safetensors::load(&tp, device).map_err(|e| CheckpointError::Format { path: tp, message: e.to_string() })?;
+    let tensors = candle_core::safetensors::load(&tp, device)
+        .map_err(|e| CheckpointError::Format { path: tp, message: e.to_string() })?;
     Ok((tensors, state))
 }

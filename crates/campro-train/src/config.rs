@@ -202,7 +202,18 @@ impl Default for DataConfig {
 }
 impl Default for DetectorConfig {
     fn default() -> Self {
-        Self { model: "../shared/models/yolox_nano.onnx".into(), data: "../shared/data/coco-person".into(), size: 320, batch: 4, lr: 1e-5, max_images: None, distill: 0.0, adapter: 0, adapter_lr: 1e-3, adapter_fit: 0 }
+        Self {
+            model: "../shared/models/yolox_nano.onnx".into(),
+            data: "../shared/data/coco-person".into(),
+            size: 320,
+            batch: 4,
+            lr: 1e-5,
+            max_images: None,
+            distill: 0.0,
+            adapter: 0,
+            adapter_lr: 1e-3,
+            adapter_fit: 0,
+        }
     }
 }
 
@@ -216,13 +227,21 @@ impl Config {
     /// Reads and checks a TOML file (missing keys take the paper's defaults).
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let p = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Parse { path: p.clone(), message: e.to_string() })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ConfigError::Parse { path: p.clone(), message: e.to_string() })?;
         Self::parse(&text, &p)
     }
 
     pub fn parse(text: &str, origin: &str) -> Result<Self, ConfigError> {
-        let c: Config = toml::from_str(text).map_err(|e| ConfigError::Parse { path: origin.into(), message: e.message().to_string() + &span(text, e.span()) })?;
-        c.check().map_err(|(key, rule)| ConfigError::Rule { path: origin.into(), key: key.into(), rule: rule.into() })?;
+        let c: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: origin.into(),
+            message: e.message().to_string() + &span(text, e.span()),
+        })?;
+        c.check().map_err(|(key, rule)| ConfigError::Rule {
+            path: origin.into(),
+            key: key.into(),
+            rule: rule.into(),
+        })?;
         Ok(c)
     }
 
@@ -231,24 +250,60 @@ impl Config {
         let finite_pos = |v: f64| v.is_finite() && v > 0.0;
         let checks: [(bool, &str, &str); 21] = [
             ((2..=1024).contains(&self.camera.knots), "camera.knots", "must be in 2..=1024"),
-            (self.camera.gamma.is_finite() && (0.2..=5.0).contains(&self.camera.gamma), "camera.gamma", "must be in [0.2, 5]"),
+            (
+                self.camera.gamma.is_finite() && (0.2..=5.0).contains(&self.camera.gamma),
+                "camera.gamma",
+                "must be in [0.2, 5]",
+            ),
             (finite_pos(self.camera.lr), "camera.lr", "must be finite and > 0"),
             (finite_pos(self.attacker.lr), "attacker.lr", "must be finite and > 0"),
-            (self.attacker.backbone_lr.is_finite() && self.attacker.backbone_lr >= 0.0, "attacker.backbone_lr", "must be finite and ≥ 0 (0 freezes F)"),
+            (
+                self.attacker.backbone_lr.is_finite() && self.attacker.backbone_lr >= 0.0,
+                "attacker.backbone_lr",
+                "must be finite and ≥ 0 (0 freezes F)",
+            ),
             ((0.0..=1.0).contains(&self.attacker.pretrain_accuracy), "attacker.pretrain_accuracy", "must be in [0, 1]"),
             (self.protector.steps_per_round >= 1, "protector.steps_per_round", "must be ≥ 1"),
-            (self.protector.omega.is_finite() && self.protector.omega >= 0.0, "protector.omega", "must be finite and ≥ 0"),
-            (self.protector.protector_only || self.attacker.steps_per_round >= 1, "attacker.steps_per_round", "must be ≥ 1 unless protector.protector_only"),
+            (
+                self.protector.omega.is_finite() && self.protector.omega >= 0.0,
+                "protector.omega",
+                "must be finite and ≥ 0",
+            ),
+            (
+                self.protector.protector_only || self.attacker.steps_per_round >= 1,
+                "attacker.steps_per_round",
+                "must be ≥ 1 unless protector.protector_only",
+            ),
             (self.data.min_images >= 2, "data.min_images", "must be ≥ 2 (one photo to train on, one to check)"),
             ((0.0..1.0).contains(&self.data.validation_identities), "data.validation_identities", "must be in [0, 1)"),
             ((1..=4096).contains(&self.data.batch), "data.batch", "must be in 1..=4096"),
-            (self.detector.size % 32 == 0 && (64..=1024).contains(&self.detector.size), "detector.size", "must be a multiple of 32 in 64..=1024"),
+            (
+                self.detector.size % 32 == 0 && (64..=1024).contains(&self.detector.size),
+                "detector.size",
+                "must be a multiple of 32 in 64..=1024",
+            ),
             ((1..=256).contains(&self.detector.batch), "detector.batch", "must be in 1..=256"),
-            (self.detector.lr.is_finite() && self.detector.lr >= 0.0, "detector.lr", "must be finite and ≥ 0 (0 freezes P)"),
-            (self.detector.distill.is_finite() && self.detector.distill >= 0.0, "detector.distill", "must be finite and ≥ 0 (0 leaves it out)"),
+            (
+                self.detector.lr.is_finite() && self.detector.lr >= 0.0,
+                "detector.lr",
+                "must be finite and ≥ 0 (0 freezes P)",
+            ),
+            (
+                self.detector.distill.is_finite() && self.detector.distill >= 0.0,
+                "detector.distill",
+                "must be finite and ≥ 0 (0 leaves it out)",
+            ),
             (self.detector.adapter <= 4096, "detector.adapter", "must be at most 4096 hidden units (0 for none)"),
-            (self.detector.adapter_fit == 0 || self.detector.adapter > 0, "detector.adapter_fit", "needs detector.adapter > 0 (there is no adapter to fit)"),
-            (self.detector.adapter_lr.is_finite() && self.detector.adapter_lr >= 0.0, "detector.adapter_lr", "must be finite and ≥ 0 (0 freezes the adapter)"),
+            (
+                self.detector.adapter_fit == 0 || self.detector.adapter > 0,
+                "detector.adapter_fit",
+                "needs detector.adapter > 0 (there is no adapter to fit)",
+            ),
+            (
+                self.detector.adapter_lr.is_finite() && self.detector.adapter_lr >= 0.0,
+                "detector.adapter_lr",
+                "must be finite and ≥ 0 (0 freezes the adapter)",
+            ),
             (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
             (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
         ];

@@ -43,18 +43,29 @@ pub fn iou_cxcywh(a: [f32; 4], b: [f32; 4]) -> f32 {
 
 /// SimOTA for one image. `anchors`: (column, row, stride) per anchor; `boxes`: predicted
 /// (cx, cy, w, h); `obj`, `cls`: predicted probabilities; `gts`: (cx, cy, w, h) boxes.
-pub fn simota(anchors: &[(f32, f32, f32)], boxes: &[[f32; 4]], obj: &[f32], cls: &[f32], gts: &[[f32; 4]]) -> Vec<Positive> {
+pub fn simota(
+    anchors: &[(f32, f32, f32)],
+    boxes: &[[f32; 4]],
+    obj: &[f32],
+    cls: &[f32],
+    gts: &[[f32; 4]],
+) -> Vec<Positive> {
     const RADIUS: f32 = 2.5;
     let n = anchors.len();
     // Geometry: in box, in centre area, per (gt, anchor).
     let inside = |g: &[f32; 4], i: usize| -> (bool, bool) {
         let (c, r, s) = anchors[i];
         let (x, y) = ((c + 0.5) * s, (r + 0.5) * s);
-        let in_box = (x - (g[0] - g[2] / 2.0)).min(g[0] + g[2] / 2.0 - x).min(y - (g[1] - g[3] / 2.0)).min(g[1] + g[3] / 2.0 - y) > 0.0;
+        let in_box = (x - (g[0] - g[2] / 2.0))
+            .min(g[0] + g[2] / 2.0 - x)
+            .min(y - (g[1] - g[3] / 2.0))
+            .min(g[1] + g[3] / 2.0 - y)
+            > 0.0;
         let in_centre = (x - g[0]).abs() < RADIUS * s && (y - g[1]).abs() < RADIUS * s;
         (in_box, in_centre)
     };
-    let candidate: Vec<bool> = (0..n).map(|i| gts.iter().any(|g| matches!(inside(g, i), (true, _) | (_, true)))).collect();
+    let candidate: Vec<bool> =
+        (0..n).map(|i| gts.iter().any(|g| matches!(inside(g, i), (true, _) | (_, true)))).collect();
     let cands: Vec<usize> = (0..n).filter(|&i| candidate[i]).collect();
     if cands.is_empty() {
         return Vec::new();
@@ -153,7 +164,11 @@ pub fn yolox_loss(head: &Tensor, h: usize, w: usize, gts: &[Vec<[f32; 4]>]) -> R
     let a = anchors(h, w);
     let (bv, ov, cv): (Vec<Vec<[f32; 4]>>, Vec<Vec<f32>>, Vec<Vec<f32>>) = {
         let raw: Vec<Vec<Vec<f32>>> = boxes.detach().to_vec3()?;
-        (raw.into_iter().map(|img| img.into_iter().map(|r| [r[0], r[1], r[2], r[3]]).collect()).collect(), obj.detach().to_vec2()?, cls.detach().to_vec2()?)
+        (
+            raw.into_iter().map(|img| img.into_iter().map(|r| [r[0], r[1], r[2], r[3]]).collect()).collect(),
+            obj.detach().to_vec2()?,
+            cls.detach().to_vec2()?,
+        )
     };
     let (mut fg, mut gt_rows, mut iou_t) = (Vec::<u32>::new(), Vec::<f32>::new(), Vec::<f32>::new());
     let mut obj_t = vec![0f32; b * n];
@@ -180,7 +195,13 @@ pub fn yolox_loss(head: &Tensor, h: usize, w: usize, gts: &[Vec<[f32; 4]>]) -> R
         let iou_loss = ((1.0 - iou.sqr()?)?.sum_all()? / norm)?;
         let cls_fg = cls.flatten_all()?.index_select(&idx, 0)?;
         let cls_loss = (bce_sum(&cls_fg, &Tensor::from_vec(iou_t, np, dev)?)? / norm)?;
-        let parts = DetLoss { iou: iou_loss.to_scalar::<f32>()? as f64, obj: obj_loss.to_scalar::<f32>()? as f64, cls: cls_loss.to_scalar::<f32>()? as f64, positives: np, kd: 0.0 };
+        let parts = DetLoss {
+            iou: iou_loss.to_scalar::<f32>()? as f64,
+            obj: obj_loss.to_scalar::<f32>()? as f64,
+            cls: cls_loss.to_scalar::<f32>()? as f64,
+            positives: np,
+            kd: 0.0,
+        };
         (((iou_loss * 5.0)? + obj_loss)?.add(&cls_loss)?, parts)
     };
     Ok((loss, parts))
@@ -195,7 +216,9 @@ pub struct DetectorAdam {
 impl DetectorAdam {
     pub fn new(det: &Yolox, cfg: &crate::config::DetectorConfig) -> Result<Self> {
         use candle_nn::{AdamW, Optimizer, ParamsAdamW};
-        let adam = |vars: Vec<candle_core::Var>, lr: f64| AdamW::new(vars, ParamsAdamW { lr, weight_decay: 0.0, ..Default::default() });
+        let adam = |vars: Vec<candle_core::Var>, lr: f64| {
+            AdamW::new(vars, ParamsAdamW { lr, weight_decay: 0.0, ..Default::default() })
+        };
         let (adapter, rest) = det.adapter_and_rest();
         let mut groups = vec![adam(rest, cfg.lr)?];
         if !adapter.is_empty() {
@@ -245,7 +268,11 @@ impl AdapterFit {
 
 /// The detector `cfg` trains: `cfg.model`, with a colour adapter of `cfg.adapter` units
 /// (seeded by `seed`) when that is not 0.
-pub fn student(cfg: &crate::config::DetectorConfig, seed: u64, dev: &candle_core::Device) -> std::result::Result<Yolox, crate::yolox::YoloxError> {
+pub fn student(
+    cfg: &crate::config::DetectorConfig,
+    seed: u64,
+    dev: &candle_core::Device,
+) -> std::result::Result<Yolox, crate::yolox::YoloxError> {
     let det = Yolox::load(&cfg.model, dev)?;
     if cfg.adapter > 0 {
         det.with_adapter(cfg.adapter, seed, dev)
@@ -256,7 +283,10 @@ pub fn student(cfg: &crate::config::DetectorConfig, seed: u64, dev: &candle_core
 
 /// The frozen teacher of `cfg.distill`: `cfg.model` as loaded, never updated; None when
 /// distillation is off.
-pub fn teacher(cfg: &crate::config::DetectorConfig, dev: &candle_core::Device) -> std::result::Result<Option<Yolox>, crate::yolox::YoloxError> {
+pub fn teacher(
+    cfg: &crate::config::DetectorConfig,
+    dev: &candle_core::Device,
+) -> std::result::Result<Option<Yolox>, crate::yolox::YoloxError> {
     if cfg.distill > 0.0 {
         Yolox::load(&cfg.model, dev).map(Some)
     } else {
@@ -268,7 +298,13 @@ pub fn teacher(cfg: &crate::config::DetectorConfig, dev: &candle_core::Device) -
 /// camera's output `camera_out` of person batch `b` (canvas side `cfg.size`), [`yolox_loss`]
 /// against its boxes, plus `cfg.distill` times [`distill_loss`] against `teacher` run on the
 /// unprotected batch when a teacher is given. Returns the loss and its parts.
-pub fn utility_loss(det: &Yolox, teacher: Option<&Yolox>, cfg: &crate::config::DetectorConfig, camera_out: &Tensor, b: &PersonBatch) -> Result<(Tensor, DetLoss)> {
+pub fn utility_loss(
+    det: &Yolox,
+    teacher: Option<&Yolox>,
+    cfg: &crate::config::DetectorConfig,
+    camera_out: &Tensor,
+    b: &PersonBatch,
+) -> Result<(Tensor, DetLoss)> {
     let head = det.forward(&detector_input(camera_out, &b.mask)?)?;
     let (loss, mut parts) = yolox_loss(&head, cfg.size, cfg.size, &b.boxes)?;
     match teacher {

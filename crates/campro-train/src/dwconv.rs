@@ -23,11 +23,24 @@ struct Geo {
 
 impl Geo {
     fn new(x: &[usize], k: &[usize], stride: usize, pad: usize) -> Result<Self> {
-        let (&[b, c, h, w], &[kc, 1, kh, kw]) = (x, k) else { candle_core::bail!("depthwise: x {x:?} must be (B, C, H, W) and w {k:?} (C, 1, kh, kw)") };
+        let (&[b, c, h, w], &[kc, 1, kh, kw]) = (x, k) else {
+            candle_core::bail!("depthwise: x {x:?} must be (B, C, H, W) and w {k:?} (C, 1, kh, kw)")
+        };
         if kc != c || h + 2 * pad < kh || w + 2 * pad < kw || stride == 0 {
             candle_core::bail!("depthwise: x {x:?}, w {k:?}, stride {stride}, pad {pad} do not fit");
         }
-        Ok(Self { b, c, h, w, kh, kw, stride, pad, oh: (h + 2 * pad - kh) / stride + 1, ow: (w + 2 * pad - kw) / stride + 1 })
+        Ok(Self {
+            b,
+            c,
+            h,
+            w,
+            kh,
+            kw,
+            stride,
+            pad,
+            oh: (h + 2 * pad - kh) / stride + 1,
+            ow: (w + 2 * pad - kw) / stride + 1,
+        })
     }
 
     /// Input coordinate of output `o` and tap `k`, if inside the image.
@@ -83,8 +96,12 @@ impl CustomOp2 for Forward {
 
     fn bwd(&self, x: &Tensor, w: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
         let grad = grad.contiguous()?;
-        let gx = grad.apply_op2_no_bwd(w, &GradInput { stride: self.stride, pad: self.pad, h: x.dim(2)?, w: x.dim(3)? })?;
-        let gw = x.apply_op2_no_bwd(&grad, &GradWeight { stride: self.stride, pad: self.pad, kh: w.dim(2)?, kw: w.dim(3)? })?;
+        let gx =
+            grad.apply_op2_no_bwd(w, &GradInput { stride: self.stride, pad: self.pad, h: x.dim(2)?, w: x.dim(3)? })?;
+        let gw = x.apply_op2_no_bwd(
+            &grad,
+            &GradWeight { stride: self.stride, pad: self.pad, kh: w.dim(2)?, kw: w.dim(3)? },
+        )?;
         Ok((Some(gx), Some(gw)))
     }
 }

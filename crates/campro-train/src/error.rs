@@ -29,5 +29,3 @@ pub enum TrainError {
 
 /// `Result` with this crate's [`TrainError`].
 pub type Result<T, E = TrainError> = std::result::Result<T, E>;
-
-

@@ -102,12 +102,20 @@ impl FaceSet {
             }
         }
         let set = Self::build(sel, models)?;
-        campro_eval::atomic::write(&file, &set.encode(sel), true).map_err(|e| FacesError::Cache { path: file.clone(), message: e.to_string() })?;
+        campro_eval::atomic::write(&file, &set.encode(sel), true)
+            .map_err(|e| FacesError::Cache { path: file.clone(), message: e.to_string() })?;
         Ok(set)
     }
 
     fn encode(&self, sel: &Selection) -> Vec<u8> {
-        let idx = Index { selection: sel.clone(), classes: self.classes.clone(), validation: self.validation.clone(), labels: self.labels.clone(), check: self.check.clone(), skipped: self.skipped };
+        let idx = Index {
+            selection: sel.clone(),
+            classes: self.classes.clone(),
+            validation: self.validation.clone(),
+            labels: self.labels.clone(),
+            check: self.check.clone(),
+            skipped: self.skipped,
+        };
         let json = serde_json::to_vec(&idx).expect("index serialises");
         let mut out = (json.len() as u64).to_le_bytes().to_vec();
         out.extend(json);
@@ -120,13 +128,24 @@ impl FaceSet {
         let n = u64::from_le_bytes(bytes.get(..8)?.try_into().ok()?) as usize;
         let idx: Index = serde_json::from_slice(bytes.get(8..8usize.checked_add(n)?)?).ok()?;
         let crops = bytes.get(8 + n..)?.to_vec();
-        let ok = idx.selection == *sel && crops.len() == idx.labels.len() * CROP.0 * CROP.1 * 3 && idx.check.len() == idx.labels.len() && idx.labels.iter().all(|&l| (l as usize) < idx.classes.len());
-        ok.then_some(Self { classes: idx.classes, validation: idx.validation, labels: idx.labels, check: idx.check, crops, skipped: idx.skipped })
+        let ok = idx.selection == *sel
+            && crops.len() == idx.labels.len() * CROP.0 * CROP.1 * 3
+            && idx.check.len() == idx.labels.len()
+            && idx.labels.iter().all(|&l| (l as usize) < idx.classes.len());
+        ok.then_some(Self {
+            classes: idx.classes,
+            validation: idx.validation,
+            labels: idx.labels,
+            check: idx.check,
+            crops,
+            skipped: idx.skipped,
+        })
     }
 
     fn build(sel: &Selection, models: &Path) -> Result<Self, FacesError> {
         let lfw = Lfw::open(&sel.lfw)?;
-        let mut names: Vec<&String> = lfw.people.iter().filter(|(_, v)| v.len() >= sel.min_images).map(|(k, _)| k).collect();
+        let mut names: Vec<&String> =
+            lfw.people.iter().filter(|(_, v)| v.len() >= sel.min_images).map(|(k, _)| k).collect();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(sel.seed);
         names.shuffle(&mut rng);
         if let Some(m) = sel.max_identities {
@@ -137,14 +156,25 @@ impl FaceSet {
         let mut classes: Vec<String> = names[n_val..].iter().map(|s| s.to_string()).collect();
         classes.sort();
         if classes.len() < 2 {
-            return Err(FacesError::Data(format!("{}: only {} identities with ≥ {} photos after the validation split", sel.lfw.display(), classes.len(), sel.min_images)));
+            return Err(FacesError::Data(format!(
+                "{}: only {} identities with ≥ {} photos after the validation split",
+                sel.lfw.display(),
+                classes.len(),
+                sel.min_images
+            )));
         }
         let det = FaceDetector::new(Model::load(Manifest::parse(YUNET, Path::new("bundled yunet.json"), models)?)?)?;
-        let Task::FaceEmbedder { template, .. } = Manifest::parse(MOBILEFACENET, Path::new("bundled mobilefacenet_casia.json"), models)?.task else {
+        let Task::FaceEmbedder { template, .. } =
+            Manifest::parse(MOBILEFACENET, Path::new("bundled mobilefacenet_casia.json"), models)?.task
+        else {
             unreachable!("the bundled manifest is an embedder")
         };
         let template = template.map(|p| p.map(f64::from));
-        let jobs: Vec<(u32, &PathBuf)> = classes.iter().enumerate().flat_map(|(c, name)| lfw.people[name].iter().map(move |p| (c as u32, p))).collect();
+        let jobs: Vec<(u32, &PathBuf)> = classes
+            .iter()
+            .enumerate()
+            .flat_map(|(c, name)| lfw.people[name].iter().map(move |p| (c as u32, p)))
+            .collect();
         let crops: Vec<Option<(u32, Vec<u8>)>> = jobs
             .par_iter()
             .map(|&(c, p)| -> Result<Option<(u32, Vec<u8>)>, FacesError> {
@@ -157,7 +187,8 @@ impl FaceSet {
         let skipped = crops.iter().filter(|c| c.is_none()).count();
         let kept: Vec<(u32, Vec<u8>)> = crops.into_iter().flatten().collect();
         // The last kept photo of each class is its check photo.
-        let check: Vec<bool> = (0..kept.len()).map(|i| kept.get(i + 1).is_none_or(|next| next.0 != kept[i].0)).collect();
+        let check: Vec<bool> =
+            (0..kept.len()).map(|i| kept.get(i + 1).is_none_or(|next| next.0 != kept[i].0)).collect();
         Ok(Self {
             classes,
             validation,

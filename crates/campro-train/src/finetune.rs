@@ -10,8 +10,8 @@
 use crate::camera::Camera;
 use crate::config::DetectorConfig;
 use crate::detection::utility_loss;
-use crate::persons::PersonSet;
 use crate::error::TrainError;
+use crate::persons::PersonSet;
 use crate::train::draw;
 use crate::yolox::Yolox;
 use candle_core::Device;
@@ -67,14 +67,22 @@ pub struct Finetuned {
 }
 
 /// Fine-tunes `cfg.model` behind `imaging` with `cfg`'s data, size, batch and learning rate.
-pub fn run(imaging: &Imaging, cfg: &DetectorConfig, o: &FinetuneOptions, mut on_step: impl FnMut(&StepRow)) -> Result<Finetuned, TrainError> {
+pub fn run(
+    imaging: &Imaging,
+    cfg: &DetectorConfig,
+    o: &FinetuneOptions,
+    mut on_step: impl FnMut(&StepRow),
+) -> Result<Finetuned, TrainError> {
     if cfg.lr <= 0.0 {
         return Err(TrainError::Unsupported("detector.lr: must be > 0 to fine-tune".into()));
     }
     let dev = Device::Cpu;
     let set = PersonSet::open(&cfg.data, cfg.size, cfg.max_images)?;
     if set.is_empty() {
-        return Err(TrainError::Unsupported(format!("{}: no person images outside the held-out part", cfg.data.display())));
+        return Err(TrainError::Unsupported(format!(
+            "{}: no person images outside the held-out part",
+            cfg.data.display()
+        )));
     }
     let camera = match imaging {
         Imaging::Raw => None,
@@ -115,7 +123,16 @@ pub fn run(imaging: &Imaging, cfg: &DetectorConfig, o: &FinetuneOptions, mut on_
             return Err(TrainError::Diverged(format!("detection loss is {l} at step {step}: lower detector.lr")));
         }
         adam.step(&loss.backward()?)?;
-        let row = StepRow { step, seconds: start.elapsed().as_secs_f64(), loss: l, iou: parts.iou, obj: parts.obj, cls: parts.cls, positives: parts.positives, kd: parts.kd };
+        let row = StepRow {
+            step,
+            seconds: start.elapsed().as_secs_f64(),
+            loss: l,
+            iou: parts.iou,
+            obj: parts.obj,
+            cls: parts.cls,
+            positives: parts.positives,
+            kd: parts.kd,
+        };
         on_step(&row);
         log.push(row);
     }

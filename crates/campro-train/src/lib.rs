@@ -9,8 +9,8 @@
 pub mod batchnorm;
 pub mod camera;
 pub mod checkpoint;
-pub mod detection;
 pub mod config;
+pub mod detection;
 pub mod dwconv;
 pub mod error;
 pub mod faces;

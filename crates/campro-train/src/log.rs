@@ -70,7 +70,10 @@ pub fn parse_log_csv(text: &str) -> Result<Vec<LogRow>> {
             if f.len() != 7 {
                 return Err(err(i + 1, format!("{} fields, expected 7", f.len())));
             }
-            let num = |k: usize| f[k].parse::<f64>().map_err(|e| err(i + 1, format!("{}: {e}", LOG_HEADER.split(',').nth(k).unwrap_or("?"))));
+            let num = |k: usize| {
+                f[k].parse::<f64>()
+                    .map_err(|e| err(i + 1, format!("{}: {e}", LOG_HEADER.split(',').nth(k).unwrap_or("?"))))
+            };
             Ok(LogRow {
                 round: f[0].parse().map_err(|e| err(i + 1, format!("round: {e}")))?,
                 seconds: num(1)?,
@@ -88,7 +91,10 @@ pub fn parse_log_csv(text: &str) -> Result<Vec<LogRow>> {
 /// attacker's accuracies (last batch, held-aside photos through the camera), by round.
 pub fn plot_log(log: &[LogRow]) -> (String, String) {
     use campro_eval::plot::{chart, Series, Style};
-    let series = |name: &str, f: &dyn Fn(&LogRow) -> Option<f64>| Series { name: name.into(), points: log.iter().filter_map(|r| f(r).map(|v| (r.round as f64, v))).collect() };
+    let series = |name: &str, f: &dyn Fn(&LogRow) -> Option<f64>| Series {
+        name: name.into(),
+        points: log.iter().filter_map(|r| f(r).map(|v| (r.round as f64, v))).collect(),
+    };
     let losses = chart(
         "campro train: losses",
         "round",
@@ -106,7 +112,10 @@ pub fn plot_log(log: &[LogRow]) -> (String, String) {
         "campro train: attacker accuracy",
         "round",
         "top-1",
-        &[series("last batch", &|r| Some(r.attacker_accuracy)), series("held-aside, through camera", &|r| r.check_accuracy)],
+        &[
+            series("last batch", &|r| Some(r.attacker_accuracy)),
+            series("held-aside, through camera", &|r| r.check_accuracy),
+        ],
         Style::Lines,
         None,
         Some((0.0, 1.0)),
@@ -121,8 +130,24 @@ mod tests {
     #[test]
     fn the_csv_log_reads_back_with_its_nans_and_gaps() {
         let rows = vec![
-            LogRow { round: 0, seconds: 1.5, attacker_ce: 2.25, attacker_accuracy: 0.5, privacy_loss: f64::NAN, detection_loss: f64::NAN, check_accuracy: Some(0.875) },
-            LogRow { round: 1, seconds: 7.125, attacker_ce: 3.0, attacker_accuracy: 0.25, privacy_loss: 0.5, detection_loss: 4.0, check_accuracy: None },
+            LogRow {
+                round: 0,
+                seconds: 1.5,
+                attacker_ce: 2.25,
+                attacker_accuracy: 0.5,
+                privacy_loss: f64::NAN,
+                detection_loss: f64::NAN,
+                check_accuracy: Some(0.875),
+            },
+            LogRow {
+                round: 1,
+                seconds: 7.125,
+                attacker_ce: 3.0,
+                attacker_accuracy: 0.25,
+                privacy_loss: 0.5,
+                detection_loss: 4.0,
+                check_accuracy: None,
+            },
         ];
         let csv = log_csv(&rows);
         assert_eq!(csv.lines().nth(1), Some("0,1.500,2.250000,0.5000,NaN,NaN,0.8750"));
@@ -130,7 +155,11 @@ mod tests {
         assert_eq!(back[1], rows[1]);
         assert!(back[0].privacy_loss.is_nan() && back[0].check_accuracy == Some(0.875));
         let bad = csv.replace("7.125", "x");
-        assert!(parse_log_csv(&bad).unwrap_err().to_string().starts_with("line 3: seconds"), "{}", parse_log_csv(&bad).unwrap_err());
+        assert!(
+            parse_log_csv(&bad).unwrap_err().to_string().starts_with("line 3: seconds"),
+            "{}",
+            parse_log_csv(&bad).unwrap_err()
+        );
         assert!(parse_log_csv("round,seconds\n").unwrap_err().to_string().contains("line 1: expected the header"));
         assert!(parse_log_csv(&format!("{LOG_HEADER}\n1,2\n")).unwrap_err().to_string().contains("line 2: 2 fields"));
     }

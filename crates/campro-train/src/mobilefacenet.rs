@@ -14,7 +14,8 @@ use candle_nn::{VarBuilder, VarMap};
 use std::path::Path;
 
 /// Bottleneck settings (expansion t, output channels c, repeats n, first stride s).
-const SETTINGS: [(usize, usize, usize, usize); 5] = [(2, 64, 5, 2), (4, 128, 1, 2), (2, 128, 6, 1), (4, 128, 1, 2), (2, 128, 2, 1)];
+const SETTINGS: [(usize, usize, usize, usize); 5] =
+    [(2, 64, 5, 2), (4, 128, 1, 2), (2, 128, 6, 1), (4, 128, 1, 2), (2, 128, 2, 1)];
 
 /// Input size (height, width).
 pub const INPUT: (usize, usize) = (112, 96);
@@ -34,7 +35,8 @@ pub fn dense(x: &Tensor, w: &Tensor, stride: usize, pad: usize) -> Result<Tensor
     for ky in 0..kh {
         for kx in 0..kw {
             let tap = w.narrow(2, ky, 1)?.narrow(3, kx, 1)?.reshape((cout, cin))?;
-            let win = if kh == 1 && kw == 1 { xp.clone() } else { xp.narrow(2, ky, oh)?.narrow(3, kx, ow)?.contiguous()? };
+            let win =
+                if kh == 1 && kw == 1 { xp.clone() } else { xp.narrow(2, ky, oh)?.narrow(3, kx, ow)?.contiguous()? };
             let term = tap.broadcast_matmul(&win.reshape((b, cin, oh * ow))?)?;
             acc = Some(match acc {
                 None => term,
@@ -106,7 +108,8 @@ impl BatchNorm {
         let (mean, var) = (stats.get(0)?, stats.get(1)?);
         let m = Self::MOMENTUM;
         self.running_mean.set(&((self.running_mean.as_tensor() * (1.0 - m))? + (mean * m)?)?)?;
-        self.running_var.set(&((self.running_var.as_tensor() * (1.0 - m))? + (var * (m * n / (n - 1.0).max(1.0)))?)?)?;
+        self.running_var
+            .set(&((self.running_var.as_tensor() * (1.0 - m))? + (var * (m * n / (n - 1.0).max(1.0)))?)?)?;
         Ok(y)
     }
 }
@@ -123,7 +126,17 @@ struct ConvBlock {
 
 impl ConvBlock {
     #[allow(clippy::too_many_arguments)]
-    fn new(vb: &VarBuilder, cin: usize, cout: usize, k: (usize, usize), stride: usize, pad: usize, depthwise: bool, linear: bool, names: (&str, &str, &str)) -> Result<Self> {
+    fn new(
+        vb: &VarBuilder,
+        cin: usize,
+        cout: usize,
+        k: (usize, usize),
+        stride: usize,
+        pad: usize,
+        depthwise: bool,
+        linear: bool,
+        names: (&str, &str, &str),
+    ) -> Result<Self> {
         let w = if depthwise { vb.get((cout, 1, k.0, k.1), names.0)? } else { vb.get((cout, cin, k.0, k.1), names.0)? };
         let bn = BatchNorm::new(vb.pp(names.1), cout)?;
         let prelu = if linear { None } else { Some(vb.get(cout, names.2)?) };
@@ -131,7 +144,11 @@ impl ConvBlock {
     }
 
     fn forward(&self, x: &Tensor, train: bool) -> Result<Tensor> {
-        let y = if self.depthwise { depthwise(x, &self.w, self.stride, self.pad)? } else { dense(x, &self.w, self.stride, self.pad)? };
+        let y = if self.depthwise {
+            depthwise(x, &self.w, self.stride, self.pad)?
+        } else {
+            dense(x, &self.w, self.stride, self.pad)?
+        };
         let y = self.bn.forward(&y, train)?;
         match &self.prelu {
             Some(a) => prelu(&y, a),
@@ -188,14 +205,21 @@ impl MobileFaceNet {
     /// Loads the checkpoint (`net_state_dict` of a legacy `torch.save`) into a new VarMap.
     pub fn from_checkpoint(path: &Path, device: &Device) -> std::result::Result<(Self, VarMap), TorchError> {
         let sd = read_state_dict(path, Some("net_state_dict"))?;
-        let bad = |e: candle_core::Error| TorchError::Format { path: path.display().to_string(), message: e.to_string() };
+        let bad =
+            |e: candle_core::Error| TorchError::Format { path: path.display().to_string(), message: e.to_string() };
         let vm = VarMap::new();
         let net = Self::new(VarBuilder::from_varmap(&vm, DType::F32, device)).map_err(bad)?;
         let vars = vm.data().lock().expect("var map lock");
         for (name, var) in vars.iter() {
-            let t = sd.get(name).ok_or_else(|| TorchError::Format { path: path.display().to_string(), message: format!("{name} missing from the checkpoint") })?;
+            let t = sd.get(name).ok_or_else(|| TorchError::Format {
+                path: path.display().to_string(),
+                message: format!("{name} missing from the checkpoint"),
+            })?;
             if t.dims() != var.dims() {
-                return Err(TorchError::Format { path: path.display().to_string(), message: format!("{name}: shape {:?}, expected {:?}", t.dims(), var.dims()) });
+                return Err(TorchError::Format {
+                    path: path.display().to_string(),
+                    message: format!("{name}: shape {:?}, expected {:?}", t.dims(), var.dims()),
+                });
             }
             var.set(&t.to_device(device).map_err(bad)?).map_err(bad)?;
         }
@@ -206,7 +230,13 @@ impl MobileFaceNet {
     /// The trainable variables of `vars` (the map `from_checkpoint` returned): everything but
     /// the batch-norm running statistics.
     pub fn trainable(vars: &VarMap) -> Vec<Var> {
-        vars.data().lock().expect("var map lock").iter().filter(|(k, _)| !k.contains("running_")).map(|(_, v)| v.clone()).collect()
+        vars.data()
+            .lock()
+            .expect("var map lock")
+            .iter()
+            .filter(|(k, _)| !k.contains("running_"))
+            .map(|(_, v)| v.clone())
+            .collect()
     }
 
     /// Embeddings (B, 128) of normalised faces (B, 3, 112, 96); `train` uses and updates

@@ -69,19 +69,31 @@ impl PersonSet {
                     .gts
                     .iter()
                     .filter(|g| !g.crowd && g.bbox[2] * f >= 1.0 && g.bbox[3] * f >= 1.0)
-                    .map(|g| [(g.bbox[0] + g.bbox[2] / 2.0) * f, (g.bbox[1] + g.bbox[3] / 2.0) * f, g.bbox[2] * f, g.bbox[3] * f])
+                    .map(|g| {
+                        [
+                            (g.bbox[0] + g.bbox[2] / 2.0) * f,
+                            (g.bbox[1] + g.bbox[3] / 2.0) * f,
+                            g.bbox[2] * f,
+                            g.bbox[3] * f,
+                        ]
+                    })
                     .collect();
                 Ok((x, mask, boxes))
             })
             .collect::<campro_eval::Result<_>>()?;
         let b = idx.len();
-        let (mut xs, mut ms, mut boxes) = (Vec::with_capacity(b * 3 * s * s), Vec::with_capacity(b * s * s), Vec::with_capacity(b));
+        let (mut xs, mut ms, mut boxes) =
+            (Vec::with_capacity(b * 3 * s * s), Vec::with_capacity(b * s * s), Vec::with_capacity(b));
         for (x, m, bx) in items {
             xs.extend(x);
             ms.extend(m);
             boxes.push(bx);
         }
-        Ok(PersonBatch { x: Tensor::from_vec(xs, (b, 3, s, s), dev)?, mask: Tensor::from_vec(ms, (b, 1, s, s), dev)?, boxes })
+        Ok(PersonBatch {
+            x: Tensor::from_vec(xs, (b, 3, s, s), dev)?,
+            mask: Tensor::from_vec(ms, (b, 1, s, s), dev)?,
+            boxes,
+        })
     }
 }
 

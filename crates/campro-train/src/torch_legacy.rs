@@ -12,7 +12,8 @@ use std::path::Path;
 
 /// The first pickle of a legacy checkpoint, byte for byte: protocol 2, the magic number
 /// 0x1950a86a20f9469cfc6c as a 10-byte LONG1, STOP.
-const MAGIC_PICKLE: [u8; 15] = [0x80, 0x02, 0x8a, 0x0a, 0x6c, 0xfc, 0x9c, 0x46, 0xf9, 0x20, 0x6a, 0xa8, 0x50, 0x19, 0x2e];
+const MAGIC_PICKLE: [u8; 15] =
+    [0x80, 0x02, 0x8a, 0x0a, 0x6c, 0xfc, 0x9c, 0x46, 0xf9, 0x20, 0x6a, 0xa8, 0x50, 0x19, 0x2e];
 
 #[derive(Debug, thiserror::Error)]
 pub enum TorchError {
@@ -37,7 +38,11 @@ pub fn read_state_dict(path: &Path, key: Option<&str>) -> Result<HashMap<String,
     let mut r = BufReader::new(file);
     let mut head = [0u8; 15];
     if r.read_exact(&mut head).is_err() || head != MAGIC_PICKLE {
-        let kind = if head.starts_with(b"PK") { "a zip checkpoint, not the legacy format" } else { "not a legacy torch checkpoint (magic number missing)" };
+        let kind = if head.starts_with(b"PK") {
+            "a zip checkpoint, not the legacy format"
+        } else {
+            "not a legacy torch checkpoint (magic number missing)"
+        };
         return Err(fmt(kind.into()));
     }
     let _protocol = pickle(&mut r).map_err(|e| fmt(e.to_string()))?;
@@ -45,7 +50,10 @@ pub fn read_state_dict(path: &Path, key: Option<&str>) -> Result<HashMap<String,
     let main = pickle(&mut r).map_err(|e| fmt(e.to_string()))?;
     let keys = pickle(&mut r).map_err(|e| fmt(e.to_string()))?;
     let keys: Vec<String> = match keys {
-        Object::List(v) => v.into_iter().map(|k| k.unicode().map_err(|_| fmt("storage key is not a string".into()))).collect::<Result<_, _>>()?,
+        Object::List(v) => v
+            .into_iter()
+            .map(|k| k.unicode().map_err(|_| fmt("storage key is not a string".into())))
+            .collect::<Result<_, _>>()?,
         _ => return Err(fmt("storage key list missing".into())),
     };
     let dict = match (main, key) {
@@ -57,16 +65,22 @@ pub fn read_state_dict(path: &Path, key: Option<&str>) -> Result<HashMap<String,
         (o, _) => o,
     };
     let Object::Dict(entries) = dict else { return Err(fmt("the state dict is not a dict".into())) };
-    let infos: Vec<_> = entries.into_iter().filter_map(|(n, v)| v.into_tensor_info(n, Path::new("")).ok().flatten()).collect();
+    let infos: Vec<_> =
+        entries.into_iter().filter_map(|(n, v)| v.into_tensor_info(n, Path::new("")).ok().flatten()).collect();
     // Storages follow in key order: i64 element count, then the bytes.
     let mut storages: HashMap<String, (DType, Vec<u8>)> = HashMap::new();
-    let dtype_of: HashMap<String, DType> = infos.iter().map(|i| (i.path.trim_start_matches('/').to_string(), i.dtype)).collect();
+    let dtype_of: HashMap<String, DType> =
+        infos.iter().map(|i| (i.path.trim_start_matches('/').to_string(), i.dtype)).collect();
     for k in keys {
         let mut n = [0u8; 8];
         r.read_exact(&mut n).map_err(|e| fmt(format!("storage {k}: {e}")))?;
         let n = i64::from_le_bytes(n);
         let dtype = *dtype_of.get(&k).unwrap_or(&DType::F32);
-        let bytes = usize::try_from(n).ok().and_then(|n| n.checked_mul(dtype.size_in_bytes())).filter(|&b| b <= 1 << 32).ok_or_else(|| fmt(format!("storage {k}: bad size {n}")))?;
+        let bytes = usize::try_from(n)
+            .ok()
+            .and_then(|n| n.checked_mul(dtype.size_in_bytes()))
+            .filter(|&b| b <= 1 << 32)
+            .ok_or_else(|| fmt(format!("storage {k}: bad size {n}")))?;
         let mut buf = vec![0u8; bytes];
         r.read_exact(&mut buf).map_err(|e| fmt(format!("storage {k}: {e}")))?;
         storages.insert(k, (dtype, buf));

@@ -9,11 +9,11 @@
 
 use crate::camera::Camera;
 use crate::config::{Config, Head};
+use crate::error::TrainError;
 use crate::faces::{FaceSet, Selection};
+use crate::log::LogRow;
 use crate::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet, EMBEDDING};
 use crate::persons::PersonSet;
-use crate::error::TrainError;
-use crate::log::LogRow;
 use crate::yolox::Yolox;
 use candle_core::{DType, Device, Tensor, Var, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW, SGD};
@@ -71,9 +71,16 @@ impl Initial {
     /// provenance. The optimiser's curve has evenly spaced knots.
     pub fn from_params(params: &campro::Params, origin: &str) -> Result<Self, TrainError> {
         if !params.tone_curve.is_uniform() {
-            return Err(TrainError::Unsupported(format!("{origin}: tone_curve: the optimiser's camera needs evenly spaced knots")));
+            return Err(TrainError::Unsupported(format!(
+                "{origin}: tone_curve: the optimiser's camera needs evenly spaced knots"
+            )));
         }
-        Ok(Self { ccm: params.ccm, curve: params.tone_curve.y().to_vec(), gamma: params.degamma, origin: origin.into() })
+        Ok(Self {
+            ccm: params.ccm,
+            curve: params.tone_curve.y().to_vec(),
+            gamma: params.degamma,
+            origin: origin.into(),
+        })
     }
 }
 
@@ -88,7 +95,11 @@ impl Outcome {
         params.name = name.into();
         params.description = format!(
             "learnt by campro train from {config_name} ({}{})",
-            if cfg.protector.omega > 0.0 { format!("privacy and utility players, omega {}", cfg.protector.omega) } else { "privacy player".into() },
+            if cfg.protector.omega > 0.0 {
+                format!("privacy and utility players, omega {}", cfg.protector.omega)
+            } else {
+                "privacy player".into()
+            },
             if cfg.protector.protector_only { ", protector only" } else { "" }
         );
         params.provenance = self.provenance.clone();
@@ -158,7 +169,9 @@ fn finite(what: &str, v: f64) -> Result<(), TrainError> {
     if v.is_finite() {
         Ok(())
     } else {
-        Err(TrainError::Diverged(format!("{what} is {v}: lower attacker.backbone_lr / attacker.lr or camera.lr (the last checkpoint is intact)")))
+        Err(TrainError::Diverged(format!(
+            "{what} is {v}: lower attacker.backbone_lr / attacker.lr or camera.lr (the last checkpoint is intact)"
+        )))
     }
 }
 
@@ -201,10 +214,18 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         None => Camera::identity(cfg.camera.knots, cfg.camera.gamma, &dev)?,
         Some(i) => {
             if i.curve.len() != cfg.camera.knots {
-                return Err(TrainError::Unsupported(format!("--init {}: {} curve knots, but camera.knots is {}", i.origin, i.curve.len(), cfg.camera.knots)));
+                return Err(TrainError::Unsupported(format!(
+                    "--init {}: {} curve knots, but camera.knots is {}",
+                    i.origin,
+                    i.curve.len(),
+                    cfg.camera.knots
+                )));
             }
             if i.gamma != cfg.camera.gamma {
-                return Err(TrainError::Unsupported(format!("--init {}: degamma {}, but camera.gamma is {}", i.origin, i.gamma, cfg.camera.gamma)));
+                return Err(TrainError::Unsupported(format!(
+                    "--init {}: degamma {}, but camera.gamma is {}",
+                    i.origin, i.gamma, cfg.camera.gamma
+                )));
             }
             let c = Camera::from_values(i.ccm, &i.curve, i.gamma, &dev)?;
             c.project()?;
@@ -221,15 +242,24 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         None
     };
     let teacher = if utility.is_some() { crate::detection::teacher(&cfg.detector, &dev)? } else { None };
-    let embed = |x: &Tensor, train_bn: bool| -> candle_core::Result<Tensor> { l2_normalise(&net.forward_t(&normalise_unit(x)?, train_bn)?) };
+    let embed = |x: &Tensor, train_bn: bool| -> candle_core::Result<Tensor> {
+        l2_normalise(&net.forward_t(&normalise_unit(x)?, train_bn)?)
+    };
 
     // H from the class means of the raw training embeddings, cached beside the faces (keyed
     // by the face selection and the checkpoint file): one backbone pass over every face.
     let ckpt_len = std::fs::metadata(&cfg.attacker.checkpoint).map_or(0, |m| m.len());
-    let key = crate::faces::fnv(&format!("{}|{}|{ckpt_len}", serde_json::to_string(&sel).expect("selection serialises"), cfg.attacker.checkpoint.display()));
+    let key = crate::faces::fnv(&format!(
+        "{}|{}|{ckpt_len}",
+        serde_json::to_string(&sel).expect("selection serialises"),
+        cfg.attacker.checkpoint.display()
+    ));
     let means_name = format!("means-{key:016x}.safetensors");
     let means_file = cfg.data.cache.join(&means_name);
-    let cached = candle_core::safetensors::load(&means_file, &dev).ok().and_then(|mut t| t.remove("means")).filter(|m| m.dims() == [classes, EMBEDDING]);
+    let cached = candle_core::safetensors::load(&means_file, &dev)
+        .ok()
+        .and_then(|mut t| t.remove("means"))
+        .filter(|m| m.dims() == [classes, EMBEDDING]);
     let means = match cached {
         Some(m) => m,
         None => {
@@ -243,14 +273,24 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             }
             let m = Tensor::from_vec(sums.concat(), (classes, EMBEDDING), &dev)?;
             // A cache that cannot be written only costs the next run this pass.
-            let _ = crate::checkpoint::write_tensors(&cfg.data.cache, &means_name, &[("means".to_string(), m.clone())].into());
+            let _ = crate::checkpoint::write_tensors(
+                &cfg.data.cache,
+                &means_name,
+                &[("means".to_string(), m.clone())].into(),
+            );
             m
         }
     };
     let head = ProxyHead::from_means(&means, cfg.attacker.head)?;
     // Everything a checkpoint holds, by name.
     let named = || -> Vec<(String, Var)> {
-        let mut v: Vec<(String, Var)> = net_vars.data().lock().expect("var map lock").iter().map(|(k, v)| (format!("attacker.{k}"), v.clone())).collect();
+        let mut v: Vec<(String, Var)> = net_vars
+            .data()
+            .lock()
+            .expect("var map lock")
+            .iter()
+            .map(|(k, v)| (format!("attacker.{k}"), v.clone()))
+            .collect();
         v.push(("camera.ccm".into(), cam.ccm.clone()));
         v.push(("camera.curve".into(), cam.curve.clone()));
         v.push(("head.w".into(), head.w.clone()));
@@ -264,10 +304,15 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     if let Some(dir) = &opts.resume {
         let (tensors, state) = crate::checkpoint::load(dir, &dev)?;
         if state.classes != faces.classes || state.seed != cfg.seed {
-            return Err(TrainError::Unsupported(format!("{}: checkpoint of another face set or seed: resume with its own configuration", dir.display())));
+            return Err(TrainError::Unsupported(format!(
+                "{}: checkpoint of another face set or seed: resume with its own configuration",
+                dir.display()
+            )));
         }
         for (name, var) in named() {
-            let t = tensors.get(&name).ok_or_else(|| TrainError::Unsupported(format!("{}: {name} missing from the checkpoint", dir.display())))?;
+            let t = tensors.get(&name).ok_or_else(|| {
+                TrainError::Unsupported(format!("{}: {name} missing from the checkpoint", dir.display()))
+            })?;
             var.set(t)?;
         }
         first_round = state.round + 1;
@@ -278,7 +323,11 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let save = |round: usize, log: &[LogRow]| -> Result<(), TrainError> {
         let Some(dir) = &opts.checkpoints else { return Ok(()) };
         let tensors = named().into_iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
-        crate::checkpoint::save(dir, &tensors, &crate::checkpoint::State { round, seed: cfg.seed, classes: faces.classes.clone(), log: log.to_vec() })?;
+        crate::checkpoint::save(
+            dir,
+            &tensors,
+            &crate::checkpoint::State { round, seed: cfg.seed, classes: faces.classes.clone(), log: log.to_vec() },
+        )?;
         Ok(())
     };
     // Two SGD groups: the head at `lr`, the pretrained backbone at `backbone_lr`.
@@ -292,10 +341,13 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     // A colour adapter in P (`detector.adapter`) is also fitted to undo the camera, one step
     // per protector step at `detector.adapter_lr`.
     let mut fitter = match &utility {
-        Some((_, det)) if cfg.detector.adapter_lr > 0.0 => crate::detection::AdapterFit::new(det, cfg.detector.adapter_lr)?,
+        Some((_, det)) if cfg.detector.adapter_lr > 0.0 => {
+            crate::detection::AdapterFit::new(det, cfg.detector.adapter_lr)?
+        }
         _ => None,
     };
-    let (mut person_order, all_people): (Vec<usize>, Vec<usize>) = (Vec::new(), (0..utility.as_ref().map_or(0, |(set, _)| set.len())).collect());
+    let (mut person_order, all_people): (Vec<usize>, Vec<usize>) =
+        (Vec::new(), (0..utility.as_ref().map_or(0, |(set, _)| set.len())).collect());
     // Reseeded from the round on resume (see `checkpoint`).
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ ((first_round as u64 - 1) << 32));
     let mut order: Vec<usize> = Vec::new();
@@ -309,16 +361,17 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         }
         Ok(hits / check.len().max(1) as f64)
     };
-    let attacker_step = |x: &Tensor, y: &Tensor, sgd: &mut SGD, sgd_backbone: &mut SGD| -> Result<(f64, f64), TrainError> {
-        let logits = head.logits(&embed(x, cfg.attacker.train_batch_norm)?, Some(y))?;
-        let ce = candle_nn::loss::cross_entropy(&logits, y)?;
-        let loss = ce.to_scalar::<f32>()? as f64;
-        finite("attacker cross-entropy", loss)?;
-        let grads = ce.backward()?;
-        sgd.step(&grads)?;
-        sgd_backbone.step(&grads)?;
-        Ok((loss, accuracy(&logits, y)?))
-    };
+    let attacker_step =
+        |x: &Tensor, y: &Tensor, sgd: &mut SGD, sgd_backbone: &mut SGD| -> Result<(f64, f64), TrainError> {
+            let logits = head.logits(&embed(x, cfg.attacker.train_batch_norm)?, Some(y))?;
+            let ce = candle_nn::loss::cross_entropy(&logits, y)?;
+            let loss = ce.to_scalar::<f32>()? as f64;
+            finite("attacker cross-entropy", loss)?;
+            let grads = ce.backward()?;
+            sgd.step(&grads)?;
+            sgd_backbone.step(&grads)?;
+            Ok((loss, accuracy(&logits, y)?))
+        };
     // Pretraining on raw faces until the head reaches the threshold (or the step budget).
     let (mut ce, mut acc) = (f64::NAN, 0.0);
     let pretrain = if first_round == 1 { cfg.attacker.pretrain_steps } else { 0 };
@@ -330,7 +383,15 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         }
     }
     // Round 0, or the resumed camera's check (logged only when the checkpoint had no log).
-    let row = LogRow { round: first_round - 1, seconds: seconds(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: f64::NAN, detection_loss: f64::NAN, check_accuracy: Some(check_accuracy(first_round > 1)?) };
+    let row = LogRow {
+        round: first_round - 1,
+        seconds: seconds(),
+        attacker_ce: ce,
+        attacker_accuracy: acc,
+        privacy_loss: f64::NAN,
+        detection_loss: f64::NAN,
+        check_accuracy: Some(check_accuracy(first_round > 1)?),
+    };
     on_row(&row);
     if log.is_empty() {
         log.push(row);
@@ -372,7 +433,15 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         let last = round == cfg.budget.rounds || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
         let checkpoint = round % cfg.budget.checkpoint_every == 0 || last;
         let check_acc = if checkpoint { Some(check_accuracy(true)?) } else { None };
-        let row = LogRow { round, seconds: seconds(), attacker_ce: ce, attacker_accuracy: acc, privacy_loss: lns, detection_loss: ldet, check_accuracy: check_acc };
+        let row = LogRow {
+            round,
+            seconds: seconds(),
+            attacker_ce: ce,
+            attacker_accuracy: acc,
+            privacy_loss: lns,
+            detection_loss: ldet,
+            check_accuracy: check_acc,
+        };
         on_row(&row);
         log.push(row);
         if checkpoint {
@@ -394,6 +463,16 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         "seconds": seconds(),
     });
     let serde_json::Value::Object(provenance) = prov else { unreachable!("a JSON object") };
-    Ok(Outcome { ccm: cam.ccm_values()?, curve: cam.curve_values()?, gamma: cfg.camera.gamma, provenance, log, seconds: seconds(), classes, train_faces: train.len(), check_faces: check.len(), detector: utility.map(|(_, d)| d) })
+    Ok(Outcome {
+        ccm: cam.ccm_values()?,
+        curve: cam.curve_values()?,
+        gamma: cfg.camera.gamma,
+        provenance,
+        log,
+        seconds: seconds(),
+        classes,
+        train_faces: train.len(),
+        check_faces: check.len(),
+        detector: utility.map(|(_, d)| d),
+    })
 }
-

@@ -34,9 +34,20 @@ pub enum YoloxError {
 #[derive(Debug, Clone)]
 enum Op {
     /// One axis, from `start` to `end` (clamped) by `step`.
-    Slice { axis: usize, start: usize, end: i64, step: usize },
+    Slice {
+        axis: usize,
+        start: usize,
+        end: i64,
+        step: usize,
+    },
     Concat(usize),
-    Conv { w: String, b: Option<String>, stride: usize, pad: usize, depthwise: bool },
+    Conv {
+        w: String,
+        b: Option<String>,
+        stride: usize,
+        pad: usize,
+        depthwise: bool,
+    },
     Sigmoid,
     Mul,
     /// Multiplication by a constant scalar.
@@ -91,11 +102,16 @@ impl Yolox {
     pub fn load(path: &Path, dev: &candle_core::Device) -> std::result::Result<Self, YoloxError> {
         let p = path.display().to_string();
         let bytes = std::fs::read(path).map_err(|e| YoloxError::Io { path: p.clone(), message: e.to_string() })?;
-        let model = pb::ModelProto::decode(bytes.as_slice()).map_err(|e| YoloxError::Graph { path: p.clone(), message: format!("not an ONNX model: {e}") })?;
+        let model = pb::ModelProto::decode(bytes.as_slice())
+            .map_err(|e| YoloxError::Graph { path: p.clone(), message: format!("not an ONNX model: {e}") })?;
         Self::from_model(model, p, dev)
     }
 
-    fn from_model(model: pb::ModelProto, p: String, dev: &candle_core::Device) -> std::result::Result<Self, YoloxError> {
+    fn from_model(
+        model: pb::ModelProto,
+        p: String,
+        dev: &candle_core::Device,
+    ) -> std::result::Result<Self, YoloxError> {
         let bad = |m: String| YoloxError::Graph { path: p.clone(), message: m };
         let graph = model.graph.as_ref().ok_or_else(|| bad("no graph".into()))?;
         let inits: HashMap<&str, &pb::TensorProto> = graph.initializer.iter().map(|t| (t.name.as_str(), t)).collect();
@@ -109,7 +125,8 @@ impl Yolox {
             let what = format!("node {} ({})", n.name, n.op_type);
             let attr = |name: &str| n.attribute.iter().find(|a| a.name == name);
             let attr_ints = |name: &str| attr(name).map(|a| a.ints.clone()).unwrap_or_default();
-            let data: Vec<String> = n.input.iter().filter(|i| !inits.contains_key(i.as_str()) && !i.is_empty()).cloned().collect();
+            let data: Vec<String> =
+                n.input.iter().filter(|i| !inits.contains_key(i.as_str()) && !i.is_empty()).cloned().collect();
             let op = match n.op_type.as_str() {
                 "Slice" => {
                     let arg = |k: usize| int_of(&n.input[k]);
@@ -124,10 +141,21 @@ impl Yolox {
                 }
                 "Concat" => Op::Concat(attr("axis").map_or(0, |a| a.i) as usize),
                 "Conv" => {
-                    let w = inits.get(n.input[1].as_str()).ok_or_else(|| bad(format!("{what}: weight is not a constant")))?;
-                    let (stride, pads, dil, group) = (attr_ints("strides"), attr_ints("pads"), attr_ints("dilations"), attr("group").map_or(1, |a| a.i));
+                    let w = inits
+                        .get(n.input[1].as_str())
+                        .ok_or_else(|| bad(format!("{what}: weight is not a constant")))?;
+                    let (stride, pads, dil, group) = (
+                        attr_ints("strides"),
+                        attr_ints("pads"),
+                        attr_ints("dilations"),
+                        attr("group").map_or(1, |a| a.i),
+                    );
                     let pad = pads.first().copied().unwrap_or(0);
-                    if pads.iter().any(|&q| q != pad) || dil.iter().any(|&d| d != 1) || stride.len() != 2 || stride[0] != stride[1] {
+                    if pads.iter().any(|&q| q != pad)
+                        || dil.iter().any(|&d| d != 1)
+                        || stride.len() != 2
+                        || stride[0] != stride[1]
+                    {
                         return Err(bad(format!("{what}: only symmetric padding, square strides and no dilation")));
                     }
                     let depthwise = group != 1;
@@ -144,7 +172,9 @@ impl Yolox {
                 }
                 "Sigmoid" => Op::Sigmoid,
                 "Mul" => match n.input.iter().find_map(|i| inits.get(i.as_str())) {
-                    Some(c) if data.len() == 1 && c.dims.iter().all(|&d| d == 1) && floats(c).len() == 1 => Op::Scale(floats(c)[0]),
+                    Some(c) if data.len() == 1 && c.dims.iter().all(|&d| d == 1) && floats(c).len() == 1 => {
+                        Op::Scale(floats(c)[0])
+                    }
                     Some(_) => return Err(bad(format!("{what}: a constant factor must be a scalar"))),
                     None => Op::Mul,
                 },
@@ -152,17 +182,25 @@ impl Yolox {
                 "MaxPool" => {
                     let k = attr_ints("kernel_shape");
                     let (s, pads) = (attr_ints("strides"), attr_ints("pads"));
-                    if k.len() != 2 || k[0] != k[1] || k[0] % 2 == 0 || s.iter().any(|&v| v != 1) || pads.iter().any(|&q| q != k[0] / 2) {
+                    if k.len() != 2
+                        || k[0] != k[1]
+                        || k[0] % 2 == 0
+                        || s.iter().any(|&v| v != 1)
+                        || pads.iter().any(|&q| q != k[0] / 2)
+                    {
                         return Err(bad(format!("{what}: only odd square stride-1 'same' pooling")));
                     }
                     Op::MaxPool(k[0] as usize)
                 }
                 "Resize" => {
                     let mode = attr("mode").map(|a| String::from_utf8_lossy(&a.s).to_string()).unwrap_or_default();
-                    let scales = n.input.get(2).and_then(|s| inits.get(s.as_str())).map(|t| floats(t)).unwrap_or_default();
+                    let scales =
+                        n.input.get(2).and_then(|s| inits.get(s.as_str())).map(|t| floats(t)).unwrap_or_default();
                     let f = scales.get(2).copied().unwrap_or(0.0);
                     if mode != "nearest" || scales.len() != 4 || scales[3] != f || f.fract() != 0.0 || f < 1.0 {
-                        return Err(bad(format!("{what}: only nearest upsampling by an integer factor (mode {mode}, scales {scales:?})")));
+                        return Err(bad(format!(
+                            "{what}: only nearest upsampling by an integer factor (mode {mode}, scales {scales:?})"
+                        )));
                     }
                     Op::Upsample(f as usize)
                 }
@@ -178,7 +216,12 @@ impl Yolox {
             let output = n.output.first().cloned().ok_or_else(|| bad(format!("{what}: no output")))?;
             nodes.push(Node { op, inputs: data, output });
         }
-        let input = graph.input.iter().map(|i| i.name.clone()).find(|n| !inits.contains_key(n.as_str())).ok_or_else(|| bad("no input".into()))?;
+        let input = graph
+            .input
+            .iter()
+            .map(|i| i.name.clone())
+            .find(|n| !inits.contains_key(n.as_str()))
+            .ok_or_else(|| bad("no input".into()))?;
         let output = graph.output.first().map(|o| o.name.clone()).ok_or_else(|| bad("no output".into()))?;
         let index = params.iter().enumerate().map(|(i, (n, _))| (n.clone(), i)).collect();
         Ok(Self { nodes, input, output, params, index, model })
@@ -195,7 +238,12 @@ impl Yolox {
     /// N(0, 1/3) by `seed`, the rest is zero, so the adapter starts as the identity and the
     /// detector's output is unchanged. The network keeps its current weights (new tensors,
     /// fresh optimiser state). Its tensors are named `adapter.*` ([`Self::adapter_and_rest`]).
-    pub fn with_adapter(self, hidden: usize, seed: u64, dev: &candle_core::Device) -> std::result::Result<Self, YoloxError> {
+    pub fn with_adapter(
+        self,
+        hidden: usize,
+        seed: u64,
+        dev: &candle_core::Device,
+    ) -> std::result::Result<Self, YoloxError> {
         use rand::SeedableRng;
         use rand_distr::Distribution;
         let p = "adapter".to_string();
@@ -207,7 +255,13 @@ impl Yolox {
         if graph.initializer.iter().any(|t| t.name.starts_with("adapter.")) {
             return Err(YoloxError::Graph { path: p, message: "the model already has an adapter".into() });
         }
-        let tensor = |name: &str, dims: Vec<i64>, v: Vec<f32>| pb::TensorProto { name: name.into(), dims, data_type: 1, raw_data: v.iter().flat_map(|x| x.to_le_bytes()).collect(), ..Default::default() };
+        let tensor = |name: &str, dims: Vec<i64>, v: Vec<f32>| pb::TensorProto {
+            name: name.into(),
+            dims,
+            data_type: 1,
+            raw_data: v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            ..Default::default()
+        };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let normal = rand_distr::Normal::new(0.0f32, (1.0f32 / 3.0).sqrt()).expect("valid");
         let h = hidden as i64;
@@ -225,8 +279,20 @@ impl Yolox {
                 *i = ADAPTED.into();
             }
         }
-        let ints = |name: &str, v: Vec<i64>| pb::AttributeProto { name: name.into(), r#type: 7, ints: v, ..Default::default() };
-        let conv_attrs = || vec![ints("kernel_shape", vec![1, 1]), ints("strides", vec![1, 1]), ints("pads", vec![0, 0, 0, 0]), ints("dilations", vec![1, 1])];
+        let ints = |name: &str, v: Vec<i64>| pb::AttributeProto {
+            name: name.into(),
+            r#type: 7,
+            ints: v,
+            ..Default::default()
+        };
+        let conv_attrs = || {
+            vec![
+                ints("kernel_shape", vec![1, 1]),
+                ints("strides", vec![1, 1]),
+                ints("pads", vec![0, 0, 0, 0]),
+                ints("dilations", vec![1, 1]),
+            ]
+        };
         let node = |op: &str, inputs: &[&str], output: &str, attribute: Vec<pb::AttributeProto>| pb::NodeProto {
             name: format!("adapter_{output}"),
             op_type: op.into(),
@@ -270,7 +336,9 @@ impl Yolox {
         if h % 32 != 0 || w % 32 != 0 {
             candle_core::bail!("YOLOX input {h}x{w}: height and width must be multiples of 32");
         }
-        self.run(x, None)?.remove(self.output.as_str()).ok_or_else(|| candle_core::Error::Msg("output not computed".into()))
+        self.run(x, None)?
+            .remove(self.output.as_str())
+            .ok_or_else(|| candle_core::Error::Msg("output not computed".into()))
     }
 
     /// The colour adapter's output ([`Self::with_adapter`]) for `x` (B, 3, H, W), BGR
@@ -291,7 +359,11 @@ impl Yolox {
             if until.is_some_and(|u| values.contains_key(u)) {
                 break;
             }
-            let arg = |k: usize| -> Result<&Tensor> { values.get(n.inputs[k].as_str()).ok_or_else(|| candle_core::Error::Msg(format!("{} not computed", n.inputs[k]))) };
+            let arg = |k: usize| -> Result<&Tensor> {
+                values
+                    .get(n.inputs[k].as_str())
+                    .ok_or_else(|| candle_core::Error::Msg(format!("{} not computed", n.inputs[k])))
+            };
             let y = match &n.op {
                 Op::Slice { axis, start, end, step } => {
                     let x = arg(0)?;
@@ -303,7 +375,11 @@ impl Yolox {
                 Op::Concat(axis) => Tensor::cat(&(0..n.inputs.len()).map(arg).collect::<Result<Vec<_>>>()?, *axis)?,
                 Op::Conv { w, b, stride, pad, depthwise } => {
                     let w = self.param(w).as_tensor();
-                    let y = if *depthwise { crate::dwconv::depthwise(arg(0)?, w, *stride, *pad)? } else { crate::mobilefacenet::dense(arg(0)?, w, *stride, *pad)? };
+                    let y = if *depthwise {
+                        crate::dwconv::depthwise(arg(0)?, w, *stride, *pad)?
+                    } else {
+                        crate::mobilefacenet::dense(arg(0)?, w, *stride, *pad)?
+                    };
                     match b {
                         Some(b) => y.broadcast_add(&self.param(b).as_tensor().reshape((1, (), 1, 1))?)?,
                         None => y,

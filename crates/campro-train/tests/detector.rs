@@ -197,7 +197,10 @@ fn colour_adapter_starts_as_the_identity_and_round_trips_through_onnx() {
     let want: Vec<f32> = head_of(&plain, &x);
     let net = Yolox::load(&onnx, &dev).unwrap().with_adapter(4, 7, &dev).unwrap();
     let (adapter, rest) = net.adapter_and_rest();
-    assert_eq!(adapter.iter().map(|v| v.dims().to_vec()).collect::<Vec<_>>(), [vec![4, 3, 1, 1], vec![4], vec![3, 4, 1, 1], vec![3]]);
+    assert_eq!(
+        adapter.iter().map(|v| v.dims().to_vec()).collect::<Vec<_>>(),
+        [vec![4, 3, 1, 1], vec![4], vec![3, 4, 1, 1], vec![3]]
+    );
     assert_eq!(rest.len(), plain.vars().len());
     assert!(plain.adapter_and_rest().0.is_empty());
     let start: Vec<f32> = head_of(&net, &x);

@@ -29,9 +29,21 @@ fn training_never_sees_the_held_out_images() {
 fn fine_tuning_behind_a_camera_fits_its_images_and_stops_on_time() {
     let Some(model) = shared::shared("models/yolox_nano.onnx") else { return };
     let Some(coco) = shared::shared("data/coco-person/instances_person.json") else { return };
-    let cfg = DetectorConfig { model, data: coco.parent().unwrap().to_path_buf(), size: 128, batch: 2, lr: 1e-3, max_images: Some(2), ..DetectorConfig::default() };
+    let cfg = DetectorConfig {
+        model,
+        data: coco.parent().unwrap().to_path_buf(),
+        size: 128,
+        batch: 2,
+        lr: 1e-3,
+        max_images: Some(2),
+        ..DetectorConfig::default()
+    };
     // A strong camera (colour inversion through the curve): the detector must adapt to it.
-    let imaging = Imaging::Camera { ccm: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], curve: (0..32).map(|i| 1.0 - i as f64 / 31.0).collect(), gamma: 2.2 };
+    let imaging = Imaging::Camera {
+        ccm: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        curve: (0..32).map(|i| 1.0 - i as f64 / 31.0).collect(),
+        gamma: 2.2,
+    };
     let done = run(&imaging, &cfg, &FinetuneOptions { steps: 8, seconds: f64::INFINITY, seed: 0 }, |_| {}).unwrap();
     assert_eq!((done.log.len(), done.images), (8, 2));
     let l: Vec<f64> = done.log.iter().map(|r| r.loss).collect();
@@ -40,7 +52,10 @@ fn fine_tuning_behind_a_camera_fits_its_images_and_stops_on_time() {
     let (first, last) = ((l[0] + l[1]) / 2.0, (l[6] + l[7]) / 2.0);
     assert!(last < 0.8 * first, "L_det {first} -> {last}: {l:?}");
     // The time budget stops it before the first step; a zero learning rate is refused.
-    assert!(run(&Imaging::Raw, &cfg, &FinetuneOptions { steps: 8, seconds: 0.0, seed: 0 }, |_| {}).unwrap().log.is_empty());
+    assert!(run(&Imaging::Raw, &cfg, &FinetuneOptions { steps: 8, seconds: 0.0, seed: 0 }, |_| {})
+        .unwrap()
+        .log
+        .is_empty());
     // Distillation: behind no camera the student starts as its teacher (L_kd = 0 at the
     // first step, not after it); behind the inverting camera it does not, and the logged
     // loss is the detection parts plus L_kd.

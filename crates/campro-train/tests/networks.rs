@@ -92,7 +92,8 @@ fn fused_batch_norm_matches_generic_ops() {
 
 #[test]
 fn dense_matches_candle_convolution() {
-    for (h, w, stride, k, pad) in [(9, 7, 1, 3, 1), (10, 8, 2, 3, 1), (9, 9, 2, 3, 1), (7, 6, 1, 1, 0), (8, 8, 1, 3, 0)] {
+    for (h, w, stride, k, pad) in [(9, 7, 1, 3, 1), (10, 8, 2, 3, 1), (9, 9, 2, 3, 1), (7, 6, 1, 1, 0), (8, 8, 1, 3, 0)]
+    {
         let x = rng_tensor(&[2, 3, h, w], 5);
         let wt = rng_tensor(&[4, 3, k, k], 6);
         let want = x.conv2d(&wt, pad, stride, 1, 1).unwrap();
@@ -104,7 +105,9 @@ fn dense_matches_candle_convolution() {
 
 #[test]
 fn camera_matches_the_desktop_pipeline() {
-    let params = campro::Params::from_file(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../params/color-inversion.json")).unwrap();
+    let params =
+        campro::Params::from_file(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../params/color-inversion.json"))
+            .unwrap();
     // A CCM with negative and > 1 entries, so the clip is exercised.
     let ccm = [[1.4, -0.3, -0.1], [-0.2, 1.3, -0.1], [0.05, -0.5, 1.45]];
     let curve: Vec<f64> = params.tone_curve.y().to_vec();
@@ -158,7 +161,8 @@ fn camera_gradients_by_hand() {
     let gm: Vec<Vec<f32>> = g.get(cam2.ccm.as_tensor()).unwrap().to_vec2().unwrap();
     assert_eq!(gm[0], vec![0.0; 3]);
     // project() clamps into the ranges.
-    let cam3 = Camera::from_values([[9.0, -7.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], &[-0.5, 0.5, 1.5], 2.2, &dev).unwrap();
+    let cam3 = Camera::from_values([[9.0, -7.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], &[-0.5, 0.5, 1.5], 2.2, &dev)
+        .unwrap();
     cam3.project().unwrap();
     assert_eq!(cam3.ccm_values().unwrap()[0], [5.0, -5.0, 0.0]);
     assert_eq!(cam3.curve_values().unwrap(), vec![0.0, 0.5, 1.0]);
@@ -181,14 +185,24 @@ fn mobilefacenet_checkpoint_matches_the_onnx_export() {
     assert!(stats == 2 * 50 && trainable.len() == sd.len() - stats);
     // Align with the evaluation's own detector and template, then embed both ways.
     let manifests = Path::new(env!("CARGO_MANIFEST_DIR")).join("../campro-eval/models");
-    let load = |n: &str| campro_eval::model::Model::load(campro_eval::manifest::Manifest::load(&manifests.join(n), models).unwrap()).unwrap();
+    let load = |n: &str| {
+        campro_eval::model::Model::load(campro_eval::manifest::Manifest::load(&manifests.join(n), models).unwrap())
+            .unwrap()
+    };
     let det = campro_eval::face::FaceDetector::new(load("yunet.json")).unwrap();
     let emb = campro_eval::face::Embedder::new(load("mobilefacenet_casia.json")).unwrap();
     let img = campro_eval::data::read_rgb8(&face).unwrap();
     let f = campro_eval::face::central_face(&det.detect(&img).unwrap(), 250, 250).unwrap();
     let crop = emb.align(&img, &f.landmarks);
     let want = emb.embed(&crop).unwrap();
-    let x = Tensor::from_vec(crop.as_raw().iter().map(|&v| v as f32 / 255.0).collect::<Vec<_>>(), (1, 112, 96, 3), &Device::Cpu).unwrap().permute((0, 3, 1, 2)).unwrap();
+    let x = Tensor::from_vec(
+        crop.as_raw().iter().map(|&v| v as f32 / 255.0).collect::<Vec<_>>(),
+        (1, 112, 96, 3),
+        &Device::Cpu,
+    )
+    .unwrap()
+    .permute((0, 3, 1, 2))
+    .unwrap();
     let e = net.forward_t(&normalise_unit(&x).unwrap(), false).unwrap();
     let e = campro_train::mobilefacenet::l2_normalise(&e).unwrap();
     let got: Vec<f32> = e.flatten_all().unwrap().to_vec1().unwrap();

@@ -47,7 +47,13 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     assert_eq!(out.curve.len(), 32);
     assert_eq!(out.provenance["config"]["seed"], 1);
     // The face set was cached: a second build reads it back identically.
-    let sel = campro_train::faces::Selection { lfw: c.data.lfw.clone(), min_images: 5, validation_identities: 0.2, max_identities: Some(5), seed: 1 };
+    let sel = campro_train::faces::Selection {
+        lfw: c.data.lfw.clone(),
+        min_images: 5,
+        validation_identities: 0.2,
+        max_identities: Some(5),
+        seed: 1,
+    };
     let a = campro_train::faces::FaceSet::load_or_build(&sel, &c.data.models, cache.path()).unwrap();
     // One face file and one class-means file (the means of the raw embeddings, keyed by
     // faces and checkpoint), nothing rebuilt beside them.
@@ -65,18 +71,36 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     // its first 11 rows the first part's (NaN-valued fields included), seconds rising.
     c.budget.rounds = 12;
     let mut seen = Vec::new();
-    let resumed = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts.clone()), init: None }, |r| seen.push(r.clone())).unwrap();
+    let resumed = campro_train::train::run(
+        &c,
+        &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts.clone()), init: None },
+        |r| seen.push(r.clone()),
+    )
+    .unwrap();
     assert_eq!((seen[0].round, seen[0].check_accuracy), (10, Some(after)));
     assert_eq!(resumed.log.iter().map(|r| r.round).collect::<Vec<_>>(), (0..=12).collect::<Vec<_>>());
     let same = |a: f64, b: f64| a == b || (a.is_nan() && b.is_nan());
     for (a, b) in rows.iter().zip(&resumed.log) {
-        assert!(same(a.seconds, b.seconds) && same(a.privacy_loss, b.privacy_loss) && same(a.detection_loss, b.detection_loss) && a.check_accuracy == b.check_accuracy, "{a:?} != {b:?}");
+        assert!(
+            same(a.seconds, b.seconds)
+                && same(a.privacy_loss, b.privacy_loss)
+                && same(a.detection_loss, b.detection_loss)
+                && a.check_accuracy == b.check_accuracy,
+            "{a:?} != {b:?}"
+        );
     }
     assert!(resumed.log.windows(2).all(|w| w[1].seconds >= w[0].seconds));
     assert!(resumed.seconds >= out.seconds && resumed.provenance["rounds"] == 12);
     // A checkpoint of another seed is refused.
     c.seed = 2;
-    let err = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts), init: None }, |_| {}).err().unwrap().to_string();
+    let err = campro_train::train::run(
+        &c,
+        &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts), init: None },
+        |_| {},
+    )
+    .err()
+    .unwrap()
+    .to_string();
     assert!(err.contains("another face set or seed"), "{err}");
     let (losses, acc) = campro_train::log::plot_log(&out.log);
     assert!(losses.starts_with("<svg") && losses.contains("privacy") && acc.contains("held-aside"));
@@ -104,7 +128,12 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     c.budget.rounds = 8;
     c.budget.checkpoint_every = 8;
     let ckpts = cache.path().join("ckpt");
-    let out = campro_train::train::run(&c, &campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None, init: None }, |_| {}).unwrap();
+    let out = campro_train::train::run(
+        &c,
+        &campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None, init: None },
+        |_| {},
+    )
+    .unwrap();
     let det: Vec<f64> = out.log[1..].iter().map(|r| r.detection_loss).collect();
     assert!(det.iter().all(|v| v.is_finite() && *v > 0.0), "{det:?}");
     let (first, last) = ((det[0] + det[1]) / 2.0, (det[6] + det[7]) / 2.0);
@@ -121,7 +150,12 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     let mut a = c.clone();
     a.detector.adapter = 4;
     let ckpts_a = cache.path().join("ckpt-a");
-    let out = campro_train::train::run(&a, &campro_train::train::RunOptions { checkpoints: Some(ckpts_a.clone()), resume: None, init: None }, |_| {}).unwrap();
+    let out = campro_train::train::run(
+        &a,
+        &campro_train::train::RunOptions { checkpoints: Some(ckpts_a.clone()), resume: None, init: None },
+        |_| {},
+    )
+    .unwrap();
     let detector = out.detector.expect("the fine-tuned detector");
     let (adapter, _) = detector.adapter_and_rest();
     assert_eq!(adapter.len(), 4);
@@ -139,7 +173,10 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     // one round, it ends there) and the provenance names it; a set of other knots is refused.
     let ccm = [[0.5, -1.0, 0.25], [2.0, 1.0, -0.5], [0.0, 0.125, 1.5]];
     let curve: Vec<f64> = (0..32).map(|i| ((i * 7) % 32) as f64 / 31.0).collect();
-    let init = |curve: Vec<f64>| campro_train::train::RunOptions { init: Some(campro_train::train::Initial { ccm, curve, gamma: 2.2, origin: "start.json".into() }), ..Default::default() };
+    let init = |curve: Vec<f64>| campro_train::train::RunOptions {
+        init: Some(campro_train::train::Initial { ccm, curve, gamma: 2.2, origin: "start.json".into() }),
+        ..Default::default()
+    };
     c.camera.lr = 1e-12;
     let out = campro_train::train::run(&c, &init(curve.clone()), |_| {}).unwrap();
     assert!(out.ccm.iter().flatten().zip(ccm.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-6), "{:?}", out.ccm);
@@ -158,7 +195,8 @@ fn a_diverging_run_stops_with_a_named_error_and_no_parameters() {
     c.attacker.backbone_lr = 1e36;
     c.attacker.pretrain_steps = 5;
     c.budget.rounds = 5;
-    let err = campro_train::train::run(&c, &Default::default(), |_| {}).err().expect("a learning rate of 1e36 diverges");
+    let err =
+        campro_train::train::run(&c, &Default::default(), |_| {}).err().expect("a learning rate of 1e36 diverges");
     assert!(matches!(err, campro_train::TrainError::Diverged(_)), "{err}");
     assert!(err.to_string().contains("is NaN") || err.to_string().contains("is inf"), "{err}");
 }

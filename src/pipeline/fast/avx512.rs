@@ -189,7 +189,9 @@ impl Reference {
     #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vbmi,popcnt,bmi1")]
     fn redo<const N: usize>(&self, at: &[usize; N], channel: &[i64; N], src: &[u8], dst: &mut [u8]) {
         const { assert!(N >= 8) };
-        let (Some(at), Some(channel)) = (at.first_chunk::<8>(), channel.first_chunk::<8>()) else { unreachable!("N >= 8") };
+        let (Some(at), Some(channel)) = (at.first_chunk::<8>(), channel.first_chunk::<8>()) else {
+            unreachable!("N >= 8")
+        };
         // Permute from a 32-entry table: two 16-entry permutes, bit 4 picks.
         let load = |t: &[f64; 32]| {
             // SAFETY: four loads of eight f64 inside a 32-entry array.
@@ -210,18 +212,26 @@ impl Reference {
         // SAFETY: eight i64 loaded from an eight-element array.
         let row = unsafe { _mm512_loadu_si512(channel.as_ptr().cast()) };
         // Lane l's matrix row: column j of the CCM permuted by the lane's channel.
-        let m = |j: usize| _mm512_permutexvar_pd(row, _mm512_setr_pd(self.m[j], self.m[3 + j], self.m[6 + j], 0.0, 0.0, 0.0, 0.0, 0.0));
+        let m = |j: usize| {
+            _mm512_permutexvar_pd(row, _mm512_setr_pd(self.m[j], self.m[3 + j], self.m[6 + j], 0.0, 0.0, 0.0, 0.0, 0.0))
+        };
         let pick = |t: &[__m512d; 4], seg: __m512i, high: __mmask8| {
             let lo = _mm512_permutex2var_pd(t[0], seg, t[1]);
             let hi = _mm512_permutex2var_pd(t[2], seg, t[3]);
             _mm512_mask_blend_pd(high, lo, hi)
         };
         // ccm::apply: (m0·v0 + m1·v1) + m2·v2, each product and sum rounded.
-        let s = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(m(0), lin[0]), _mm512_mul_pd(m(1), lin[1])), _mm512_mul_pd(m(2), lin[2]));
+        let s = _mm512_add_pd(
+            _mm512_add_pd(_mm512_mul_pd(m(0), lin[0]), _mm512_mul_pd(m(1), lin[1])),
+            _mm512_mul_pd(m(2), lin[2]),
+        );
         // clip01 (no NaN can occur: finite CCM, degamma in [0, 1]).
         let t = _mm512_min_pd(_mm512_max_pd(s, zero), one);
         // ToneCurve::eval on uniform knots: segment min(trunc(t · (k - 1)), k - 2).
-        let seg = _mm512_min_epi64(_mm512_cvttpd_epi64(_mm512_mul_pd(t, _mm512_set1_pd(self.scale))), _mm512_set1_epi64(self.last));
+        let seg = _mm512_min_epi64(
+            _mm512_cvttpd_epi64(_mm512_mul_pd(t, _mm512_set1_pd(self.scale))),
+            _mm512_set1_epi64(self.last),
+        );
         let high = _mm512_test_epi64_mask(seg, _mm512_set1_epi64(16));
         let a = _mm512_div_pd(_mm512_sub_pd(t, pick(&tx0, seg, high)), pick(&tdx, seg, high));
         let v = _mm512_add_pd(pick(&ty0, seg, high), _mm512_mul_pd(a, pick(&tdy, seg, high)));
@@ -244,7 +254,10 @@ enum Slot {
     Segment(usize),
     /// Only `x' = -h` (the matrix output clipped at 0) and/or values past the top end
     /// (`x >= k - 1`, clipped at 1).
-    Ends { low: bool, high: bool },
+    Ends {
+        low: bool,
+        high: bool,
+    },
 }
 
 /// The curve's lines per slot, for `x' = x - h` clamped to [-h, h] and `n = round(x')`
@@ -274,7 +287,9 @@ fn slots(y: &[f64], codes: [Option<u16>; 2]) -> Option<(f64, [f64; 32], [f64; 32
         *slot = match (*slot, seg) {
             (Slot::Unused, s) if s >= 0.0 && s <= (k - 2) as f64 => Slot::Segment(s as usize),
             (Slot::Unused, s) => Slot::Ends { low: s < 0.0, high: s >= 0.0 },
-            (Slot::Ends { low, high }, s) if s < 0.0 || s > (k - 2) as f64 => Slot::Ends { low: low || s < 0.0, high: high || s >= 0.0 },
+            (Slot::Ends { low, high }, s) if s < 0.0 || s > (k - 2) as f64 => {
+                Slot::Ends { low: low || s < 0.0, high: high || s >= 0.0 }
+            }
             _ => return None,
         };
     }
@@ -385,7 +400,9 @@ impl Kernel {
         // SAFETY (all loads and stores below): every pointer is into `self`'s arrays of
         // 64 bytes / 16 f32, or into a 192-byte chunk of `src` / `dst`.
         let ld = |b: &[u8; 64]| unsafe { _mm512_loadu_si512(b.as_ptr().cast()) };
-        let tables: [[__m512i; 4]; 4] = std::array::from_fn(|b| std::array::from_fn(|q| unsafe { _mm512_loadu_si512(self.planes[b][64 * q..].as_ptr().cast()) }));
+        let tables: [[__m512i; 4]; 4] = std::array::from_fn(|b| {
+            std::array::from_fn(|q| unsafe { _mm512_loadu_si512(self.planes[b][64 * q..].as_ptr().cast()) })
+        });
         let split = self.split.map(|s| s.map(|v| ld(&v)));
         let merge = self.merge.map(|s| s.map(|v| ld(&v)));
         let m = self.m.map(|v| _mm512_set1_ps(v));
@@ -394,7 +411,8 @@ impl Kernel {
         // Word j of a pack: the high word of dword 4·(j / 8) + j % 4 of the first (j % 8 < 4)
         // or second register, the order of `packus_epi32`.
         let high_words = _mm512_set_epi16(
-            63, 61, 59, 57, 31, 29, 27, 25, 55, 53, 51, 49, 23, 21, 19, 17, 47, 45, 43, 41, 15, 13, 11, 9, 39, 37, 35, 33, 7, 5, 3, 1,
+            63, 61, 59, 57, 31, 29, 27, 25, 55, 53, 51, 49, 23, 21, 19, 17, 47, 45, 43, 41, 15, 13, 11, 9, 39, 37, 35,
+            33, 7, 5, 3, 1,
         );
         let v = self.intercept.map(|t| unsafe { [_mm512_loadu_ps(t.as_ptr()), _mm512_loadu_ps(t[16..].as_ptr())] });
         let (s0, s1) = unsafe { (_mm512_loadu_ps(self.slope.as_ptr()), _mm512_loadu_ps(self.slope[16..].as_ptr())) };
@@ -431,8 +449,10 @@ impl Kernel {
                             let lo = _mm512_mask2_permutex2var_epi8(tables[b][0], codes, !high, tables[b][1]);
                             bytes[b] = _mm512_mask2_permutex2var_epi8(tables[b][2], lo, high, tables[b][3]);
                         }
-                        let (w01l, w01h) = (_mm512_unpacklo_epi8(bytes[0], bytes[1]), _mm512_unpackhi_epi8(bytes[0], bytes[1]));
-                        let (w23l, w23h) = (_mm512_unpacklo_epi8(bytes[2], bytes[3]), _mm512_unpackhi_epi8(bytes[2], bytes[3]));
+                        let (w01l, w01h) =
+                            (_mm512_unpacklo_epi8(bytes[0], bytes[1]), _mm512_unpackhi_epi8(bytes[0], bytes[1]));
+                        let (w23l, w23h) =
+                            (_mm512_unpacklo_epi8(bytes[2], bytes[3]), _mm512_unpackhi_epi8(bytes[2], bytes[3]));
                         lin[c] = [
                             _mm512_castsi512_ps(_mm512_unpacklo_epi16(w01l, w23l)),
                             _mm512_castsi512_ps(_mm512_unpackhi_epi16(w01l, w23l)),
@@ -519,7 +539,6 @@ impl Kernel {
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -559,7 +578,10 @@ mod tests {
                         let low = w.round_ties_even().rem_euclid(SCALE);
                         match code {
                             Some(_) => assert!(low >= threshold, "{k} knots, E {e}, x' = {x}: flagged"),
-                            None => assert!(low >= 4.0 && low + 4.0 <= threshold, "{k} knots, E {e}, x' = {x}: {low} of {threshold}"),
+                            None => assert!(
+                                low >= 4.0 && low + 4.0 <= threshold,
+                                "{k} knots, E {e}, x' = {x}: {low} of {threshold}"
+                            ),
                         }
                     }
                     // Inside: the curve through the knots, shifted by 0.5 + E (the ends, which

@@ -13,12 +13,12 @@
 //! what recomputing would have given for the old scene, and the bound actually achieved
 //! is always returned. The check is a 3x3 product, no allocation.
 
+use super::{check_options, convert_with, Camera2Values, ConvertError, CurvePart, Options};
 use crate::ccm::{self, Mat3};
 use crate::color_temp::{self, DngCalibration};
+use crate::emulate::error_bound;
 use crate::error::{check_matrix, check_range, ValidationError};
 use crate::params::Params;
-use super::{check_options, convert_with, Camera2Values, ConvertError, CurvePart, Options};
-use crate::emulate::error_bound;
 
 /// Default skip tolerance: a quarter of an 8-bit LSB.
 pub const DEFAULT_TOLERANCE: f64 = 0.25 / 255.0;
@@ -75,7 +75,15 @@ impl Camera2Loop {
         params.validate()?;
         check_options(&opts)?;
         check_range(|| "skip_tolerance".into(), tolerance, 0.0, 1.0)?;
-        Ok(Self { params, opts, tolerance, ct_source: CtSource::Params, curve: None, current: None, stats: LoopStats::default() })
+        Ok(Self {
+            params,
+            opts,
+            tolerance,
+            ct_source: CtSource::Params,
+            curve: None,
+            current: None,
+            stats: LoopStats::default(),
+        })
     }
 
     /// The parameter set.

@@ -6,7 +6,9 @@ use super::{convert, values_from_json, Camera2Values, Options, MATRIX_RANGE};
 use crate::ccm::{self, Mat3};
 use crate::emulate::{DeviceModel, Isp};
 use crate::params::Params;
-use crate::targets::target::{Condition, CurveFormat, Feed, Format, MatrixBy, MatrixFormat, StageOrder, Target, TargetError};
+use crate::targets::target::{
+    Condition, CurveFormat, Feed, Format, MatrixBy, MatrixFormat, StageOrder, Target, TargetError,
+};
 
 /// The ISP a Camera2 device runs with the request's matrix and curve, as `model` says
 /// its HAL treats them: matrix entries rounded to `matrix_frac_bits` fractional bits,

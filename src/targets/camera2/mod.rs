@@ -68,7 +68,10 @@ pub struct Options {
 
 impl Default for Options {
     fn default() -> Self {
-        Self { max_curve_points: DEFAULT_MAX_CURVE_POINTS, rational: RationalMode::Best { max_denominator: DEFAULT_MAX_DENOMINATOR } }
+        Self {
+            max_curve_points: DEFAULT_MAX_CURVE_POINTS,
+            rational: RationalMode::Best { max_denominator: DEFAULT_MAX_DENOMINATOR },
+        }
     }
 }
 
@@ -163,7 +166,10 @@ pub fn matrix_from_rationals(v: &[i32; 18]) -> Result<Mat3, ValidationError> {
     for i in 0..9 {
         let (num, den) = (v[2 * i], v[2 * i + 1]);
         if den == 0 {
-            return Err(ValidationError::Rule { field: format!("colorCorrectionTransform[{}]", 2 * i + 1), rule: "denominator must not be 0".into() });
+            return Err(ValidationError::Rule {
+                field: format!("colorCorrectionTransform[{}]", 2 * i + 1),
+                rule: "denominator must not be 0".into(),
+            });
         }
         m[i / 3][i % 3] = num as f64 / den as f64;
     }
@@ -173,7 +179,11 @@ pub fn matrix_from_rationals(v: &[i32; 18]) -> Result<Mat3, ValidationError> {
 /// A curve from a flat (Pin, Pout) array as `TonemapCurve` holds it.
 pub fn curve_from_pairs(pairs: &[f32]) -> Result<ToneCurve, ValidationError> {
     if !pairs.len().is_multiple_of(2) {
-        return Err(ValidationError::WrongLength { field: "tonemapCurve".into(), expected: "an even number (Pin, Pout pairs)".into(), got: pairs.len() });
+        return Err(ValidationError::WrongLength {
+            field: "tonemapCurve".into(),
+            expected: "an even number (Pin, Pout pairs)".into(),
+            got: pairs.len(),
+        });
     }
     let x = pairs.iter().step_by(2).map(|&v| v as f64).collect();
     let y = pairs.iter().skip(1).step_by(2).map(|&v| v as f64).collect();
@@ -210,14 +220,24 @@ pub fn convert(params: &Params, device: &Mat3, opts: &Options) -> Result<Camera2
 /// `opts` broken rules, by field.
 pub fn check_options(opts: &Options) -> Result<(), ValidationError> {
     if opts.max_curve_points < 2 {
-        return Err(ValidationError::OutOfRange { field: "max_curve_points".into(), value: opts.max_curve_points as f64, min: 2.0, max: f64::INFINITY });
+        return Err(ValidationError::OutOfRange {
+            field: "max_curve_points".into(),
+            value: opts.max_curve_points as f64,
+            min: 2.0,
+            max: f64::INFINITY,
+        });
     }
     let d = match opts.rational {
         RationalMode::Best { max_denominator } => ("max_denominator", max_denominator),
         RationalMode::Fixed { denominator } => ("denominator", denominator),
     };
     if d.1 == 0 || d.1 > i32::MAX as u32 {
-        return Err(ValidationError::OutOfRange { field: d.0.into(), value: d.1 as f64, min: 1.0, max: i32::MAX as f64 });
+        return Err(ValidationError::OutOfRange {
+            field: d.0.into(),
+            value: d.1 as f64,
+            min: 1.0,
+            max: i32::MAX as f64,
+        });
     }
     Ok(())
 }
@@ -244,7 +264,8 @@ pub struct CurvePart {
 /// subset when it has more) and rounds it to f32 pairs, measuring what that costs.
 pub fn curve_part(params: &Params, scale: f64, max_points: usize) -> CurvePart {
     let folded = params.tone_curve.fold_scale(scale);
-    let (fitted, simplified) = if folded.len() > max_points { (folded.simplify(max_points).0, true) } else { (folded.clone(), false) };
+    let (fitted, simplified) =
+        if folded.len() > max_points { (folded.simplify(max_points).0, true) } else { (folded.clone(), false) };
     let pairs = to_f32_pairs(&fitted);
     let sent = curve_from_pairs(&pairs).expect("rounded pairs stay valid");
     CurvePart { scale, max_points, max_abs: folded.max_abs_diff(&sent), simplified, lipschitz: sent.max_slope(), pairs }
@@ -252,7 +273,12 @@ pub fn curve_part(params: &Params, scale: f64, max_points: usize) -> CurvePart {
 
 /// [`convert`] reusing `cache` when its scale and point budget still apply (and
 /// refilling it when not). `opts` must have passed [`check_options`].
-pub(crate) fn convert_with(params: &Params, device: &Mat3, opts: &Options, cache: &mut Option<CurvePart>) -> Result<Camera2Values, ConvertError> {
+pub(crate) fn convert_with(
+    params: &Params,
+    device: &Mat3,
+    opts: &Options,
+    cache: &mut Option<CurvePart>,
+) -> Result<Camera2Values, ConvertError> {
     check_matrix("device_ccm", device, ccm::CCM_LIMIT)?;
     let composed = ccm::mul(&params.ccm, device);
     // Leave room for the rounding: coarse denominators (say 1/2) could otherwise round an

@@ -21,7 +21,12 @@ pub struct Readback {
 
 /// Compares a request's `COLOR_CORRECTION_TRANSFORM` and `TONEMAP_CURVE` (one channel,
 /// flat pairs) with those the `CaptureResult` reports.
-pub fn readback(requested_cst: &[i32; 18], requested_curve: &[f32], reported_cst: &[i32; 18], reported_curve: &[f32]) -> Result<Readback, ValidationError> {
+pub fn readback(
+    requested_cst: &[i32; 18],
+    requested_curve: &[f32],
+    reported_cst: &[i32; 18],
+    reported_curve: &[f32],
+) -> Result<Readback, ValidationError> {
     let requested = |e: ValidationError| e.within("requested");
     let reported = |e: ValidationError| e.within("reported");
     let want = matrix_from_rationals(requested_cst).map_err(requested)?;
@@ -60,5 +65,4 @@ mod tests {
         bad[3] = 0;
         assert!(readback(&id, &line, &bad, &line).unwrap_err().to_string().contains("reported"));
     }
-
 }

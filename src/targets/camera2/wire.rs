@@ -59,22 +59,35 @@ impl Camera2Values {
 /// `colorCorrectionTransform` (or `android.colorCorrection.transform`) is 18 integers
 /// (numerator/denominator pairs), 9 numbers, or 3 rows of 3.
 pub fn device_transform_from_capture_result(text: &str) -> Result<Mat3, ValidationError> {
-    let v: serde_json::Value = serde_json::from_str(text).map_err(|e| ValidationError::Rule { field: "<capture result>".into(), rule: format!("not JSON: {e}") })?;
+    let v: serde_json::Value = serde_json::from_str(text)
+        .map_err(|e| ValidationError::Rule { field: "<capture result>".into(), rule: format!("not JSON: {e}") })?;
     let (key, t) = ["colorCorrectionTransform", "android.colorCorrection.transform"]
         .iter()
         .find_map(|k| v.get(*k).map(|t| (*k, t)))
-        .ok_or_else(|| ValidationError::Rule { field: "colorCorrectionTransform".into(), rule: "missing from the capture result".into() })?;
+        .ok_or_else(|| ValidationError::Rule {
+            field: "colorCorrectionTransform".into(),
+            rule: "missing from the capture result".into(),
+        })?;
     let flat: Vec<&serde_json::Value> = match t.as_array() {
-        Some(a) if a.len() == 3 && a.iter().all(|r| r.is_array()) => a.iter().flat_map(|r| r.as_array().unwrap().iter()).collect(),
+        Some(a) if a.len() == 3 && a.iter().all(|r| r.is_array()) => {
+            a.iter().flat_map(|r| r.as_array().unwrap().iter()).collect()
+        }
         Some(a) => a.iter().collect(),
         None => return Err(ValidationError::Rule { field: key.into(), rule: "must be an array".into() }),
     };
-    let num = |i: usize| flat[i].as_f64().ok_or_else(|| ValidationError::Rule { field: format!("{key}[{i}]"), rule: "must be a number".into() });
+    let num = |i: usize| {
+        flat[i]
+            .as_f64()
+            .ok_or_else(|| ValidationError::Rule { field: format!("{key}[{i}]"), rule: "must be a number".into() })
+    };
     match flat.len() {
         18 => {
             let mut ints = [0i32; 18];
             for (i, slot) in ints.iter_mut().enumerate() {
-                *slot = flat[i].as_i64().and_then(|v| i32::try_from(v).ok()).ok_or_else(|| ValidationError::Rule { field: format!("{key}[{i}]"), rule: "must be a 32-bit integer".into() })?;
+                *slot = flat[i].as_i64().and_then(|v| i32::try_from(v).ok()).ok_or_else(|| ValidationError::Rule {
+                    field: format!("{key}[{i}]"),
+                    rule: "must be a 32-bit integer".into(),
+                })?;
             }
             matrix_from_rationals(&ints).map_err(|e| ValidationError::Rule { field: key.into(), rule: e.to_string() })
         }
@@ -86,17 +99,19 @@ pub fn device_transform_from_capture_result(text: &str) -> Result<Mat3, Validati
             check_matrix(key, &m, crate::ccm::CCM_LIMIT)?;
             Ok(m)
         }
-        n => Err(ValidationError::WrongLength { field: key.into(), expected: "18 integers or 9 numbers".into(), got: n }),
+        n => {
+            Err(ValidationError::WrongLength { field: key.into(), expected: "18 integers or 9 numbers".into(), got: n })
+        }
     }
 }
-
 
 /// Reads back what [`Camera2Values::to_json`] wrote: the matrix the device receives (from
 /// `colorCorrectionTransform`), its curve (`tonemapCurve.red`) and the range scale folded
 /// into the curve. Trailing content after the object is refused.
 pub fn values_from_json(bytes: &[u8]) -> Result<(Mat3, crate::ToneCurve, f64), ValidationError> {
     let rule = |field: &str, rule: String| ValidationError::Rule { field: field.into(), rule };
-    let v: serde_json::Value = serde_json::from_slice(bytes).map_err(|e| rule("<camera2 values>", format!("not JSON: {e}")))?;
+    let v: serde_json::Value =
+        serde_json::from_slice(bytes).map_err(|e| rule("<camera2 values>", format!("not JSON: {e}")))?;
     let cst = v
         .get("colorCorrectionTransform")
         .and_then(|a| a.as_array())

@@ -41,6 +41,17 @@ pub enum FileError {
     },
 }
 
+impl FileError {
+    /// What went wrong, without the path (for errors that name the path themselves).
+    pub fn reason(&self) -> String {
+        match self {
+            FileError::NotRegular { what, .. } => format!("is {what}; only regular files are read"),
+            FileError::TooLarge { role, limit, .. } => format!("larger than the limit of {limit} bytes for {role}"),
+            FileError::Io { source, .. } => io_message(source),
+        }
+    }
+}
+
 /// The OS error's text without Rust's ` (os error N)` suffix.
 fn io_message(e: &std::io::Error) -> String {
     let s = e.to_string();

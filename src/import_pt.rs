@@ -2,17 +2,18 @@
 //! `stage -> state_dict | None`, stages `degamma`, `ccm` {`ccm`: 3x3}, `gamma`
 //! {`keypoints`: [k]}).
 //!
-//! The zip is read with `zip`, the pickle with candle's pickle reader, which builds an
-//! object tree and never executes anything. The tree is then checked against an allow
-//! list of globals (OrderedDict, torch's tensor rebuild functions and storage types);
-//! anything else is rejected by name. Storages tagged for any device (`cpu`, `cuda:0`,
-//! ...) are read the same way: the bytes in the archive are what matter. Sizes, opcode
-//! counts and memo copies are bounded, so a hostile file cannot exhaust memory.
+//! The zip is read with `zip`, the pickle with [`crate::pickle`], which builds a tree of
+//! plain values, never executes anything and bounds work, memory and depth. The tree is
+//! then checked against an allow list of globals (OrderedDict, torch's tensor rebuild
+//! functions and storage types); anything else is rejected by name. Storages tagged for
+//! any device (`cpu`, `cuda:0`, ...) are read the same way: the bytes in the archive are
+//! what matter. A checkpoint with neither a `ccm` nor a `gamma` stage is refused (it
+//! would import as an unprotected identity).
 
 use crate::ccm::Mat3;
 use crate::params::Params;
 use crate::tone_curve::ToneCurve;
-use candle_core::pickle::{Object, Stack};
+use crate::pickle::{self, Value};
 use std::io::{Cursor, Read};
 use std::path::Path;
 
@@ -20,8 +21,6 @@ use std::path::Path;
 pub const MAX_FILE_BYTES: u64 = 64 << 20;
 /// Largest pickle stream and storage entry read (bytes).
 pub const MAX_ENTRY_BYTES: u64 = 16 << 20;
-const MAX_OPS: usize = 200_000;
-const MAX_COPIED_NODES: usize = 1_000_000;
 
 const ALLOWED_GLOBALS: &[(&str, &str)] = &[
     ("collections", "OrderedDict"),
@@ -33,19 +32,42 @@ const ALLOWED_GLOBALS: &[(&str, &str)] = &[
 
 /// Why a checkpoint could not be read.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum CheckpointError {
-    #[error("{path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    /// The file could not be read.
+    #[error(transparent)]
+    File(#[from] crate::file::FileError),
+    /// Not a zip archive with a `data.pkl`.
     #[error("not a PyTorch zip checkpoint: {0}")]
     Zip(String),
+    /// An entry is larger than [`MAX_ENTRY_BYTES`].
     #[error("checkpoint is larger than the {limit}-byte limit ({what})")]
-    TooLarge { what: String, limit: u64 },
-    #[error("corrupt pickle stream: {0}")]
-    Pickle(String),
+    TooLarge {
+        /// Which entry, how large.
+        what: String,
+        /// The limit, bytes.
+        limit: u64,
+    },
+    /// The pickle is malformed or too costly to read.
+    #[error("pickle: {0}")]
+    Pickle(#[from] pickle::PickleError),
+    /// The pickle names a global outside the allow list.
     #[error("pickle refers to global {module}.{name}, which is not allowed in a CamPro checkpoint")]
-    ForbiddenGlobal { module: String, name: String },
+    ForbiddenGlobal {
+        /// Its module.
+        module: String,
+        /// Its name.
+        name: String,
+    },
+    /// The objects are not a CamPro pipeline's state.
     #[error("unexpected checkpoint layout at {at}: {problem}")]
-    Layout { at: String, problem: String },
+    Layout {
+        /// Where (`ccm.ccm`, `<root>`).
+        at: String,
+        /// What is wrong.
+        problem: String,
+    },
+    /// The values break a parameter rule.
     #[error("checkpoint values are not valid parameters: {0}")]
     Invalid(#[from] crate::ValidationError),
 }
@@ -57,20 +79,19 @@ fn layout(at: &str, problem: impl Into<String>) -> CheckpointError {
 /// A tensor read from the archive, as f64 in row-major order.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Tensor {
+    /// Its shape.
     pub shape: Vec<usize>,
+    /// Its values, row-major.
     pub data: Vec<f64>,
+    /// `float32` or `float64`.
     pub dtype: &'static str,
+    /// The device it was saved from (`cpu`, `cuda:0`).
     pub device: String,
 }
 
 /// Reads a CamPro checkpoint into a parameter set (description and provenance filled in).
 pub fn read_checkpoint(path: &Path) -> Result<Params, CheckpointError> {
-    let io = |source| CheckpointError::Io { path: path.display().to_string(), source };
-    let size = std::fs::metadata(path).map_err(io)?.len();
-    if size > MAX_FILE_BYTES {
-        return Err(CheckpointError::TooLarge { what: format!("file is {size} bytes"), limit: MAX_FILE_BYTES });
-    }
-    let bytes = std::fs::read(path).map_err(io)?;
+    let bytes = crate::file::read_capped(path, MAX_FILE_BYTES, "a checkpoint")?;
     let mut p = read_checkpoint_bytes(&bytes)?;
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     p.name = name.clone();
@@ -99,24 +120,21 @@ pub fn read_checkpoint_bytes(bytes: &[u8]) -> Result<Params, CheckpointError> {
         Err(_) => false,
     };
     let pkl = read_entry(&mut zip, &pkl_name)?;
-    let root = unpickle(&pkl)?;
+    let root = pickle::read(&pkl, pickle::Limits::default())?;
     check_globals(&root)?;
 
-    let stages = match root {
-        Object::Dict(kv) => kv,
-        other => return Err(layout("<root>", format!("expected an OrderedDict of stages, found {}", kind(&other)))),
-    };
+    let stages = dict_of(&root).ok_or_else(|| layout("<root>", format!("expected an OrderedDict of stages, found {}", root.kind())))?;
     let mut order = Vec::new();
     let mut ccm: Option<Tensor> = None;
     let mut keypoints: Option<Tensor> = None;
     for (k, v) in stages {
-        let name = match k {
-            Object::Unicode(s) => s,
-            other => return Err(layout("<root>", format!("stage names must be strings, found {}", kind(&other)))),
-        };
+        let name = k.as_str().ok_or_else(|| layout("<root>", format!("stage names must be strings, found {}", k.kind())))?.to_string();
+        if order.contains(&name) {
+            return Err(layout(&name, "the stage appears twice"));
+        }
         match name.as_str() {
             "degamma" => {
-                if v != Object::None {
+                if *v != Value::None {
                     return Err(layout("degamma", "expected None (degamma has no parameters)"));
                 }
             }
@@ -126,9 +144,13 @@ pub fn read_checkpoint_bytes(bytes: &[u8]) -> Result<Params, CheckpointError> {
         }
         order.push(name);
     }
-    // The pickle reader does not keep SETITEMS order, so the stage order cannot be
-    // checked; CamPro's pipelines always run degamma, ccm, gamma, as this crate does.
-    order.sort_by_key(|s| ["degamma", "ccm", "gamma"].iter().position(|c| c == s));
+    // CamPro's pipelines run degamma, ccm, gamma, as this crate does.
+    if !order.windows(2).all(|w| stage_rank(&w[0]) < stage_rank(&w[1])) {
+        return Err(layout("<root>", format!("stages {order:?} are not in the order degamma, ccm, gamma")));
+    }
+    if ccm.is_none() && keypoints.is_none() {
+        return Err(layout("<root>", "neither a ccm nor a gamma stage: nothing to import (it would be an unprotected identity)"));
+    }
     let mut m: Mat3 = crate::ccm::IDENTITY;
     let mut dtype = "float32";
     let mut device = "cpu".to_string();
@@ -177,108 +199,27 @@ fn read_entry(zip: &mut zip::ZipArchive<Cursor<&[u8]>>, name: &str) -> Result<Ve
     Ok(buf)
 }
 
-/// Runs the pickle opcodes into an object tree, bounding work and memo copies.
-fn unpickle(pkl: &[u8]) -> Result<Object, CheckpointError> {
-    let mut cur = Cursor::new(pkl);
-    let mut stack = Stack::empty();
-    let mut copied = 0usize;
-    for _ in 0..MAX_OPS {
-        let pos = cur.position() as usize;
-        let op = *pkl.get(pos).ok_or_else(|| CheckpointError::Pickle("stream ends before STOP".into()))?;
-        let done = stack.read(&mut cur).map_err(|e| CheckpointError::Pickle(e.to_string()))?;
-        if done {
-            return stack.finalize().map_err(|e| CheckpointError::Pickle(e.to_string()));
-        }
-        // BINGET / LONG_BINGET copy a memo entry: count what they copy.
-        if op == b'h' || op == b'j' {
-            if let Some(top) = stack.stack().last() {
-                copied += count_nodes(top, MAX_COPIED_NODES + 1);
-                if copied > MAX_COPIED_NODES {
-                    return Err(CheckpointError::Pickle("memo references copy too much data".into()));
-                }
-            }
-        }
-    }
-    Err(CheckpointError::Pickle(format!("more than {MAX_OPS} opcodes")))
+fn stage_rank(s: &str) -> usize {
+    ["degamma", "ccm", "gamma"].iter().position(|c| *c == s).unwrap_or(usize::MAX)
 }
 
-fn count_nodes(o: &Object, cap: usize) -> usize {
-    let mut n = 1;
-    let mut todo = vec![o];
-    while let Some(o) = todo.pop() {
-        if n > cap {
-            break;
-        }
-        match o {
-            Object::Tuple(v) | Object::List(v) => {
-                n += v.len();
-                todo.extend(v.iter());
-            }
-            Object::Dict(kv) => {
-                n += 2 * kv.len();
-                for (k, v) in kv {
-                    todo.push(k);
-                    todo.push(v);
-                }
-            }
-            Object::Reduce { callable, args } | Object::Build { callable, args } => {
-                n += 2;
-                todo.push(callable);
-                todo.push(args);
-            }
-            Object::PersistentLoad(b) => {
-                n += 1;
-                todo.push(b);
-            }
-            _ => {}
-        }
+/// The (key, value) pairs of a dict, of an `OrderedDict()` call filled by SETITEMS (read
+/// as a dict), or of either with BUILD state (a state dict's `_metadata`) attached.
+fn dict_of(v: &Value) -> Option<Vec<(&Value, &Value)>> {
+    match v {
+        Value::Dict(_) => Some(v.as_dict()?.collect()),
+        Value::Build(n) => dict_of(&n.items[0]),
+        _ => None,
     }
-    n
 }
 
-fn check_globals(o: &Object) -> Result<(), CheckpointError> {
-    let mut todo = vec![o];
-    while let Some(o) = todo.pop() {
-        match o {
-            Object::Class { module_name, class_name }
-                if !ALLOWED_GLOBALS.iter().any(|(m, c)| m == module_name && c == class_name) =>
-            {
-                return Err(CheckpointError::ForbiddenGlobal { module: module_name.clone(), name: class_name.clone() });
-            }
-            Object::Tuple(v) | Object::List(v) => todo.extend(v.iter()),
-            Object::Dict(kv) => {
-                for (k, v) in kv {
-                    todo.push(k);
-                    todo.push(v);
-                }
-            }
-            Object::Reduce { callable, args } | Object::Build { callable, args } => {
-                todo.push(callable);
-                todo.push(args);
-            }
-            Object::PersistentLoad(b) => todo.push(b),
-            _ => {}
+fn check_globals(v: &Value) -> Result<(), CheckpointError> {
+    for (module, name) in v.globals() {
+        if !ALLOWED_GLOBALS.iter().any(|(m, c)| *m == module && *c == name) {
+            return Err(CheckpointError::ForbiddenGlobal { module: module.into(), name: name.into() });
         }
     }
     Ok(())
-}
-
-fn kind(o: &Object) -> &'static str {
-    match o {
-        Object::Class { .. } => "a global",
-        Object::Int(_) | Object::Long(_) => "an integer",
-        Object::Float(_) => "a float",
-        Object::Unicode(_) => "a string",
-        Object::Bool(_) => "a bool",
-        Object::None => "None",
-        Object::Tuple(_) => "a tuple",
-        Object::List(_) => "a list",
-        Object::Mark => "a mark",
-        Object::Dict(_) => "a dict",
-        Object::Reduce { .. } => "a reduce call",
-        Object::Build { .. } => "a build call",
-        Object::PersistentLoad(_) => "a persistent reference",
-    }
 }
 
 /// The tensor `key` of the state dict of `stage`.
@@ -286,56 +227,54 @@ fn state_tensor(
     zip: &mut zip::ZipArchive<Cursor<&[u8]>>,
     prefix: &str,
     big_endian: bool,
-    state: Object,
+    state: &Value,
     stage: &str,
     key: &str,
 ) -> Result<Tensor, CheckpointError> {
     let at = format!("{stage}.{key}");
-    let kv = match state {
-        Object::Dict(kv) => kv,
-        other => return Err(layout(stage, format!("expected a state_dict, found {}", kind(&other)))),
-    };
+    let kv = dict_of(state).ok_or_else(|| layout(stage, format!("expected a state_dict, found {}", state.kind())))?;
     let value = kv
         .into_iter()
-        .find(|(k, _)| matches!(k, Object::Unicode(s) if s == key))
+        .find(|(k, _)| k.as_str() == Some(key))
         .map(|(_, v)| v)
         .ok_or_else(|| layout(stage, format!("state_dict has no '{key}'")))?;
+    // A call `callable(args...)` as (callable, args).
+    let call = |v: &'_ Value| match v {
+        Value::Reduce(n) => Some((n.items[0].clone(), n.items[1].as_seq().map(<[Value]>::to_vec))),
+        _ => None,
+    };
     // Unwrap nn.Parameter if present.
-    let value = match value {
-        Object::Reduce { callable, args } if is_class(&callable, "torch._utils", "_rebuild_parameter") => match *args {
-            Object::Tuple(mut a) if !a.is_empty() => a.remove(0),
+    let value = match call(value) {
+        Some((c, args)) if c.is_global("torch._utils", "_rebuild_parameter") => match args {
+            Some(a) if !a.is_empty() => a[0].clone(),
             _ => return Err(layout(&at, "malformed _rebuild_parameter arguments")),
         },
-        v => v,
+        _ => value.clone(),
     };
-    let args = match value {
-        Object::Reduce { callable, args } if is_class(&callable, "torch._utils", "_rebuild_tensor_v2") => match *args {
-            Object::Tuple(a) => a,
-            _ => return Err(layout(&at, "malformed _rebuild_tensor_v2 arguments")),
-        },
-        other => return Err(layout(&at, format!("expected a tensor, found {}", kind(&other)))),
+    let args = match call(&value) {
+        Some((c, args)) if c.is_global("torch._utils", "_rebuild_tensor_v2") => {
+            args.ok_or_else(|| layout(&at, "malformed _rebuild_tensor_v2 arguments"))?
+        }
+        _ => return Err(layout(&at, format!("expected a tensor, found {}", value.kind()))),
     };
     if args.len() < 4 {
         return Err(layout(&at, "tensor rebuild needs storage, offset, shape and stride"));
     }
     let storage = match &args[0] {
-        Object::PersistentLoad(b) => match b.as_ref() {
-            Object::Tuple(t) => t.clone(),
-            _ => return Err(layout(&at, "malformed storage reference")),
-        },
+        Value::PersistentId(n) => n.items[0].as_seq().ok_or_else(|| layout(&at, "malformed storage reference"))?,
         _ => return Err(layout(&at, "expected a storage reference")),
     };
     // ('storage', torch.FloatStorage, key, device, numel)
-    if storage.len() != 5 || storage[0] != Object::Unicode("storage".into()) {
+    if storage.len() != 5 || storage[0].as_str() != Some("storage") {
         return Err(layout(&at, "storage reference is not ('storage', type, key, device, numel)"));
     }
     let (dtype, width) = match &storage[1] {
-        Object::Class { class_name, .. } if class_name == "FloatStorage" => ("float32", 4usize),
-        Object::Class { class_name, .. } if class_name == "DoubleStorage" => ("float64", 8),
+        v if v.is_global("torch", "FloatStorage") => ("float32", 4usize),
+        v if v.is_global("torch", "DoubleStorage") => ("float64", 8),
         _ => return Err(layout(&at, "storage type must be FloatStorage or DoubleStorage")),
     };
-    let (skey, device) = match (&storage[2], &storage[3]) {
-        (Object::Unicode(k), Object::Unicode(d)) => (k.clone(), d.clone()),
+    let (skey, device) = match (storage[2].as_str(), storage[3].as_str()) {
+        (Some(k), Some(d)) => (k.to_string(), d.to_string()),
         _ => return Err(layout(&at, "storage key and device must be strings")),
     };
     if skey.is_empty() || !skey.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
@@ -377,21 +316,13 @@ fn state_tensor(
     Ok(Tensor { shape, data, dtype, device })
 }
 
-fn is_class(o: &Object, module: &str, name: &str) -> bool {
-    matches!(o, Object::Class { module_name, class_name } if module_name == module && class_name == name)
+fn int(v: &Value) -> Option<usize> {
+    v.as_int().filter(|&x| (0..1 << 40).contains(&x)).map(|x| x as usize)
 }
 
-fn int(o: &Object) -> Option<usize> {
-    match o {
-        Object::Int(v) if *v >= 0 => Some(*v as usize),
-        Object::Long(v) if *v >= 0 && *v < (1 << 40) => Some(*v as usize),
-        _ => None,
-    }
-}
-
-fn ints(o: &Object) -> Option<Vec<usize>> {
-    match o {
-        Object::Tuple(v) => v.iter().map(int).collect(),
+fn ints(v: &Value) -> Option<Vec<usize>> {
+    match v {
+        Value::Tuple(_) => v.as_seq()?.iter().map(int).collect(),
         _ => None,
     }
 }

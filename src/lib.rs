@@ -15,7 +15,8 @@
 //!   against the desktop pipeline with a stated bound.
 //!
 //! The default build has no desktop-only dependency. The `pt` feature adds
-//! [`import_pt`] (CamPro's PyTorch checkpoints, read without executing anything).
+//! [`import_pt`] (CamPro's PyTorch checkpoints, read by the bounded [`pickle`] reader
+//! without executing anything).
 //! Errors: each module returns its own error kind; all of them convert into [`Error`].
 #![warn(missing_docs)]
 
@@ -35,6 +36,8 @@ pub mod tone_curve;
 
 #[cfg(feature = "pt")]
 pub mod import_pt;
+#[cfg(feature = "pt")]
+pub mod pickle;
 
 pub use ccm::Mat3;
 pub use error::ValidationError;

@@ -181,8 +181,11 @@ impl Params {
             return Err(ParamsError::TooLarge { size: text.len(), limit: MAX_JSON_BYTES });
         }
         let de = &mut serde_json::Deserializer::from_str(text);
-        let raw: ParamsJson = serde_path_to_error::deserialize(de)
+        let raw: ParamsJson = serde_path_to_error::deserialize(&mut *de)
             .map_err(|e| ParamsError::Json { path: e.path().to_string(), message: e.inner().to_string() })?;
+        // One object and nothing after it (white space aside). serde_json bounds the
+        // nesting depth (128) while parsing.
+        de.end().map_err(|e| ParamsError::Json { path: ".".into(), message: format!("text after the object: {e}") })?;
         Ok(Self::from_raw(raw)?)
     }
 

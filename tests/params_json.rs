@@ -178,3 +178,14 @@ fn huge_input_is_refused_before_parsing() {
     let big = " ".repeat(campro::params::MAX_JSON_BYTES + 1);
     assert!(matches!(Params::from_json(&big), Err(ParamsError::TooLarge { .. })));
 }
+
+/// A file is one object: text after it is refused (as a capture result's is).
+#[test]
+fn text_after_the_object_is_refused() {
+    let ok = std::fs::read_to_string(campro_testkit::workspace_root().join("params/identity.json")).unwrap();
+    assert!(Params::from_json(&format!("{ok}\n\n")).is_ok());
+    for tail in ["{}", "x", "]", "{\"format\": 1}"] {
+        let e = Params::from_json(&format!("{ok}{tail}")).unwrap_err().to_string();
+        assert!(e.contains("text after the object"), "{tail}: {e}");
+    }
+}

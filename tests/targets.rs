@@ -110,11 +110,21 @@ fn rpi_matrices_are_quantised_and_clamped() {
     assert_eq!(f.quantize(0.30), (0.30f64 * 1024.0).round() / 1024.0);
     let v = Rpi::Vc4.format().matrix.unwrap();
     assert_eq!(v.quantize(1.23456), 1.235);
-    // 4 · 2.12 > 8: clamped, so the measured error must be large for bright reds.
-    let out = Rpi::Pisp.export(&p, Some(&base)).unwrap();
+    // 4 · 2.12 > 8: refused by name, unless clamping is asked for; then the clamp is
+    // listed and the measured error is large for bright reds.
+    let e = Rpi::Pisp.export(&p, Some(&base)).unwrap_err().to_string();
+    assert!(e.contains("rpi.ccm.ccms[0].ccm[0]") && e.contains("outside the ISP's range") && e.contains("--clamp"), "{e}");
+    let (out, clamped) = Rpi::Pisp.export_clamped(&p, Some(&base)).unwrap();
+    assert!(!clamped.is_empty() && clamped.iter().all(|c| c.ends_with("clamped")), "{clamped:?}");
     let conds = Rpi::Pisp.emulate(&p, &out, Some(&base)).unwrap();
     let s = deployment_vs_desktop(&p, &conds[0].feed, conds[0].emulator.as_ref(), &[[255, 40, 40]]).unwrap();
     assert!(s.max_lsb() > 1.0, "{}", s.max_lsb());
+    // A VC4 file is not a PiSP base (and the other way round).
+    let Some(vc4) = fixture("rpi_vc4_imx219.json") else { return };
+    let e = Rpi::Pisp.export(&bundled("identity"), Some(&vc4)).unwrap_err().to_string();
+    assert!(e.contains("target") && e.contains("bcm2835") && e.contains("\"pisp\""), "{e}");
+    let e = Rpi::Vc4.export(&bundled("identity"), Some(&base)).unwrap_err().to_string();
+    assert!(e.contains("needs a \"bcm2835\" tuning file"), "{e}");
 }
 
 #[test]

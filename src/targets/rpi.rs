@@ -224,16 +224,60 @@ impl Target for Rpi {
     }
 
     fn export(&self, params: &Params, base: Option<&str>) -> Result<Vec<u8>, TargetError> {
+        self.export_with(params, base, false).map(|(bytes, _)| bytes)
+    }
+
+    fn export_clamped(&self, params: &Params, base: Option<&str>) -> Result<(Vec<u8>, Vec<String>), TargetError> {
+        self.export_with(params, base, true)
+    }
+
+    fn emulate(&self, _params: &Params, exported: &[u8], base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
+        self.emulate_file(exported, base)
+    }
+}
+
+impl Rpi {
+    /// The `target` a tuning file for this ISP names.
+    fn tuning_target(self) -> &'static str {
+        match self {
+            Rpi::Vc4 => "bcm2835",
+            Rpi::Pisp => "pisp",
+        }
+    }
+
+    /// The export; matrix entries outside the ISP's range are refused, or clamped (and
+    /// listed) with `clamp`.
+    fn export_with(&self, params: &Params, base: Option<&str>, clamp: bool) -> Result<(Vec<u8>, Vec<String>), TargetError> {
         let base = base.ok_or(TargetError::NeedsBase { target: self.name() })?;
         let (mut root, tuning) = parse(base, self.file())?;
-        let composed: Vec<Value> = tuning
-            .ccms
-            .iter()
-            .map(|(ct, m)| {
-                let c = ccm::mul(&params.ccm, m);
-                serde_json::json!({ "ct": ct, "ccm": c.iter().flatten().copied().collect::<Vec<f64>>() })
-            })
-            .collect();
+        match root.get("target").and_then(Value::as_str) {
+            Some(t) if t != self.tuning_target() => {
+                return Err(field(
+                    "base",
+                    "target",
+                    format!("is \"{t}\": --target {} needs a \"{}\" tuning file", self.name(), self.tuning_target()),
+                ))
+            }
+            _ => {}
+        }
+        let fmt = self.matrix_format();
+        let mut clamped = Vec::new();
+        let mut composed: Vec<Value> = Vec::with_capacity(tuning.ccms.len());
+        for (i, (ct, m)) in tuning.ccms.iter().enumerate() {
+            let mut c: Vec<f64> = ccm::mul(&params.ccm, m).iter().flatten().copied().collect();
+            for (k, v) in c.iter_mut().enumerate() {
+                if !(fmt.min..=fmt.max).contains(v) {
+                    let f = format!("rpi.ccm.ccms[{i}].ccm[{k}]");
+                    let rule = format!("{v:.4} is outside the ISP's range [{}, {}]", fmt.min, fmt.max);
+                    if !clamp {
+                        return Err(field("exported", &f, format!("{rule} (--clamp clamps it; compare then shows the error)")));
+                    }
+                    clamped.push(format!("{f}: {rule}, clamped"));
+                    *v = v.clamp(fmt.min, fmt.max);
+                }
+            }
+            composed.push(serde_json::json!({ "ct": ct, "ccm": c }));
+        }
         block(&mut root, "rpi.ccm", self.file())?["ccms"] = Value::Array(composed);
         let c = &params.tone_curve;
         let mut points: Vec<Value> = Vec::with_capacity(2 * c.len());
@@ -259,10 +303,10 @@ impl Target for Rpi {
             message: e.to_string(),
         })?;
         text.push('\n');
-        Ok(text.into_bytes())
+        Ok((text.into_bytes(), clamped))
     }
 
-    fn emulate(&self, _params: &Params, exported: &[u8], base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
+    fn emulate_file(&self, exported: &[u8], base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
         let text = std::str::from_utf8(exported).map_err(|e| TargetError::Parse {
             file: "export".into(),
             format: "UTF-8",

@@ -164,6 +164,12 @@ pub trait Target {
     /// The exported file's contents. `base` is the stack's own tuning file where the
     /// export patches one (everything not CamPro's is kept).
     fn export(&self, params: &Params, base: Option<&str>) -> Result<Vec<u8>, TargetError>;
+    /// [`Target::export`], clamping values the stack cannot hold instead of refusing
+    /// them; returns the file and one line per value clamped. Targets that never clamp
+    /// export as usual.
+    fn export_clamped(&self, params: &Params, base: Option<&str>) -> Result<(Vec<u8>, Vec<String>), TargetError> {
+        self.export(params, base).map(|bytes| (bytes, Vec::new()))
+    }
     /// Reads `exported` back with the target's parser and returns what the ISP applies
     /// under each condition it is calibrated for. `params` is what was exported (for the
     /// stated bounds), `base` the unpatched tuning file (the device matrices before

@@ -80,11 +80,39 @@ pub struct Common {
     #[arg(long)]
     models: Option<PathBuf>,
     /// Use only the first N (images, or identities for privacy): quick looks and CI.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_limit)]
     limit: Option<usize>,
-    /// Output folder for the CSV, JSON, SVG and Markdown reports.
+    /// Output folder for the CSV, JSON, SVG and Markdown reports (a new or empty folder,
+    /// unless --force).
     #[arg(short, long, default_value = "campro-eval")]
     output: PathBuf,
+    /// Write into an output folder that already holds files (replacing its reports).
+    #[arg(long)]
+    force: bool,
+}
+
+/// `--limit`: at least 1 (an empty selection has nothing to score).
+fn parse_limit(s: &str) -> std::result::Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!("must be a whole number >= 1, got {s}")),
+    }
+}
+
+/// `--confidence`: a score threshold in [0, 1].
+fn parse_confidence(s: &str) -> std::result::Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!("must be a number in [0, 1], got {s}")),
+    }
+}
+
+impl Common {
+    /// Refuses an output folder that already holds files, unless --force: a quick look
+    /// must not replace the reports of a long run.
+    fn check_output(&self) -> Result<()> {
+        crate::check_output_folder(&self.output, self.force)
+    }
 }
 
 #[derive(Args)]
@@ -106,8 +134,9 @@ pub struct PrivacyArgs {
     /// probed: a number (seeded choice) or `all` (the paper's gallery of every subject).
     #[arg(long, value_name = "N|all", default_value = "0", value_parser = parse_distractors)]
     distractors: usize,
-    #[arg(long, default_value_t = 10)]
-    runs: usize,
+    /// Runs (random gallery/probe splits) to average, 1 to 1000.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u16).range(1..=1000))]
+    runs: u16,
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Photos kept per identity (gallery, probe and the linear classifier's training photos).
@@ -150,8 +179,8 @@ pub struct UtilityArgs {
     /// Person detector: a bundled name or a manifest file.
     #[arg(long, default_value = "yolox-nano")]
     person_detector: String,
-    /// Confidence for precision / recall / F1.
-    #[arg(long, default_value_t = 0.25)]
+    /// Confidence for precision / recall / F1, in [0, 1].
+    #[arg(long, default_value_t = 0.25, value_parser = parse_confidence)]
     confidence: f64,
     /// Score each parameter set from `campro train` or `campro finetune-detector` with the
     /// detector fine-tuned beside it (its `provenance.detector.manifest`); raw images and
@@ -179,7 +208,7 @@ impl Common {
     fn conditions(&self) -> Result<Vec<Condition>> {
         let mut c = vec![Condition::raw()];
         for path in &self.params {
-            let p = Params::from_file(path).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+            let p = crate::load_params(path)?;
             let name = set_name(path);
             if c.iter().any(|x| x.name == name) {
                 bail!("{}: two parameter sets are named {name:?}", path.display());
@@ -250,7 +279,7 @@ fn parse_distractors(v: &str) -> std::result::Result<usize, String> {
 
 /// Identity names from a trained parameter file (held-out identities) or a list file.
 fn read_identities(path: &Path) -> Result<Vec<String>> {
-    let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+    let text = campro::file::read_text_capped(path, 16 << 20, "an identity list (--identities)")?;
     let names: Vec<String> = if text.trim_start().starts_with('{') {
         let v: serde_json::Value = serde_json::from_str(&text).with_context(|| path.display().to_string())?;
         let list = v.pointer("/provenance/data/validation_identities").and_then(|l| l.as_array()).ok_or_else(|| {
@@ -291,7 +320,7 @@ fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<priva
         conds
     };
     let o = PrivacyOptions {
-        runs: a.runs,
+        runs: a.runs as usize,
         seed: a.seed,
         pool: a.pool,
         limit: c.limit,
@@ -367,8 +396,11 @@ fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utili
 fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBuf>> {
     let mut own = HashMap::new();
     for path in params {
-        let v: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(path).with_context(|| path.display().to_string())?)?;
+        let v: serde_json::Value = serde_json::from_str(&campro::file::read_text_capped(
+            path,
+            campro::params::MAX_JSON_BYTES as u64,
+            "a parameter file",
+        )?)?;
         if let Some(m) = v.pointer("/provenance/detector/manifest").and_then(|m| m.as_str()) {
             let manifest = path.parent().unwrap_or(Path::new(".")).join(m);
             if !manifest.is_file() {
@@ -404,6 +436,8 @@ fn run_quality(c: &Common, images: Option<&Path>, conds: &[Condition]) -> Result
 }
 
 pub fn run(cmd: EvalCmd) -> Result<()> {
+    let (EvalCmd::Privacy { common, .. } | EvalCmd::Utility { common, .. } | EvalCmd::Quality { common, .. } | EvalCmd::All { common, .. }) = &cmd;
+    common.check_output()?;
     match cmd {
         EvalCmd::Privacy { common, p } => run_privacy(&common, &p, &common.conditions()?).map(drop),
         EvalCmd::Utility { common, u } => run_utility(&common, &u, &common.conditions()?).map(drop),

@@ -3,23 +3,21 @@
 
 mod bench;
 mod eval;
+mod simulate;
 mod train;
 
 use anyhow::{anyhow, bail, Context, Result};
 use campro::ccm::{self, Mat3};
 use campro::compare;
 use campro::emulate::DeviceModel;
-use campro::pipeline::fast::Exact8;
 use campro::pipeline::{Depth, Prepared};
 use campro::targets::camera2::{self, Camera2, Options, RationalMode};
 use campro::targets::{Condition, Support};
 use campro::Params;
 use campro_testkit::stress;
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use rayon::prelude::*;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// The recommended preset: `campro demo`'s default. Of the learnt sets it is the most
 /// useful one that meets both privacy targets on the paper's protocol (trained/README.md).
@@ -88,9 +86,9 @@ enum Cmd {
         /// Overwrite existing outputs.
         #[arg(long)]
         force: bool,
-        /// Worker threads (default: all cores).
-        #[arg(long)]
-        jobs: Option<usize>,
+        /// Worker threads (default: all cores; more than the cores is clamped, with a warning).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+        jobs: Option<u32>,
     },
     /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
     Compare {
@@ -101,15 +99,15 @@ enum Cmd {
         files: FileTargetArgs,
         #[command(flatten)]
         device: DeviceArgs,
-        /// Emulate a HAL that rounds matrix entries to this many fractional bits.
-        #[arg(long)]
+        /// Emulate a HAL that rounds matrix entries to this many fractional bits (0 to 52).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(0..=52))]
         matrix_frac_bits: Option<u32>,
-        /// Emulate a device LUT of this many evenly spaced entries.
-        #[arg(long)]
-        lut_size: Option<usize>,
-        /// Random pixels to test.
-        #[arg(long, default_value_t = 100_000)]
-        random: usize,
+        /// Emulate a device LUT of this many evenly spaced entries (2 to 65536).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(2..=65536))]
+        lut_size: Option<u32>,
+        /// Random pixels to test (1 to 10,000,000).
+        #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
+        random: u32,
         #[arg(long, default_value_t = 1)]
         seed: u64,
         #[arg(long, value_enum, default_value_t = Report::Text)]
@@ -192,6 +190,9 @@ enum Cmd {
         /// Parameters to use instead of the recommended preset.
         #[arg(long)]
         params: Option<PathBuf>,
+        /// Write into an output folder that already holds files.
+        #[arg(long)]
+        force: bool,
     },
 }
 
@@ -203,18 +204,27 @@ struct DeviceArgs {
     /// A saved capture result (JSON with colorCorrectionTransform) giving the device transform.
     #[arg(long)]
     capture_result: Option<PathBuf>,
-    /// Colour temperature (K) at which to interpolate the parameter file's ct_calibration.
-    #[arg(long, conflicts_with_all = ["device_ccm", "capture_result"])]
+    /// Colour temperature (K, 1000 to 40000) at which to interpolate the parameter file's ct_calibration.
+    #[arg(long, allow_negative_numbers = true, conflicts_with_all = ["device_ccm", "capture_result"], value_parser = parse_ct)]
     ct: Option<f64>,
-    /// The device's TONEMAP_MAX_CURVE_POINTS.
-    #[arg(long, default_value_t = camera2::DEFAULT_MAX_CURVE_POINTS)]
-    max_curve_points: usize,
+    /// The device's TONEMAP_MAX_CURVE_POINTS (2 to 65536).
+    #[arg(long, default_value_t = camera2::DEFAULT_MAX_CURVE_POINTS as u32, value_parser = clap::value_parser!(u32).range(2..=65536))]
+    max_curve_points: u32,
     /// Rationals: best approximation with denominators up to this.
     #[arg(long, default_value_t = camera2::DEFAULT_MAX_DENOMINATOR, conflicts_with = "fixed_denominator")]
     max_denominator: u32,
     /// Rationals: every entry over this fixed denominator (e.g. 1024) instead.
     #[arg(long)]
     fixed_denominator: Option<u32>,
+}
+
+/// `--ct`: a finite colour temperature in the calibration range.
+fn parse_ct(s: &str) -> std::result::Result<f64, String> {
+    let (lo, hi) = campro::color_temp::CT_RANGE;
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && (lo..=hi).contains(&v) => Ok(v),
+        _ => Err(format!("must be a colour temperature in [{lo}, {hi}] K, got {s}")),
+    }
 }
 
 /// The registered stack names, for `--target` (`campro convert --help` lists them).
@@ -236,6 +246,9 @@ struct FileTargetArgs {
     /// Hald CLUT level L (an L^3 x L^3 image, L^2 points per axis).
     #[arg(long, default_value_t = 8)]
     hald_level: usize,
+    /// Clamp values the stack cannot hold (saying which) instead of refusing them.
+    #[arg(long)]
+    clamp: bool,
 }
 
 impl FileTargetArgs {
@@ -265,14 +278,26 @@ impl FileTargetArgs {
         }
     }
 
-    /// The base file's text (at most 16 MiB), if given.
+    /// The file `t` exports for `p` (the base read here); values out of the stack's range
+    /// are refused, or clamped with `--clamp` and listed on stderr.
+    fn export(&self, t: &dyn campro::targets::Target, p: &Params) -> Result<(Vec<u8>, Option<String>)> {
+        let base = self.base_text()?;
+        let bytes = if self.clamp {
+            let (bytes, clamped) = t.export_clamped(p, base.as_deref())?;
+            for c in &clamped {
+                eprintln!("warning: {c} (compare measures what that costs)");
+            }
+            bytes
+        } else {
+            t.export(p, base.as_deref())?
+        };
+        Ok((bytes, base))
+    }
+
+    /// The base file's text (a regular file of at most 16 MiB), if given.
     fn base_text(&self) -> Result<Option<String>> {
         let Some(f) = &self.base else { return Ok(None) };
-        let meta = std::fs::metadata(f).with_context(|| f.display().to_string())?;
-        if meta.len() > 16 << 20 {
-            bail!("{}: base file is {} bytes; the limit is 16 MiB", f.display(), meta.len());
-        }
-        Ok(Some(std::fs::read_to_string(f).with_context(|| f.display().to_string())?))
+        Ok(Some(campro::file::read_text_capped(f, 16 << 20, "a tuning file (--base)")?))
     }
 }
 
@@ -297,11 +322,74 @@ enum Report {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        // --help and --version print as clap writes them.
+        Err(e) if !e.use_stderr() => e.exit(),
+        Err(e) => {
+            // Clap's first line names the flag and the rule; the rest is usage advice.
+            let text = e.render().to_string();
+            let first = text.lines().next().unwrap_or("invalid arguments");
+            eprintln!("error: {}", escape(first.trim_start_matches("error: ")));
+            std::process::exit(2);
+        }
+    };
     if let Err(e) = run(cli) {
-        eprintln!("error: {}", format!("{e:#}").replace('\n', " "));
+        eprintln!("error: {}", one_line(&e));
         std::process::exit(1);
     }
+}
+
+/// An error chain as one line: each cause's first line (a backtrace some libraries
+/// append with `RUST_BACKTRACE` set never shows), a cause that the text so far already
+/// says left out, control characters escaped.
+pub(crate) fn one_line(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        let first = text.lines().map(str::trim).find(|l| !l.is_empty()).unwrap_or_default();
+        if first.is_empty() || out.contains(first) {
+            continue;
+        }
+        // A cause that repeats the text so far (a path added twice) is not said again.
+        let first = first.strip_prefix(out.as_str()).map(|r| r.trim_start_matches(": ")).unwrap_or(first);
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(first);
+    }
+    escape(&out)
+}
+
+/// Writes one line to stdout; a closed stdout (`| head`) ends the command quietly.
+pub(crate) fn say(args: std::fmt::Arguments) {
+    if let Err(e) = writeln!(std::io::stdout().lock(), "{args}") {
+        quiet_exit(e);
+    }
+}
+
+/// Writes bytes to stdout, as [`say`].
+pub(crate) fn say_bytes(bytes: &[u8]) {
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_all(bytes).and_then(|()| out.flush()) {
+        quiet_exit(e);
+    }
+}
+
+/// Ends the process after a failed write to stdout: quietly (status 0) when the reader
+/// went away, with a one-line error otherwise.
+fn quiet_exit(e: std::io::Error) -> ! {
+    if e.kind() == std::io::ErrorKind::BrokenPipe {
+        std::process::exit(0);
+    }
+    eprintln!("error: standard output: {e}");
+    std::process::exit(1);
+}
+
+/// `println!` through [`say`].
+#[macro_export]
+macro_rules! say {
+    ($($t:tt)*) => { $crate::say(format_args!($($t)*)) };
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -316,10 +404,10 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Validate { params } => {
             for p in params {
                 let v = load_params(&p)?;
-                println!(
+                say!(
                     "{}: ok ({}: {} knots{}, degamma {}, CCM range [{:.3}, {:.3}], {} CT calibrations)",
                     p.display(),
-                    if v.name.is_empty() { "unnamed" } else { &v.name },
+                    if v.name.is_empty() { "unnamed".to_string() } else { escape(&v.name) },
                     v.tone_curve.len(),
                     if v.tone_curve.is_uniform() { " evenly spaced" } else { "" },
                     v.degamma,
@@ -340,12 +428,12 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Convert { params, target, files, output, force, .. } if target != "camera2" => {
             let p = load_params(&params)?;
             let t = files.target(&target, Camera2::default())?;
-            let bytes = t.export(&p, files.base_text()?.as_deref())?;
+            let (bytes, _) = files.export(t.as_ref(), &p)?;
             match output {
                 Some(o) => write_atomic(&o, &bytes, force),
                 None if target == "hald" => bail!("a Hald image is binary: pass --output FILE.ppm"),
                 None => {
-                    std::io::stdout().write_all(&bytes)?;
+                    say_bytes(&bytes);
                     Ok(())
                 }
             }
@@ -353,14 +441,13 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Compare { params, target, files, device, matrix_frac_bits, lut_size, random, seed, format } => {
             let p = load_params(&params)?;
             let (m, options) = device_setup(&p, &device)?;
-            let t = files.target(&target, Camera2::new(m, options, DeviceModel { matrix_frac_bits, lut_size }))?;
-            let base = files.base_text()?;
-            let exported = t.export(&p, base.as_deref())?;
+            let t = files.target(&target, Camera2::new(m, options, DeviceModel { matrix_frac_bits, lut_size: lut_size.map(|n| n as usize) }))?;
+            let (exported, base) = files.export(t.as_ref(), &p)?;
             let conditions = t.emulate(&p, &exported, base.as_deref())?;
-            let rows = comparison(&p, &conditions, random, seed)?;
+            let rows = comparison(&p, &conditions, random as usize, seed)?;
             match format {
                 Report::Text => {
-                    println!("target {} ({} bytes exported)", t.name(), exported.len());
+                    say!("target {} ({} bytes exported)", t.name(), exported.len());
                     print_comparison(&rows);
                 }
                 Report::Json => {
@@ -368,7 +455,7 @@ fn run(cli: Cli) -> Result<()> {
                     if target == "camera2" {
                         json["camera2"] = serde_json::from_slice(&exported)?;
                     }
-                    println!("{}", serde_json::to_string_pretty(&json)?)
+                    say!("{}", serde_json::to_string_pretty(&json)?)
                 }
             }
             Ok(())
@@ -376,7 +463,15 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Convert { params, device, format, output, force, .. } => {
             let p = load_params(&params)?;
             let (m, opts) = device_setup(&p, &device)?;
-            let v = camera2::convert(&p, &m, &opts)?;
+            let v = camera2::convert(&p, &m, &opts).map_err(flagged)?;
+            let r = &v.report;
+            if r.curve_simplified && r.curve_max_abs * 255.0 > 0.5 {
+                eprintln!(
+                    "warning: the curve lost knots to fit {} points: it errs up to {:.2} LSB (8-bit); a device with more TONEMAP_MAX_CURVE_POINTS (--max-curve-points) errs less",
+                    opts.max_curve_points,
+                    r.curve_max_abs * 255.0
+                );
+            }
             let text = match format {
                 Format::Json => serde_json::to_string(&v.to_json())? + "\n",
                 Format::Kotlin => v.to_kotlin(),
@@ -384,14 +479,14 @@ fn run(cli: Cli) -> Result<()> {
             match output {
                 Some(o) => write_atomic(&o, text.as_bytes(), force),
                 None => {
-                    std::io::stdout().write_all(text.as_bytes())?;
+                    say_bytes(text.as_bytes());
                     Ok(())
                 }
             }
         }
         Cmd::Simulate { params, inputs, output, bit_depth, force, jobs } => {
             let p = load_params(&params)?;
-            simulate(
+            simulate::simulate(
                 &p,
                 &inputs,
                 &output,
@@ -400,17 +495,17 @@ fn run(cli: Cli) -> Result<()> {
                     BitDepth::Sixteen => Depth::Sixteen,
                 },
                 force,
-                jobs,
+                jobs.map(|j| j as usize),
             )
         }
-        Cmd::Demo { output, params } => demo(&output, params.as_deref()),
+        Cmd::Demo { output, params, force } => demo(&output, params.as_deref(), force),
         Cmd::Bench { params, quick } => {
             let p = match params {
                 Some(path) => load_params(&path)?,
                 None => bench::default_params(),
             };
             for line in bench::run(&p, quick) {
-                println!("{line}");
+                say!("{line}");
             }
             Ok(())
         }
@@ -431,12 +526,8 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
     let m = if let Some(v) = &d.device_ccm {
         [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]]
     } else if let Some(f) = &d.capture_result {
-        let meta = std::fs::metadata(f).with_context(|| f.display().to_string())?;
-        if meta.len() > 1 << 20 {
-            bail!("{}: capture result is {} bytes; the limit is 1 MiB", f.display(), meta.len());
-        }
-        let text = std::fs::read_to_string(f).with_context(|| f.display().to_string())?;
-        camera2::device_transform_from_capture_result(&text).map_err(|e| anyhow!("{}: {e}", f.display()))?
+        let text = campro::file::read_text_capped(f, 1 << 20, "a capture result")?;
+        camera2::device_transform_from_capture_result(&text).map_err(|e| anyhow!("--capture-result {}: {e}", f.display()))?
     } else if let Some(ct) = d.ct {
         if p.ct_calibration.is_empty() {
             bail!("--ct needs a parameter file with ct_calibration");
@@ -449,7 +540,7 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
         Some(den) => RationalMode::Fixed { denominator: den },
         None => RationalMode::Best { max_denominator: d.max_denominator },
     };
-    Ok((m, Options { max_curve_points: d.max_curve_points, rational }))
+    Ok((m, Options { max_curve_points: d.max_curve_points as usize, rational }))
 }
 
 /// Writes `bytes` to `path` whole or not at all ([`campro_eval::atomic::write`]). Refuses
@@ -461,138 +552,6 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()>
         }
         r => r.with_context(|| path.display().to_string()),
     }
-}
-
-const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff"];
-
-/// Every (input file, output file) pair: folders are walked recursively and mirrored.
-fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Vec<(PathBuf, PathBuf)>> {
-    let mut jobs = Vec::new();
-    for input in inputs {
-        if input.is_dir() {
-            for entry in walkdir::WalkDir::new(input).sort_by_file_name() {
-                let entry = entry?;
-                if !entry.file_type().is_file() {
-                    continue;
-                }
-                let rel = entry.path().strip_prefix(input).unwrap();
-                jobs.push((entry.path().to_path_buf(), out.join(rel).with_extension("png")));
-            }
-        } else if input.is_file() {
-            let name = input.file_name().ok_or_else(|| anyhow!("{}: not a file name", input.display()))?;
-            jobs.push((input.clone(), out.join(Path::new(name)).with_extension("png")));
-        } else {
-            bail!("{}: no such file or folder", input.display());
-        }
-    }
-    let mut seen = std::collections::HashSet::new();
-    for (i, o) in &jobs {
-        if !seen.insert(o.clone()) {
-            bail!("two inputs would both be written to {} (the second is {})", o.display(), i.display());
-        }
-    }
-    Ok(jobs)
-}
-
-fn is_image(path: &Path) -> bool {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .map(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
-        .unwrap_or(false)
-}
-
-fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force: bool, jobs: Option<usize>) -> Result<()> {
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs.unwrap_or(0)).build()?;
-    let all = collect_inputs(inputs, out)?;
-    let (images, others): (Vec<_>, Vec<_>) = all.into_iter().partition(|(i, _)| is_image(i));
-    for (i, _) in &others {
-        eprintln!("warning: skipping {} (not a PNG, JPEG or TIFF file)", i.display());
-    }
-    let bar = if images.len() > 4 {
-        indicatif::ProgressBar::new(images.len() as u64)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    bar.set_style(indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta}").unwrap());
-    // The 16-bit degamma table (65536 powers) is built only if a 16-bit image turns up.
-    let prepared8 = Prepared::new(p, Depth::Eight);
-    let fast8 = Exact8::new(p);
-    let prepared16 = std::sync::OnceLock::new();
-    let failed = AtomicUsize::new(0);
-    pool.install(|| {
-        images.par_iter().for_each(|(i, o)| {
-            let r = if !force && o.exists() {
-                Err(anyhow!("{} exists (use --force to overwrite)", o.display()))
-            } else {
-                simulate_one(&fast8, &prepared8, &prepared16, i, o, depth, force)
-            };
-            if let Err(e) = r {
-                bar.suspend(|| eprintln!("error: {}: {e:#}", i.display()));
-                failed.fetch_add(1, Ordering::Relaxed);
-            }
-            bar.inc(1);
-        })
-    });
-    bar.finish_and_clear();
-    let failed = failed.into_inner();
-    eprintln!("simulated {} of {} images into {}", images.len() - failed, images.len(), out.display());
-    if failed > 0 {
-        bail!("{failed} image(s) failed");
-    }
-    Ok(())
-}
-
-fn simulate_one<'a>(
-    fast8: &Exact8<'a>,
-    p8: &Prepared<'a>,
-    p16: &std::sync::OnceLock<Prepared<'a>>,
-    input: &Path,
-    output: &Path,
-    depth: Depth,
-    force: bool,
-) -> Result<()> {
-    let reader = image::ImageReader::open(input)?.with_guessed_format()?;
-    let img = reader.decode()?;
-    let (w, h) = (img.width(), img.height());
-    let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
-    let row = 3 * w as usize;
-    if !sixteen && depth == Depth::Eight {
-        // 8 bits in and out: the exact path (AVX-512 blocks where the CPU has them),
-        // bit-identical to the reference.
-        let src = img.into_rgb8().into_raw();
-        let mut dst = vec![0u8; src.len()];
-        src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| {
-            fast8.run(s, d);
-        });
-        let wide: Vec<u16> = dst.into_iter().map(u16::from).collect();
-        return write_atomic(output, &encode_png(&wide, w, h, depth)?, force);
-    }
-    let (src, prep): (Vec<u16>, &Prepared) = if sixteen {
-        (img.into_rgb16().into_raw(), p16.get_or_init(|| Prepared::new(p8.params(), Depth::Sixteen)))
-    } else {
-        (img.into_rgb8().into_raw().into_iter().map(u16::from).collect(), p8)
-    };
-    let mut dst = vec![0u16; src.len()];
-    src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| prep.run(s, d, depth));
-    let png = encode_png(&dst, w, h, depth)?;
-    write_atomic(output, &png, force)
-}
-
-fn encode_png(samples: &[u16], w: u32, h: u32, depth: Depth) -> Result<Vec<u8>> {
-    use image::ImageEncoder;
-    let mut buf = Vec::new();
-    let enc = image::codecs::png::PngEncoder::new(&mut buf);
-    match depth {
-        Depth::Eight => {
-            let bytes: Vec<u8> = samples.iter().map(|&v| v as u8).collect();
-            enc.write_image(&bytes, w, h, image::ExtendedColorType::Rgb8)?
-        }
-        Depth::Sixteen => {
-            let bytes: Vec<u8> = samples.iter().flat_map(|v| v.to_ne_bytes()).collect();
-            enc.write_image(&bytes, w, h, image::ExtendedColorType::Rgb16)?
-        }
-    }
-    Ok(buf)
 }
 
 /// One row of a comparison: the condition, the pixel set, the measured error and the
@@ -630,14 +589,14 @@ fn pixel_sets(random: usize, seed: u64) -> [(String, Vec<[u8; 3]>); 3] {
 }
 
 fn print_comparison(rows: &[Row]) {
-    println!(
+    say!(
         "{:<16} {:<22} {:>10} {:>10} {:>10} {:>12}",
         "condition", "pixels", "max LSB", "mean LSB", "PSNR dB", "bound LSB"
     );
     for r in rows {
         let bound = r.bound.map_or("-".to_string(), |b| format!("{:.4}", b * 255.0));
         let s = &r.stats;
-        println!(
+        say!(
             "{:<16} {:<22} {:>10.4} {:>10.5} {:>10.2} {:>12}",
             r.condition,
             r.pixels,
@@ -659,7 +618,8 @@ fn comparison_json(target: &str, exported_bytes: usize, rows: &[Row]) -> serde_j
     })
 }
 
-fn demo(out: &Path, params: Option<&Path>) -> Result<()> {
+fn demo(out: &Path, params: Option<&Path>, force: bool) -> Result<()> {
+    check_output_folder(out, force)?;
     let (p, file) = match params {
         Some(path) => (load_params(path)?, path.display().to_string()),
         None => (Params::from_json(DEFAULT_PARAMS)?, format!("{DEFAULT_PARAMS_FILE} (the recommended preset)")),
@@ -672,31 +632,31 @@ fn demo(out: &Path, params: Option<&Path>) -> Result<()> {
     let before = out.join("chart.png");
     // Fixed names: never built from the file's contents.
     let after = out.join("chart-protected.png");
-    write_atomic(&before, &encode_png(&src, w, h, Depth::Eight)?, true)?;
-    write_atomic(&after, &encode_png(&dst, w, h, Depth::Eight)?, true)?;
-    println!("preset: {file}");
-    println!("parameters: {} - {}", escape(&p.name), escape(&p.description));
-    println!("wrote {} (input) and {} (desktop pipeline output)\n", before.display(), after.display());
+    write_atomic(&before, &simulate::encode_png(&src, w, h, Depth::Eight)?, true)?;
+    write_atomic(&after, &simulate::encode_png(&dst, w, h, Depth::Eight)?, true)?;
+    say!("preset: {file}");
+    say!("parameters: {} - {}", escape(&p.name), escape(&p.description));
+    say!("wrote {} (input) and {} (desktop pipeline output)\n", before.display(), after.display());
     let v = camera2::convert(&p, &ccm::IDENTITY, &Options::default())?;
-    println!("Camera2 values (device transform: identity; `campro convert --device-ccm ...` for yours):");
-    println!("  COLOR_CORRECTION_TRANSFORM (num/den pairs): {:?}", v.color_correction_transform);
+    say!("Camera2 values (device transform: identity; `campro convert --device-ccm ...` for yours):");
+    say!("  COLOR_CORRECTION_TRANSFORM (num/den pairs): {:?}", v.color_correction_transform);
     let c = &v.tonemap_curve.red;
     let pts: Vec<String> = c.chunks(2).take(4).map(|p| format!("({:.4}, {:.4})", p[0], p[1])).collect();
-    println!(
+    say!(
         "  TONEMAP_CURVE: {} points per channel: {}, ... ({:.4}, {:.4})",
         c.len() / 2,
         pts.join(", "),
         c[c.len() - 2],
         c[c.len() - 1]
     );
-    println!(
+    say!(
         "  matrix scale {}, rational error {:.2e}, curve error {:.2e}, bound {:.2e} LSB over sensor RGB in [0,1]",
         v.scale,
         v.report.matrix_max_abs,
         v.report.curve_max_abs,
         v.report.bound_lsb()
     );
-    println!("\nSimulated device vs desktop pipeline:");
+    say!("\nSimulated device vs desktop pipeline:");
     let device = Camera2::default();
     let conditions = campro::targets::Target::emulate(&device, &p, &serde_json::to_vec(&v.to_json())?, None)?;
     print_comparison(&comparison(&p, &conditions, 100_000, 1)?);
@@ -718,7 +678,7 @@ fn stress(seconds: f64, seed: u64) -> Result<()> {
         }
         s = s.wrapping_add(1);
     }
-    println!("stress: {} cases in {:.1} s (seeds {seed}..{s}): {converted} converted, {refused} refused with a named error, 0 invariants broken", converted + refused, start.elapsed().as_secs_f64());
+    say!("stress: {} cases in {:.1} s (seeds {seed}..{s}): {converted} converted, {refused} refused with a named error, 0 invariants broken", converted + refused, start.elapsed().as_secs_f64());
     Ok(())
 }
 
@@ -726,4 +686,40 @@ fn stress(seconds: f64, seed: u64) -> Result<()> {
 /// description must not move the cursor, retitle the terminal or forge a line).
 pub(crate) fn escape(text: &str) -> String {
     text.chars().flat_map(|c| if c.is_control() { c.escape_default().collect::<Vec<_>>() } else { vec![c] }).collect()
+}
+
+/// Refuses an output folder that already holds files unless `force` (a quick look must
+/// not replace the results of a long run), and a path that is not a folder.
+pub(crate) fn check_output_folder(out: &Path, force: bool) -> Result<()> {
+    match std::fs::read_dir(out) {
+        Ok(mut entries) => {
+            if entries.next().is_some() && !force {
+                bail!(
+                    "--output {}: the folder already holds files (an earlier run's?); choose another or pass --force",
+                    out.display()
+                );
+            }
+            Ok(())
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(_) if out.exists() => bail!("--output {}: is not a folder", out.display()),
+        Err(e) => Err(e).with_context(|| format!("--output {}", out.display())),
+    }
+}
+
+/// A conversion error with the option the user typed in place of the library's field
+/// name (`--device-ccm[1][2]: ...` rather than `device_ccm[1][2]: ...`).
+fn flagged(e: camera2::ConvertError) -> anyhow::Error {
+    let text = e.to_string();
+    for (field, flag) in [
+        ("device_ccm", "--device-ccm"),
+        ("max_curve_points", "--max-curve-points"),
+        ("max_denominator", "--max-denominator"),
+        ("denominator", "--fixed-denominator"),
+    ] {
+        if let Some(rest) = text.strip_prefix(field) {
+            return anyhow!("{flag}{rest}");
+        }
+    }
+    anyhow!(text)
 }

@@ -10,8 +10,33 @@ use std::path::Path;
 /// Writes `bytes` to `path` atomically, creating missing parent folders. With `replace`
 /// false an existing `path` is left alone and the call fails with
 /// [`std::io::ErrorKind::AlreadyExists`] (checked at the rename, so no race can clobber it).
+/// With `replace` true only a regular file is replaced: a symbolic link, folder, device,
+/// FIFO or socket at `path` is refused ([`std::io::ErrorKind::InvalidInput`]), so the
+/// rename can never swap a device node or a link's target for a file. A parent that is a
+/// file, not a folder, is refused the same way.
 pub fn write(path: &Path, bytes: &[u8], replace: bool) -> std::io::Result<()> {
+    let refuse = |what: String| Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, what));
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    if let Some(up) = dir.ancestors().find(|a| !a.as_os_str().is_empty() && std::fs::symlink_metadata(a).is_ok()) {
+        if !up.is_dir() {
+            return refuse(format!("{} is not a folder", up.display()));
+        }
+    }
+    if replace {
+        if let Ok(m) = std::fs::symlink_metadata(path) {
+            let t = m.file_type();
+            if !t.is_file() {
+                let what = if t.is_symlink() {
+                    "a symbolic link"
+                } else if t.is_dir() {
+                    "a folder"
+                } else {
+                    "not a regular file"
+                };
+                return refuse(format!("is {what}; only regular files are replaced"));
+            }
+        }
+    }
     std::fs::create_dir_all(dir)?;
     let mut builder = tempfile::Builder::new();
     builder.prefix(".campro-").suffix(".tmp");
@@ -65,6 +90,32 @@ mod tests {
     fn a_folder_in_the_way_is_an_error_not_a_panic() {
         let dir = tempfile::tempdir().unwrap();
         std::fs::create_dir(dir.path().join("taken")).unwrap();
-        assert!(write(&dir.path().join("taken"), b"x", true).is_err());
+        let e = write(&dir.path().join("taken"), b"x", true).unwrap_err();
+        assert_eq!(e.to_string(), "is a folder; only regular files are replaced");
+        // A parent that is a file: named, not "exists".
+        std::fs::write(dir.path().join("file"), b"x").unwrap();
+        let e = write(&dir.path().join("file/out.json"), b"x", false).unwrap_err();
+        assert!(e.to_string().ends_with("file is not a folder"), "{e}");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn links_and_devices_are_never_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("target");
+        std::fs::write(&target, b"keep").unwrap();
+        let link = dir.path().join("link");
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        let e = write(&link, b"x", true).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput);
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+        assert_eq!(std::fs::read(&target).unwrap(), b"keep");
+        // A FIFO (made by mkfifo(1), so no device node is ever at risk here).
+        let fifo = dir.path().join("fifo");
+        if std::process::Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success()) {
+            let e = write(&fifo, b"x", true).unwrap_err();
+            assert!(e.to_string().contains("not a regular file"), "{e}");
+            assert!(!std::fs::symlink_metadata(&fifo).unwrap().file_type().is_file());
+        }
     }
 }

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use thiserror::Error;
 
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum EvalError {
     /// The I/O error is part of the message, not a `source`, so a chain is printed once.
     #[error("{path}: {error}")]
@@ -18,6 +19,14 @@ pub enum EvalError {
     Data { path: PathBuf, line: usize, message: String },
     #[error("{0}")]
     Invalid(String),
+    /// An input file could not be read (not a regular file, over its size cap, ...).
+    #[error(transparent)]
+    File(#[from] campro::file::FileError),
+}
+
+/// Reads the regular file `path` as text, at most `limit` bytes (`role` names it).
+pub fn read_text(path: &std::path::Path, limit: u64, role: &'static str) -> Result<String> {
+    Ok(campro::file::read_text_capped(path, limit, role)?)
 }
 
 impl EvalError {

@@ -15,9 +15,13 @@ use campro::tone_curve::ToneCurve;
 /// One stress case.
 #[derive(Debug, Clone)]
 pub struct Case {
+    /// The parameter set (adversarial CCM and curve).
     pub params: Params,
+    /// The device transform.
     pub device: Mat3,
+    /// Point budget and rational mode.
     pub opts: Options,
+    /// The seed it was drawn from.
     pub seed: u64,
 }
 
@@ -26,6 +30,7 @@ pub struct Case {
 pub struct Rng(pub u64);
 
 impl Rng {
+    /// The next 64 random bits.
     pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
@@ -34,12 +39,15 @@ impl Rng {
         z ^ (z >> 31)
     }
     /// Uniform in [0, 1).
+    /// Uniform in [0, 1).
     pub fn unit(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
+    /// Uniform in [lo, hi).
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.unit()
     }
+    /// One of `v`, uniformly.
     pub fn pick<T: Copy>(&mut self, v: &[T]) -> T {
         v[(self.next_u64() % v.len() as u64) as usize]
     }

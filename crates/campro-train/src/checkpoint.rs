@@ -55,7 +55,8 @@ pub fn write_tensors(dir: &Path, name: &str, tensors: &HashMap<String, Tensor>) 
 /// Reads a checkpoint written by [`save`].
 pub fn load(dir: &Path, device: &Device) -> Result<(HashMap<String, Tensor>, State), CheckpointError> {
     let sp = dir.join(STATE);
-    let text = std::fs::read(&sp).map_err(|e| CheckpointError::Io { path: sp.clone(), message: e.to_string() })?;
+    let text = campro::file::read_capped(&sp, 16 << 20, "a checkpoint state")
+        .map_err(|e| CheckpointError::Io { path: sp.clone(), message: e.reason() })?;
     let state: State =
         serde_json::from_slice(&text).map_err(|e| CheckpointError::Format { path: sp, message: e.to_string() })?;
     let tp = dir.join(TENSORS);

@@ -227,8 +227,9 @@ impl Config {
     /// Reads and checks a TOML file (missing keys take the paper's defaults).
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let p = path.display().to_string();
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| ConfigError::Parse { path: p.clone(), message: e.to_string() })?;
+        // A configuration is a few KiB: read as a regular file, at most 1 MiB.
+        let text = campro::file::read_text_capped(path, 1 << 20, "a configuration")
+            .map_err(|e| ConfigError::Parse { path: p.clone(), message: e.reason() })?;
         Self::parse(&text, &p)
     }
 

@@ -101,7 +101,8 @@ impl Yolox {
     /// naming the node.
     pub fn load(path: &Path, dev: &candle_core::Device) -> std::result::Result<Self, YoloxError> {
         let p = path.display().to_string();
-        let bytes = std::fs::read(path).map_err(|e| YoloxError::Io { path: p.clone(), message: e.to_string() })?;
+        let bytes = campro::file::read_capped(path, 256 << 20, "an ONNX model")
+            .map_err(|e| YoloxError::Io { path: p.clone(), message: e.reason() })?;
         let model = pb::ModelProto::decode(bytes.as_slice())
             .map_err(|e| YoloxError::Graph { path: p.clone(), message: format!("not an ONNX model: {e}") })?;
         Self::from_model(model, p, dev)

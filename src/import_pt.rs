@@ -12,8 +12,8 @@
 
 use crate::ccm::Mat3;
 use crate::params::Params;
-use crate::tone_curve::ToneCurve;
 use crate::pickle::{self, Value};
+use crate::tone_curve::ToneCurve;
 use std::io::{Cursor, Read};
 use std::path::Path;
 
@@ -123,12 +123,16 @@ pub fn read_checkpoint_bytes(bytes: &[u8]) -> Result<Params, CheckpointError> {
     let root = pickle::read(&pkl, pickle::Limits::default())?;
     check_globals(&root)?;
 
-    let stages = dict_of(&root).ok_or_else(|| layout("<root>", format!("expected an OrderedDict of stages, found {}", root.kind())))?;
+    let stages = dict_of(&root)
+        .ok_or_else(|| layout("<root>", format!("expected an OrderedDict of stages, found {}", root.kind())))?;
     let mut order = Vec::new();
     let mut ccm: Option<Tensor> = None;
     let mut keypoints: Option<Tensor> = None;
     for (k, v) in stages {
-        let name = k.as_str().ok_or_else(|| layout("<root>", format!("stage names must be strings, found {}", k.kind())))?.to_string();
+        let name = k
+            .as_str()
+            .ok_or_else(|| layout("<root>", format!("stage names must be strings, found {}", k.kind())))?
+            .to_string();
         if order.contains(&name) {
             return Err(layout(&name, "the stage appears twice"));
         }
@@ -149,7 +153,10 @@ pub fn read_checkpoint_bytes(bytes: &[u8]) -> Result<Params, CheckpointError> {
         return Err(layout("<root>", format!("stages {order:?} are not in the order degamma, ccm, gamma")));
     }
     if ccm.is_none() && keypoints.is_none() {
-        return Err(layout("<root>", "neither a ccm nor a gamma stage: nothing to import (it would be an unprotected identity)"));
+        return Err(layout(
+            "<root>",
+            "neither a ccm nor a gamma stage: nothing to import (it would be an unprotected identity)",
+        ));
     }
     let mut m: Mat3 = crate::ccm::IDENTITY;
     let mut dtype = "float32";

@@ -296,7 +296,9 @@ impl<'a> Vm<'a> {
 
     fn line(&mut self) -> Result<&'a str, PickleError> {
         let rest = &self.data[self.pos.min(self.data.len())..];
-        let Some(end) = rest.iter().position(|&b| b == b'\n') else { return self.bad("a text argument has no end of line") };
+        let Some(end) = rest.iter().position(|&b| b == b'\n') else {
+            return self.bad("a text argument has no end of line");
+        };
         self.pos += end + 1;
         std::str::from_utf8(&rest[..end]).or_else(|_| self.bad("a text argument is not UTF-8"))
     }
@@ -332,7 +334,10 @@ impl<'a> Vm<'a> {
         let Some(m) = self.stack.iter().rposition(|s| matches!(s, Slot::Mark)) else { return self.bad("no MARK") };
         let items = self.stack.split_off(m + 1);
         self.stack.pop();
-        Ok(items.into_iter().map(|s| if let Slot::Val(v) = s { v } else { unreachable!("above the topmost MARK") }).collect())
+        Ok(items
+            .into_iter()
+            .map(|s| if let Slot::Val(v) = s { v } else { unreachable!("above the topmost MARK") })
+            .collect())
     }
 
     fn node(&mut self, items: Vec<Value>) -> Result<Node, PickleError> {
@@ -380,7 +385,10 @@ impl<'a> Vm<'a> {
             Value::Set(n) if want == "set" => n,
             other => {
                 let kind = other.kind();
-                return Err(PickleError::Malformed { at, what: format!("expected a {want} on the stack, found {kind}") });
+                return Err(PickleError::Malformed {
+                    at,
+                    what: format!("expected a {want} on the stack, found {kind}"),
+                });
             }
         };
         let copied = if Rc::strong_count(&node.items) > 1 { node.items.len() as u64 } else { 0 };
@@ -658,7 +666,9 @@ impl<'a> Vm<'a> {
                         b'h' => self.u8()? as u64,
                         _ => self.le(4)?,
                     };
-                    let Some(v) = self.memo.get(&key).cloned() else { return self.bad(format!("memo key {key} was never stored")) };
+                    let Some(v) = self.memo.get(&key).cloned() else {
+                        return self.bad(format!("memo key {key} was never stored"));
+                    };
                     self.push(v)?
                 }
                 other => return self.bad(format!("opcode 0x{other:02x} is not supported")),

@@ -36,13 +36,33 @@ fn op() -> impl Strategy<Value = Vec<u8>> {
         any::<u8>().prop_map(|k| vec![b'K', k]),
         any::<u8>().prop_map(|k| vec![b'q', k % 4]),
         any::<u8>().prop_map(|k| vec![b'h', k % 4]),
-        any::<u32>().prop_map(|n| { let mut v = vec![b'j']; v.extend((n % 8).to_le_bytes()); v }),
-        any::<u32>().prop_map(|n| { let mut v = vec![b'X']; v.extend(n.to_le_bytes()); v }),
-        (0u8..8).prop_map(|n| { let mut v = vec![b'X', n, 0, 0, 0]; v.extend(std::iter::repeat_n(b'a', n as usize)); v }),
-        (0u8..12).prop_map(|n| { let mut v = vec![0x8a, n]; v.extend(std::iter::repeat_n(0xffu8, n as usize)); v }),
+        any::<u32>().prop_map(|n| {
+            let mut v = vec![b'j'];
+            v.extend((n % 8).to_le_bytes());
+            v
+        }),
+        any::<u32>().prop_map(|n| {
+            let mut v = vec![b'X'];
+            v.extend(n.to_le_bytes());
+            v
+        }),
+        (0u8..8).prop_map(|n| {
+            let mut v = vec![b'X', n, 0, 0, 0];
+            v.extend(std::iter::repeat_n(b'a', n as usize));
+            v
+        }),
+        (0u8..12).prop_map(|n| {
+            let mut v = vec![0x8a, n];
+            v.extend(std::iter::repeat_n(0xffu8, n as usize));
+            v
+        }),
         Just(b"ctorch\nFloatStorage\n".to_vec()),
         Just(b"ccollections\nOrderedDict\n".to_vec()),
-        any::<u64>().prop_map(|f| { let mut v = vec![b'G']; v.extend(f.to_be_bytes()); v }),
+        any::<u64>().prop_map(|f| {
+            let mut v = vec![b'G'];
+            v.extend(f.to_be_bytes());
+            v
+        }),
         Just(vec![0x80, 2]),
         Just(vec![b'.']),
     ]

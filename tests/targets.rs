@@ -113,7 +113,10 @@ fn rpi_matrices_are_quantised_and_clamped() {
     // 4 · 2.12 > 8: refused by name, unless clamping is asked for; then the clamp is
     // listed and the measured error is large for bright reds.
     let e = Rpi::Pisp.export(&p, Some(&base)).unwrap_err().to_string();
-    assert!(e.contains("rpi.ccm.ccms[0].ccm[0]") && e.contains("outside the ISP's range") && e.contains("--clamp"), "{e}");
+    assert!(
+        e.contains("rpi.ccm.ccms[0].ccm[0]") && e.contains("outside the ISP's range") && e.contains("--clamp"),
+        "{e}"
+    );
     let (out, clamped) = Rpi::Pisp.export_clamped(&p, Some(&base)).unwrap();
     assert!(!clamped.is_empty() && clamped.iter().all(|c| c.ends_with("clamped")), "{clamped:?}");
     let conds = Rpi::Pisp.emulate(&p, &out, Some(&base)).unwrap();

@@ -247,7 +247,12 @@ impl Rpi {
 
     /// The export; matrix entries outside the ISP's range are refused, or clamped (and
     /// listed) with `clamp`.
-    fn export_with(&self, params: &Params, base: Option<&str>, clamp: bool) -> Result<(Vec<u8>, Vec<String>), TargetError> {
+    fn export_with(
+        &self,
+        params: &Params,
+        base: Option<&str>,
+        clamp: bool,
+    ) -> Result<(Vec<u8>, Vec<String>), TargetError> {
         let base = base.ok_or(TargetError::NeedsBase { target: self.name() })?;
         let (mut root, tuning) = parse(base, self.file())?;
         match root.get("target").and_then(Value::as_str) {
@@ -270,7 +275,11 @@ impl Rpi {
                     let f = format!("rpi.ccm.ccms[{i}].ccm[{k}]");
                     let rule = format!("{v:.4} is outside the ISP's range [{}, {}]", fmt.min, fmt.max);
                     if !clamp {
-                        return Err(field("exported", &f, format!("{rule} (--clamp clamps it; compare then shows the error)")));
+                        return Err(field(
+                            "exported",
+                            &f,
+                            format!("{rule} (--clamp clamps it; compare then shows the error)"),
+                        ));
                     }
                     clamped.push(format!("{f}: {rule}, clamped"));
                     *v = v.clamp(fmt.min, fmt.max);

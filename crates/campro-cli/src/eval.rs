@@ -436,7 +436,10 @@ fn run_quality(c: &Common, images: Option<&Path>, conds: &[Condition]) -> Result
 }
 
 pub fn run(cmd: EvalCmd) -> Result<()> {
-    let (EvalCmd::Privacy { common, .. } | EvalCmd::Utility { common, .. } | EvalCmd::Quality { common, .. } | EvalCmd::All { common, .. }) = &cmd;
+    let (EvalCmd::Privacy { common, .. }
+    | EvalCmd::Utility { common, .. }
+    | EvalCmd::Quality { common, .. }
+    | EvalCmd::All { common, .. }) = &cmd;
     common.check_output()?;
     match cmd {
         EvalCmd::Privacy { common, p } => run_privacy(&common, &p, &common.conditions()?).map(drop),

@@ -441,7 +441,10 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Compare { params, target, files, device, matrix_frac_bits, lut_size, random, seed, format } => {
             let p = load_params(&params)?;
             let (m, options) = device_setup(&p, &device)?;
-            let t = files.target(&target, Camera2::new(m, options, DeviceModel { matrix_frac_bits, lut_size: lut_size.map(|n| n as usize) }))?;
+            let t = files.target(
+                &target,
+                Camera2::new(m, options, DeviceModel { matrix_frac_bits, lut_size: lut_size.map(|n| n as usize) }),
+            )?;
             let (exported, base) = files.export(t.as_ref(), &p)?;
             let conditions = t.emulate(&p, &exported, base.as_deref())?;
             let rows = comparison(&p, &conditions, random as usize, seed)?;
@@ -527,7 +530,8 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
         [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]]
     } else if let Some(f) = &d.capture_result {
         let text = campro::file::read_text_capped(f, 1 << 20, "a capture result")?;
-        camera2::device_transform_from_capture_result(&text).map_err(|e| anyhow!("--capture-result {}: {e}", f.display()))?
+        camera2::device_transform_from_capture_result(&text)
+            .map_err(|e| anyhow!("--capture-result {}: {e}", f.display()))?
     } else if let Some(ct) = d.ct {
         if p.ct_calibration.is_empty() {
             bail!("--ct needs a parameter file with ct_calibration");
@@ -591,7 +595,12 @@ fn pixel_sets(random: usize, seed: u64) -> [(String, Vec<[u8; 3]>); 3] {
 fn print_comparison(rows: &[Row]) {
     say!(
         "{:<16} {:<22} {:>10} {:>10} {:>10} {:>12}",
-        "condition", "pixels", "max LSB", "mean LSB", "PSNR dB", "bound LSB"
+        "condition",
+        "pixels",
+        "max LSB",
+        "mean LSB",
+        "PSNR dB",
+        "bound LSB"
     );
     for r in rows {
         let bound = r.bound.map_or("-".to_string(), |b| format!("{:.4}", b * 255.0));

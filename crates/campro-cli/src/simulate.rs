@@ -96,7 +96,9 @@ fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
                     continue;
                 }
                 if t.is_symlink() {
-                    found.skipped.push((entry.path().to_path_buf(), "a symbolic link (links inside folders are not followed)"));
+                    found
+                        .skipped
+                        .push((entry.path().to_path_buf(), "a symbolic link (links inside folders are not followed)"));
                     continue;
                 }
                 if !t.is_file() {
@@ -134,7 +136,14 @@ fn is_image(path: &Path) -> bool {
 }
 
 /// Runs `p` over every image under `inputs` into PNGs under `out`.
-pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force: bool, jobs: Option<usize>) -> Result<()> {
+pub fn simulate(
+    p: &Params,
+    inputs: &[PathBuf],
+    out: &Path,
+    depth: Depth,
+    force: bool,
+    jobs: Option<usize>,
+) -> Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = match jobs {
         Some(j) if j > cores => {
@@ -162,7 +171,8 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, depth: Depth, force:
         indicatif::ProgressBar::hidden()
     };
     bar.set_style(
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta}").expect("valid template"),
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta}")
+            .expect("valid template"),
     );
     // The 16-bit degamma table (65536 powers) is built only if a 16-bit image turns up.
     let prepared8 = Prepared::new(p, Depth::Eight);
@@ -211,7 +221,8 @@ impl Paths<'_, '_> {
         if let Some(n) = extra_frames(&bytes) {
             warn(&format!("{n}; only the first is simulated"));
         }
-        let mut decoder = image::ImageReader::new(std::io::Cursor::new(&bytes)).with_guessed_format()?.into_decoder()?;
+        let mut decoder =
+            image::ImageReader::new(std::io::Cursor::new(&bytes)).with_guessed_format()?.into_decoder()?;
         let (w, h) = decoder.dimensions();
         let need = decoder.total_bytes().saturating_mul(BYTES_PER_SAMPLE_PEAK).max(1);
         if need > DECODE_BUDGET {

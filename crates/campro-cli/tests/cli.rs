@@ -1,32 +1,13 @@
 //! The `campro` command line, end to end: outputs, bad input (one-line errors, non-zero
 //! exit, no panic, no partial files), overwrite rules.
 
+mod common;
+
 use assert_cmd::Command;
 use campro::Params;
+use common::{bundled, campro, fails_with, write_pt};
 use std::io::Write;
 use std::path::{Path, PathBuf};
-
-fn campro() -> Command {
-    Command::cargo_bin("campro").unwrap()
-}
-
-fn bundled(name: &str) -> PathBuf {
-    campro_testkit::workspace_root().join("params").join(name)
-}
-
-/// Runs and expects failure with a one-line error that contains `needle`.
-fn fails_with(cmd: &mut Command, needle: &str) {
-    let out = cmd.output().unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "succeeded; stderr: {err}");
-    assert!(!err.contains("panicked"), "panic: {err}");
-    assert!(err.contains(needle), "stderr {err:?} lacks {needle:?}");
-    assert!(!err.contains("Caused by") && !err.contains("backtrace"), "{err}");
-    assert!(
-        err.lines().all(|l| l.starts_with("error") || l.starts_with("warning") || l.starts_with("simulated")),
-        "one line per error: {err}"
-    );
-}
 
 fn files_in(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> =
@@ -150,21 +131,6 @@ fn convert_output_file_is_not_overwritten_without_force() {
     campro().arg("convert").arg(bundled("identity.json")).arg("-o").arg(&o).arg("--force").assert().success();
     assert!(std::fs::read_to_string(&o).unwrap().contains("colorCorrectionTransform"));
     assert_eq!(files_in(dir.path()), vec!["v.json"], "no temporary files left");
-}
-
-fn write_pt(path: &Path, pkl: &[u8], storages: &[(&str, Vec<u8>)]) {
-    let f = std::fs::File::create(path).unwrap();
-    let mut z = zip::ZipWriter::new(f);
-    let o = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
-    z.start_file("archive/data.pkl", o).unwrap();
-    z.write_all(pkl).unwrap();
-    z.start_file("archive/byteorder", o).unwrap();
-    z.write_all(b"little").unwrap();
-    for (name, data) in storages {
-        z.start_file(format!("archive/data/{name}"), o).unwrap();
-        z.write_all(data).unwrap();
-    }
-    z.finish().unwrap();
 }
 
 #[test]

@@ -1,0 +1,49 @@
+//! Helpers shared by the command-line tests.
+#![allow(dead_code)]
+
+use assert_cmd::Command;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// The `campro` binary, with `RUST_BACKTRACE` set so that a backtrace leaking into a
+/// message would show.
+pub fn campro() -> Command {
+    let mut c = Command::cargo_bin("campro").unwrap();
+    c.env("RUST_BACKTRACE", "1");
+    c
+}
+
+/// A bundled parameter file.
+pub fn bundled(name: &str) -> PathBuf {
+    campro_testkit::workspace_root().join("params").join(name)
+}
+
+/// Runs and expects failure with a one-line error that contains `needle`.
+pub fn fails_with(cmd: &mut Command, needle: &str) {
+    let out = cmd.output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "succeeded; stderr: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    assert!(err.contains(needle), "stderr {err:?} lacks {needle:?}");
+    assert!(!err.contains("Caused by") && !err.contains("backtrace"), "{err}");
+    assert!(
+        err.lines().all(|l| l.starts_with("error") || l.starts_with("warning") || l.starts_with("simulated")),
+        "one line per error: {err}"
+    );
+}
+
+/// Writes a PyTorch zip checkpoint: `pkl` as data.pkl and the named storages.
+pub fn write_pt(path: &Path, pkl: &[u8], storages: &[(&str, Vec<u8>)]) {
+    let f = std::fs::File::create(path).unwrap();
+    let mut z = zip::ZipWriter::new(f);
+    let o = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    z.start_file("archive/data.pkl", o).unwrap();
+    z.write_all(pkl).unwrap();
+    z.start_file("archive/byteorder", o).unwrap();
+    z.write_all(b"little").unwrap();
+    for (name, data) in storages {
+        z.start_file(format!("archive/data/{name}"), o).unwrap();
+        z.write_all(data).unwrap();
+    }
+    z.finish().unwrap();
+}

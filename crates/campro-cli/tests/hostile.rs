@@ -1,0 +1,399 @@
+//! Hostile input and misuse, class by class: no crash, hang or unbounded memory on any
+//! input, nothing written where it must not be, and one line naming the flag or field
+//! and the rule. Crafted inputs are built here; nothing large is committed.
+
+mod common;
+
+use common::{bundled, campro, fails_with, write_pt};
+use std::path::Path;
+use std::time::Duration;
+
+/// A hang is a failure: every command here must end well within this.
+const LIMIT: Duration = Duration::from_secs(60);
+
+fn mkfifo(p: &Path) -> bool {
+    std::process::Command::new("mkfifo").arg(p).status().is_ok_and(|s| s.success())
+}
+
+// ---- Crashes ----------------------------------------------------------------------
+
+#[test]
+fn empty_selections_are_refused_by_name() {
+    fails_with(campro().args(["eval", "privacy", "--limit", "0"]).timeout(LIMIT), "--limit");
+    fails_with(campro().args(["eval", "all", "--limit", "0"]).timeout(LIMIT), "must be a whole number >= 1");
+    fails_with(campro().args(["eval", "privacy", "--runs", "0"]).timeout(LIMIT), "--runs");
+}
+
+#[test]
+fn a_deeply_nested_or_copying_pickle_is_refused_not_a_stack_overflow_or_a_hang() {
+    let dir = tempfile::tempdir().unwrap();
+    // A tuple nested 1,000,000 deep: 1 MB.
+    let mut deep = vec![0x80, 2, b'N'];
+    deep.extend(std::iter::repeat_n(0x85u8, 1_000_000));
+    deep.push(b'.');
+    let f = dir.path().join("deep.pt");
+    write_pt(&f, &deep, &[]);
+    fails_with(campro().arg("import-pt").arg(&f).arg("-o").arg(dir.path().join("o.json")).timeout(LIMIT), "nesting");
+    // A 1,000-item list fetched from the memo and appended to 100,000 times (each append
+    // copies it): 500 KB asking for 10^8 copies.
+    let mut copies = vec![0x80, 2, b']', b'('];
+    copies.extend(std::iter::repeat_n(b'N', 1000));
+    copies.extend([b'e', b'q', 0]);
+    copies.extend(std::iter::repeat_n([b'h', 0, b'N', b'a', b'0'], 100_000).flatten());
+    copies.push(b'.');
+    let f = dir.path().join("copies.pt");
+    write_pt(&f, &copies, &[]);
+    fails_with(campro().arg("import-pt").arg(&f).arg("-o").arg(dir.path().join("o.json")).timeout(LIMIT), "pickle");
+    assert!(!dir.path().join("o.json").exists());
+}
+
+#[test]
+fn a_closed_stdout_ends_the_command_quietly() {
+    use std::process::{Command, Stdio};
+    for args in [vec!["compare", "--random", "1000000"], vec!["validate"], vec!["demo", "-o"]] {
+        let dir = tempfile::tempdir().unwrap();
+        let mut cmd = Command::new(assert_cmd::cargo::cargo_bin("campro"));
+        cmd.args(&args);
+        if args[0] == "demo" {
+            cmd.arg(dir.path().join("demo"));
+        } else {
+            cmd.arg(bundled("identity.json"));
+        }
+        let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+        drop(child.stdout.take()); // the reader goes away before the first line
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!err.contains("panicked") && !err.contains("Broken pipe"), "{args:?}: {err}");
+        assert!(out.status.success(), "{args:?}: {:?} {err}", out.status);
+    }
+}
+
+// ---- Hangs --------------------------------------------------------------------------
+
+#[test]
+fn fifos_devices_and_folders_are_refused_before_reading() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("fifo.json");
+    if !mkfifo(&fifo) {
+        eprintln!("SKIP: no mkfifo");
+        return;
+    }
+    let id = bundled("identity.json");
+    fails_with(campro().arg("validate").arg(&fifo).timeout(LIMIT), "is a FIFO; only regular files are read");
+    fails_with(campro().arg("validate").arg("/dev/zero").timeout(LIMIT), "is a device");
+    fails_with(campro().arg("import-pt").arg(&fifo).arg("-o").arg(dir.path().join("o.json")).timeout(LIMIT), "FIFO");
+    fails_with(campro().arg("convert").arg(&id).arg("--capture-result").arg("/dev/zero").timeout(LIMIT), "is a device");
+    fails_with(
+        campro().arg("convert").arg(&id).args(["--target", "rpi-vc4", "--base"]).arg(&fifo).timeout(LIMIT),
+        "FIFO",
+    );
+    fails_with(
+        campro().arg("demo").arg("--params").arg("/dev/zero").arg("-o").arg(dir.path().join("d")).timeout(LIMIT),
+        "device",
+    );
+    fails_with(
+        campro().arg("train").arg("/dev/zero").arg("-o").arg(dir.path().join("t.json")).timeout(LIMIT),
+        "device",
+    );
+    fails_with(
+        campro().arg("eval").arg("quality").arg(&fifo).arg("-o").arg(dir.path().join("e")).timeout(LIMIT),
+        "FIFO",
+    );
+    fails_with(
+        campro().arg("simulate").arg(&id).arg(&fifo).arg("-o").arg(dir.path().join("s")).timeout(LIMIT),
+        "not a regular file",
+    );
+    let json_dir = dir.path().join("dir.json");
+    std::fs::create_dir(&json_dir).unwrap();
+    let out = campro().arg("validate").arg(&json_dir).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.matches("dir.json").count(), 1, "the path once: {err}");
+}
+
+#[test]
+fn too_many_jobs_are_clamped_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = dir.path().join("in/a.png");
+    std::fs::create_dir_all(img.parent().unwrap()).unwrap();
+    image::save_buffer(&img, &[10u8; 12], 2, 2, image::ExtendedColorType::Rgb8).unwrap();
+    let out = campro()
+        .arg("simulate")
+        .arg(bundled("identity.json"))
+        .arg(dir.path().join("in"))
+        .arg("-o")
+        .arg(dir.path().join("out"))
+        .args(["--jobs", "100000"])
+        .timeout(LIMIT)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("warning: --jobs 100000 is more than the"), "{err}");
+}
+
+// ---- Memory -------------------------------------------------------------------------
+
+/// CRC-32 (PNG's), by the definition: reflected polynomial 0xEDB88320.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in bytes {
+        c ^= b as u32;
+        for _ in 0..8 {
+            c = if c & 1 == 1 { (c >> 1) ^ 0xEDB8_8320 } else { c >> 1 };
+        }
+    }
+    !c
+}
+
+fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
+    out.extend((data.len() as u32).to_be_bytes());
+    let mut body = kind.to_vec();
+    body.extend(data);
+    out.extend(&body);
+    out.extend(crc32(&body).to_be_bytes());
+}
+
+#[test]
+fn a_decompression_bomb_is_refused_by_its_header() {
+    // A 60,000 x 60,000 RGB PNG header (10.8 GB decoded) with a token IDAT: 100 bytes.
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = Vec::new();
+    ihdr.extend(60_000u32.to_be_bytes());
+    ihdr.extend(60_000u32.to_be_bytes());
+    ihdr.extend([8, 2, 0, 0, 0]);
+    chunk(&mut png, b"IHDR", &ihdr);
+    chunk(&mut png, b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]);
+    chunk(&mut png, b"IEND", &[]);
+    let dir = tempfile::tempdir().unwrap();
+    let bomb = dir.path().join("bomb.png");
+    std::fs::write(&bomb, &png).unwrap();
+    fails_with(
+        campro()
+            .arg("simulate")
+            .arg(bundled("identity.json"))
+            .arg(&bomb)
+            .arg("-o")
+            .arg(dir.path().join("o"))
+            .timeout(LIMIT),
+        "the image is 60000 x 60000",
+    );
+}
+
+#[test]
+fn size_like_options_have_named_caps() {
+    let id = bundled("identity.json");
+    fails_with(campro().arg("compare").arg(&id).args(["--random", "0"]), "--random");
+    fails_with(campro().arg("compare").arg(&id).args(["--random", "4000000000"]), "--random");
+    fails_with(campro().arg("compare").arg(&id).args(["--lut-size", "0"]), "--lut-size");
+    fails_with(campro().arg("compare").arg(&id).args(["--lut-size", "99999999"]), "--lut-size");
+    fails_with(campro().arg("compare").arg(&id).args(["--matrix-frac-bits", "64"]), "--matrix-frac-bits");
+    fails_with(campro().arg("convert").arg(&id).args(["--max-curve-points", "1"]), "--max-curve-points");
+    fails_with(campro().arg("convert").arg(&id).args(["--target", "cube", "--cube-size", "100000"]), "--cube-size");
+}
+
+// ---- Files damaged -------------------------------------------------------------------
+
+#[cfg(unix)]
+#[test]
+fn force_replaces_regular_files_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let id = bundled("identity.json");
+    let target = dir.path().join("target.json");
+    std::fs::write(&target, b"keep").unwrap();
+    let link = dir.path().join("link.json");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    fails_with(campro().arg("convert").arg(&id).arg("-o").arg(&link).arg("--force"), "symbolic link");
+    assert_eq!(std::fs::read(&target).unwrap(), b"keep");
+    assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+    let fifo = dir.path().join("fifo.json");
+    if mkfifo(&fifo) {
+        fails_with(
+            campro().arg("convert").arg(&id).arg("-o").arg(&fifo).arg("--force").timeout(LIMIT),
+            "only regular files",
+        );
+        assert!(!std::fs::symlink_metadata(&fifo).unwrap().file_type().is_file());
+    }
+    let sub = dir.path().join("sub");
+    std::fs::create_dir(&sub).unwrap();
+    fails_with(campro().arg("convert").arg(&id).arg("-o").arg(&sub).arg("--force"), "a folder");
+    // A parent that is a file: named as such, not "exists".
+    fails_with(campro().arg("convert").arg(&id).arg("-o").arg(target.join("x.json")), "is not a folder");
+}
+
+#[test]
+fn no_file_name_comes_from_file_contents() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut p = campro::Params::from_file(&bundled("color-inversion.json")).unwrap();
+    p.name = "../../escaped\u{1b}]0;title\u{7}".into();
+    p.description = "ok\n\u{1b}[2K\rerror-free".into();
+    let params = dir.path().join("evil.json");
+    std::fs::write(&params, p.to_json()).unwrap();
+    let out_dir = dir.path().join("a/b/demo");
+    let out = campro().arg("demo").arg("--params").arg(&params).arg("-o").arg(&out_dir).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut names: Vec<String> =
+        std::fs::read_dir(&out_dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    names.sort();
+    assert_eq!(names, ["chart-protected.png", "chart.png"]);
+    assert!(!dir.path().join("escaped").exists() && !dir.path().join("a/escaped").exists());
+    // Control characters from the file are escaped when echoed.
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(!stdout.contains('\u{1b}') && stdout.contains("\\u{1b}]0;title"), "{stdout}");
+    let v = campro().arg("validate").arg(&params).output().unwrap();
+    assert!(!String::from_utf8_lossy(&v.stdout).contains('\u{1b}'));
+}
+
+#[test]
+fn existing_output_folders_are_not_replaced_without_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("earlier-run");
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(out.join("report.md"), b"90 minutes of work").unwrap();
+    fails_with(campro().args(["eval", "quality"]).arg("-o").arg(&out), "already holds files");
+    fails_with(campro().arg("demo").arg("-o").arg(&out), "already holds files");
+    assert_eq!(std::fs::read(out.join("report.md")).unwrap(), b"90 minutes of work");
+}
+
+#[test]
+fn simulate_never_replaces_or_rereads_its_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    std::fs::create_dir(&input).unwrap();
+    image::save_buffer(input.join("a.png"), &[200u8; 12], 2, 2, image::ExtendedColorType::Rgb8).unwrap();
+    let before = std::fs::read(input.join("a.png")).unwrap();
+    let id = bundled("color-inversion.json");
+    fails_with(
+        campro().arg("simulate").arg(&id).arg(&input).arg("-o").arg(&input).arg("--force"),
+        "outputs would replace inputs",
+    );
+    fails_with(
+        campro().arg("simulate").arg(&id).arg(input.join("a.png")).arg("-o").arg(&input).arg("--force"),
+        "would replace an input",
+    );
+    assert_eq!(std::fs::read(input.join("a.png")).unwrap(), before);
+    // An output folder inside the input folder: written, never read back as input.
+    let inner = input.join("out");
+    for _ in 0..2 {
+        let out = campro().arg("simulate").arg(&id).arg(&input).arg("-o").arg(&inner).arg("--force").output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success() && err.contains("simulated 1 of 1 images"), "{err}");
+    }
+    assert!(!inner.join("out").exists());
+}
+
+// ---- Silent wrong results -------------------------------------------------------------
+
+#[test]
+fn what_a_run_skips_or_drops_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    std::fs::create_dir(&input).unwrap();
+    image::save_buffer(input.join("rgba.png"), &[9u8; 16], 2, 2, image::ExtendedColorType::Rgba8).unwrap();
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(input.join("rgba.png"), input.join("link.png")).unwrap();
+    let fifo = input.join("pipe.png");
+    let made_fifo = mkfifo(&fifo);
+    let id = bundled("identity.json");
+    let out = campro()
+        .arg("simulate")
+        .arg(&id)
+        .arg(&input)
+        .arg("-o")
+        .arg(dir.path().join("o"))
+        .timeout(LIMIT)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("alpha channel is dropped"), "{err}");
+    #[cfg(unix)]
+    assert!(err.contains("link.png: a symbolic link"), "{err}");
+    if made_fifo {
+        assert!(err.contains("pipe.png: not a regular file"), "{err}");
+    }
+    // Nothing to do is a failure, not a silent success.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    fails_with(campro().arg("simulate").arg(&id).arg(&empty).arg("-o").arg(dir.path().join("o2")), "nothing to do");
+}
+
+#[test]
+fn trailing_text_and_empty_checkpoints_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("t.json");
+    let text = std::fs::read_to_string(bundled("identity.json")).unwrap();
+    std::fs::write(&f, text + "{\"more\": 1}").unwrap();
+    fails_with(campro().arg("validate").arg(&f), "text after the object");
+    // An OrderedDict with no stages: it would import as an unprotected identity.
+    let empty = dir.path().join("empty.pt");
+    write_pt(&empty, b"\x80\x02ccollections\nOrderedDict\nq\x00)Rq\x01.", &[]);
+    fails_with(
+        campro().arg("import-pt").arg(&empty).arg("-o").arg(dir.path().join("o.json")),
+        "neither a ccm nor a gamma stage",
+    );
+}
+
+#[test]
+fn exporters_check_the_isps_limits() {
+    let Some(vc4) = campro_testkit::shared("fixtures/targets/rpi_vc4_imx219.json") else { return };
+    let Some(pisp) = campro_testkit::shared("fixtures/targets/rpi_pisp_imx219.json") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let mut p = campro::Params::from_file(&bundled("identity.json")).unwrap();
+    p.ccm = [[6.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let strong = dir.path().join("strong.json");
+    std::fs::write(&strong, p.to_json()).unwrap();
+    let out = dir.path().join("out.json");
+    fails_with(
+        campro().arg("convert").arg(&strong).args(["--target", "rpi-vc4", "--base"]).arg(&vc4).arg("-o").arg(&out),
+        "outside the ISP's range",
+    );
+    assert!(!out.exists());
+    let run = campro()
+        .arg("convert")
+        .arg(&strong)
+        .args(["--target", "rpi-vc4", "--clamp", "--base"])
+        .arg(&vc4)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(run.status.success() && String::from_utf8_lossy(&run.stderr).contains("clamped"));
+    fails_with(
+        campro().arg("convert").arg(bundled("identity.json")).args(["--target", "rpi-vc4", "--base"]).arg(&pisp),
+        "needs a \"bcm2835\" tuning file",
+    );
+}
+
+#[test]
+fn a_lossy_curve_simplification_is_said_on_stderr() {
+    let out = campro()
+        .arg("convert")
+        .arg(bundled("campro-omega-0.5.json"))
+        .args(["--max-curve-points", "4"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("warning: the curve lost knots to fit 4 points"));
+}
+
+// ---- Messages ---------------------------------------------------------------------------
+
+#[test]
+fn messages_name_the_flag_once_on_one_line() {
+    let id = bundled("identity.json");
+    fails_with(campro().arg("convert").arg(&id).args(["--ct", "-5"]), "--ct");
+    fails_with(campro().arg("convert").arg(&id).args(["--ct", "NaN"]), "must be a colour temperature");
+    fails_with(campro().args(["eval", "utility", "--confidence", "NaN"]), "--confidence");
+    fails_with(campro().args(["eval", "utility", "--confidence", "2"]), "must be a number in [0, 1]");
+    fails_with(
+        campro().arg("convert").arg(&id).args(["--device-ccm", "1", "0", "0", "0", "1", "0", "0", "0", "1e9"]),
+        "--device-ccm[2][2]",
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.png");
+    std::fs::write(&bad, b"not a png").unwrap();
+    let out = campro().arg("simulate").arg(&id).arg(&bad).arg("-o").arg(dir.path().join("o")).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    let first = err.lines().next().unwrap_or_default();
+    assert_eq!(first.matches("bad.png").count(), 1, "{err}");
+}

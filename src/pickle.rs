@@ -143,9 +143,12 @@ impl Value {
         matches!(self, Value::Global { module, name } if &**module == m && &**name == n)
     }
 
-    /// Every global named anywhere in the tree (depth-first, bounded by the tree's size).
+    /// Every global named anywhere in the value. Shared containers (memo fetches) are
+    /// visited once, so the walk costs the number of distinct containers, not the size of
+    /// the tree they unfold to (which doubling fetches make exponential).
     pub fn globals(&self) -> Vec<(&str, &str)> {
         let mut out = Vec::new();
+        let mut seen = std::collections::HashSet::new();
         let mut todo = vec![self];
         while let Some(v) = todo.pop() {
             match v {
@@ -156,7 +159,11 @@ impl Value {
                 | Value::Set(n)
                 | Value::Reduce(n)
                 | Value::Build(n)
-                | Value::PersistentId(n) => todo.extend(n.items.iter()),
+                | Value::PersistentId(n) => {
+                    if seen.insert(Rc::as_ptr(&n.items)) {
+                        todo.extend(n.items.iter());
+                    }
+                }
                 _ => {}
             }
         }

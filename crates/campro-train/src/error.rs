@@ -5,7 +5,7 @@
 #[non_exhaustive]
 pub enum TrainError {
     #[error(transparent)]
-    Checkpoint(#[from] crate::checkpoint::CheckpointError),
+    Checkpoint(#[from] CheckpointError),
     #[error(transparent)]
     Faces(#[from] crate::faces::FacesError),
     #[error(transparent)]
@@ -29,3 +29,13 @@ pub enum TrainError {
 
 /// `Result` with this crate's [`TrainError`].
 pub type Result<T, E = TrainError> = std::result::Result<T, E>;
+
+/// Why a training checkpoint could not be written or read.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum CheckpointError {
+    #[error("{path}: {message}")]
+    Io { path: std::path::PathBuf, message: String },
+    #[error("{path}: {message}")]
+    Format { path: std::path::PathBuf, message: String },
+}

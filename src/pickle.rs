@@ -159,10 +159,10 @@ impl Value {
                 | Value::Set(n)
                 | Value::Reduce(n)
                 | Value::Build(n)
-                | Value::PersistentId(n) => {
-                    if seen.insert(Rc::as_ptr(&n.items)) {
-                        todo.extend(n.items.iter());
-                    }
+                | Value::PersistentId(n)
+                    if seen.insert(Rc::as_ptr(&n.items)) =>
+                {
+                    todo.extend(n.items.iter())
                 }
                 _ => {}
             }

@@ -5,7 +5,11 @@
 import org.campro.CamProController
 import org.campro.CamProNative
 import org.campro.CamProSession
+import org.campro.CaptureReport
 import org.campro.DeviceSupport
+import org.campro.FrameGate
+import org.campro.ProtectionGuard
+import org.campro.ProtectionState
 import org.campro.TestHooks
 import java.io.File
 import java.util.concurrent.atomic.AtomicInteger
@@ -301,6 +305,112 @@ fun soak(paramsJson: String, updates: Int) {
     }
 }
 
+/** A result that honours the request: modes as asked, the sent transform and curve on all channels. */
+fun honoured(s: CamProSession): CaptureReport {
+    val c = s.curveForRequest()
+    return CaptureReport(0, 0, 0, s.transform.copyOf(), listOf(c, c.copyOf(), c.copyOf()))
+}
+
+fun CaptureReport.with(
+    awbMode: Int? = this.awbMode,
+    colorCorrectionMode: Int? = this.colorCorrectionMode,
+    tonemapMode: Int? = this.tonemapMode,
+    transform: IntArray? = this.transform,
+    curves: List<FloatArray>? = this.curves,
+) = CaptureReport(awbMode, colorCorrectionMode, tonemapMode, transform, curves)
+
+fun violated(st: ProtectionState, needle: String) = st is ProtectionState.Violated && st.reason.contains(needle)
+
+fun failClosed(paramsJson: String) {
+    check("fail closed: a device that honours the request is Protected after its first result") {
+        CamProSession.fromJson(paramsJson).use { s ->
+            s.updateFromTransform(PHONE)
+            val g = ProtectionGuard(s)
+            expect(g.state == ProtectionState.Verifying && !g.framesAllowed) { "starts Verifying, closed" }
+            expect(g.onProtectedResult(honoured(s)) == ProtectionState.Protected && g.framesAllowed) { "${g.state}" }
+            // A device that reports the curve with more points (here 2n - 1: every sent point and
+            // each segment's midpoint) applies the same curve: still Protected.
+            val c = s.curveForRequest()
+            val dense = FloatArray(2 * (2 * (c.size / 2) - 1))
+            var k = 0
+            for (i in 0 until c.size / 2) {
+                if (i > 0) { dense[k++] = (c[2 * i - 2] + c[2 * i]) / 2; dense[k++] = (c[2 * i - 1] + c[2 * i + 1]) / 2 }
+                dense[k++] = c[2 * i]; dense[k++] = c[2 * i + 1]
+            }
+            expect(g.onProtectedResult(honoured(s).with(curves = listOf(dense, dense, dense))) == ProtectionState.Protected) { "${g.state}" }
+        }
+    }
+    check("fail closed: an ignored transform, an ignored curve, AWB back on, wrong modes are violations") {
+        CamProSession.fromJson(paramsJson).use { s ->
+            s.updateFromTransform(PHONE)
+            val g = ProtectionGuard(s)
+            val ok = honoured(s)
+            // The device kept its own transform (what auto mode reported) instead of CamPro's.
+            expect(violated(g.onProtectedResult(ok.with(transform = PHONE)), "transform differs")) { "${g.state}" }
+            expect(!g.framesAllowed) { "closed" }
+            val line = floatArrayOf(0f, 0f, 1f, 1f)
+            expect(violated(g.onProtectedResult(ok.with(curves = listOf(line, line, line))), "curve differs")) { "${g.state}" }
+            // One channel only ignored is enough.
+            val c = s.curveForRequest()
+            expect(violated(g.onProtectedResult(ok.with(curves = listOf(c, c, line))), "channel B")) { "${g.state}" }
+            expect(violated(g.onProtectedResult(ok.with(awbMode = 1)), "auto white balance is on")) { "${g.state}" }
+            expect(violated(g.onProtectedResult(ok.with(colorCorrectionMode = 1)), "instead of TRANSFORM_MATRIX")) { "${g.state}" }
+            expect(violated(g.onProtectedResult(ok.with(tonemapMode = 2)), "instead of CONTRAST_CURVE")) { "${g.state}" }
+            expect(violated(g.onProtectedResult(ok.with(transform = IntArray(5))), "not 18")) { "${g.state}" }
+            expect(violated(g.onProtectedResult(ok.with(transform = IntArray(18))), "do not read back")) { "${g.state}" }
+        }
+    }
+    check("fail closed: missing keys are violations unless the app trusts the device") {
+        CamProSession.fromJson(paramsJson).use { s ->
+            s.updateFromTransform(PHONE)
+            val ok = honoured(s)
+            val strict = ProtectionGuard(s)
+            expect(violated(strict.onProtectedResult(ok.with(transform = null)), "does not report COLOR_CORRECTION_TRANSFORM")) { "${strict.state}" }
+            expect(violated(strict.onProtectedResult(ok.with(curves = null)), "does not report TONEMAP_CURVE")) { "${strict.state}" }
+            expect(violated(strict.onProtectedResult(ok.with(awbMode = null)), "CONTROL_AWB_MODE")) { "${strict.state}" }
+            val trusting = ProtectionGuard(s, trustMissingKeys = true)
+            expect(trusting.onProtectedResult(ok.with(transform = null, curves = null)) == ProtectionState.Protected) { "${trusting.state}" }
+            // Trust covers absent keys, never wrong ones.
+            expect(violated(trusting.onProtectedResult(ok.with(transform = null, awbMode = 1)), "auto white balance")) { "${trusting.state}" }
+        }
+    }
+    check("fail closed: a change mid-stream and back; a new request verifies again; unsupported is final") {
+        CamProSession.fromJson(paramsJson).use { s ->
+            s.updateFromTransform(PHONE)
+            val g = ProtectionGuard(s)
+            val seq = listOf(honoured(s), honoured(s), honoured(s).with(awbMode = 1), honoured(s).with(transform = PHONE), honoured(s))
+            val states = seq.map { g.onProtectedResult(it).javaClass.simpleName }
+            expect(states == listOf("Protected", "Protected", "Violated", "Violated", "Protected")) { "$states" }
+            g.requestChanged()
+            expect(g.state == ProtectionState.Verifying && !g.framesAllowed) { "${g.state}" }
+            g.unsupported("no CONTRAST_CURVE")
+            expect(g.onProtectedResult(honoured(s)) == ProtectionState.Unsupported("no CONTRAST_CURVE")) { "${g.state}" }
+            g.requestChanged()
+            expect(g.state is ProtectionState.Unsupported) { "${g.state}" }
+        }
+    }
+    check("fail closed: each frame waits for its own result; unverified frames never reach the app") {
+        CamProSession.fromJson(paramsJson).use { s ->
+            s.updateFromTransform(PHONE)
+            val got = mutableListOf<Int>()
+            val closed = mutableListOf<Int>()
+            val gate = FrameGate<Int>(ProtectionGuard(s), capacity = 2, deliver = { got += it }, drop = { closed += it })
+            gate.onFrame(100, 1)
+            expect(got.isEmpty()) { "held until its result" }
+            gate.onResult(100, honoured(s))
+            gate.onFrame(200, 2)
+            gate.onResult(200, honoured(s).with(awbMode = 1)) // this very frame was not protected
+            gate.onResult(300, honoured(s)) // result before its frame
+            gate.onFrame(300, 3)
+            gate.onFrame(400, 4); gate.onFrame(500, 5); gate.onFrame(600, 6) // results never come
+            gate.clear()
+            expect(got == listOf(1, 3)) { "delivered $got" }
+            expect(closed == listOf(2, 4, 5, 6)) { "dropped $closed" }
+            expect(gate.delivered == 2L && gate.dropped == 4L) { "${gate.delivered}/${gate.dropped}" }
+        }
+    }
+}
+
 fun main(args: Array<String>) {
     CamProNative.load(args[0])
     val cases = readCases(args[1])
@@ -309,6 +419,7 @@ fun main(args: Array<String>) {
     valuesEqualTheCore(cases)
     badInput(paramsJson)
     readbackAndController(paramsJson)
+    failClosed(paramsJson)
     threads(paramsJson)
     soak(paramsJson, soakUpdates)
     println(if (failures == 0) "ALL PASSED (${cases.size} value cases)" else "$failures FAILED")

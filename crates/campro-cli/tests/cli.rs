@@ -3,7 +3,6 @@
 
 mod common;
 
-use assert_cmd::Command;
 use campro::Params;
 use common::{bundled, campro, fails_with, write_pt};
 use std::io::Write;

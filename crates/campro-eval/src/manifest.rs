@@ -158,7 +158,9 @@ impl Manifest {
 }
 
 fn check_strides(strides: &[usize], i: &Input) -> std::result::Result<(), (String, String)> {
-    if strides.is_empty() || strides.iter().any(|&s| s == 0 || i.width % s != 0 || i.height % s != 0) {
+    if strides.is_empty()
+        || strides.iter().any(|&s| s == 0 || !i.width.is_multiple_of(s) || !i.height.is_multiple_of(s))
+    {
         return Err(("task.strides".into(), "must be non-empty and divide the input width and height".into()));
     }
     Ok(())

@@ -25,7 +25,7 @@ pub fn decode_yolox(
     threshold: f32,
 ) -> Result<Vec<Detection>> {
     let n: usize = strides.iter().map(|s| (width / s) * (height / s)).sum();
-    if n == 0 || head.len() % n != 0 || head.len() / n <= 5 + class {
+    if n == 0 || !head.len().is_multiple_of(n) || head.len() / n <= 5 + class {
         return Err(EvalError::Invalid(format!(
             "YOLOX output has {} values, which is not {n} anchors x (5 + classes > {class})",
             head.len()
@@ -40,7 +40,8 @@ pub fn decode_yolox(
             let r = &head[a * stride_len..(a + 1) * stride_len];
             a += 1;
             let score = r[4] * r[5 + class];
-            if !(score >= threshold) {
+            // A NaN score is below any threshold.
+            if score.is_nan() || score < threshold {
                 continue;
             }
             let (col, row, s) = ((i % cols) as f32, (i / cols) as f32, s as f32);

@@ -420,8 +420,8 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
             };
             let raw_enrolled = enrol(None);
             let camera_enrolled: Vec<_> = (0..conds.len()).map(|ci| view(ci).map(|v| enrol(Some(v)))).collect();
-            for ci in 0..conds.len() {
-                let (gallery, lin) = camera_enrolled[ci].as_ref().unwrap_or(&raw_enrolled);
+            for (ci, enrolled) in camera_enrolled.iter().enumerate() {
+                let (gallery, lin) = enrolled.as_ref().unwrap_or(&raw_enrolled);
                 for (oi, &order) in orders.iter().enumerate() {
                     // None: the attacker found no face, so the probe is not identified.
                     let mut ranks: [Vec<Option<Rank>>; 2] = [Vec::new(), Vec::new()];

@@ -15,6 +15,7 @@ pub enum ConfigError {
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
+#[derive(Default)]
 pub struct Config {
     /// Seed of every random choice (data order, splits, initialisation).
     pub seed: u64,
@@ -150,19 +151,6 @@ pub struct BudgetConfig {
     pub checkpoint_every: usize,
 }
 
-impl Default for Config {
-    fn default() -> Self {
-        Self {
-            seed: 0,
-            camera: Default::default(),
-            attacker: Default::default(),
-            protector: Default::default(),
-            data: Default::default(),
-            detector: Default::default(),
-            budget: Default::default(),
-        }
-    }
-}
 impl Default for CameraConfig {
     fn default() -> Self {
         Self { knots: 32, gamma: 2.2, lr: 1e-3 }
@@ -279,7 +267,7 @@ impl Config {
             ((0.0..1.0).contains(&self.data.validation_identities), "data.validation_identities", "must be in [0, 1)"),
             ((1..=4096).contains(&self.data.batch), "data.batch", "must be in 1..=4096"),
             (
-                self.detector.size % 32 == 0 && (64..=1024).contains(&self.detector.size),
+                self.detector.size.is_multiple_of(32) && (64..=1024).contains(&self.detector.size),
                 "detector.size",
                 "must be a multiple of 32 in 64..=1024",
             ),

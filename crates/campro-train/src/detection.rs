@@ -162,7 +162,9 @@ pub fn yolox_loss(head: &Tensor, h: usize, w: usize, gts: &[Vec<[f32; 4]>]) -> R
     let obj = head.narrow(D::Minus1, 4, 1)?.squeeze(D::Minus1)?;
     let cls = head.narrow(D::Minus1, 5, 1)?.squeeze(D::Minus1)?;
     let a = anchors(h, w);
-    let (bv, ov, cv): (Vec<Vec<[f32; 4]>>, Vec<Vec<f32>>, Vec<Vec<f32>>) = {
+    // Per image: boxes, objectness, class scores.
+    type PerImage = (Vec<Vec<[f32; 4]>>, Vec<Vec<f32>>, Vec<Vec<f32>>);
+    let (bv, ov, cv): PerImage = {
         let raw: Vec<Vec<Vec<f32>>> = boxes.detach().to_vec3()?;
         (
             raw.into_iter().map(|img| img.into_iter().map(|r| [r[0], r[1], r[2], r[3]]).collect()).collect(),

@@ -48,7 +48,9 @@ impl PersonSet {
     /// Decodes and letterboxes the images `idx` (in parallel).
     pub fn batch(&self, idx: &[usize], dev: &Device) -> Result<PersonBatch, crate::error::TrainError> {
         let s = self.size;
-        let items: Vec<(Vec<f32>, Vec<f32>, Vec<[f32; 4]>)> = idx
+        // Per image: letterboxed pixels (CHW), the mask of the image inside the letterbox, boxes (cx, cy, w, h).
+        type Item = (Vec<f32>, Vec<f32>, Vec<[f32; 4]>);
+        let items: Vec<Item> = idx
             .par_iter()
             .map(|&i| -> campro_eval::Result<_> {
                 let im = &self.images[i];

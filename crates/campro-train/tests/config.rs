@@ -14,8 +14,7 @@ fn empty_file_gives_the_paper_settings() {
 
 #[test]
 fn a_full_file_round_trips() {
-    let mut c = Config::default();
-    c.seed = 7;
+    let mut c = Config { seed: 7, ..Config::default() };
     c.protector.omega = 5.0;
     c.protector.protector_only = true;
     c.attacker.head = Head::Arcface;

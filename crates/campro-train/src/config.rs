@@ -13,9 +13,8 @@ pub enum ConfigError {
     Rule { path: String, key: String, rule: String },
 }
 
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
-#[derive(Default)]
 pub struct Config {
     /// Seed of every random choice (data order, splits, initialisation).
     pub seed: u64,

@@ -4,6 +4,7 @@
 plugins {
     id("com.android.library")
     id("org.jetbrains.kotlin.android")
+    `maven-publish`
 }
 
 android {
@@ -19,6 +20,37 @@ android {
     }
     kotlinOptions { jvmTarget = "17" }
     sourceSets["main"].jniLibs.srcDir(layout.buildDirectory.dir("rustJniLibs"))
+    publishing {
+        singleVariant("release") { withSourcesJar() }
+    }
+}
+
+dependencies {
+    // CameraX is the app's choice: CamProCameraX compiles against it, apps that use it
+    // bring their own CameraX (1.3 or later).
+    compileOnly("androidx.camera:camera-core:1.4.1")
+    compileOnly("androidx.camera:camera-camera2:1.4.1")
+    compileOnly("androidx.annotation:annotation:1.9.1")
+}
+
+// An AAR with libcampro_jni.so for arm64-v8a, armeabi-v7a and x86_64, published to a
+// Maven repository in this project: ./gradlew :campro:publishReleasePublicationToLocalRepository
+// writes android/build/repo/org/campro/campro/0.1.0/campro-0.1.0.aar.
+publishing {
+    publications {
+        register<MavenPublication>("release") {
+            groupId = "org.campro"
+            artifactId = "campro"
+            version = "0.1.0"
+            afterEvaluate { from(components["release"]) }
+        }
+    }
+    repositories {
+        maven {
+            name = "local"
+            url = uri(rootProject.layout.buildDirectory.dir("repo"))
+        }
+    }
 }
 
 // cargo install cargo-ndk; rustup target add aarch64-linux-android armv7-linux-androideabi x86_64-linux-android

@@ -32,12 +32,14 @@ import android.widget.TextView
 import org.campro.CamProController
 import org.campro.CamProNative
 import org.campro.DeviceSupport
+import org.campro.ProtectionGuard
+import org.campro.ProtectionState
 import org.campro.android.applyCamPro
+import org.campro.android.camproReport
 import org.campro.android.camproSupport
 import org.campro.android.colorTransformInto
 import org.campro.android.gainsInto
 import org.campro.android.openCamProAsset
-import org.campro.android.tonemapRedInto
 import java.util.concurrent.Executor
 
 class MainActivity : Activity() {
@@ -57,12 +59,13 @@ class MainActivity : Activity() {
     private var previewSurface: Surface? = null
     private var support: DeviceSupport.Result? = null
     private var controller: CamProController? = null
-    private var enabled = false
+    private var guard: ProtectionGuard? = null
+    private var description = ""
+    private var enabled = true
     private var paramFile = ""
     private var results = 0L
     private val transformBuf = IntArray(18)
     private val gainsBuf = FloatArray(4)
-    private val curveBuf = FloatArray(2 * 4096)
 
     override fun onCreate(savedInstanceState: Bundle?) {
         super.onCreate(savedInstanceState)
@@ -75,7 +78,8 @@ class MainActivity : Activity() {
 
         val files = (assets.list("params") ?: emptyArray()).filter { it.endsWith(".json") }.sorted()
         spinner.adapter = ArrayAdapter(this, android.R.layout.simple_spinner_dropdown_item, files)
-        spinner.setSelection(maxOf(0, files.indexOf("color-inversion.json")))
+        // The recommended learnt preset by default.
+        spinner.setSelection(maxOf(0, files.indexOf("campro-omega-0.5.json")))
         paramFile = files.getOrElse(spinner.selectedItemPosition) { "" }
         spinner.onItemSelectedListener = object : AdapterView.OnItemSelectedListener {
             override fun onItemSelected(parent: AdapterView<*>?, view: View?, position: Int, id: Long) {
@@ -138,6 +142,8 @@ class MainActivity : Activity() {
     private fun closeCamera() {
         controller?.session?.close()
         controller = null
+        guard = null
+        showPreview(false)
         captureSession?.close(); captureSession = null
         device?.close(); device = null
         meteringReader?.close(); meteringReader = null
@@ -159,24 +165,36 @@ class MainActivity : Activity() {
         }))
     }
 
+    /** The preview is shown only while the guard says Protected (or CamPro is off): blank otherwise. */
+    private fun showPreview(on: Boolean) = runOnUiThread { preview.visibility = if (on) View.VISIBLE else View.INVISIBLE }
+
     /** CamPro switched, parameter set changed, or the session (re)started. */
     private fun reconfigure() {
         val s = captureSession ?: return
         controller?.session?.close()
         controller = null
+        guard = null
+        showPreview(false)
         if (!enabled) {
             val req = device!!.createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply { addTarget(previewSurface!!) }
             s.setRepeatingRequest(req.build(), null, camera)
+            showPreview(true)
             return showStatus("CamPro off: unprotected preview")
+        }
+        description = try {
+            org.json.JSONObject(assets.open("params/$paramFile").bufferedReader().use { it.readText() }).optString("description")
+        } catch (e: Exception) {
+            ""
         }
         when (val sup = support) {
             is DeviceSupport.Result.Unsupported -> {
                 s.stopRepeating() // never show unprotected frames while CamPro is on
-                showStatus("CamPro not supported on this camera: " + sup.reasons.joinToString("; "))
+                showStatus("${ProtectionState.Unsupported(sup.reasons.joinToString("; "))}")
             }
             is DeviceSupport.Result.Supported -> try {
                 val session = openCamProAsset(assets, "params/$paramFile", sup.maxCurvePoints)
                 controller = CamProController(session)
+                guard = ProtectionGuard(session)
                 // Until the first metering result, only metering frames run: the preview stays dark.
                 s.setRepeatingRequest(meteringRequest(), captureCallback, camera)
                 showStatus("CamPro: metering" + (sup.note?.let { " ($it)" } ?: ""))
@@ -203,6 +221,8 @@ class MainActivity : Activity() {
             setTag(PROTECTED)
         }.build()
         val burst = listOf(meteringRequest()) + List(ctl.meteringInterval - 1) { protected }
+        guard?.requestChanged() // new values: closed until a result of them verifies
+        showPreview(false)
         captureSession?.setRepeatingBurst(burst, captureCallback, camera)
     }
 
@@ -214,9 +234,11 @@ class MainActivity : Activity() {
                     METERING -> if (result.colorTransformInto(transformBuf) && result.gainsInto(gainsBuf)) {
                         if (ctl.onMeteringResult(transformBuf, gainsBuf)) rebuildBurst()
                     }
-                    PROTECTED -> if (result.colorTransformInto(transformBuf)) {
-                        val n = result.tonemapRedInto(curveBuf)
-                        if (n > 0) ctl.onProtectedResult(transformBuf, curveBuf, n)
+                    PROTECTED -> {
+                        val g = guard ?: return
+                        val before = g.framesAllowed
+                        g.onProtectedResult(result.camproReport())
+                        if (g.framesAllowed != before) showPreview(g.framesAllowed)
                     }
                 }
             } catch (e: RuntimeException) {
@@ -225,7 +247,7 @@ class MainActivity : Activity() {
                 showStatus("CamPro stopped: ${e.message}")
                 return
             }
-            if (++results % 15 == 0L) showStatus(ctl.status())
+            if (++results % 15 == 0L) showStatus("$paramFile: $description\n${guard?.state}; ${ctl.status()}")
         }
     }
 

@@ -12,6 +12,7 @@ import android.hardware.camera2.params.ColorSpaceTransform
 import android.hardware.camera2.params.RggbChannelVector
 import android.hardware.camera2.params.TonemapCurve
 import org.campro.CamProSession
+import org.campro.CaptureReport
 import org.campro.DeviceSupport
 
 /** Whether this camera can run CamPro, with the reasons when not. */
@@ -36,14 +37,21 @@ fun CaptureResult.gainsInto(out: FloatArray): Boolean {
     return true
 }
 
-/** Copies the red channel of the reported `TONEMAP_CURVE` into [out]; returns floats written (0 when absent or too long). */
-fun CaptureResult.tonemapRedInto(out: FloatArray): Int {
-    val c = get(CaptureResult.TONEMAP_CURVE) ?: return 0
-    val n = 2 * c.getPointCount(TonemapCurve.CHANNEL_RED)
-    if (n > out.size) return 0
-    c.copyColorCurve(TonemapCurve.CHANNEL_RED, out, 0)
-    return n
-}
+/**
+ * What this result reports about CamPro's stages, for [org.campro.ProtectionGuard]: the
+ * three modes, the transform and the three curves, `null` where a key is absent.
+ */
+fun CaptureResult.camproReport(): CaptureReport = CaptureReport(
+    awbMode = get(CaptureResult.CONTROL_AWB_MODE),
+    colorCorrectionMode = get(CaptureResult.COLOR_CORRECTION_MODE),
+    tonemapMode = get(CaptureResult.TONEMAP_MODE),
+    transform = get(CaptureResult.COLOR_CORRECTION_TRANSFORM)?.let { t -> IntArray(18).also { t.copyElements(it, 0) } },
+    curves = get(CaptureResult.TONEMAP_CURVE)?.let { c ->
+        listOf(TonemapCurve.CHANNEL_RED, TonemapCurve.CHANNEL_GREEN, TonemapCurve.CHANNEL_BLUE).map { ch ->
+            FloatArray(2 * c.getPointCount(ch)).also { c.copyColorCurve(ch, it, 0) }
+        }
+    },
+)
 
 /**
  * Sets CamPro on a request: AWB off (Camera2 ignores TRANSFORM_MATRIX otherwise), the

@@ -91,8 +91,8 @@ pub struct Node {
 }
 
 impl Value {
-    /// Nesting depth: 0 for scalars.
-    pub fn depth(&self) -> u32 {
+    /// The children of a container value; `None` for scalars and globals.
+    pub fn node(&self) -> Option<&Node> {
         match self {
             Value::Tuple(n)
             | Value::List(n)
@@ -100,9 +100,14 @@ impl Value {
             | Value::Set(n)
             | Value::Reduce(n)
             | Value::Build(n)
-            | Value::PersistentId(n) => n.depth,
-            _ => 0,
+            | Value::PersistentId(n) => Some(n),
+            _ => None,
         }
+    }
+
+    /// Nesting depth: 0 for scalars.
+    pub fn depth(&self) -> u32 {
+        self.node().map_or(0, |n| n.depth)
     }
 
     /// The items of a tuple or list.
@@ -151,20 +156,10 @@ impl Value {
         let mut seen = std::collections::HashSet::new();
         let mut todo = vec![self];
         while let Some(v) = todo.pop() {
-            match v {
-                Value::Global { module, name } => out.push((&**module, &**name)),
-                Value::Tuple(n)
-                | Value::List(n)
-                | Value::Dict(n)
-                | Value::Set(n)
-                | Value::Reduce(n)
-                | Value::Build(n)
-                | Value::PersistentId(n)
-                    if seen.insert(Rc::as_ptr(&n.items)) =>
-                {
-                    todo.extend(n.items.iter())
-                }
-                _ => {}
+            if let Value::Global { module, name } = v {
+                out.push((&**module, &**name));
+            } else if let Some(n) = v.node().filter(|n| seen.insert(Rc::as_ptr(&n.items))) {
+                todo.extend(n.items.iter());
             }
         }
         out

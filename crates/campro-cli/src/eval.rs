@@ -111,7 +111,7 @@ impl Common {
     /// Refuses an output folder that already holds files, unless --force: a quick look
     /// must not replace the reports of a long run.
     fn check_output(&self) -> Result<()> {
-        crate::check_output_folder(&self.output, self.force)
+        crate::check_output_folder(&self.output, self.force, "--output")
     }
 }
 

@@ -628,7 +628,7 @@ fn comparison_json(target: &str, exported_bytes: usize, rows: &[Row]) -> serde_j
 }
 
 fn demo(out: &Path, params: Option<&Path>, force: bool) -> Result<()> {
-    check_output_folder(out, force)?;
+    check_output_folder(out, force, "--output")?;
     let (p, file) = match params {
         Some(path) => (load_params(path)?, path.display().to_string()),
         None => (Params::from_json(DEFAULT_PARAMS)?, format!("{DEFAULT_PARAMS_FILE} (the recommended preset)")),
@@ -699,20 +699,21 @@ pub(crate) fn escape(text: &str) -> String {
 
 /// Refuses an output folder that already holds files unless `force` (a quick look must
 /// not replace the results of a long run), and a path that is not a folder.
-pub(crate) fn check_output_folder(out: &Path, force: bool) -> Result<()> {
+/// `flag` names the option the folder came from.
+pub(crate) fn check_output_folder(out: &Path, force: bool, flag: &str) -> Result<()> {
     match std::fs::read_dir(out) {
         Ok(mut entries) => {
             if entries.next().is_some() && !force {
                 bail!(
-                    "--output {}: the folder already holds files (an earlier run's?); choose another or pass --force",
+                    "{flag} {}: the folder already holds files (an earlier run's?); choose another or pass --force",
                     out.display()
                 );
             }
             Ok(())
         }
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(_) if out.exists() => bail!("--output {}: is not a folder", out.display()),
-        Err(e) => Err(e).with_context(|| format!("--output {}", out.display())),
+        Err(_) if out.exists() => bail!("{flag} {}: is not a folder", out.display()),
+        Err(e) => Err(e).with_context(|| format!("{flag} {}", out.display())),
     }
 }
 

@@ -19,6 +19,13 @@ pub fn train(
         Some(p) => Some(campro_train::train::Initial::from_params(&load_params(p)?, &p.display().to_string())?),
         None => None,
     };
+    // A checkpoint folder that holds an earlier run is written into only when resuming
+    // from it, or with --force.
+    if let Some(c) = &checkpoints {
+        if resume.as_deref() != Some(c.as_path()) {
+            crate::check_output_folder(c, force, "--checkpoints")?;
+        }
+    }
     let opts = &campro_train::train::RunOptions { checkpoints, resume, init };
     for p in std::iter::once(output).chain(log) {
         if p.exists() && !force {

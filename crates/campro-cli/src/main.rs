@@ -5,6 +5,7 @@ mod bench;
 mod eval;
 mod simulate;
 mod train;
+mod video;
 
 use anyhow::{anyhow, bail, Context, Result};
 use campro::ccm::{self, Mat3};
@@ -72,7 +73,7 @@ enum Cmd {
         #[arg(long)]
         force: bool,
     },
-    /// Run the desktop pipeline on images (files or folders, recursive) into PNGs.
+    /// Run the desktop pipeline on images and videos (files or folders, recursive) into PNGs and videos (ffmpeg).
     Simulate {
         params: PathBuf,
         #[arg(required = true)]
@@ -89,6 +90,18 @@ enum Cmd {
         /// Worker threads (default: all cores; more than the cores is clamped, with a warning).
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
         jobs: Option<u32>,
+        /// Video encoder (ffmpeg's name): libx264, libx265, libvpx-vp9, ffv1 (lossless, in Matroska), ...
+        #[arg(long, default_value = "libx264")]
+        codec: String,
+        /// Video constant quality (lower is better; H.264's 18 looks lossless to most).
+        #[arg(long, default_value_t = 18, value_parser = clap::value_parser!(u32).range(0..=63), conflicts_with = "bitrate")]
+        crf: u32,
+        /// Video bitrate instead of --crf (ffmpeg's -b:v, e.g. 8M).
+        #[arg(long, value_parser = parse_bitrate)]
+        bitrate: Option<String>,
+        /// Video encoder preset (libx264/libx265: ultrafast ... veryslow).
+        #[arg(long)]
+        preset: Option<String>,
     },
     /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
     Compare {
@@ -216,6 +229,20 @@ struct DeviceArgs {
     /// Rationals: every entry over this fixed denominator (e.g. 1024) instead.
     #[arg(long)]
     fixed_denominator: Option<u32>,
+}
+
+/// `--bitrate`: digits with an optional k, M or G (ffmpeg's -b:v).
+fn parse_bitrate(s: &str) -> std::result::Result<String, String> {
+    let digits = s.trim_end_matches(['k', 'K', 'M', 'G']);
+    if !digits.is_empty()
+        && digits.len() <= 12
+        && digits.bytes().all(|b| b.is_ascii_digit())
+        && s.len() - digits.len() <= 1
+    {
+        Ok(s.to_string())
+    } else {
+        Err(format!("must be a bitrate such as 8M or 2500k, got {s}"))
+    }
 }
 
 /// `--ct`: a finite colour temperature in the calibration range.
@@ -487,7 +514,8 @@ fn run(cli: Cli) -> Result<()> {
                 }
             }
         }
-        Cmd::Simulate { params, inputs, output, bit_depth, force, jobs } => {
+        Cmd::Simulate { params, inputs, output, bit_depth, force, jobs, codec, crf, bitrate, preset } => {
+            let enc = video::Encoding { codec, crf: Some(crf), bitrate, preset };
             let p = load_params(&params)?;
             simulate::simulate(
                 &p,
@@ -499,6 +527,7 @@ fn run(cli: Cli) -> Result<()> {
                 },
                 force,
                 jobs.map(|j| j as usize),
+                &enc,
             )
         }
         Cmd::Demo { output, params, force } => demo(&output, params.as_deref(), force),

@@ -7,6 +7,7 @@
 //! decompression bomb is refused by its header and several large images wait for each
 //! other instead of adding up.
 
+use crate::video::{self, Encoding};
 use crate::write_atomic;
 use anyhow::{anyhow, bail, Result};
 use campro::pipeline::fast::Exact8;
@@ -106,11 +107,11 @@ fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
                     continue;
                 }
                 let rel = entry.path().strip_prefix(input).expect("walkdir yields paths under its root");
-                found.jobs.push((entry.path().to_path_buf(), out.join(rel).with_extension("png")));
+                found.jobs.push((entry.path().to_path_buf(), output_for(&out.join(rel))));
             }
         } else if meta.is_file() {
             let name = input.file_name().ok_or_else(|| anyhow!("{}: not a file name", input.display()))?;
-            found.jobs.push((input.clone(), out.join(Path::new(name)).with_extension("png")));
+            found.jobs.push((input.clone(), output_for(&out.join(Path::new(name)))));
         } else {
             bail!("{}: is not a regular file or folder", input.display());
         }
@@ -128,6 +129,15 @@ fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
     Ok(found)
 }
 
+/// Where an input goes: images become PNGs, videos keep their container.
+fn output_for(path: &Path) -> PathBuf {
+    if video::is_video(path) {
+        path.to_path_buf()
+    } else {
+        path.with_extension("png")
+    }
+}
+
 fn is_image(path: &Path) -> bool {
     path.extension()
         .and_then(|e| e.to_str())
@@ -135,7 +145,7 @@ fn is_image(path: &Path) -> bool {
         .unwrap_or(false)
 }
 
-/// Runs `p` over every image under `inputs` into PNGs under `out`.
+/// Runs `p` over every image and video under `inputs` into PNGs and videos under `out`.
 pub fn simulate(
     p: &Params,
     inputs: &[PathBuf],
@@ -143,6 +153,7 @@ pub fn simulate(
     depth: Depth,
     force: bool,
     jobs: Option<usize>,
+    enc: &Encoding,
 ) -> Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = match jobs {
@@ -158,12 +169,16 @@ pub fn simulate(
     for (i, why) in &found.skipped {
         eprintln!("warning: skipping {}: {why}", crate::escape(&i.display().to_string()));
     }
-    let (images, others): (Vec<_>, Vec<_>) = found.jobs.into_iter().partition(|(i, _)| is_image(i));
+    let (videos, rest): (Vec<_>, Vec<_>) = found.jobs.into_iter().partition(|(i, _)| video::is_video(i));
+    let (images, others): (Vec<_>, Vec<_>) = rest.into_iter().partition(|(i, _)| is_image(i));
     for (i, _) in &others {
-        eprintln!("warning: skipping {} (not a PNG, JPEG or TIFF file)", crate::escape(&i.display().to_string()));
+        eprintln!(
+            "warning: skipping {} (not a PNG, JPEG, TIFF or video file)",
+            crate::escape(&i.display().to_string())
+        );
     }
-    if images.is_empty() {
-        bail!("no PNG, JPEG or TIFF image among the inputs: nothing to do");
+    if images.is_empty() && videos.is_empty() {
+        bail!("no PNG, JPEG, TIFF or video file among the inputs: nothing to do");
     }
     let bar = if images.len() > 4 {
         indicatif::ProgressBar::new(images.len() as u64)
@@ -196,10 +211,32 @@ pub fn simulate(
         })
     });
     bar.finish_and_clear();
-    let failed = failed.into_inner();
-    eprintln!("simulated {} of {} images into {}", images.len() - failed, images.len(), out.display());
+    let mut failed = failed.into_inner();
+    if !images.is_empty() {
+        eprintln!("simulated {} of {} images into {}", images.len() - failed, images.len(), out.display());
+    }
+    // Videos one after another, each frame on every core.
+    for (i, wanted) in &videos {
+        let o = enc.output_path(wanted);
+        if &o != wanted {
+            eprintln!("note: {} is written as {} ({} needs Matroska)", wanted.display(), o.display(), enc.codec);
+        }
+        let warn = |w: &str| eprintln!("warning: {}: {w}", i.display());
+        let r = if !force && o.exists() {
+            Err(anyhow!("{} exists (use --force to overwrite)", o.display()))
+        } else {
+            pool.install(|| video::simulate(&fast8, i, &o, enc, force, &warn))
+        };
+        match r {
+            Ok(n) => eprintln!("simulated {n} frames of {} into {}", i.display(), o.display()),
+            Err(e) => {
+                eprintln!("error: {}: {}", i.display(), crate::one_line(&e));
+                failed += 1;
+            }
+        }
+    }
     if failed > 0 {
-        bail!("{failed} image(s) failed");
+        bail!("{failed} input(s) failed");
     }
     Ok(())
 }

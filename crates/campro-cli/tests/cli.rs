@@ -722,7 +722,7 @@ fn train_writes_params_and_detector_that_eval_reads() {
         .arg(&p)
         .arg("--identities")
         .arg(&p)
-        .args(["--runs", "1", "--no-verification", "--shared"])
+        .args(["--runs", "1", "--no-verification", "--force", "--shared"])
         .arg(&shared)
         .arg("-o")
         .arg(&out)
@@ -737,7 +737,7 @@ fn train_writes_params_and_detector_that_eval_reads() {
             .arg(&p)
             .arg("--identities")
             .arg(&names)
-            .args(["--shared"])
+            .args(["--force", "--shared"])
             .arg(&shared)
             .arg("-o")
             .arg(&out),

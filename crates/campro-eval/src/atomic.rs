@@ -15,6 +15,16 @@ use std::path::Path;
 /// rename can never swap a device node or a link's target for a file. A parent that is a
 /// file, not a folder, is refused the same way.
 pub fn write(path: &Path, bytes: &[u8], replace: bool) -> std::io::Result<()> {
+    let mut tmp = temporary_beside(path, ".tmp")?;
+    tmp.write_all(bytes)?;
+    tmp.as_file().sync_all()?;
+    persist(tmp, path, replace)
+}
+
+/// A temporary file (`.campro-*SUFFIX`, permissions of an ordinary new file) in the folder
+/// `path` will be in, which is created if missing: for output that a program (ffmpeg)
+/// writes by name before [`persist`] renames it over `path`. Refuses what [`write`] refuses.
+pub fn temporary_beside(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
     let refuse = |what: String| Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, what));
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if let Some(up) = dir.ancestors().find(|a| !a.as_os_str().is_empty() && std::fs::symlink_metadata(a).is_ok()) {
@@ -22,33 +32,44 @@ pub fn write(path: &Path, bytes: &[u8], replace: bool) -> std::io::Result<()> {
             return refuse(format!("{} is not a folder", up.display()));
         }
     }
-    if replace {
-        if let Ok(m) = std::fs::symlink_metadata(path) {
-            let t = m.file_type();
-            if !t.is_file() {
-                let what = if t.is_symlink() {
-                    "a symbolic link"
-                } else if t.is_dir() {
-                    "a folder"
-                } else {
-                    "not a regular file"
-                };
-                return refuse(format!("is {what}; only regular files are replaced"));
-            }
-        }
-    }
+    check_replaceable(path)?;
     std::fs::create_dir_all(dir)?;
     let mut builder = tempfile::Builder::new();
-    builder.prefix(".campro-").suffix(".tmp");
+    builder.prefix(".campro-").suffix(suffix);
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
         // The mode given to open(2), which the umask then reduces, as for any new file.
         builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
-    let mut tmp = builder.tempfile_in(dir)?;
-    tmp.write_all(bytes)?;
-    tmp.as_file().sync_all()?;
+    builder.tempfile_in(dir)
+}
+
+/// Refuses a `path` that exists and is not a regular file (a symbolic link, folder,
+/// device, FIFO or socket): only regular files are ever replaced.
+fn check_replaceable(path: &Path) -> std::io::Result<()> {
+    let Ok(m) = std::fs::symlink_metadata(path) else { return Ok(()) };
+    let t = m.file_type();
+    if t.is_file() {
+        return Ok(());
+    }
+    let what = if t.is_symlink() {
+        "a symbolic link"
+    } else if t.is_dir() {
+        "a folder"
+    } else {
+        "not a regular file"
+    };
+    Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("is {what}; only regular files are replaced")))
+}
+
+/// Renames the finished temporary file `tmp` over `path`: only over a regular file, and
+/// only with `replace` (otherwise [`std::io::ErrorKind::AlreadyExists`], checked at the
+/// rename).
+pub fn persist(tmp: tempfile::NamedTempFile, path: &Path, replace: bool) -> std::io::Result<()> {
+    if replace {
+        check_replaceable(path)?;
+    }
     let done = if replace { tmp.persist(path) } else { tmp.persist_noclobber(path) };
     done.map(|_| ()).map_err(|e| e.error)
 }

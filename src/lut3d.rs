@@ -149,6 +149,7 @@ impl Lut3d {
     }
 
     /// Interleaved RGB8 in and out.
+    #[inline]
     pub fn run(&self, src: &[u8], dst: &mut [u8], interp: Interp) {
         assert_eq!(src.len(), dst.len(), "source and destination sample counts differ");
         for (s, d) in src.chunks_exact(3).zip(dst.chunks_exact_mut(3)) {

@@ -44,7 +44,17 @@ enum Cmd {
         /// Parameter files (JSON, format campro-params v1).
         #[arg(required = true)]
         params: Vec<PathBuf>,
+        /// Text (one line per file) or one JSON object per file, one a line.
+        #[arg(long, value_enum, default_value_t = Report::Text)]
+        format: Report,
     },
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell) to stdout.
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
+    /// Print the manual page (roff) to stdout: `campro man > campro.1`.
+    Man,
     /// Convert a CamPro checkpoint (Pipeline.save .pt) to a parameter file.
     ImportPt {
         /// The checkpoint.
@@ -428,7 +438,34 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::FinetuneDetector { params, config, steps, seconds, log, force } => {
             train::finetune_detector(&params, config.as_deref(), steps, seconds, log.as_deref(), force)
         }
-        Cmd::Validate { params } => {
+        Cmd::Completions { shell } => {
+            let mut buf = Vec::new();
+            clap_complete::generate(shell, &mut <Cli as clap::CommandFactory>::command(), "campro", &mut buf);
+            say_bytes(&buf);
+            Ok(())
+        }
+        Cmd::Man => {
+            let mut buf = Vec::new();
+            clap_mangen::Man::new(<Cli as clap::CommandFactory>::command()).render(&mut buf)?;
+            say_bytes(&buf);
+            Ok(())
+        }
+        Cmd::Validate { params, format: Report::Json } => {
+            for p in params {
+                let v = load_params(&p)?;
+                let (lo, hi) = ccm::min_max(&v.ccm);
+                say!(
+                    "{}",
+                    serde_json::json!({
+                        "file": p.display().to_string(), "ok": true, "name": v.name, "description": v.description,
+                        "knots": v.tone_curve.len(), "evenlySpaced": v.tone_curve.is_uniform(), "degamma": v.degamma,
+                        "ccmMin": lo, "ccmMax": hi, "ctCalibrations": v.ct_calibration.len(),
+                    })
+                );
+            }
+            Ok(())
+        }
+        Cmd::Validate { params, .. } => {
             for p in params {
                 let v = load_params(&p)?;
                 say!(

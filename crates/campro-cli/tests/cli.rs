@@ -830,3 +830,31 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     );
     assert!(!trained.exists());
 }
+
+/// Completions and the manual page come from the same clap definition as the parser.
+#[test]
+fn completions_man_page_and_json_validation() {
+    let out = campro().args(["completions", "bash"]).output().unwrap();
+    let bash = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && bash.contains("_campro()"), "{bash}");
+    for sub in ["simulate", "convert", "eval", "train", "completions"] {
+        assert!(bash.contains(sub), "bash completion lacks {sub}");
+    }
+    let man = campro().arg("man").output().unwrap();
+    let man = String::from_utf8_lossy(&man.stdout);
+    assert!(man.contains(".TH campro 1") && man.contains("simulate"), "{man}");
+    let out = campro()
+        .args(["validate", "--format", "json"])
+        .arg(bundled("identity.json"))
+        .arg(bundled("color-inversion.json"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let lines: Vec<serde_json::Value> =
+        String::from_utf8_lossy(&out.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 2);
+    assert_eq!(lines[0]["name"], "identity");
+    assert_eq!(lines[0]["knots"], 32);
+    assert_eq!(lines[1]["name"], "color-inversion");
+    assert_eq!(lines[1]["ok"], true);
+}

@@ -694,7 +694,11 @@ fn comparison_json(target: &str, exported_bytes: usize, rows: &[Row]) -> serde_j
 }
 
 fn demo(out: &Path, params: Option<&Path>, force: bool) -> Result<()> {
-    check_output_folder(out, force, "--output")?;
+    // A folder holding only an earlier demo's two files is the demo's own: replaced.
+    let earlier_demo = std::fs::read_dir(out).is_ok_and(|entries| {
+        entries.flatten().all(|e| matches!(e.file_name().to_str(), Some("chart.png" | "chart-protected.png")))
+    });
+    check_output_folder(out, force || earlier_demo, "--output")?;
     let (p, file) = match params {
         Some(path) => (load_params(path)?, path.display().to_string()),
         None => (Params::from_json(DEFAULT_PARAMS)?, format!("{DEFAULT_PARAMS_FILE} (the recommended preset)")),

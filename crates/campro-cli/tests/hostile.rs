@@ -251,6 +251,10 @@ fn existing_output_folders_are_not_replaced_without_force() {
     std::fs::write(out.join("report.md"), b"90 minutes of work").unwrap();
     fails_with(campro().args(["eval", "quality"]).arg("-o").arg(&out), "already holds files");
     fails_with(campro().arg("demo").arg("-o").arg(&out), "already holds files");
+    // An earlier demo's own folder is not "an earlier run" worth keeping: the demo reruns.
+    let demo = dir.path().join("demo");
+    campro().arg("demo").arg("-o").arg(&demo).assert().success();
+    campro().arg("demo").arg("-o").arg(&demo).assert().success();
     let config = campro_testkit::workspace_root().join("crates/campro-train/configs/omega-0.5.toml");
     fails_with(
         campro().arg("train").arg(&config).arg("--checkpoints").arg(&out).arg("-o").arg(dir.path().join("t.json")),

@@ -616,7 +616,12 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
 /// Writes `bytes` to `path` whole or not at all ([`campro_eval::atomic::write`]). Refuses
 /// to replace `path` unless `force` (checked once, at the rename).
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()> {
-    match campro_eval::atomic::write(path, bytes, force) {
+    output_result(path, campro_eval::atomic::write(path, bytes, force))
+}
+
+/// An output write's result, with "exists (use --force ...)" for a refused overwrite.
+pub(crate) fn output_result(path: &Path, r: std::io::Result<()>) -> Result<()> {
+    match r {
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
             bail!("{} exists (use --force to overwrite)", path.display())
         }

@@ -241,13 +241,7 @@ pub fn simulate(
             rotated
         }
     };
-    campro_eval::atomic::persist(tmp, output, force).map_err(|e| {
-        if e.kind() == std::io::ErrorKind::AlreadyExists {
-            anyhow!("{} exists (use --force to overwrite)", output.display())
-        } else {
-            anyhow!("{}: {e}", output.display())
-        }
-    })?;
+    crate::output_result(output, campro_eval::atomic::persist(tmp, output, force))?;
     Ok(frames)
 }
 

@@ -73,7 +73,7 @@ impl Lfw {
     /// image are skipped and counted (the second value).
     pub fn pairs(&self) -> Result<(Vec<Pair>, usize)> {
         let path = self.root.join("pairs.txt");
-        let text = crate::error::read_text(&path, 16 << 20, "LFW pairs.txt")?;
+        let text = campro::file::read_text_capped(&path, 16 << 20, "LFW pairs.txt")?;
         parse_pairs(&text, &path, |name, n| self.image(name, n))
     }
 }
@@ -164,7 +164,7 @@ struct CocoAnn {
 /// Reads `instances_person.json` under `root` (images in `root/images`), sorted by id.
 pub fn coco_person(root: &Path) -> Result<Vec<CocoImage>> {
     let path = root.join("instances_person.json");
-    let text = crate::error::read_text(&path, 64 << 20, "COCO annotations")?;
+    let text = campro::file::read_text_capped(&path, 64 << 20, "COCO annotations")?;
     let de = &mut serde_json::Deserializer::from_str(&text);
     let file: CocoFile = serde_path_to_error::deserialize(de).map_err(|e| EvalError::Data {
         path: path.clone(),

@@ -24,11 +24,6 @@ pub enum EvalError {
     File(#[from] campro::file::FileError),
 }
 
-/// Reads the regular file `path` as text, at most `limit` bytes (`role` names it).
-pub fn read_text(path: &std::path::Path, limit: u64, role: &'static str) -> Result<String> {
-    Ok(campro::file::read_text_capped(path, limit, role)?)
-}
-
 impl EvalError {
     pub fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> Self {
         let path = path.into();

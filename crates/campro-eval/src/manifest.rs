@@ -92,7 +92,7 @@ impl Manifest {
     /// Reads `path`; a relative `file` is looked up beside the manifest first (a model
     /// written with its manifest, e.g. a fine-tuned detector), then in `models_dir`.
     pub fn load(path: &Path, models_dir: &Path) -> Result<Self> {
-        let text = crate::error::read_text(path, 1 << 20, "a model manifest")?;
+        let text = campro::file::read_text_capped(path, 1 << 20, "a model manifest")?;
         let beside = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
         match Self::parse(&text, path, beside) {
             Ok(m) if m.file.is_file() => Ok(m),

@@ -28,13 +28,39 @@ fn per_call(batch: usize, runs: usize, mut f: impl FnMut()) -> f64 {
     }) / batch as f64
 }
 
-struct Row {
+/// One row of the table.
+pub struct Row {
     group: &'static str,
     name: String,
-    time: String,
+    time: Time,
+    /// Largest and mean error in 8-bit LSB (NaN: not measured).
     max_lsb: f64,
     mean_lsb: f64,
     note: String,
+}
+
+/// A median time and what it is per.
+#[derive(Clone, Copy)]
+enum Time {
+    /// Seconds per 1920x1080 frame.
+    Frame(f64),
+    /// Seconds per Camera2 update.
+    Update(f64),
+    /// Not timed.
+    None,
+}
+
+/// A 1920x1080 frame in megapixels.
+const FRAME_MPX: f64 = 1920.0 * 1080.0 / 1e6;
+
+impl std::fmt::Display for Time {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        match *self {
+            Time::Frame(s) => write!(f, "{:.2} ms/frame ({:.2} ms/Mpx)", s * 1e3, s * 1e3 / FRAME_MPX),
+            Time::Update(s) => write!(f, "{:.3} us/update", s * 1e6),
+            Time::None => f.write_str("-"),
+        }
+    }
 }
 
 fn err8(out: &[u8], want: &[[f64; 3]]) -> (f64, f64) {
@@ -49,17 +75,18 @@ fn err8(out: &[u8], want: &[[f64; 3]]) -> (f64, f64) {
     (max, sum / (3 * want.len()) as f64)
 }
 
-pub fn run(params: &Params, quick: bool) -> Vec<String> {
+/// Runs every row: medians of `quick` (3) or full (11) repetitions, more for the
+/// millisecond rows.
+pub fn run(params: &Params, quick: bool) -> Vec<Row> {
     let runs = if quick { 3 } else { 11 };
     // The millisecond rows (copy, exact 8-bit) take many more runs: on a shared machine
     // their medians move by tens of percent over a handful.
     let many = if quick { 31 } else { 101 };
     let (w, h) = (1920usize, 1080usize);
     let frame = test_frame(w, h);
-    let mpx = (w * h) as f64 / 1e6;
     let mut out = vec![0u8; frame.len()];
     let mut rows = Vec::new();
-    let ms = |s: f64| format!("{:.2} ms/frame ({:.2} ms/Mpx)", s * 1e3, s * 1e3 / mpx);
+    let ms = Time::Frame;
 
     // Error sample: the frame plus random pixels, against the unrounded f64 reference.
     let mut sample: Vec<u8> = frame.clone();
@@ -208,7 +235,7 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
     });
 
     // Camera2 updates.
-    let us = |s: f64| format!("{:.3} us/update", s * 1e6);
+    let us = Time::Update;
     let batch = if quick { 200 } else { 2000 };
     let t = per_call(batch, runs, || {
         black_box(convert(black_box(params), black_box(&PHONE), &Options::default()).unwrap());
@@ -290,7 +317,7 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
         rows.push(Row {
             group: "skip",
             name: format!("fewest curve points within {tol_lsb} LSB"),
-            time: "-".into(),
+            time: Time::None,
             max_lsb: e * 255.0,
             mean_lsb: f64::NAN,
             note: format!("{} of 256 points", c.len()),
@@ -327,8 +354,13 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
         }
     }
 
+    rows
+}
+
+/// The rows as a Markdown table.
+pub fn markdown(rows: &[Row]) -> Vec<String> {
     let mut lines = vec![
-        format!("| group | path / setting | median time | max err (LSB8) | mean err (LSB8) | note |"),
+        "| group | path / setting | median time | max err (LSB8) | mean err (LSB8) | note |".to_string(),
         "|---|---|---|---|---|---|".to_string(),
     ];
     let f = |v: f64| {
@@ -356,7 +388,58 @@ pub fn run(params: &Params, quick: bool) -> Vec<String> {
     lines
 }
 
+/// The rows as one JSON object: `rows`, each with `seconds` per `per` (`frame` of 1920x1080,
+/// `update`, or null when untimed) and errors in 8-bit LSB (null when not measured).
+pub fn json(rows: &[Row]) -> serde_json::Value {
+    let num = |v: f64| if v.is_finite() { serde_json::json!(v) } else { serde_json::Value::Null };
+    let rows: Vec<_> = rows
+        .iter()
+        .map(|r| {
+            let (seconds, per) = match r.time {
+                Time::Frame(s) => (num(s), "frame"),
+                Time::Update(s) => (num(s), "update"),
+                Time::None => (serde_json::Value::Null, ""),
+            };
+            serde_json::json!({
+                "group": r.group, "name": r.name, "seconds": seconds,
+                "per": if per.is_empty() { serde_json::Value::Null } else { per.into() },
+                "max_lsb": num(r.max_lsb), "mean_lsb": num(r.mean_lsb), "note": r.note,
+            })
+        })
+        .collect();
+    serde_json::json!({ "frame": [1920, 1080], "rows": rows })
+}
+
 /// The parameter set the table uses by default: like the paper's strong checkpoints.
 pub fn default_params() -> Params {
     campro_testkit::bench::bench_params()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_print_as_markdown_and_json() {
+        let row = |time, max_lsb| Row {
+            group: "image",
+            name: "x".into(),
+            time,
+            max_lsb,
+            mean_lsb: f64::NAN,
+            note: "n".into(),
+        };
+        let rows = [row(Time::Frame(0.002), 0.5), row(Time::Update(2e-6), 0.004), row(Time::None, 0.0)];
+        let md = markdown(&rows);
+        assert_eq!(md[2], "| image | x | 2.00 ms/frame (0.96 ms/Mpx) | 0.500 | - | n |");
+        assert_eq!(md[3], "| image | x | 2.000 us/update | 4.0e-3 | - | n |");
+        assert_eq!(md[4], "| image | x | - | 0 | - | n |");
+        let j = json(&rows);
+        assert_eq!(j["rows"][0]["seconds"], 0.002);
+        assert_eq!(j["rows"][0]["per"], "frame");
+        assert_eq!(j["rows"][1]["per"], "update");
+        assert!(
+            j["rows"][0]["mean_lsb"].is_null() && j["rows"][2]["per"].is_null() && j["rows"][2]["seconds"].is_null()
+        );
+    }
 }

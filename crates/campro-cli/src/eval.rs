@@ -100,7 +100,7 @@ fn parse_limit(s: &str) -> std::result::Result<usize, String> {
 }
 
 /// `--confidence`: a score threshold in [0, 1].
-fn parse_confidence(s: &str) -> std::result::Result<f64, String> {
+pub(crate) fn parse_confidence(s: &str) -> std::result::Result<f64, String> {
     match s.parse::<f64>() {
         Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
         _ => Err(format!("must be a number in [0, 1], got {s}")),
@@ -194,10 +194,7 @@ pub struct UtilityArgs {
 
 impl Common {
     fn shared(&self) -> PathBuf {
-        self.shared
-            .clone()
-            .or_else(|| std::env::var_os("CAMPRO_SHARED").map(PathBuf::from))
-            .unwrap_or_else(|| PathBuf::from("../shared"))
+        shared_dir(self.shared.as_deref())
     }
 
     fn models_dir(&self) -> PathBuf {
@@ -228,6 +225,14 @@ impl Common {
     }
 }
 
+/// The shared data folder: `given`, else $CAMPRO_SHARED, else `../shared`.
+pub(crate) fn shared_dir(given: Option<&Path>) -> PathBuf {
+    given
+        .map(Path::to_path_buf)
+        .or_else(|| std::env::var_os("CAMPRO_SHARED").map(PathBuf::from))
+        .unwrap_or_else(|| PathBuf::from("../shared"))
+}
+
 /// A parameter file's image-type name in the reports: its file stem.
 fn set_name(path: &Path) -> String {
     path.file_stem().map_or("params".into(), |s| s.to_string_lossy().into_owned())
@@ -256,7 +261,7 @@ fn manifest(name_or_path: &str, models: &Path) -> Result<Manifest> {
     Ok(Manifest::load(p, models)?)
 }
 
-fn load(name: &str, models: &Path) -> Result<Model> {
+pub(crate) fn load(name: &str, models: &Path) -> Result<Model> {
     let m = manifest(name, models)?;
     eprintln!("loading {} ({})", m.name, m.file.display());
     Ok(Model::load(m)?)
@@ -393,7 +398,7 @@ fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utili
 
 /// Parameter set name → the manifest of the detector fine-tuned with it, for the sets whose
 /// provenance names one.
-fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBuf>> {
+pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBuf>> {
     let mut own = HashMap::new();
     for path in params {
         let v: serde_json::Value = serde_json::from_str(&campro::file::read_text_capped(

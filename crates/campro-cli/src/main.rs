@@ -3,6 +3,7 @@
 
 mod bench;
 mod eval;
+mod inspect;
 mod simulate;
 mod train;
 mod video;
@@ -113,6 +114,40 @@ enum Cmd {
         #[arg(long)]
         preset: Option<String>,
     },
+    /// Look at what a parameter set does to your images: raw | protected side by side with
+    /// the faces (YuNet) and people (person detector) found on each, a JSON of the
+    /// detections per image, and OUTPUT/index.html linking them.
+    Inspect {
+        params: PathBuf,
+        /// Images or folders (recursive).
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// Output folder (new or empty, unless --force).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// The shared data folder (default: $CAMPRO_SHARED or ../shared).
+        #[arg(long)]
+        shared: Option<PathBuf>,
+        /// Folder of the model files (default: SHARED/models).
+        #[arg(long)]
+        models: Option<PathBuf>,
+        /// Person detector: a bundled name or a manifest file.
+        #[arg(long, default_value = "yolox-nano")]
+        person_detector: String,
+        /// Find people on the protected panel with the detector fine-tuned for PARAMS
+        /// (its provenance.detector), as the camera's user would.
+        #[arg(long)]
+        own_detector: bool,
+        /// Draw and list people scored at least this, in [0, 1].
+        #[arg(long, default_value_t = 0.25, value_parser = eval::parse_confidence)]
+        confidence: f64,
+        /// Write into an output folder that already holds files.
+        #[arg(long)]
+        force: bool,
+        /// A line per image, or the index as one JSON object.
+        #[arg(long, value_enum, default_value_t = Report::Text)]
+        format: Report,
+    },
     /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
     Compare {
         params: PathBuf,
@@ -144,6 +179,9 @@ enum Cmd {
         /// Fewer repetitions and a smaller error sample (for CI).
         #[arg(long)]
         quick: bool,
+        /// A Markdown table, or one JSON object.
+        #[arg(long, value_enum, default_value_t = Report::Text)]
+        format: Report,
     },
     /// Randomised numerical soak: adversarial cases checked against every invariant until time runs out.
     Stress {
@@ -153,6 +191,9 @@ enum Cmd {
         /// First seed (cases use seed, seed+1, ...).
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// A summary line, or one JSON object.
+        #[arg(long, value_enum, default_value_t = Report::Text)]
+        format: Report,
     },
     /// Evaluate privacy (face recognition), utility (person detection) and image quality with real models.
     Eval {
@@ -216,6 +257,9 @@ enum Cmd {
         /// Write into an output folder that already holds files.
         #[arg(long)]
         force: bool,
+        /// Readable text, or one JSON object.
+        #[arg(long, value_enum, default_value_t = Report::Text)]
+        format: Report,
     },
 }
 
@@ -567,18 +611,54 @@ fn run(cli: Cli) -> Result<()> {
                 &enc,
             )
         }
-        Cmd::Demo { output, params, force } => demo(&output, params.as_deref(), force),
-        Cmd::Bench { params, quick } => {
+        Cmd::Inspect {
+            params,
+            inputs,
+            output,
+            shared,
+            models,
+            person_detector,
+            own_detector,
+            confidence,
+            force,
+            format,
+        } => {
+            let p = load_params(&params)?;
+            check_output_folder(&output, force, "--output")?;
+            let models = models.unwrap_or_else(|| eval::shared_dir(shared.as_deref()).join("models"));
+            let people = eval::load(&person_detector, &models)?;
+            let own = if own_detector {
+                let own = eval::own_detectors(std::slice::from_ref(&params))?;
+                let manifest = own.values().next().ok_or_else(|| {
+                    anyhow!("--own-detector: {} names no fine-tuned detector (provenance.detector)", params.display())
+                })?;
+                let m = eval::load(&manifest.to_string_lossy(), &models)?;
+                Some((m.manifest.name.clone(), campro_eval::person::PersonDetector::new(m)?))
+            } else {
+                None
+            };
+            let det = inspect::Detectors {
+                faces: campro_eval::face::FaceDetector::new(eval::load("yunet", &models)?)?,
+                people: (people.manifest.name.clone(), campro_eval::person::PersonDetector::new(people)?),
+                own,
+                confidence: confidence as f32,
+            };
+            inspect::inspect(&params, &p, &inputs, &output, &det, matches!(format, Report::Json))
+        }
+        Cmd::Demo { output, params, force, format } => demo(&output, params.as_deref(), force, format),
+        Cmd::Bench { params, quick, format } => {
             let p = match params {
                 Some(path) => load_params(&path)?,
                 None => bench::default_params(),
             };
-            for line in bench::run(&p, quick) {
-                say!("{line}");
+            let rows = bench::run(&p, quick);
+            match format {
+                Report::Text => bench::markdown(&rows).iter().for_each(|line| say!("{line}")),
+                Report::Json => say!("{}", bench::json(&rows)),
             }
             Ok(())
         }
-        Cmd::Stress { seconds, seed } => stress(seconds, seed),
+        Cmd::Stress { seconds, seed, format } => stress(seconds, seed, format),
     }
 }
 
@@ -698,7 +778,7 @@ fn comparison_json(target: &str, exported_bytes: usize, rows: &[Row]) -> serde_j
     })
 }
 
-fn demo(out: &Path, params: Option<&Path>, force: bool) -> Result<()> {
+fn demo(out: &Path, params: Option<&Path>, force: bool, format: Report) -> Result<()> {
     // A folder holding only an earlier demo's two files is the demo's own: replaced.
     let earlier_demo = std::fs::read_dir(out).is_ok_and(|entries| {
         entries.flatten().all(|e| matches!(e.file_name().to_str(), Some("chart.png" | "chart-protected.png")))
@@ -718,10 +798,27 @@ fn demo(out: &Path, params: Option<&Path>, force: bool) -> Result<()> {
     let after = out.join("chart-protected.png");
     write_atomic(&before, &simulate::encode_png(&src, w, h, Depth::Eight)?, true)?;
     write_atomic(&after, &simulate::encode_png(&dst, w, h, Depth::Eight)?, true)?;
+    let v = camera2::convert(&p, &ccm::IDENTITY, &Options::default())?;
+    let device = Camera2::default();
+    let conditions = campro::targets::Target::emulate(&device, &p, &serde_json::to_vec(&v.to_json())?, None)?;
+    let rows = comparison(&p, &conditions, 100_000, 1)?;
+    if let Report::Json = format {
+        let json = serde_json::json!({
+            "preset": file, "name": p.name, "description": p.description,
+            "input": before.display().to_string(), "output": after.display().to_string(),
+            "camera2": v.to_json(),
+            "conversion": {
+                "matrix_scale": v.scale, "matrix_max_abs": v.report.matrix_max_abs,
+                "curve_max_abs": v.report.curve_max_abs, "bound_lsb": v.report.bound_lsb(),
+            },
+            "comparison": comparison_json("camera2", 0, &rows)["comparison"],
+        });
+        say!("{json}");
+        return Ok(());
+    }
     say!("preset: {file}");
     say!("parameters: {} - {}", escape(&p.name), escape(&p.description));
     say!("wrote {} (input) and {} (desktop pipeline output)\n", before.display(), after.display());
-    let v = camera2::convert(&p, &ccm::IDENTITY, &Options::default())?;
     say!("Camera2 values (device transform: identity; `campro convert --device-ccm ...` for yours):");
     say!("  COLOR_CORRECTION_TRANSFORM (num/den pairs): {:?}", v.color_correction_transform);
     let c = &v.tonemap_curve.red;
@@ -741,13 +838,11 @@ fn demo(out: &Path, params: Option<&Path>, force: bool) -> Result<()> {
         v.report.bound_lsb()
     );
     say!("\nSimulated device vs desktop pipeline:");
-    let device = Camera2::default();
-    let conditions = campro::targets::Target::emulate(&device, &p, &serde_json::to_vec(&v.to_json())?, None)?;
-    print_comparison(&comparison(&p, &conditions, 100_000, 1)?);
+    print_comparison(&rows);
     Ok(())
 }
 
-fn stress(seconds: f64, seed: u64) -> Result<()> {
+fn stress(seconds: f64, seed: u64, format: Report) -> Result<()> {
     if !(seconds.is_finite() && seconds >= 0.0) {
         bail!("--seconds must be a finite number >= 0, got {seconds}");
     }
@@ -762,7 +857,14 @@ fn stress(seconds: f64, seed: u64) -> Result<()> {
         }
         s = s.wrapping_add(1);
     }
-    say!("stress: {} cases in {:.1} s (seeds {seed}..{s}): {converted} converted, {refused} refused with a named error, 0 invariants broken", converted + refused, start.elapsed().as_secs_f64());
+    let secs = start.elapsed().as_secs_f64();
+    match format {
+        Report::Text => say!("stress: {} cases in {secs:.1} s (seeds {seed}..{s}): {converted} converted, {refused} refused with a named error, 0 invariants broken", converted + refused),
+        Report::Json => say!("{}", serde_json::json!({
+            "cases": converted + refused, "seconds": secs, "first_seed": seed, "next_seed": s,
+            "converted": converted, "refused": refused, "invariants_broken": 0,
+        })),
+    }
     Ok(())
 }
 

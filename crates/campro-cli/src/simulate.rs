@@ -31,13 +31,13 @@ pub const DECODE_BUDGET: u64 = 768 << 20;
 const BYTES_PER_SAMPLE_PEAK: u64 = 4;
 
 /// A counting semaphore of bytes.
-struct Budget {
+pub(crate) struct Budget {
     free: Mutex<u64>,
     freed: Condvar,
 }
 
 impl Budget {
-    fn new(bytes: u64) -> Self {
+    pub(crate) fn new(bytes: u64) -> Self {
         Self { free: Mutex::new(bytes), freed: Condvar::new() }
     }
 
@@ -53,7 +53,7 @@ impl Budget {
 }
 
 /// Bytes taken from a [`Budget`], given back on drop.
-struct Lease<'a> {
+pub(crate) struct Lease<'a> {
     budget: &'a Budget,
     n: u64,
 }
@@ -66,11 +66,11 @@ impl Drop for Lease<'_> {
 }
 
 /// What a walk over the inputs found.
-struct Inputs {
+pub(crate) struct Inputs {
     /// (input file, output file).
-    jobs: Vec<(PathBuf, PathBuf)>,
+    pub jobs: Vec<(PathBuf, PathBuf)>,
     /// Entries passed over, with why.
-    skipped: Vec<(PathBuf, &'static str)>,
+    pub skipped: Vec<(PathBuf, &'static str)>,
 }
 
 /// A path made absolute and, where it exists, with links resolved (for comparing).
@@ -79,7 +79,7 @@ fn resolved(p: &Path) -> PathBuf {
 }
 
 /// Every (input file, output file) pair: folders are walked recursively and mirrored.
-fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
+pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
     let out_abs = resolved(out);
     let mut found = Inputs { jobs: Vec::new(), skipped: Vec::new() };
     for input in inputs {
@@ -138,7 +138,7 @@ fn output_for(path: &Path) -> PathBuf {
     }
 }
 
-fn is_image(path: &Path) -> bool {
+pub(crate) fn is_image(path: &Path) -> bool {
     path.extension()
         .and_then(|e| e.to_str())
         .map(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
@@ -253,30 +253,8 @@ struct Paths<'a, 'p> {
 
 impl Paths<'_, '_> {
     fn one(&self, input: &Path, output: &Path, warn: &dyn Fn(&str)) -> Result<()> {
-        use image::ImageDecoder;
-        let bytes = campro::file::read_capped(input, MAX_FILE_BYTES, "an image")?;
-        if let Some(n) = extra_frames(&bytes) {
-            warn(&format!("{n}; only the first is simulated"));
-        }
-        let mut decoder =
-            image::ImageReader::new(std::io::Cursor::new(&bytes)).with_guessed_format()?.into_decoder()?;
-        let (w, h) = decoder.dimensions();
-        let need = decoder.total_bytes().saturating_mul(BYTES_PER_SAMPLE_PEAK).max(1);
-        if need > DECODE_BUDGET {
-            bail!(
-                "the image is {w} x {h} ({} decoded bytes); the limit is {} (a decompression bomb, or split it)",
-                decoder.total_bytes(),
-                DECODE_BUDGET / BYTES_PER_SAMPLE_PEAK
-            );
-        }
-        let mut limits = image::Limits::default();
-        limits.max_alloc = Some(need);
-        decoder.set_limits(limits)?;
-        if decoder.color_type().has_alpha() {
-            warn("its alpha channel is dropped (the output is RGB)");
-        }
-        let _lease = self.budget.take(need);
-        let img = image::DynamicImage::from_decoder(decoder)?;
+        let (img, _lease) = decode(input, self.budget, warn)?;
+        let (w, h) = (img.width(), img.height());
         let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
         let row = 3 * w as usize;
         if !sixteen && self.depth == Depth::Eight {
@@ -301,6 +279,40 @@ impl Paths<'_, '_> {
         let png = encode_png(&dst, w, h, self.depth)?;
         write_atomic(output, &png, self.force)
     }
+}
+
+/// Reads and decodes one image file: capped read, a warning for extra frames and alpha,
+/// and the decoded size (times [`BYTES_PER_SAMPLE_PEAK`]) taken from `budget` before
+/// decoding, held until the returned lease drops. A decompression bomb is refused by its
+/// header.
+pub(crate) fn decode<'b>(
+    input: &Path,
+    budget: &'b Budget,
+    warn: &dyn Fn(&str),
+) -> Result<(image::DynamicImage, Lease<'b>)> {
+    use image::ImageDecoder;
+    let bytes = campro::file::read_capped(input, MAX_FILE_BYTES, "an image")?;
+    if let Some(n) = extra_frames(&bytes) {
+        warn(&format!("{n}; only the first is simulated"));
+    }
+    let mut decoder = image::ImageReader::new(std::io::Cursor::new(&bytes)).with_guessed_format()?.into_decoder()?;
+    let (w, h) = decoder.dimensions();
+    let need = decoder.total_bytes().saturating_mul(BYTES_PER_SAMPLE_PEAK).max(1);
+    if need > DECODE_BUDGET {
+        bail!(
+            "the image is {w} x {h} ({} decoded bytes); the limit is {} (a decompression bomb, or split it)",
+            decoder.total_bytes(),
+            DECODE_BUDGET / BYTES_PER_SAMPLE_PEAK
+        );
+    }
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(need);
+    decoder.set_limits(limits)?;
+    if decoder.color_type().has_alpha() {
+        warn("its alpha channel is dropped (the output is RGB)");
+    }
+    let lease = budget.take(need);
+    Ok((image::DynamicImage::from_decoder(decoder)?, lease))
 }
 
 /// Says how many frames or pages past the first a PNG (APNG) or TIFF holds, if any.

@@ -184,28 +184,61 @@ pub fn simulate(
             .expect("valid template"),
     );
     bar.set_message(input.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
-    let mut src = vec![0u8; frame_bytes];
-    let mut dst = vec![0u8; frame_bytes];
+    // Three stages overlap: a reader thread fills frames from the decoder, this thread runs
+    // the camera on every core, a writer thread feeds the encoder. Frames circulate through
+    // a fixed pool of IN_FLIGHT buffers, so memory stays bounded whatever the length.
+    const IN_FLIGHT: usize = 4;
     let row = 3 * p.width as usize;
     let mut frames = 0u64;
     let mut from = decode.stdout.take().expect("piped");
     let mut to = encode.stdin.take().expect("piped");
-    let result = loop {
-        match read_frame(&mut from, &mut src) {
-            Ok(false) => break Ok(()),
-            Ok(true) => {}
-            Err(e) => break Err(e),
-        }
-        src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| {
-            fast8.run(s, d);
+    let (free_tx, free_rx) = std::sync::mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
+    let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
+    let (done_tx, done_rx) = std::sync::mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
+    for _ in 0..IN_FLIGHT {
+        free_tx.send(vec![0u8; frame_bytes]).expect("room for the pool");
+    }
+    let result = std::thread::scope(|scope| {
+        let reader = scope.spawn(move || -> Result<()> {
+            while let Ok(mut buf) = free_rx.recv() {
+                if !read_frame(&mut from, &mut buf)? {
+                    return Ok(());
+                }
+                if full_tx.send(buf).is_err() {
+                    return Ok(());
+                }
+            }
+            Ok(())
         });
-        if let Err(e) = to.write_all(&dst) {
-            break Err(anyhow!("the encoder stopped: {e}"));
+        let writer = scope.spawn(move || -> Result<()> {
+            for buf in done_rx {
+                to.write_all(&buf).map_err(|e| anyhow!("the encoder stopped: {e}"))?;
+                if free_tx.send(buf).is_err() {
+                    break;
+                }
+            }
+            Ok(())
+        });
+        let mut out = vec![0u8; frame_bytes];
+        for src in full_rx.iter() {
+            src.par_chunks(row * 16).zip(out.par_chunks_mut(row * 16)).for_each(|(s, d)| {
+                fast8.run(s, d);
+            });
+            // The processed frame goes to the writer; its input buffer becomes the next output.
+            let processed = std::mem::replace(&mut out, src);
+            if done_tx.send(processed).is_err() {
+                break;
+            }
+            frames += 1;
+            bar.inc(1);
         }
-        frames += 1;
-        bar.inc(1);
-    };
-    drop(to);
+        drop(done_tx);
+        // Unblock a reader waiting for a free buffer if the writer quit early.
+        drop(full_rx);
+        let w = writer.join().unwrap_or_else(|_| Err(anyhow!("the writer thread panicked")));
+        let r = reader.join().unwrap_or_else(|_| Err(anyhow!("the reader thread panicked")));
+        r.and(w)
+    });
     bar.finish_and_clear();
     let dec = decode.wait_with_output()?;
     let enc_out = encode.wait_with_output()?;

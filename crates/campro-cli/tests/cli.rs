@@ -340,7 +340,7 @@ fn demo_writes_before_and_after() {
 
 #[test]
 fn help_for_every_command() {
-    for c in ["validate", "import-pt", "convert", "simulate", "compare", "demo"] {
+    for c in ["validate", "import-pt", "convert", "simulate", "inspect", "compare", "demo", "bench", "stress"] {
         campro().args([c, "--help"]).assert().success();
     }
 }
@@ -857,4 +857,37 @@ fn completions_man_page_and_json_validation() {
     assert_eq!(lines[0]["knots"], 32);
     assert_eq!(lines[1]["name"], "color-inversion");
     assert_eq!(lines[1]["ok"], true);
+}
+
+#[test]
+fn demo_and_stress_print_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = campro()
+        .args(["demo", "--format", "json", "--params"])
+        .arg(bundled("color-inversion.json"))
+        .arg("-o")
+        .arg(dir.path().join("d"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["name"], "color-inversion");
+    // Inversion: the curve falls from 1 to 0; the device output is the desktop's within
+    // the stated bound on every compared pixel set.
+    let red: Vec<f64> =
+        v["camera2"]["tonemapCurve"]["red"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    assert_eq!((red[1], red[red.len() - 1]), (1.0, 0.0));
+    let rows = v["comparison"].as_array().unwrap();
+    // Grey levels, the RGB cube, random pixels, the chart.
+    assert_eq!(rows.len(), 4);
+    for r in rows {
+        assert!(r["maxLsb"].as_f64().unwrap() <= r["boundLsb"].as_f64().unwrap(), "{r}");
+    }
+    let out = campro().args(["stress", "--seconds", "0.3", "--seed", "5", "--format", "json"]).output().unwrap();
+    assert!(out.status.success());
+    let s: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let cases = s["cases"].as_u64().unwrap();
+    assert!(cases > 0);
+    assert_eq!(s["converted"].as_u64().unwrap() + s["refused"].as_u64().unwrap(), cases);
+    assert_eq!(s["next_seed"].as_u64().unwrap(), 5 + cases);
 }

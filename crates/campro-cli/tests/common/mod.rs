@@ -27,7 +27,7 @@ pub fn fails_with(cmd: &mut Command, needle: &str) {
     assert!(err.contains(needle), "stderr {err:?} lacks {needle:?}");
     assert!(!err.contains("Caused by") && !err.contains("backtrace"), "{err}");
     assert!(
-        err.lines().all(|l| l.starts_with("error") || l.starts_with("warning") || l.starts_with("simulated")),
+        err.lines().all(|l| ["error", "warning", "simulated", "loading"].iter().any(|p| l.starts_with(p))),
         "one line per error: {err}"
     );
 }

@@ -1,0 +1,371 @@
+//! `campro inspect`: per-image results people can look at. For each image, raw | protected
+//! side by side with the faces YuNet finds (magenta, with its five landmarks) and the people
+//! the person detector finds (green) drawn on each panel, a JSON of the detections, and an
+//! `index.html` (with `index.json`) linking them all.
+//!
+//! Inputs are read as `simulate` reads them (regular files with a byte cap, folders walked
+//! without following links, one shared decode budget); outputs are written atomically under
+//! names taken from the input paths, never from file contents.
+
+use crate::simulate::{self, Budget};
+use crate::{escape, say, write_atomic};
+use anyhow::{bail, Result};
+use campro::pipeline::fast::Exact8;
+use campro::Params;
+use campro_eval::face::{Face, FaceDetector};
+use campro_eval::person::{Detection, PersonDetector};
+use image::{Rgb, RgbImage};
+use rayon::prelude::*;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+/// Face boxes and landmarks.
+pub const FACE_COLOUR: Rgb<u8> = Rgb([255, 0, 255]);
+/// Person boxes.
+pub const PERSON_COLOUR: Rgb<u8> = Rgb([0, 255, 0]);
+/// White pixels between the panels.
+pub const GAP: u32 = 8;
+
+/// The models an inspection runs.
+pub struct Detectors {
+    pub faces: FaceDetector,
+    /// Name (for the report) and detector, for raw images.
+    pub people: (String, PersonDetector),
+    /// The preset's own fine-tuned detector for the protected panel, if asked for.
+    pub own: Option<(String, PersonDetector)>,
+    /// People below this score (in [0, 1]) are not drawn or listed.
+    pub confidence: f32,
+}
+
+/// What one panel shows.
+struct Panel {
+    name: &'static str,
+    image: RgbImage,
+    faces: Vec<Face>,
+    people: Vec<Detection>,
+    detector: String,
+}
+
+/// Line thickness of the drawn boxes for an image of this size (pixels, at least 1).
+pub fn thickness(w: u32, h: u32) -> u32 {
+    (w.min(h) / 160).max(2)
+}
+
+/// Draws `bbox` (`[x0, y0, x1, y1]`, image pixels) as a hollow rectangle `t` pixels thick,
+/// growing inwards, inside a black ring one pixel wide (visible on any protected colour);
+/// boxes reaching outside the image are clipped.
+fn draw_box(img: &mut RgbImage, bbox: [f32; 4], t: u32, colour: Rgb<u8>) {
+    use imageproc::rect::Rect;
+    let [x0, y0, x1, y1] = bbox.map(|v| if v.is_finite() { v.clamp(-1e6, 1e6).round() as i32 } else { 0 });
+    if x1 - x0 > 0 && y1 - y0 > 0 {
+        let ring = Rect::at(x0 - 1, y0 - 1).of_size((x1 - x0 + 2) as u32, (y1 - y0 + 2) as u32);
+        imageproc::drawing::draw_hollow_rect_mut(img, ring, Rgb([0, 0, 0]));
+    }
+    for i in 0..t as i32 {
+        let (w, h) = (x1 - x0 - 2 * i, y1 - y0 - 2 * i);
+        if w <= 0 || h <= 0 {
+            break;
+        }
+        imageproc::drawing::draw_hollow_rect_mut(img, Rect::at(x0 + i, y0 + i).of_size(w as u32, h as u32), colour);
+    }
+}
+
+/// The panel with its detections drawn on.
+fn drawn(p: &Panel) -> RgbImage {
+    let mut img = p.image.clone();
+    let t = thickness(img.width(), img.height());
+    for d in &p.people {
+        draw_box(&mut img, d.bbox, t, PERSON_COLOUR);
+    }
+    for f in &p.faces {
+        draw_box(&mut img, f.bbox, t, FACE_COLOUR);
+        for l in f.landmarks {
+            if l.iter().all(|v| v.is_finite()) {
+                let at = (l[0].round() as i32, l[1].round() as i32);
+                imageproc::drawing::draw_filled_circle_mut(&mut img, at, t as i32 + 1, FACE_COLOUR);
+            }
+        }
+    }
+    img
+}
+
+/// The panels side by side, [`GAP`] white pixels apart.
+fn side_by_side(panels: &[RgbImage]) -> RgbImage {
+    let h = panels.iter().map(|p| p.height()).max().unwrap_or(0);
+    let w = panels.iter().map(|p| p.width()).sum::<u32>() + GAP * panels.len().saturating_sub(1) as u32;
+    let mut out = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
+    let mut x = 0i64;
+    for p in panels {
+        image::imageops::replace(&mut out, p, x, 0);
+        x += (p.width() + GAP) as i64;
+    }
+    out
+}
+
+fn round2(v: f32) -> f64 {
+    (v as f64 * 100.0).round() / 100.0
+}
+
+fn panel_json(p: &Panel) -> Value {
+    json!({
+        "panel": p.name,
+        "person_detector": p.detector,
+        "faces": p.faces.iter().map(|f| json!({
+            "bbox": f.bbox.map(round2), "score": round2(f.score),
+            "landmarks": f.landmarks.map(|l| l.map(round2)),
+        })).collect::<Vec<_>>(),
+        "people": p.people.iter().map(|d| json!({"bbox": d.bbox.map(round2), "score": round2(d.score)})).collect::<Vec<_>>(),
+    })
+}
+
+/// What a URL path segment keeps as is: RFC 3986's unreserved characters.
+const SEGMENT: &percent_encoding::AsciiSet =
+    &percent_encoding::NON_ALPHANUMERIC.remove(b'-').remove(b'.').remove(b'_').remove(b'~');
+
+/// `path` relative to `root` as a URL path (each segment percent-encoded).
+fn href(path: &Path, root: &Path) -> String {
+    let rel = path.strip_prefix(root).unwrap_or(path);
+    rel.components()
+        .map(|c| percent_encoding::utf8_percent_encode(&c.as_os_str().to_string_lossy(), SEGMENT).to_string())
+        .collect::<Vec<_>>()
+        .join("/")
+}
+
+/// `text` safe inside HTML text and double-quoted attributes.
+pub fn html_escape(text: &str) -> String {
+    let mut s = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => s.push_str("&amp;"),
+            '<' => s.push_str("&lt;"),
+            '>' => s.push_str("&gt;"),
+            '"' => s.push_str("&quot;"),
+            '\'' => s.push_str("&#39;"),
+            c if c.is_control() => s.push('\u{fffd}'),
+            c => s.push(c),
+        }
+    }
+    s
+}
+
+/// Inspects one image: detections on raw and protected, the picture and its JSON written.
+fn one(
+    input: &Path,
+    picture: &Path,
+    fast: &Exact8,
+    det: &Detectors,
+    budget: &Budget,
+    warn: &dyn Fn(&str),
+) -> Result<Value> {
+    let raw = {
+        let (img, _lease) = simulate::decode(input, budget, warn)?;
+        img.into_rgb8()
+    };
+    let mut protected = RgbImage::new(raw.width(), raw.height());
+    fast.run(raw.as_raw(), &mut protected);
+    let mut panels = Vec::with_capacity(2);
+    for (name, image) in [("raw", raw), ("protected", protected)] {
+        let (pname, pdet) = match (&det.own, name) {
+            (Some(own), "protected") => own,
+            _ => &det.people,
+        };
+        let faces = det.faces.detect(&image)?;
+        let mut people = pdet.detect(&image)?;
+        people.retain(|d| d.score >= det.confidence);
+        panels.push(Panel { name, image, faces, people, detector: pname.clone() });
+    }
+    let picture_img = side_by_side(&panels.iter().map(drawn).collect::<Vec<_>>());
+    let mut png = Vec::new();
+    picture_img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)?;
+    let json_path = picture.with_extension("json");
+    let (w, h) = (panels[0].image.width(), panels[0].image.height());
+    let v = json!({
+        "input": input.display().to_string(),
+        "width": w,
+        "height": h,
+        "picture": picture.file_name().map(|n| n.to_string_lossy().into_owned()),
+        "panels": panels.iter().map(panel_json).collect::<Vec<_>>(),
+    });
+    write_atomic(picture, &png, true)?;
+    write_atomic(&json_path, (serde_json::to_string_pretty(&v)? + "\n").as_bytes(), true)?;
+    Ok(v)
+}
+
+/// The index page: a row per image with its picture, counts and JSON link.
+fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, String)], out: &Path) -> String {
+    let mut s = String::from(
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>campro inspect</title>\n\
+         <style>body{font-family:sans-serif;margin:1em}img{max-width:100%;height:auto}\
+         td,th{padding:.3em .6em;vertical-align:top;text-align:left}\
+         .face{color:#c0c}.person{color:#080}</style></head><body>\n",
+    );
+    s += &format!(
+        "<h1>campro inspect</h1>\n<p>Parameters: {}. Left: raw; right: protected. \
+         <span class=\"face\">Faces</span> (YuNet, with landmarks) and <span class=\"person\">people</span> \
+         (the person detector) found on each.</p>\n<table>\n\
+         <tr><th>image</th><th>faces raw &rarr; protected</th><th>people raw &rarr; protected</th><th>detections</th></tr>\n",
+        html_escape(params)
+    );
+    for (picture, v) in items {
+        let count = |panel: usize, what: &str| v["panels"][panel][what].as_array().map_or(0, |a| a.len());
+        let link = href(picture, out);
+        let json_link = href(&picture.with_extension("json"), out);
+        let name = html_escape(&href_name(picture, out));
+        s += &format!(
+            "<tr><td><a href=\"{link}\"><img src=\"{link}\" alt=\"{name}\" width=\"640\"></a><br>{name}</td>\
+             <td class=\"face\">{} &rarr; {}</td><td class=\"person\">{} &rarr; {}</td>\
+             <td><a href=\"{json_link}\">JSON</a></td></tr>\n",
+            count(0, "faces"),
+            count(1, "faces"),
+            count(0, "people"),
+            count(1, "people"),
+        );
+    }
+    s += "</table>\n";
+    if !failed.is_empty() {
+        s += "<h2>Failed</h2>\n<ul>\n";
+        for (i, e) in failed {
+            s += &format!("<li>{}: {}</li>\n", html_escape(&i.display().to_string()), html_escape(e));
+        }
+        s += "</ul>\n";
+    }
+    s + "</body></html>\n"
+}
+
+/// The picture's path under `out`, for display.
+fn href_name(picture: &Path, out: &Path) -> String {
+    picture.strip_prefix(out).unwrap_or(picture).display().to_string()
+}
+
+/// Runs the inspection of every image under `inputs` into `out` (checked by the caller:
+/// new, empty or forced); prints a line per image, or (`json_out`) the index as one JSON
+/// object.
+pub fn inspect(
+    params_file: &Path,
+    p: &Params,
+    inputs: &[PathBuf],
+    out: &Path,
+    det: &Detectors,
+    json_out: bool,
+) -> Result<()> {
+    let found = simulate::collect_inputs(inputs, out)?;
+    for (i, why) in &found.skipped {
+        eprintln!("warning: skipping {}: {why}", escape(&i.display().to_string()));
+    }
+    let (images, others): (Vec<_>, Vec<_>) = found.jobs.into_iter().partition(|(i, _)| simulate::is_image(i));
+    for (i, _) in &others {
+        eprintln!("warning: skipping {} (not a PNG, JPEG or TIFF file)", escape(&i.display().to_string()));
+    }
+    if images.is_empty() {
+        bail!("no PNG, JPEG or TIFF file among the inputs: nothing to inspect");
+    }
+    let fast = Exact8::new(p);
+    let budget = Budget::new(simulate::DECODE_BUDGET);
+    let bar = indicatif::ProgressBar::new(images.len() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("inspect {bar:40} {pos}/{len} {elapsed_precise} eta {eta}")
+            .expect("valid template"),
+    );
+    let results: Vec<Result<Value>> = images
+        .par_iter()
+        .map(|(i, o)| {
+            let warn = |w: &str| bar.suspend(|| eprintln!("warning: {}: {w}", escape(&i.display().to_string())));
+            let r = one(i, o, &fast, det, &budget, &warn);
+            bar.inc(1);
+            r
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut done = Vec::new();
+    let mut failed = Vec::new();
+    for ((i, o), r) in images.into_iter().zip(results) {
+        match r {
+            Ok(v) => done.push((o, v)),
+            Err(e) => {
+                let line = crate::one_line(&e);
+                eprintln!("error: {}: {line}", escape(&i.display().to_string()));
+                failed.push((i, line));
+            }
+        }
+    }
+    let params_name = format!("{} ({})", params_file.display(), p.name);
+    let index = json!({
+        "params": params_name,
+        "face_detector": "yunet",
+        "person_detector": det.people.0,
+        "own_detector": det.own.as_ref().map(|o| o.0.clone()),
+        "confidence": det.confidence,
+        "images": done.iter().map(|(o, v)| json!({
+            "input": v["input"], "picture": href(o, out), "json": href(&o.with_extension("json"), out),
+            "faces": [v["panels"][0]["faces"].as_array().map_or(0, |a| a.len()), v["panels"][1]["faces"].as_array().map_or(0, |a| a.len())],
+            "people": [v["panels"][0]["people"].as_array().map_or(0, |a| a.len()), v["panels"][1]["people"].as_array().map_or(0, |a| a.len())],
+        })).collect::<Vec<_>>(),
+        "failed": failed.iter().map(|(i, e)| json!({"input": i.display().to_string(), "error": e})).collect::<Vec<_>>(),
+    });
+    write_atomic(&out.join("index.html"), index_html(&params_name, &done, &failed, out).as_bytes(), true)?;
+    write_atomic(&out.join("index.json"), (serde_json::to_string_pretty(&index)? + "\n").as_bytes(), true)?;
+    if json_out {
+        say!("{}", serde_json::to_string(&index)?);
+    } else {
+        for (o, v) in &done {
+            let n = |panel: usize, what: &str| v["panels"][panel][what].as_array().map_or(0, |a| a.len());
+            say!(
+                "{}: faces {} raw, {} protected; people {} raw, {} protected",
+                escape(&href_name(o, out)),
+                n(0, "faces"),
+                n(1, "faces"),
+                n(0, "people"),
+                n(1, "people")
+            );
+        }
+        say!("index: {}", out.join("index.html").display());
+    }
+    if !failed.is_empty() {
+        bail!("{} of {} image(s) failed", failed.len(), failed.len() + done.len());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn boxes_are_drawn_inwards_and_clipped() {
+        let mut img = RgbImage::from_pixel(20, 10, Rgb([9, 9, 9]));
+        draw_box(&mut img, [2.0, 3.0, 8.0, 9.0], 2, PERSON_COLOUR);
+        // Outer ring: x 2..=7, y 3..=8; second ring x 3..=6, y 4..=7; inside untouched.
+        assert_eq!(img[(2, 3)], PERSON_COLOUR);
+        assert_eq!(img[(7, 8)], PERSON_COLOUR);
+        assert_eq!(img[(3, 4)], PERSON_COLOUR);
+        assert_eq!(img[(4, 5)], Rgb([9, 9, 9]));
+        // The black ring just outside: x 1 and 8, y 2 and 9; beyond it untouched.
+        assert_eq!(img[(8, 3)], Rgb([0, 0, 0]));
+        assert_eq!(img[(1, 3)], Rgb([0, 0, 0]));
+        assert_eq!(img[(5, 9)], Rgb([0, 0, 0]));
+        assert_eq!(img[(9, 3)], Rgb([9, 9, 9]));
+        assert_eq!(img[(0, 3)], Rgb([9, 9, 9]));
+        // Partly outside and non-finite: no panic, the visible part drawn.
+        draw_box(&mut img, [-5.0, -5.0, 25.0, 5.0], 1, FACE_COLOUR);
+        assert_eq!(img[(10, 4)], FACE_COLOUR);
+        draw_box(&mut img, [f32::NAN, 0.0, f32::INFINITY, 3.0], 3, FACE_COLOUR);
+    }
+
+    #[test]
+    fn panels_sit_side_by_side() {
+        let a = RgbImage::from_pixel(3, 2, Rgb([1, 2, 3]));
+        let b = RgbImage::from_pixel(4, 2, Rgb([4, 5, 6]));
+        let s = side_by_side(&[a, b]);
+        assert_eq!(s.dimensions(), (3 + GAP + 4, 2));
+        assert_eq!(s[(2, 1)], Rgb([1, 2, 3]));
+        assert_eq!(s[(3, 0)], Rgb([255, 255, 255]));
+        assert_eq!(s[(3 + GAP, 0)], Rgb([4, 5, 6]));
+    }
+
+    #[test]
+    fn links_and_text_are_escaped() {
+        let out = Path::new("/o");
+        assert_eq!(href(Path::new("/o/a b/x\"<y>.png"), out), "a%20b/x%22%3Cy%3E.png");
+        assert_eq!(html_escape("<a href='x'>&\"\u{1b}"), "&lt;a href=&#39;x&#39;&gt;&amp;&quot;\u{fffd}");
+    }
+}

@@ -1,0 +1,153 @@
+//! `campro inspect` on shared images: the index page's links open, each picture is raw |
+//! protected with the detections drawn only where the JSON says, and the protected panel is
+//! the exact pipeline's output.
+
+mod common;
+use common::{bundled, campro, fails_with};
+use image::RgbImage;
+use serde_json::Value;
+use std::path::Path;
+
+/// Every `href="..."` and `src="..."` value of an HTML page.
+fn links(html: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    for attr in ["href=\"", "src=\""] {
+        let mut rest = html;
+        while let Some(i) = rest.find(attr) {
+            rest = &rest[i + attr.len()..];
+            let end = rest.find('"').expect("closed attribute");
+            out.push(rest[..end].to_string());
+            rest = &rest[end..];
+        }
+    }
+    out
+}
+
+/// Whether (x, y) is within `margin` pixels of anything drawn for this panel's detections.
+fn near_drawing(panel: &Value, x: f32, y: f32, margin: f32) -> bool {
+    let near_box = |b: &Value| {
+        let b: Vec<f32> = b.as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+        let inside_outer = x >= b[0] - margin && x <= b[2] + margin && y >= b[1] - margin && y <= b[3] + margin;
+        let inside_inner = x > b[0] + margin && x < b[2] - margin && y > b[1] + margin && y < b[3] - margin;
+        inside_outer && !inside_inner
+    };
+    let faces = panel["faces"].as_array().unwrap();
+    let people = panel["people"].as_array().unwrap();
+    faces.iter().any(|f| {
+        near_box(&f["bbox"])
+            || f["landmarks"].as_array().unwrap().iter().any(|l| {
+                let (lx, ly) = (l[0].as_f64().unwrap() as f32, l[1].as_f64().unwrap() as f32);
+                (lx - x).abs() <= margin && (ly - y).abs() <= margin
+            })
+    }) || people.iter().any(|d| near_box(&d["bbox"]))
+}
+
+#[test]
+fn inspect_writes_pictures_json_and_an_index_whose_links_open() {
+    let Some(shared) = campro_testkit::shared_root(&[
+        "models/yunet_s_640_640.onnx",
+        "models/yolox_nano.onnx",
+        "data/lfw/images_deepfunneled/Aaron_Eckhart/Aaron_Eckhart_0001.jpg",
+        "data/coco-person/images/000000000785.jpg",
+    ]) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("inspect out");
+    let face = shared.join("data/lfw/images_deepfunneled/Aaron_Eckhart/Aaron_Eckhart_0001.jpg");
+    let street = shared.join("data/coco-person/images/000000000785.jpg");
+    let params = bundled("campro-omega-0.5.json");
+    let run = campro()
+        .args(["inspect".as_ref(), params.as_os_str(), face.as_os_str(), street.as_os_str(), "-o".as_ref()])
+        .arg(&out)
+        .arg("--shared")
+        .arg(&shared)
+        .args(["--format", "json"])
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let printed: Value = serde_json::from_slice(&run.stdout).unwrap();
+    assert_eq!(printed["images"].as_array().unwrap().len(), 2);
+    assert_eq!(printed, serde_json::from_slice::<Value>(&std::fs::read(out.join("index.json")).unwrap()).unwrap());
+
+    // Every link of the page opens a file inside the output folder: 2 pictures (href and
+    // src) and 2 JSONs.
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    let links = links(&html);
+    assert_eq!(links.len(), 6, "{links:?}");
+    let p = params.to_str().unwrap();
+    let fast =
+        campro::pipeline::fast::Exact8::new(Box::leak(Box::new(campro::Params::from_file(Path::new(p)).unwrap())));
+    for link in &links {
+        let rel = percent_encoding::percent_decode_str(link).decode_utf8().unwrap();
+        let file = out.join(rel.as_ref());
+        assert!(file.is_file() && file.starts_with(&out), "{link} does not open");
+        if !link.ends_with(".png") {
+            continue;
+        }
+        let json: Value = serde_json::from_slice(&std::fs::read(file.with_extension("json")).unwrap()).unwrap();
+        let input = Path::new(json["input"].as_str().unwrap());
+        let raw = image::open(input).unwrap().to_rgb8();
+        let (w, h) = raw.dimensions();
+        let picture = image::open(&file).unwrap().to_rgb8();
+        assert_eq!(picture.dimensions(), (2 * w + 8, h));
+        let mut protected = RgbImage::new(w, h);
+        fast.run(raw.as_raw(), &mut protected);
+        let panels = json["panels"].as_array().unwrap();
+        assert_eq!(panels[0]["panel"], "raw");
+        assert_eq!(panels[1]["panel"], "protected");
+        // Away from the drawn boxes and landmarks each panel is its image, pixel for pixel;
+        // on them it is not (something was drawn).
+        let (mut checked, mut drawn) = (0, 0);
+        for y in 0..h {
+            for x in 0..w {
+                for (k, img) in [&raw, &protected].into_iter().enumerate() {
+                    let shown = picture[(x + k as u32 * (w + 8), y)];
+                    if !near_drawing(&panels[k], x as f32, y as f32, 8.0) {
+                        assert_eq!(shown, img[(x, y)], "{link} panel {k} at ({x}, {y})");
+                        checked += 1;
+                    } else if shown != img[(x, y)] {
+                        drawn += 1;
+                    }
+                }
+            }
+        }
+        assert!(checked > (w * h) as usize, "{checked}");
+        let found: usize =
+            panels.iter().map(|p| p["faces"].as_array().unwrap().len() + p["people"].as_array().unwrap().len()).sum();
+        assert_eq!(found > 0, drawn > 0, "{link}: {found} detections, {drawn} drawn pixels");
+    }
+    // The LFW photo's raw panel shows the face YuNet finds, near the centre of the 250x250 image.
+    let fj: Value = serde_json::from_slice(&std::fs::read(out.join("Aaron_Eckhart_0001.json")).unwrap()).unwrap();
+    let b = &fj["panels"][0]["faces"][0]["bbox"];
+    let (cx, cy) = (
+        (b[0].as_f64().unwrap() + b[2].as_f64().unwrap()) / 2.0,
+        (b[1].as_f64().unwrap() + b[3].as_f64().unwrap()) / 2.0,
+    );
+    assert!((cx - 125.0).abs() < 25.0 && (cy - 125.0).abs() < 30.0, "face centre ({cx}, {cy})");
+
+    // A second run into the same folder is refused without --force.
+    fails_with(
+        campro()
+            .args(["inspect".as_ref(), params.as_os_str(), face.as_os_str(), "-o".as_ref()])
+            .arg(&out)
+            .arg("--shared")
+            .arg(&shared),
+        "--output",
+    );
+}
+
+#[test]
+fn inspect_names_a_missing_model_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = dir.path().join("a.png");
+    RgbImage::new(4, 4).save(&img).unwrap();
+    fails_with(
+        campro()
+            .args(["inspect".as_ref(), bundled("campro-omega-0.5.json").as_os_str(), img.as_os_str(), "-o".as_ref()])
+            .arg(dir.path().join("out"))
+            .arg("--models")
+            .arg(dir.path().join("no-models")),
+        "no-models",
+    );
+}

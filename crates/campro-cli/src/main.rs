@@ -171,8 +171,12 @@ enum Cmd {
         #[arg(long, value_enum, default_value_t = Report::Text)]
         format: Report,
     },
-    /// Print the run-time-versus-error table (image paths, Camera2 updates, skips) as Markdown.
+    /// Print the run-time-versus-error table (image paths, Camera2 updates, skips) as Markdown;
+    /// `bench train` times the optimiser's steps.
+    #[command(args_conflicts_with_subcommands = true)]
     Bench {
+        #[command(subcommand)]
+        what: Option<BenchWhat>,
         /// Parameters to use instead of a strong, paper-like set.
         #[arg(long)]
         params: Option<PathBuf>,
@@ -261,6 +265,14 @@ enum Cmd {
         #[arg(long, value_enum, default_value_t = Report::Text)]
         format: Report,
     },
+}
+
+#[derive(Subcommand)]
+enum BenchWhat {
+    /// Medians of the optimiser's training steps: MobileFaceNet 8x3x112x96 and YOLOX-Nano
+    /// 1x3x416x416 (forward, sum, backward; the PyTorch anchor's shapes) and the attacker,
+    /// privacy and detector steps at the configuration's shapes.
+    Train(train::BenchTrainArgs),
 }
 
 #[derive(Args, Clone)]
@@ -646,7 +658,8 @@ fn run(cli: Cli) -> Result<()> {
             inspect::inspect(&params, &p, &inputs, &output, &det, matches!(format, Report::Json))
         }
         Cmd::Demo { output, params, force, format } => demo(&output, params.as_deref(), force, format),
-        Cmd::Bench { params, quick, format } => {
+        Cmd::Bench { what: Some(BenchWhat::Train(a)), .. } => train::bench_train(&a),
+        Cmd::Bench { what: None, params, quick, format } => {
             let p = match params {
                 Some(path) => load_params(&path)?,
                 None => bench::default_params(),

@@ -188,3 +188,128 @@ pub fn finetune_detector(
     );
     Ok(())
 }
+
+/// `campro bench train`.
+#[derive(clap::Args)]
+pub struct BenchTrainArgs {
+    /// Threads for every step (default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    threads: Option<u32>,
+    /// Timed runs per step (the median is reported, after one warm-up).
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    runs: u32,
+    /// The configuration whose face batch, person batch and size the players' steps use
+    /// (default: the paper's).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Only these steps (repeatable; default: all).
+    #[arg(long = "only", value_enum)]
+    only: Vec<StepArg>,
+    /// The shared data folder (default: $CAMPRO_SHARED or ../shared).
+    #[arg(long)]
+    shared: Option<PathBuf>,
+    /// Also run PyTorch's anchor (SHARED/anchors/torch_step.py) with this Python, with the
+    /// same threads, right after, and report the ratios.
+    #[arg(long, value_name = "PYTHON")]
+    anchor: Option<PathBuf>,
+    /// A table, or one JSON object.
+    #[arg(long, value_enum, default_value_t = crate::Report::Text)]
+    format: crate::Report,
+}
+
+/// `--only`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum StepArg {
+    Mobilefacenet,
+    Yolox,
+    Attacker,
+    Privacy,
+    Detector,
+}
+
+pub fn bench_train(a: &BenchTrainArgs) -> Result<()> {
+    use campro_train::bench::Step;
+    let threads = a.threads.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |t| t as usize);
+    // candle's matrix products read RAYON_NUM_THREADS on every call; rayon reads it once.
+    std::env::set_var("RAYON_NUM_THREADS", threads.to_string());
+    let cfg = match &a.config {
+        Some(p) => campro_train::config::Config::load(p)?,
+        None => campro_train::config::Config::default(),
+    };
+    let steps: Vec<Step> = if a.only.is_empty() {
+        Step::ALL.to_vec()
+    } else {
+        a.only
+            .iter()
+            .map(|s| match s {
+                StepArg::Mobilefacenet => Step::MobileFaceNet,
+                StepArg::Yolox => Step::Yolox,
+                StepArg::Attacker => Step::Attacker,
+                StepArg::Privacy => Step::Privacy,
+                StepArg::Detector => Step::Detector,
+            })
+            .collect()
+    };
+    let shared = eval::shared_dir(a.shared.as_deref());
+    let models = shared.join("models");
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let times = pool.install(|| campro_train::bench::run(&models, &cfg, &steps, a.runs as usize))?;
+    let mut json = serde_json::Map::new();
+    json.insert("threads".into(), threads.into());
+    json.insert("face_batch".into(), cfg.data.batch.into());
+    json.insert("person_batch".into(), cfg.detector.batch.into());
+    json.insert("person_size".into(), cfg.detector.size.into());
+    for (s, ms) in &times {
+        json.insert(s.key().into(), (*ms).into());
+    }
+    let torch = match &a.anchor {
+        Some(py) => Some(run_anchor(py, &shared, threads)?),
+        None => None,
+    };
+    if let Some(t) = &torch {
+        json.insert("torch".into(), t.clone());
+        for (s, ms) in &times {
+            if let Some(base) = t.get(s.key()).and_then(|v| v.as_f64()) {
+                json.insert(s.key().replace("_ms", "_ratio"), (ms / base).into());
+            }
+        }
+    }
+    match a.format {
+        crate::Report::Json => crate::say!("{}", serde_json::Value::Object(json)),
+        crate::Report::Text => {
+            crate::say!("| step ({threads} threads) | campro-train | PyTorch | ratio |");
+            crate::say!("|---|---|---|---|");
+            for (s, ms) in &times {
+                let base = torch.as_ref().and_then(|t| t.get(s.key())).and_then(|v| v.as_f64());
+                match base {
+                    Some(b) => crate::say!("| {} | {ms:.0} ms | {b:.0} ms | {:.2}x |", s.key(), ms / b),
+                    None => crate::say!("| {} | {ms:.0} ms | - | - |", s.key()),
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// PyTorch's anchor as JSON: `PYTHON SHARED/anchors/torch_step.py MODELS THREADS --json`.
+fn run_anchor(python: &Path, shared: &Path, threads: usize) -> Result<serde_json::Value> {
+    let script = shared.join("anchors/torch_step.py");
+    if !script.is_file() {
+        bail!("--anchor: {} not found", script.display());
+    }
+    let out = std::process::Command::new(python)
+        .arg(&script)
+        .arg(shared.join("models"))
+        .arg(threads.to_string())
+        .arg("--json")
+        .stdin(std::process::Stdio::null())
+        .output()
+        .map_err(|e| anyhow::anyhow!("--anchor {}: {e}", python.display()))?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        bail!("--anchor: the anchor failed: {}", err.lines().last().unwrap_or("no message"));
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let last = text.lines().last().unwrap_or("");
+    serde_json::from_str(last).map_err(|e| anyhow::anyhow!("--anchor: the anchor printed no JSON ({e})"))
+}

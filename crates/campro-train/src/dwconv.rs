@@ -48,6 +48,15 @@ impl Geo {
     fn src(&self, o: usize, k: usize, n: usize) -> Option<usize> {
         (o * self.stride + k).checked_sub(self.pad).filter(|&i| i < n)
     }
+
+    /// The outputs `lo..hi` (of `on`) whose tap `k` falls inside an input axis of length `n`:
+    /// `o·stride + k − pad` in `0..n`. Looping over this range needs no bounds test per pixel.
+    #[inline]
+    fn valid(&self, k: usize, n: usize, on: usize) -> (usize, usize) {
+        let lo = self.pad.saturating_sub(k).div_ceil(self.stride);
+        let hi = if n + self.pad > k { ((n - 1 + self.pad - k) / self.stride + 1).min(on) } else { 0 };
+        (lo, hi.max(lo))
+    }
 }
 
 fn slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
@@ -82,9 +91,18 @@ impl CustomOp2 for Forward {
                     let orow = &mut o[oy * g.ow..(oy + 1) * g.ow];
                     for kx in 0..g.kw {
                         let wv = kp[ky * g.kw + kx];
-                        for (ox, ov) in orow.iter_mut().enumerate() {
-                            if let Some(ix) = g.src(ox, kx, g.w) {
-                                *ov += wv * row[ix];
+                        let (lo, hi) = g.valid(kx, g.w, g.ow);
+                        if lo == hi {
+                            continue;
+                        }
+                        let first = lo * g.stride + kx - g.pad;
+                        if g.stride == 1 {
+                            for (ov, &xv) in orow[lo..hi].iter_mut().zip(&row[first..first + hi - lo]) {
+                                *ov += wv * xv;
+                            }
+                        } else {
+                            for (ov, &xv) in orow[lo..hi].iter_mut().zip(row[first..].iter().step_by(g.stride)) {
+                                *ov += wv * xv;
                             }
                         }
                     }
@@ -95,14 +113,26 @@ impl CustomOp2 for Forward {
     }
 
     fn bwd(&self, x: &Tensor, w: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
+        // Only the gradients candle tracks: a frozen network's weights need none.
         let grad = grad.contiguous()?;
         let gx =
-            grad.apply_op2_no_bwd(w, &GradInput { stride: self.stride, pad: self.pad, h: x.dim(2)?, w: x.dim(3)? })?;
-        let gw = x.apply_op2_no_bwd(
-            &grad,
-            &GradWeight { stride: self.stride, pad: self.pad, kh: w.dim(2)?, kw: w.dim(3)? },
-        )?;
-        Ok((Some(gx), Some(gw)))
+            if x.track_op() {
+                Some(grad.apply_op2_no_bwd(
+                    w,
+                    &GradInput { stride: self.stride, pad: self.pad, h: x.dim(2)?, w: x.dim(3)? },
+                )?)
+            } else {
+                None
+            };
+        let gw = if w.track_op() {
+            Some(x.apply_op2_no_bwd(
+                &grad,
+                &GradWeight { stride: self.stride, pad: self.pad, kh: w.dim(2)?, kw: w.dim(3)? },
+            )?)
+        } else {
+            None
+        };
+        Ok((gx, gw))
     }
 }
 
@@ -134,11 +164,22 @@ impl CustomOp2 for GradInput {
             for oy in 0..g.oh {
                 for ky in 0..g.kh {
                     let Some(iy) = g.src(oy, ky, g.h) else { continue };
+                    let grow = &gop[oy * g.ow..(oy + 1) * g.ow];
+                    let xrow = &mut gxp[iy * g.w..(iy + 1) * g.w];
                     for kx in 0..g.kw {
                         let wv = kp[ky * g.kw + kx];
-                        for ox in 0..g.ow {
-                            if let Some(ix) = g.src(ox, kx, g.w) {
-                                gxp[iy * g.w + ix] += wv * gop[oy * g.ow + ox];
+                        let (lo, hi) = g.valid(kx, g.w, g.ow);
+                        if lo == hi {
+                            continue;
+                        }
+                        let first = lo * g.stride + kx - g.pad;
+                        if g.stride == 1 {
+                            for (xv, &gv) in xrow[first..first + hi - lo].iter_mut().zip(&grow[lo..hi]) {
+                                *xv += wv * gv;
+                            }
+                        } else {
+                            for (xv, &gv) in xrow[first..].iter_mut().step_by(g.stride).zip(&grow[lo..hi]) {
+                                *xv += wv * gv;
                             }
                         }
                     }
@@ -180,11 +221,22 @@ impl CustomOp2 for GradWeight {
                 for ky in 0..g.kh {
                     for kx in 0..g.kw {
                         let mut s = 0f32;
-                        for oy in 0..g.oh {
-                            let Some(iy) = g.src(oy, ky, g.h) else { continue };
-                            for ox in 0..g.ow {
-                                if let Some(ix) = g.src(ox, kx, g.w) {
-                                    s += xp[iy * g.w + ix] * gop[oy * g.ow + ox];
+                        let (lo, hi) = g.valid(kx, g.w, g.ow);
+                        if lo < hi {
+                            let first = lo * g.stride + kx - g.pad;
+                            for oy in 0..g.oh {
+                                let Some(iy) = g.src(oy, ky, g.h) else { continue };
+                                let (xrow, grow) =
+                                    (&xp[iy * g.w..(iy + 1) * g.w], &gop[oy * g.ow + lo..oy * g.ow + hi]);
+                                if g.stride == 1 {
+                                    s += xrow[first..first + hi - lo].iter().zip(grow).map(|(a, b)| a * b).sum::<f32>();
+                                } else {
+                                    s += xrow[first..]
+                                        .iter()
+                                        .step_by(g.stride)
+                                        .zip(grow)
+                                        .map(|(a, b)| a * b)
+                                        .sum::<f32>();
                                 }
                             }
                         }

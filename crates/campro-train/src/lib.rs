@@ -7,9 +7,11 @@
 //!   ([`torch_legacy`]);
 
 pub mod batchnorm;
+pub mod bench;
 pub mod camera;
 pub mod checkpoint;
 pub mod config;
+pub mod conv;
 pub mod detection;
 pub mod dwconv;
 pub mod error;

@@ -3,10 +3,12 @@
 //! batch-norm statistics come from its PyTorch checkpoint, names unchanged, into a
 //! [`VarMap`] so the attacker can be trained.
 //!
-//! Convolutions are written with matrix products and shifted multiply-adds ([`dense`],
-//! [`depthwise`]): candle runs a grouped convolution as one convolution per group (hundreds
-//! of tiny kernels per layer here) and its CPU convolution backward is a naive loop.
+//! Convolutions and PReLU are campro's own ops with their own backward
+//! ([`crate::conv::conv2d`], [`depthwise`], [`crate::conv::prelu`]): candle runs a grouped
+//! convolution as one convolution per group (hundreds of tiny kernels per layer here), its
+//! CPU convolution backward is a naive loop, and PReLU from generic ops is five passes.
 
+use crate::conv::{conv2d, prelu};
 pub use crate::dwconv::depthwise;
 use crate::torch_legacy::{read_state_dict, TorchError};
 use candle_core::{DType, Device, Result, Tensor, Var, D};
@@ -21,55 +23,6 @@ const SETTINGS: [(usize, usize, usize, usize); 5] =
 pub const INPUT: (usize, usize) = (112, 96);
 /// Embedding size.
 pub const EMBEDDING: usize = 128;
-
-/// Dense convolution `x` (B, Cin, H, W) with `w` (Cout, Cin, kh, kw), zero padding `pad`,
-/// written as one matrix product per kernel tap (a 1x1 convolution is one product). candle's
-/// CPU convolution backward runs a naive transposed convolution; matrix products keep both
-/// directions on its GEMM.
-pub fn dense(x: &Tensor, w: &Tensor, stride: usize, pad: usize) -> Result<Tensor> {
-    let (b, cin, h, wd) = x.dims4()?;
-    let (cout, _, kh, kw) = w.dims4()?;
-    let xp = if pad > 0 { x.pad_with_zeros(2, pad, pad)?.pad_with_zeros(3, pad, pad)? } else { x.clone() };
-    let (oh, ow) = (h + 2 * pad - kh + 1, wd + 2 * pad - kw + 1);
-    let mut acc: Option<Tensor> = None;
-    for ky in 0..kh {
-        for kx in 0..kw {
-            let tap = w.narrow(2, ky, 1)?.narrow(3, kx, 1)?.reshape((cout, cin))?;
-            let win =
-                if kh == 1 && kw == 1 { xp.clone() } else { xp.narrow(2, ky, oh)?.narrow(3, kx, ow)?.contiguous()? };
-            let term = tap.broadcast_matmul(&win.reshape((b, cin, oh * ow))?)?;
-            acc = Some(match acc {
-                None => term,
-                Some(a) => (a + term)?,
-            });
-        }
-    }
-    let full = acc.expect("kernel is at least 1x1").reshape((b, cout, oh, ow))?;
-    if stride == 1 {
-        return Ok(full);
-    }
-    subsample(&subsample(&full, 2, stride)?, 3, stride)
-}
-
-/// Every `s`-th element along `dim`, from 0.
-pub(crate) fn subsample(x: &Tensor, dim: usize, s: usize) -> Result<Tensor> {
-    if s == 1 {
-        return Ok(x.clone());
-    }
-    let n = x.dim(dim)?;
-    let m = n.div_ceil(s);
-    let x = if m * s > n { x.pad_with_zeros(dim, 0, m * s - n)? } else { x.clone() };
-    let mut dims = x.dims().to_vec();
-    dims[dim] = m;
-    dims.insert(dim + 1, s);
-    x.reshape(dims)?.narrow(dim + 1, 0, 1)?.squeeze(dim + 1)
-}
-
-/// PReLU with one slope per channel (`a` of shape (C,)).
-fn prelu(x: &Tensor, a: &Tensor) -> Result<Tensor> {
-    let a = a.reshape((1, a.dim(0)?, 1, 1))?;
-    x.relu()? - x.neg()?.relu()?.broadcast_mul(&a)?
-}
 
 /// Batch norm over (B, C, H, W), PyTorch's semantics (eps 1e-5, momentum 0.1, running
 /// variance unbiased). Training normalises by the batch statistics and updates the running
@@ -147,7 +100,7 @@ impl ConvBlock {
         let y = if self.depthwise {
             depthwise(x, &self.w, self.stride, self.pad)?
         } else {
-            dense(x, &self.w, self.stride, self.pad)?
+            conv2d(x, &self.w, self.stride, self.pad)?
         };
         let y = self.bn.forward(&y, train)?;
         match &self.prelu {

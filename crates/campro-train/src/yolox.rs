@@ -371,7 +371,7 @@ impl Yolox {
                     let len = x.dim(*axis)?;
                     let end = (*end).clamp(0, len as i64) as usize;
                     let x = x.narrow(*axis, *start, end.saturating_sub(*start))?;
-                    crate::mobilefacenet::subsample(&x, *axis, *step)?
+                    crate::conv::subsample(&x, *axis, *step)?
                 }
                 Op::Concat(axis) => Tensor::cat(&(0..n.inputs.len()).map(arg).collect::<Result<Vec<_>>>()?, *axis)?,
                 Op::Conv { w, b, stride, pad, depthwise } => {
@@ -379,7 +379,7 @@ impl Yolox {
                     let y = if *depthwise {
                         crate::dwconv::depthwise(arg(0)?, w, *stride, *pad)?
                     } else {
-                        crate::mobilefacenet::dense(arg(0)?, w, *stride, *pad)?
+                        crate::conv::conv2d(arg(0)?, w, *stride, *pad)?
                     };
                     match b {
                         Some(b) => y.broadcast_add(&self.param(b).as_tensor().reshape((1, (), 1, 1))?)?,

@@ -5,7 +5,7 @@
 use campro_testkit as shared;
 
 use campro_train::camera::Camera;
-use campro_train::mobilefacenet::{dense, depthwise, normalise_unit, MobileFaceNet};
+use campro_train::mobilefacenet::{depthwise, normalise_unit, MobileFaceNet};
 use candle_core::{DType, Device, Tensor};
 use std::path::Path;
 
@@ -58,6 +58,16 @@ fn depthwise_gradients_match_grouped_convolution() {
             assert!(max_abs(a, b) < 1e-4, "{h}x{w} stride {stride}: {}", max_abs(a, b));
         }
     }
+    // The 7x6 kernel over a 7x6 input (no padding): gradients of a per-channel weighted sum.
+    let x = Var::from_tensor(&rng_tensor(&[2, 3, 7, 6], 14)).unwrap();
+    let wt = Var::from_tensor(&rng_tensor(&[3, 1, 7, 6], 15)).unwrap();
+    let r = rng_tensor(&[2, 3], 16);
+    let ours = depthwise(&x, &wt, 1, 0).unwrap().flatten_from(1).unwrap().mul(&r).unwrap().sum_all().unwrap();
+    let theirs = x.broadcast_mul(&wt.reshape((1, 3, 7, 6)).unwrap()).unwrap().sum((2, 3)).unwrap();
+    let (g1, g2) = (ours.backward().unwrap(), theirs.mul(&r).unwrap().sum_all().unwrap().backward().unwrap());
+    for v in [x.as_tensor(), wt.as_tensor()] {
+        assert!(max_abs(g1.get(v).unwrap(), g2.get(v).unwrap()) < 1e-4);
+    }
 }
 
 #[test]
@@ -97,7 +107,7 @@ fn dense_matches_candle_convolution() {
         let x = rng_tensor(&[2, 3, h, w], 5);
         let wt = rng_tensor(&[4, 3, k, k], 6);
         let want = x.conv2d(&wt, pad, stride, 1, 1).unwrap();
-        let got = dense(&x, &wt, stride, pad).unwrap();
+        let got = campro_train::conv::conv2d_generic(&x, &wt, stride, pad).unwrap();
         assert_eq!(got.dims(), want.dims(), "{h}x{w} stride {stride}");
         assert!(max_abs(&got, &want) < 1e-5, "{h}x{w} stride {stride}: {}", max_abs(&got, &want));
     }

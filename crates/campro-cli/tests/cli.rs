@@ -891,3 +891,26 @@ fn demo_and_stress_print_json() {
     assert_eq!(s["converted"].as_u64().unwrap() + s["refused"].as_u64().unwrap(), cases);
     assert_eq!(s["next_seed"].as_u64().unwrap(), 5 + cases);
 }
+
+#[test]
+fn bench_train_prints_step_medians_as_json() {
+    let Some(shared) = campro_testkit::shared_root(&["models/yolox_nano.onnx"]) else {
+        return;
+    };
+    let out = campro()
+        .args(["bench", "train", "--runs", "1", "--only", "yolox", "--threads", "1", "--format", "json", "--shared"])
+        .arg(&shared)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["threads"], 1);
+    assert!(v["yolox_nano_1x416_ms"].as_f64().unwrap() > 0.0);
+    assert!(v.get("mobilefacenet_8x112x96_ms").is_none(), "only the step asked for: {v}");
+    fails_with(
+        campro()
+            .args(["bench", "train", "--runs", "1", "--only", "yolox", "--anchor", "/nonexistent/python", "--shared"])
+            .arg(&shared),
+        "--anchor",
+    );
+}

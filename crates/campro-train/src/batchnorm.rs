@@ -154,3 +154,102 @@ pub fn batch_norm_train(x: &Tensor, weight: &Tensor, bias: &Tensor, eps: f64) ->
     let y = x.apply_op3(&affine, &stats, Normalise { eps })?;
     Ok((y, stats))
 }
+
+/// y = x · scale_c + shift_c per channel c of (B, C, H, W): evaluation-mode batch norm with
+/// folded statistics, one pass each way. From generic ops its two broadcasts and their
+/// gradients (strided reductions over batch and pixels) cost more than the convolution.
+struct ChannelAffine;
+
+impl ChannelAffine {
+    /// Per channel (Σ dy·x, Σ dy) over batch and pixels, in f64.
+    fn sums(x: &[f32], g: &[f32], c: usize, n: usize) -> Vec<(f64, f64)> {
+        let planes = x.len() / n;
+        let per: Vec<(f64, f64)> = (0..planes)
+            .into_par_iter()
+            .map(|p| {
+                let (xp, gp) = (&x[p * n..(p + 1) * n], &g[p * n..(p + 1) * n]);
+                let (mut sx, mut s) = (0f64, 0f64);
+                for (&xv, &gv) in xp.iter().zip(gp) {
+                    sx += (xv * gv) as f64;
+                    s += gv as f64;
+                }
+                (sx, s)
+            })
+            .collect();
+        let mut out = vec![(0f64, 0f64); c];
+        for (p, (sx, s)) in per.into_iter().enumerate() {
+            out[p % c].0 += sx;
+            out[p % c].1 += s;
+        }
+        out
+    }
+}
+
+impl CustomOp3 for ChannelAffine {
+    fn name(&self) -> &'static str {
+        "channel-affine"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
+        let (_, c, n) = dims(l1)?;
+        let (x, scale, shift) = (slice(s1, l1)?, slice(s2, l2)?, slice(s3, l3)?);
+        if scale.len() != c || shift.len() != c {
+            candle_core::bail!("channel affine: scale and shift must have {c} entries");
+        }
+        let mut y = vec![0f32; x.len()];
+        y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(p, (yp, xp))| {
+            let (a, b) = (scale[p % c], shift[p % c]);
+            yp.iter_mut().zip(xp).for_each(|(o, &v)| *o = v * a + b);
+        });
+        Ok((CpuStorage::F32(y), l1.shape().clone()))
+    }
+
+    fn bwd(
+        &self,
+        x: &Tensor,
+        scale: &Tensor,
+        shift: &Tensor,
+        _res: &Tensor,
+        grad: &Tensor,
+    ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
+        let (_, c, h, w) = x.dims4()?;
+        let n = h * w;
+        let gv: Vec<f32> = grad.contiguous()?.flatten_all()?.to_vec1()?;
+        let dev = x.device();
+        let dx = if x.track_op() {
+            let a: Vec<f32> = scale.to_vec1()?;
+            let mut dx = vec![0f32; gv.len()];
+            dx.par_chunks_mut(n).zip(gv.par_chunks(n)).enumerate().for_each(|(p, (d, g))| {
+                let s = a[p % c];
+                d.iter_mut().zip(g).for_each(|(o, &v)| *o = v * s);
+            });
+            Some(Tensor::from_vec(dx, x.shape(), dev)?)
+        } else {
+            None
+        };
+        let (ds, db) = if scale.track_op() || shift.track_op() {
+            let xv: Vec<f32> = x.flatten_all()?.to_vec1()?;
+            let sums = Self::sums(&xv, &gv, c, n);
+            let ds = sums.iter().map(|s| s.0 as f32).collect::<Vec<_>>();
+            let db = sums.iter().map(|s| s.1 as f32).collect::<Vec<_>>();
+            (Some(Tensor::from_vec(ds, c, dev)?), Some(Tensor::from_vec(db, c, dev)?))
+        } else {
+            (None, None)
+        };
+        Ok((dx, ds, db))
+    }
+}
+
+/// `x · scale + shift` per channel of (B, C, H, W) (`scale`, `shift` of shape (C,));
+/// differentiable in all three.
+pub fn channel_affine(x: &Tensor, scale: &Tensor, shift: &Tensor) -> Result<Tensor> {
+    x.contiguous()?.apply_op3(&scale.contiguous()?, &shift.contiguous()?, ChannelAffine)
+}

@@ -107,6 +107,7 @@ pub fn run(models: &Path, cfg: &Config, steps: &[Step], runs: usize) -> crate::R
                             Ok(())
                         })?
                     } else {
+                        let net = net.frozen();
                         let mut adam =
                             AdamW::new(cam.vars(), ParamsAdamW { lr: 1e-6, weight_decay: 0.0, ..Default::default() })?;
                         median_secs(runs, || {

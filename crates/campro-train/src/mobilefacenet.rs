@@ -27,6 +27,7 @@ pub const EMBEDDING: usize = 128;
 /// Batch norm over (B, C, H, W), PyTorch's semantics (eps 1e-5, momentum 0.1, running
 /// variance unbiased). Training normalises by the batch statistics and updates the running
 /// ones; evaluation is one per-channel scale and shift.
+#[derive(Clone)]
 struct BatchNorm {
     weight: Tensor,
     bias: Tensor,
@@ -49,12 +50,11 @@ impl BatchNorm {
 
     fn forward(&self, x: &Tensor, train: bool) -> Result<Tensor> {
         let c = self.weight.dim(0)?;
-        let shape = (1, c, 1, 1);
         if !train {
             // The running statistics are state, not parameters: no gradient reaches them.
             let scale = (self.weight.as_ref() / (self.running_var.as_tensor().detach() + Self::EPS)?.sqrt()?)?;
             let shift = (&self.bias - self.running_mean.as_tensor().detach().mul(&scale)?)?;
-            return x.broadcast_mul(&scale.reshape(shape)?)?.broadcast_add(&shift.reshape(shape)?);
+            return crate::batchnorm::channel_affine(x, &scale, &shift);
         }
         let n = (x.elem_count() / c) as f64;
         let (y, stats) = crate::batchnorm::batch_norm_train(x, &self.weight, &self.bias, Self::EPS)?;
@@ -68,6 +68,7 @@ impl BatchNorm {
 }
 
 /// Convolution (no bias) + batch norm (+ PReLU).
+#[derive(Clone)]
 struct ConvBlock {
     w: Tensor,
     stride: usize,
@@ -110,6 +111,7 @@ impl ConvBlock {
     }
 }
 
+#[derive(Clone)]
 struct Bottleneck {
     expand: ConvBlock,
     dw: ConvBlock,
@@ -118,6 +120,7 @@ struct Bottleneck {
 }
 
 /// The network; its parameters live in the [`VarMap`] it was built from.
+#[derive(Clone)]
 pub struct MobileFaceNet {
     conv1: ConvBlock,
     dw_conv1: ConvBlock,
@@ -190,6 +193,30 @@ impl MobileFaceNet {
             .filter(|(k, _)| !k.contains("running_"))
             .map(|(_, v)| v.clone())
             .collect()
+    }
+
+    /// The same network with its weights detached from the [`VarMap`]: they share storage
+    /// (an optimiser step on the variables shows here too), but no gradient is computed for
+    /// them. For the protector's steps, which need only the gradient into the camera.
+    pub fn frozen(&self) -> Self {
+        let mut f = self.clone();
+        for b in f.blocks_mut() {
+            b.w = b.w.detach();
+            b.bn.weight = b.bn.weight.detach();
+            b.bn.bias = b.bn.bias.detach();
+            b.prelu = b.prelu.as_ref().map(Tensor::detach);
+        }
+        f
+    }
+
+    /// Every convolution block, in order.
+    fn blocks_mut(&mut self) -> impl Iterator<Item = &mut ConvBlock> {
+        let inner = self.blocks.iter_mut().flat_map(|b| [&mut b.expand, &mut b.dw, &mut b.project]);
+        [&mut self.conv1, &mut self.dw_conv1].into_iter().chain(inner).chain([
+            &mut self.conv2,
+            &mut self.linear7,
+            &mut self.linear1,
+        ])
     }
 
     /// Embeddings (B, 128) of normalised faces (B, 3, 112, 96); `train` uses and updates

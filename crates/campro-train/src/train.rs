@@ -245,6 +245,10 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let embed = |x: &Tensor, train_bn: bool| -> candle_core::Result<Tensor> {
         l2_normalise(&net.forward_t(&normalise_unit(x)?, train_bn)?)
     };
+    // The protector's view of the attacker: the same weights, no gradient computed for them.
+    let frozen = net.frozen();
+    let embed_frozen =
+        |x: &Tensor| -> candle_core::Result<Tensor> { l2_normalise(&frozen.forward_t(&normalise_unit(x)?, false)?) };
 
     // H from the class means of the raw training embeddings, cached beside the faces (keyed
     // by the face selection and the checkpoint file): one backbone pass over every face.
@@ -405,7 +409,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         let (mut lns, mut ldet) = (f64::NAN, f64::NAN);
         for _ in 0..cfg.protector.steps_per_round {
             let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
-            let logits = head.logits(&embed(&cam.forward(&x)?, false)?, None)?;
+            let logits = head.logits(&embed_frozen(&cam.forward(&x)?)?, None)?;
             let mut loss = non_saturating_loss(&logits, &y)?;
             lns = loss.to_scalar::<f32>()? as f64;
             finite("privacy loss", lns)?;

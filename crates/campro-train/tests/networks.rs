@@ -244,3 +244,24 @@ fn non_saturating_loss_by_hand_and_its_gradient_flows() {
     assert!((l.to_scalar::<f32>().unwrap() - (30.0 - 2f32.ln())).abs() < 1e-3);
     assert!(l.backward().unwrap().get(z.as_tensor()).is_some());
 }
+
+#[test]
+fn channel_affine_matches_generic_ops() {
+    use candle_core::Var;
+    let x = Var::from_tensor(&rng_tensor(&[3, 4, 5, 3], 21)).unwrap();
+    let a = Var::from_tensor(&rng_tensor(&[4], 22)).unwrap();
+    let b = Var::from_tensor(&rng_tensor(&[4], 23)).unwrap();
+    let r = rng_tensor(&[3, 4, 5, 3], 24);
+    let ours = campro_train::batchnorm::channel_affine(&x, &a, &b).unwrap();
+    let want = x
+        .broadcast_mul(&a.reshape((1, 4, 1, 1)).unwrap())
+        .unwrap()
+        .broadcast_add(&b.reshape((1, 4, 1, 1)).unwrap())
+        .unwrap();
+    assert!(max_abs(&ours, &want) < 1e-6);
+    let g1 = ours.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+    let g2 = want.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+    for v in [x.as_tensor(), a.as_tensor(), b.as_tensor()] {
+        assert!(max_abs(g1.get(v).unwrap(), g2.get(v).unwrap()) < 1e-5);
+    }
+}

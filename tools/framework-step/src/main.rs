@@ -1,6 +1,6 @@
 //! One training step (forward, sum of the output, backward) of each player's network in burn
-//! (NdArray backend with Autodiff, f32, CPU), at the shapes campro-train's `step_time`
-//! example times in candle: YOLOX-Nano 1x3x416x416 (its ONNX fixes batch 1) and
+//! (NdArray backend with Autodiff, f32, CPU), at the shapes `campro bench train`
+//! times in candle: YOLOX-Nano 1x3x416x416 (its ONNX fixes batch 1) and
 //! MobileFaceNet 8x3x112x96. Each phase (building the model from its weights, the forward
 //! pass, the backward pass) is timed apart and printed as it ends, so a run cut short still
 //! says where its time went; then the median of `REPS` (default 3) whole steps.

@@ -102,14 +102,45 @@ impl CustomOp3 for Normalise {
         _res: &Tensor,
         grad: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
-        let (b, c, h, w) = x.dims4()?;
-        let n = h * w;
+        // One op reads x and dy where they lie and writes dx and (dγ, dβ) into one buffer,
+        // returned as two views of it (no copies of the activations).
+        let (_, c, _, _) = x.dims4()?;
+        let coefs = Tensor::cat(&[affine.flatten_all()?, stats.flatten_all()?], 0)?;
+        let both = x.apply_op3_no_bwd(&grad.contiguous()?, &coefs, &NormaliseGrad { eps: self.eps })?;
+        let n = x.elem_count();
+        let dx = both.narrow(0, 0, n)?.reshape(x.shape())?;
+        let da = both.narrow(0, n, 2 * c)?.reshape((2, c))?;
+        Ok((Some(dx), Some(da), None))
+    }
+}
+
+/// The backward of [`Normalise`] from (x, dy, [γ, β, μ, σ²]): dx (as x) then dγ, dβ (C each),
+/// flat in one buffer.
+struct NormaliseGrad {
+    eps: f64,
+}
+
+impl CustomOp3 for NormaliseGrad {
+    fn name(&self) -> &'static str {
+        "batch-norm-train-grad"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
+        let (b, c, n) = dims(l1)?;
+        let (xv, gv, coefs) = (slice(s1, l1)?, slice(s2, l2)?, slice(s3, l3)?);
+        if gv.len() != xv.len() || coefs.len() != 4 * c {
+            candle_core::bail!("batch norm grad: operands do not match");
+        }
+        let k = Normalise { eps: self.eps }.coefs(&coefs[..2 * c], &coefs[2 * c..], c);
         let total = (b * n) as f32;
-        let xv: Vec<f32> = x.flatten_all()?.to_vec1()?;
-        let gv: Vec<f32> = grad.contiguous()?.flatten_all()?.to_vec1()?;
-        let a: Vec<f32> = affine.flatten_all()?.to_vec1()?;
-        let st: Vec<f32> = stats.flatten_all()?.to_vec1()?;
-        let k = self.coefs(&a, &st, c);
         // Per channel: Σ dy and Σ dy·x̂.
         let sums: Vec<(f32, f32)> = (0..c)
             .into_par_iter()
@@ -118,30 +149,33 @@ impl CustomOp3 for Normalise {
                 let (mut sd, mut sdx) = (0f64, 0f64);
                 for bi in 0..b {
                     let o = (bi * c + ch) * n;
-                    for i in o..o + n {
-                        sd += gv[i] as f64;
-                        sdx += (gv[i] * (xv[i] - m) * r) as f64;
+                    for (&g, &x) in gv[o..o + n].iter().zip(&xv[o..o + n]) {
+                        sd += g as f64;
+                        sdx += (g * (x - m) * r) as f64;
                     }
                 }
                 (sd as f32, sdx as f32)
             })
             .collect();
         // dx = γ r / N · (N dy − Σdy − x̂ Σ(dy x̂)).
-        let mut dx = vec![0f32; xv.len()];
+        let mut out = vec![0f32; xv.len() + 2 * c];
+        let (dx, da) = out.split_at_mut(xv.len());
         dx.par_chunks_mut(n).enumerate().for_each(|(p, d)| {
             let ch = p % c;
             let [m, r, g, _] = k[ch];
             let (sd, sdx) = sums[ch];
             let o = p * n;
-            for (i, v) in d.iter_mut().enumerate() {
-                let xh = (xv[o + i] - m) * r;
-                *v = g * r / total * (total * gv[o + i] - sd - xh * sdx);
+            for ((v, &x), &gy) in d.iter_mut().zip(&xv[o..o + n]).zip(&gv[o..o + n]) {
+                let xh = (x - m) * r;
+                *v = g * r / total * (total * gy - sd - xh * sdx);
             }
         });
-        let mut da: Vec<f32> = sums.iter().map(|s| s.1).collect(); // dγ = Σ dy·x̂
-        da.extend(sums.iter().map(|s| s.0)); // dβ = Σ dy
-        let dev = x.device();
-        Ok((Some(Tensor::from_vec(dx, x.shape(), dev)?), Some(Tensor::from_vec(da, (2, c), dev)?), None))
+        for (ch, (sd, sdx)) in sums.iter().enumerate() {
+            da[ch] = *sdx; // dγ = Σ dy·x̂
+            da[c + ch] = *sd; // dβ = Σ dy
+        }
+        let len = out.len();
+        Ok((CpuStorage::F32(out), Shape::from(len)))
     }
 }
 
@@ -220,31 +254,57 @@ impl CustomOp3 for ChannelAffine {
         _res: &Tensor,
         grad: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
-        let (_, c, h, w) = x.dims4()?;
-        let n = h * w;
-        let gv: Vec<f32> = grad.contiguous()?.flatten_all()?.to_vec1()?;
-        let dev = x.device();
-        let dx = if x.track_op() {
-            let a: Vec<f32> = scale.to_vec1()?;
-            let mut dx = vec![0f32; gv.len()];
-            dx.par_chunks_mut(n).zip(gv.par_chunks(n)).enumerate().for_each(|(p, (d, g))| {
-                let s = a[p % c];
-                d.iter_mut().zip(g).for_each(|(o, &v)| *o = v * s);
-            });
-            Some(Tensor::from_vec(dx, x.shape(), dev)?)
-        } else {
-            None
-        };
-        let (ds, db) = if scale.track_op() || shift.track_op() {
-            let xv: Vec<f32> = x.flatten_all()?.to_vec1()?;
-            let sums = Self::sums(&xv, &gv, c, n);
-            let ds = sums.iter().map(|s| s.0 as f32).collect::<Vec<_>>();
-            let db = sums.iter().map(|s| s.1 as f32).collect::<Vec<_>>();
-            (Some(Tensor::from_vec(ds, c, dev)?), Some(Tensor::from_vec(db, c, dev)?))
-        } else {
-            (None, None)
-        };
+        // One op reads x and dy in place and writes dx, then d(scale) and d(shift), into one
+        // buffer (three views); the sums only when the scale or shift is tracked.
+        let c = scale.elem_count();
+        let sums = scale.track_op() || shift.track_op();
+        let all = x.apply_op3_no_bwd(&grad.contiguous()?, &scale.contiguous()?, &ChannelAffineGrad { sums })?;
+        let n = x.elem_count();
+        let dx = if x.track_op() { Some(all.narrow(0, 0, n)?.reshape(x.shape())?) } else { None };
+        let (ds, db) = if sums { (Some(all.narrow(0, n, c)?), Some(all.narrow(0, n + c, c)?)) } else { (None, None) };
         Ok((dx, ds, db))
+    }
+}
+
+/// The backward of [`ChannelAffine`] from (x, dy, scale): dx, then Σ dy·x and Σ dy per
+/// channel (zeros unless `sums`), flat in one buffer.
+struct ChannelAffineGrad {
+    sums: bool,
+}
+
+impl CustomOp3 for ChannelAffineGrad {
+    fn name(&self) -> &'static str {
+        "channel-affine-grad"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
+        let (_, c, n) = dims(l1)?;
+        let (xv, gv, a) = (slice(s1, l1)?, slice(s2, l2)?, slice(s3, l3)?);
+        if gv.len() != xv.len() || a.len() != c {
+            candle_core::bail!("channel affine grad: operands do not match");
+        }
+        let mut out = vec![0f32; xv.len() + 2 * c];
+        let (dx, rest) = out.split_at_mut(xv.len());
+        dx.par_chunks_mut(n).zip(gv.par_chunks(n)).enumerate().for_each(|(p, (d, g))| {
+            let s = a[p % c];
+            d.iter_mut().zip(g).for_each(|(o, &v)| *o = v * s);
+        });
+        if self.sums {
+            for (ch, (sx, s)) in ChannelAffine::sums(xv, gv, c, n).into_iter().enumerate() {
+                rest[ch] = sx as f32;
+                rest[c + ch] = s as f32;
+            }
+        }
+        let len = out.len();
+        Ok((CpuStorage::F32(out), Shape::from(len)))
     }
 }
 

@@ -228,53 +228,105 @@ impl CustomOp2 for Conv {
     }
 
     fn bwd(&self, x: &Tensor, w: &Tensor, _y: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
-        let g = Geo::new(x.dims(), w.dims(), self.stride, self.pad)?;
-        let (k, p, img) = (g.k(), g.p(), g.cin * g.h * g.w);
-        let dy: Vec<f32> = grad.contiguous()?.flatten_all()?.to_vec1()?;
-        let xv: Vec<f32> = if w.track_op() { x.flatten_all()?.to_vec1()? } else { Vec::new() };
-        let wv: Vec<f32> = w.flatten_all()?.to_vec1()?;
-        let dev = x.device();
+        // Both gradients read the operands where they lie (no copies), each only if tracked.
+        let grad = grad.contiguous()?;
+        let (stride, pad) = (self.stride, self.pad);
         let dw = if w.track_op() {
-            // Σ_b dY_b (Cout×P) · col(X_b)ᵀ (P×K), per image then summed.
-            let parts = over_batch(g.b, |i, threads| {
-                let dyi = &dy[i * g.cout * p..(i + 1) * g.cout * p];
-                let xi = &xv[i * img..(i + 1) * img];
-                let mut part = vec![0f32; g.cout * k];
-                if g.direct() {
-                    matmul(&mut part, false, dyi, false, xi, true, (g.cout, k, p), threads);
-                } else {
-                    let mut col = vec![0f32; k * p];
-                    g.im2col(xi, &mut col);
-                    matmul(&mut part, false, dyi, false, &col, true, (g.cout, k, p), threads);
-                }
-                part
-            });
-            let mut sum = vec![0f32; g.cout * k];
-            for part in parts {
-                sum.iter_mut().zip(part).for_each(|(s, v)| *s += v);
-            }
-            Some(Tensor::from_vec(sum, w.shape(), dev)?)
+            let (_, _, kh, kw) = w.dims4()?;
+            Some(x.apply_op2_no_bwd(&grad, &ConvGradWeight { stride, pad, cout: w.dim(0)?, kh, kw })?)
         } else {
             None
         };
         let dx = if x.track_op() {
-            // dX_b = col⁻¹(Wᵀ (K×Cout) · dY_b (Cout×P)).
-            let mut dx = vec![0f32; g.b * img];
-            over_batch_into(&mut dx, g.b, |i, dxi, threads| {
-                let dyi = &dy[i * g.cout * p..(i + 1) * g.cout * p];
-                if g.direct() {
-                    matmul(dxi, false, &wv, true, dyi, false, (k, p, g.cout), threads);
-                } else {
-                    let mut col = vec![0f32; k * p];
-                    matmul(&mut col, false, &wv, true, dyi, false, (k, p, g.cout), threads);
-                    g.col2im(&col, dxi);
-                }
-            });
-            Some(Tensor::from_vec(dx, x.shape(), dev)?)
+            Some(grad.apply_op2_no_bwd(w, &ConvGradInput { stride, pad, h: x.dim(2)?, w: x.dim(3)? })?)
         } else {
             None
         };
         Ok((dx, dw))
+    }
+}
+
+/// `dW = Σ_b dY_b (Cout×P) · col(X_b)ᵀ (P×K)` from (x, dy).
+struct ConvGradWeight {
+    stride: usize,
+    pad: usize,
+    cout: usize,
+    kh: usize,
+    kw: usize,
+}
+
+impl CustomOp2 for ConvGradWeight {
+    fn name(&self) -> &'static str {
+        "campro-conv2d-grad-weight"
+    }
+
+    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
+        let xd = l1.dims();
+        let cin = xd.get(1).copied().unwrap_or(0);
+        let g = Geo::new(xd, &[self.cout, cin, self.kh, self.kw], self.stride, self.pad)?;
+        let (x, dy) = (slice(s1, l1, "conv2d grad")?, slice(s2, l2, "conv2d grad")?);
+        if l2.dims() != [g.b, g.cout, g.oh, g.ow] {
+            candle_core::bail!("conv2d grad: output gradient {:?} does not match", l2.dims());
+        }
+        let (k, p, img) = (g.k(), g.p(), g.cin * g.h * g.w);
+        let parts = over_batch(g.b, |i, threads| {
+            let dyi = &dy[i * g.cout * p..(i + 1) * g.cout * p];
+            let xi = &x[i * img..(i + 1) * img];
+            let mut part = vec![0f32; g.cout * k];
+            if g.direct() {
+                matmul(&mut part, false, dyi, false, xi, true, (g.cout, k, p), threads);
+            } else {
+                let mut col = vec![0f32; k * p];
+                g.im2col(xi, &mut col);
+                matmul(&mut part, false, dyi, false, &col, true, (g.cout, k, p), threads);
+            }
+            part
+        });
+        let mut parts = parts.into_iter();
+        let mut sum = parts.next().unwrap_or_else(|| vec![0f32; g.cout * k]);
+        for part in parts {
+            sum.iter_mut().zip(part).for_each(|(s, v)| *s += v);
+        }
+        Ok((CpuStorage::F32(sum), Shape::from((g.cout, g.cin, g.kh, g.kw))))
+    }
+}
+
+/// `dX_b = col⁻¹(Wᵀ (K×Cout) · dY_b (Cout×P))` from (dy, w).
+struct ConvGradInput {
+    stride: usize,
+    pad: usize,
+    h: usize,
+    w: usize,
+}
+
+impl CustomOp2 for ConvGradInput {
+    fn name(&self) -> &'static str {
+        "campro-conv2d-grad-input"
+    }
+
+    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
+        let (dd, wd) = (l1.dims(), l2.dims());
+        let (Some(&b), Some(&cin)) = (dd.first(), wd.get(1)) else {
+            candle_core::bail!("conv2d grad: output gradient {dd:?} and weights {wd:?} do not fit")
+        };
+        let g = Geo::new(&[b, cin, self.h, self.w], wd, self.stride, self.pad)?;
+        if dd != [g.b, g.cout, g.oh, g.ow] {
+            candle_core::bail!("conv2d grad: output gradient {dd:?} does not match");
+        }
+        let (dy, w) = (slice(s1, l1, "conv2d grad")?, slice(s2, l2, "conv2d grad")?);
+        let (k, p, img) = (g.k(), g.p(), g.cin * g.h * g.w);
+        let mut dx = vec![0f32; g.b * img];
+        over_batch_into(&mut dx, g.b, |i, dxi, threads| {
+            let dyi = &dy[i * g.cout * p..(i + 1) * g.cout * p];
+            if g.direct() {
+                matmul(dxi, false, w, true, dyi, false, (k, p, g.cout), threads);
+            } else {
+                let mut col = vec![0f32; k * p];
+                matmul(&mut col, false, w, true, dyi, false, (k, p, g.cout), threads);
+                g.col2im(&col, dxi);
+            }
+        });
+        Ok((CpuStorage::F32(dx), Shape::from((g.b, g.cin, g.h, g.w))))
     }
 }
 
@@ -346,24 +398,49 @@ impl CustomOp2 for Prelu {
     }
 
     fn bwd(&self, x: &Tensor, a: &Tensor, _y: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
-        let (c, n) = plane(x.dims(), a.elem_count())?;
-        let xv: Vec<f32> = x.flatten_all()?.to_vec1()?;
-        let gv: Vec<f32> = grad.contiguous()?.flatten_all()?.to_vec1()?;
-        let av: Vec<f32> = a.flatten_all()?.to_vec1()?;
-        let dx = if x.track_op() {
-            let mut dx = vec![0f32; xv.len()];
-            dx.par_chunks_mut(n).enumerate().for_each(|(pl, d)| {
-                let s = av[pl % c];
-                let (xp, gp) = (&xv[pl * n..(pl + 1) * n], &gv[pl * n..(pl + 1) * n]);
-                for ((o, &v), &g) in d.iter_mut().zip(xp).zip(gp) {
-                    *o = if v > 0.0 { g } else { s * g };
-                }
-            });
-            Some(Tensor::from_vec(dx, x.shape(), x.device())?)
-        } else {
-            None
-        };
-        let da = if a.track_op() {
+        // One op reads x and dy in place and writes dx then da into one buffer (two views).
+        let slopes = a.track_op();
+        let both = x.apply_op3_no_bwd(&grad.contiguous()?, &a.contiguous()?, &PreluGrad { slopes })?;
+        let n = x.elem_count();
+        let dx = if x.track_op() { Some(both.narrow(0, 0, n)?.reshape(x.shape())?) } else { None };
+        let da = if slopes { Some(both.narrow(0, n, a.elem_count())?.reshape(a.shape())?) } else { None };
+        Ok((dx, da))
+    }
+}
+
+/// The backward of [`Prelu`] from (x, dy, a): dx (as x), then da (C; zeros unless `slopes`).
+struct PreluGrad {
+    slopes: bool,
+}
+
+impl candle_core::CustomOp3 for PreluGrad {
+    fn name(&self) -> &'static str {
+        "campro-prelu-grad"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
+        let (xv, gv, av) = (slice(s1, l1, "prelu")?, slice(s2, l2, "prelu")?, slice(s3, l3, "prelu")?);
+        let (c, n) = plane(l1.dims(), av.len())?;
+        if gv.len() != xv.len() {
+            candle_core::bail!("prelu: gradient of {} values for {} inputs", gv.len(), xv.len());
+        }
+        let mut out = vec![0f32; xv.len() + c];
+        let (dx, da) = out.split_at_mut(xv.len());
+        dx.par_chunks_mut(n).enumerate().for_each(|(pl, d)| {
+            let s = av[pl % c];
+            for ((o, &v), &g) in d.iter_mut().zip(&xv[pl * n..(pl + 1) * n]).zip(&gv[pl * n..(pl + 1) * n]) {
+                *o = if v > 0.0 { g } else { s * g };
+            }
+        });
+        if self.slopes {
             let per: Vec<f64> = (0..xv.len() / n)
                 .into_par_iter()
                 .map(|pl| {
@@ -371,15 +448,12 @@ impl CustomOp2 for Prelu {
                     xp.iter().zip(gp).filter(|(v, _)| **v <= 0.0).map(|(&v, &g)| (v * g) as f64).sum()
                 })
                 .collect();
-            let mut da = vec![0f32; c];
-            for (pl, s) in per.iter().enumerate() {
-                da[pl % c] += *s as f32;
+            for (pl, v) in per.iter().enumerate() {
+                da[pl % c] += *v as f32;
             }
-            Some(Tensor::from_vec(da, a.shape(), a.device())?)
-        } else {
-            None
-        };
-        Ok((dx, da))
+        }
+        let len = out.len();
+        Ok((CpuStorage::F32(out), Shape::from(len)))
     }
 }
 
@@ -394,4 +468,115 @@ fn plane(dims: &[usize], slopes: usize) -> Result<(usize, usize)> {
 /// PReLU: `x` (B, C, ...), `a` (C,); differentiable in both.
 pub fn prelu(x: &Tensor, a: &Tensor) -> Result<Tensor> {
     x.contiguous()?.apply_op2(&a.contiguous()?, Prelu)
+}
+
+/// SiLU, `y = x · σ(x)`, one pass each way (`dy/dx = σ(x)·(1 + x·(1 − σ(x)))`); from the
+/// ONNX graph's Sigmoid and Mul it was two ops, four passes and two saved tensors.
+struct Silu;
+
+impl candle_core::CustomOp1 for Silu {
+    fn name(&self) -> &'static str {
+        "campro-silu"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
+        let x = slice(s, l, "silu")?;
+        let mut y = vec![0f32; x.len()];
+        y.par_chunks_mut(4096).zip(x.par_chunks(4096)).for_each(|(o, i)| {
+            o.iter_mut().zip(i).for_each(|(o, &v)| *o = v / (1.0 + (-v).exp()));
+        });
+        Ok((CpuStorage::F32(y), l.shape().clone()))
+    }
+
+    fn bwd(&self, x: &Tensor, _y: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
+        Ok(Some(x.apply_op2_no_bwd(&grad.contiguous()?, &SiluGrad)?))
+    }
+}
+
+/// The input gradient of [`Silu`] from (x, dy), reading both in place.
+struct SiluGrad;
+
+impl CustomOp2 for SiluGrad {
+    fn name(&self) -> &'static str {
+        "campro-silu-grad"
+    }
+
+    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
+        let (x, g) = (slice(s1, l1, "silu")?, slice(s2, l2, "silu")?);
+        if x.len() != g.len() {
+            candle_core::bail!("silu: gradient of {} values for {} inputs", g.len(), x.len());
+        }
+        let mut d = vec![0f32; x.len()];
+        d.par_chunks_mut(4096).zip(x.par_chunks(4096).zip(g.par_chunks(4096))).for_each(|(o, (xs, gs))| {
+            for ((o, &v), &gv) in o.iter_mut().zip(xs).zip(gs) {
+                let s = 1.0 / (1.0 + (-v).exp());
+                *o = gv * s * (1.0 + v * (1.0 - s));
+            }
+        });
+        Ok((CpuStorage::F32(d), l1.shape().clone()))
+    }
+}
+
+/// SiLU (`x · σ(x)`) of any tensor; differentiable.
+pub fn silu(x: &Tensor) -> Result<Tensor> {
+    x.contiguous()?.apply_op1(Silu)
+}
+
+/// `x + b_c` per channel of (B, C, ...) (`b` of shape (C,)): a convolution's bias, one pass
+/// forward; backward passes the gradient through and sums it per channel for `b`.
+struct ChannelBias;
+
+impl CustomOp2 for ChannelBias {
+    fn name(&self) -> &'static str {
+        "campro-channel-bias"
+    }
+
+    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
+        let (x, b) = (slice(s1, l1, "bias")?, slice(s2, l2, "bias")?);
+        let (c, n) = plane(l1.dims(), b.len())?;
+        let mut y = vec![0f32; x.len()];
+        y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(p, (yp, xp))| {
+            let bv = b[p % c];
+            yp.iter_mut().zip(xp).for_each(|(o, &v)| *o = v + bv);
+        });
+        Ok((CpuStorage::F32(y), l1.shape().clone()))
+    }
+
+    fn bwd(&self, x: &Tensor, b: &Tensor, _y: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
+        let dx = if x.track_op() { Some(grad.clone()) } else { None };
+        let db = if b.track_op() {
+            let c = b.elem_count();
+            Some(grad.contiguous()?.apply_op1_no_bwd(&ChannelSum { c })?)
+        } else {
+            None
+        };
+        Ok((dx, db))
+    }
+}
+
+/// Per channel sums of a (B, C, ...) tensor: (C,), accumulated in f64.
+struct ChannelSum {
+    c: usize,
+}
+
+impl candle_core::CustomOp1 for ChannelSum {
+    fn name(&self) -> &'static str {
+        "campro-channel-sum"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
+        let g = slice(s, l, "bias")?;
+        let (c, n) = plane(l.dims(), self.c)?;
+        let per: Vec<f64> = g.par_chunks(n).map(|p| p.iter().map(|&v| v as f64).sum()).collect();
+        let mut out = vec![0f32; c];
+        for (p, v) in per.iter().enumerate() {
+            out[p % c] += *v as f32;
+        }
+        Ok((CpuStorage::F32(out), Shape::from(c)))
+    }
+}
+
+/// `x + b` per channel: `x` (B, C, ...), `b` (C,); differentiable in both.
+pub fn channel_bias(x: &Tensor, b: &Tensor) -> Result<Tensor> {
+    x.contiguous()?.apply_op2(&b.contiguous()?, ChannelBias)
 }

@@ -49,6 +49,8 @@ enum Op {
         depthwise: bool,
     },
     Sigmoid,
+    /// `x · σ(x)`: a Sigmoid and the Mul of its input by it, fused at load time.
+    Silu,
     Mul,
     /// Multiplication by a constant scalar.
     Scale(f32),
@@ -225,6 +227,7 @@ impl Yolox {
             .ok_or_else(|| bad("no input".into()))?;
         let output = graph.output.first().map(|o| o.name.clone()).ok_or_else(|| bad("no output".into()))?;
         let index = params.iter().enumerate().map(|(i, (n, _))| (n.clone(), i)).collect();
+        fuse_silu(&mut nodes, &output);
         Ok(Self { nodes, input, output, params, index, model })
     }
 
@@ -382,11 +385,12 @@ impl Yolox {
                         crate::conv::conv2d(arg(0)?, w, *stride, *pad)?
                     };
                     match b {
-                        Some(b) => y.broadcast_add(&self.param(b).as_tensor().reshape((1, (), 1, 1))?)?,
+                        Some(b) => crate::conv::channel_bias(&y, self.param(b).as_tensor())?,
                         None => y,
                     }
                 }
                 Op::Sigmoid => candle_nn::ops::sigmoid(arg(0)?)?,
+                Op::Silu => crate::conv::silu(arg(0)?)?,
                 Op::Mul => arg(0)?.broadcast_mul(arg(1)?)?,
                 Op::Scale(c) => (arg(0)? * *c as f64)?,
                 Op::Add => arg(0)?.broadcast_add(arg(1)?)?,
@@ -423,6 +427,29 @@ impl Yolox {
             }
         }
         Ok(model)
+    }
+}
+
+/// Replaces each `s = Sigmoid(x)` followed by `Mul(x, s)` (either order), where nothing else
+/// reads `s` and `s` is not the graph's output, by one `Silu(x)` node writing the Mul's output.
+fn fuse_silu(nodes: &mut Vec<Node>, graph_output: &str) {
+    let mut i = 0;
+    while i < nodes.len() {
+        if matches!(nodes[i].op, Op::Sigmoid) && nodes[i].output != graph_output {
+            let (x, s) = (nodes[i].inputs[0].clone(), nodes[i].output.clone());
+            let readers: Vec<usize> = (0..nodes.len()).filter(|&j| nodes[j].inputs.iter().any(|n| *n == s)).collect();
+            if let [j] = readers[..] {
+                let m = &nodes[j];
+                let pair = m.inputs.len() == 2
+                    && ((m.inputs[0] == x && m.inputs[1] == s) || (m.inputs[0] == s && m.inputs[1] == x));
+                if matches!(m.op, Op::Mul) && pair && j > i {
+                    nodes[j] = Node { op: Op::Silu, inputs: vec![x], output: nodes[j].output.clone() };
+                    nodes.remove(i);
+                    continue;
+                }
+            }
+        }
+        i += 1;
     }
 }
 

@@ -100,3 +100,27 @@ fn prelu_matches_candle_and_finite_differences() {
         assert!((fd - da[c]).abs() < 2e-3, "slope {c}: {fd} vs {}", da[c]);
     }
 }
+
+#[test]
+fn silu_and_channel_bias_match_generic_ops() {
+    use campro_train::conv::{channel_bias, silu};
+    let x = Var::from_tensor(&(rand(&[2, 3, 4, 5], 9) * 6.0).unwrap()).unwrap();
+    let b = Var::from_tensor(&rand(&[3], 10)).unwrap();
+    let r = rand(&[2, 3, 4, 5], 11);
+    // SiLU against Sigmoid then Mul, as the ONNX graph has it.
+    let ours = silu(x.as_tensor()).unwrap();
+    let want = x.as_tensor().mul(&candle_nn::ops::sigmoid(x.as_tensor()).unwrap()).unwrap();
+    assert!(max_diff(&ours, &want) < 1e-5);
+    let g1 = ours.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+    let g2 = want.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+    assert!(max_diff(g1.get(x.as_tensor()).unwrap(), g2.get(x.as_tensor()).unwrap()) < 1e-5);
+    // The bias against a broadcast add.
+    let ours = channel_bias(x.as_tensor(), b.as_tensor()).unwrap();
+    let want = x.as_tensor().broadcast_add(&b.as_tensor().reshape((1, 3, 1, 1)).unwrap()).unwrap();
+    assert!(max_diff(&ours, &want) == 0.0);
+    let g1 = ours.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+    let g2 = want.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+    for v in [&x, &b] {
+        assert!(max_diff(g1.get(v.as_tensor()).unwrap(), g2.get(v.as_tensor()).unwrap()) < 1e-5);
+    }
+}

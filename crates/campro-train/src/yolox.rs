@@ -437,7 +437,7 @@ fn fuse_silu(nodes: &mut Vec<Node>, graph_output: &str) {
     while i < nodes.len() {
         if matches!(nodes[i].op, Op::Sigmoid) && nodes[i].output != graph_output {
             let (x, s) = (nodes[i].inputs[0].clone(), nodes[i].output.clone());
-            let readers: Vec<usize> = (0..nodes.len()).filter(|&j| nodes[j].inputs.iter().any(|n| *n == s)).collect();
+            let readers: Vec<usize> = (0..nodes.len()).filter(|&j| nodes[j].inputs.contains(&s)).collect();
             if let [j] = readers[..] {
                 let m = &nodes[j];
                 let pair = m.inputs.len() == 2

@@ -87,9 +87,7 @@ impl CustomOp3 for Normalise {
         let mut y = vec![0f32; x.len()];
         y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(p, (yp, xp))| {
             let [m, r, g, b] = k[p % c];
-            for (o, &v) in yp.iter_mut().zip(xp) {
-                *o = (v - m) * r * g + b;
-            }
+            crate::kernels::affine(yp, xp, r * g, b - m * r * g);
         });
         Ok((CpuStorage::F32(y), l1.shape().clone()))
     }
@@ -141,7 +139,7 @@ impl CustomOp3 for NormaliseGrad {
         }
         let k = Normalise { eps: self.eps }.coefs(&coefs[..2 * c], &coefs[2 * c..], c);
         let total = (b * n) as f32;
-        // Per channel: Σ dy and Σ dy·x̂.
+        // Per channel: Σ dy and Σ dy·x̂ (per plane in f32 lanes, over the batch in f64).
         let sums: Vec<(f32, f32)> = (0..c)
             .into_par_iter()
             .map(|ch| {
@@ -149,10 +147,9 @@ impl CustomOp3 for NormaliseGrad {
                 let (mut sd, mut sdx) = (0f64, 0f64);
                 for bi in 0..b {
                     let o = (bi * c + ch) * n;
-                    for (&g, &x) in gv[o..o + n].iter().zip(&xv[o..o + n]) {
-                        sd += g as f64;
-                        sdx += (g * (x - m) * r) as f64;
-                    }
+                    let (a, bb) = crate::kernels::sum_and_centred_dot(&gv[o..o + n], &xv[o..o + n], m, r);
+                    sd += a as f64;
+                    sdx += bb as f64;
                 }
                 (sd as f32, sdx as f32)
             })
@@ -165,10 +162,7 @@ impl CustomOp3 for NormaliseGrad {
             let [m, r, g, _] = k[ch];
             let (sd, sdx) = sums[ch];
             let o = p * n;
-            for ((v, &x), &gy) in d.iter_mut().zip(&xv[o..o + n]).zip(&gv[o..o + n]) {
-                let xh = (x - m) * r;
-                *v = g * r / total * (total * gy - sd - xh * sdx);
-            }
+            crate::kernels::batch_norm_grad(d, &xv[o..o + n], &gv[o..o + n], [m, r, g * r / total, total, sd, sdx]);
         });
         for (ch, (sd, sdx)) in sums.iter().enumerate() {
             da[ch] = *sdx; // dγ = Σ dy·x̂
@@ -201,13 +195,9 @@ impl ChannelAffine {
         let per: Vec<(f64, f64)> = (0..planes)
             .into_par_iter()
             .map(|p| {
-                let (xp, gp) = (&x[p * n..(p + 1) * n], &g[p * n..(p + 1) * n]);
-                let (mut sx, mut s) = (0f64, 0f64);
-                for (&xv, &gv) in xp.iter().zip(gp) {
-                    sx += (xv * gv) as f64;
-                    s += gv as f64;
-                }
-                (sx, s)
+                let (s, sx) =
+                    crate::kernels::sum_and_centred_dot(&g[p * n..(p + 1) * n], &x[p * n..(p + 1) * n], 0.0, 1.0);
+                (sx as f64, s as f64)
             })
             .collect();
         let mut out = vec![(0f64, 0f64); c];
@@ -240,8 +230,7 @@ impl CustomOp3 for ChannelAffine {
         }
         let mut y = vec![0f32; x.len()];
         y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(p, (yp, xp))| {
-            let (a, b) = (scale[p % c], shift[p % c]);
-            yp.iter_mut().zip(xp).for_each(|(o, &v)| *o = v * a + b);
+            crate::kernels::affine(yp, xp, scale[p % c], shift[p % c]);
         });
         Ok((CpuStorage::F32(y), l1.shape().clone()))
     }
@@ -294,8 +283,7 @@ impl CustomOp3 for ChannelAffineGrad {
         let mut out = vec![0f32; xv.len() + 2 * c];
         let (dx, rest) = out.split_at_mut(xv.len());
         dx.par_chunks_mut(n).zip(gv.par_chunks(n)).enumerate().for_each(|(p, (d, g))| {
-            let s = a[p % c];
-            d.iter_mut().zip(g).for_each(|(o, &v)| *o = v * s);
+            crate::kernels::affine(d, g, a[p % c], 0.0);
         });
         if self.sums {
             for (ch, (sx, s)) in ChannelAffine::sums(xv, gv, c, n).into_iter().enumerate() {

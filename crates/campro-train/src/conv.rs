@@ -391,8 +391,7 @@ impl CustomOp2 for Prelu {
         let (c, n) = plane(l1.dims(), a.len())?;
         let mut y = vec![0f32; x.len()];
         y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(pl, (yp, xp))| {
-            let s = a[pl % c];
-            yp.iter_mut().zip(xp).for_each(|(o, &v)| *o = if v > 0.0 { v } else { s * v });
+            crate::kernels::prelu(yp, xp, a[pl % c]);
         });
         Ok((CpuStorage::F32(y), l1.shape().clone()))
     }
@@ -434,23 +433,20 @@ impl candle_core::CustomOp3 for PreluGrad {
         }
         let mut out = vec![0f32; xv.len() + c];
         let (dx, da) = out.split_at_mut(xv.len());
-        dx.par_chunks_mut(n).enumerate().for_each(|(pl, d)| {
-            let s = av[pl % c];
-            for ((o, &v), &g) in d.iter_mut().zip(&xv[pl * n..(pl + 1) * n]).zip(&gv[pl * n..(pl + 1) * n]) {
-                *o = if v > 0.0 { g } else { s * g };
-            }
-        });
+        let per: Vec<f32> = dx
+            .par_chunks_mut(n)
+            .enumerate()
+            .map(|(pl, d)| {
+                let (xp, gp) = (&xv[pl * n..(pl + 1) * n], &gv[pl * n..(pl + 1) * n]);
+                crate::kernels::prelu_grad(d, xp, gp, av[pl % c])
+            })
+            .collect();
         if self.slopes {
-            let per: Vec<f64> = (0..xv.len() / n)
-                .into_par_iter()
-                .map(|pl| {
-                    let (xp, gp) = (&xv[pl * n..(pl + 1) * n], &gv[pl * n..(pl + 1) * n]);
-                    xp.iter().zip(gp).filter(|(v, _)| **v <= 0.0).map(|(&v, &g)| (v * g) as f64).sum()
-                })
-                .collect();
+            let mut acc = vec![0f64; c];
             for (pl, v) in per.iter().enumerate() {
-                da[pl % c] += *v as f32;
+                acc[pl % c] += *v as f64;
             }
+            da.iter_mut().zip(acc).for_each(|(o, v)| *o = v as f32);
         }
         let len = out.len();
         Ok((CpuStorage::F32(out), Shape::from(len)))
@@ -536,8 +532,7 @@ impl CustomOp2 for ChannelBias {
         let (c, n) = plane(l1.dims(), b.len())?;
         let mut y = vec![0f32; x.len()];
         y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(p, (yp, xp))| {
-            let bv = b[p % c];
-            yp.iter_mut().zip(xp).for_each(|(o, &v)| *o = v + bv);
+            crate::kernels::affine(yp, xp, 1.0, b[p % c]);
         });
         Ok((CpuStorage::F32(y), l1.shape().clone()))
     }

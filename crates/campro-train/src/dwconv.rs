@@ -97,9 +97,7 @@ impl CustomOp2 for Forward {
                         }
                         let first = lo * g.stride + kx - g.pad;
                         if g.stride == 1 {
-                            for (ov, &xv) in orow[lo..hi].iter_mut().zip(&row[first..first + hi - lo]) {
-                                *ov += wv * xv;
-                            }
+                            crate::kernels::axpy(&mut orow[lo..hi], wv, &row[first..first + hi - lo]);
                         } else {
                             for (ov, &xv) in orow[lo..hi].iter_mut().zip(row[first..].iter().step_by(g.stride)) {
                                 *ov += wv * xv;
@@ -174,9 +172,7 @@ impl CustomOp2 for GradInput {
                         }
                         let first = lo * g.stride + kx - g.pad;
                         if g.stride == 1 {
-                            for (xv, &gv) in xrow[first..first + hi - lo].iter_mut().zip(&grow[lo..hi]) {
-                                *xv += wv * gv;
-                            }
+                            crate::kernels::axpy(&mut xrow[first..first + hi - lo], wv, &grow[lo..hi]);
                         } else {
                             for (xv, &gv) in xrow[first..].iter_mut().step_by(g.stride).zip(&grow[lo..hi]) {
                                 *xv += wv * gv;
@@ -229,7 +225,7 @@ impl CustomOp2 for GradWeight {
                                 let (xrow, grow) =
                                     (&xp[iy * g.w..(iy + 1) * g.w], &gop[oy * g.ow + lo..oy * g.ow + hi]);
                                 if g.stride == 1 {
-                                    s += xrow[first..first + hi - lo].iter().zip(grow).map(|(a, b)| a * b).sum::<f32>();
+                                    s += crate::kernels::dot(&xrow[first..first + hi - lo], grow);
                                 } else {
                                     s += xrow[first..]
                                         .iter()

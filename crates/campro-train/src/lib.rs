@@ -17,6 +17,7 @@ pub mod dwconv;
 pub mod error;
 pub mod faces;
 pub mod finetune;
+pub mod kernels;
 pub mod log;
 pub mod mobilefacenet;
 pub mod persons;

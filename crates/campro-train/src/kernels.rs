@@ -1,0 +1,137 @@
+//! The element-wise inner loops of campro's training ops, compiled for AVX-512 and AVX2 as
+//! well as the baseline and chosen at run time (`multiversion`): a Rust build targets plain
+//! x86-64 (SSE2), which leaves most of a wide CPU's lanes unused. Plain multiplies and adds
+//! (no fused multiply-add), so every version returns the same values; sums run in 16 lanes,
+//! so a sum's rounding differs from a sequential one (both are f32 sums of the same terms).
+
+use multiversion::multiversion;
+
+/// `y[i] += a · x[i]`.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
+pub fn axpy(y: &mut [f32], a: f32, x: &[f32]) {
+    for (o, &v) in y.iter_mut().zip(x) {
+        *o += a * v;
+    }
+}
+
+/// `Σ x[i] · y[i]`, in 16 lanes.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
+pub fn dot(x: &[f32], y: &[f32]) -> f32 {
+    let n = x.len().min(y.len());
+    let (x, y) = (&x[..n], &y[..n]);
+    let mut lanes = [0f32; 16];
+    let (xc, yc) = (x.chunks_exact(16), y.chunks_exact(16));
+    let (xr, yr) = (xc.remainder(), yc.remainder());
+    for (a, b) in xc.zip(yc) {
+        for k in 0..16 {
+            lanes[k] += a[k] * b[k];
+        }
+    }
+    let mut s: f32 = lanes.iter().sum();
+    for (a, b) in xr.iter().zip(yr) {
+        s += a * b;
+    }
+    s
+}
+
+/// `y[i] = x[i] · a + b`.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
+pub fn affine(y: &mut [f32], x: &[f32], a: f32, b: f32) {
+    for (o, &v) in y.iter_mut().zip(x) {
+        *o = v * a + b;
+    }
+}
+
+/// PReLU forward: `y[i] = x[i]` where positive, else `s · x[i]`.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
+pub fn prelu(y: &mut [f32], x: &[f32], s: f32) {
+    for (o, &v) in y.iter_mut().zip(x) {
+        *o = if v > 0.0 { v } else { s * v };
+    }
+}
+
+/// PReLU backward for one plane of slope `s`: writes `dx` and returns `Σ_{x ≤ 0} x · dy`
+/// (the slope's gradient), in 16 lanes.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
+pub fn prelu_grad(dx: &mut [f32], x: &[f32], g: &[f32], s: f32) -> f32 {
+    let n = dx.len().min(x.len()).min(g.len());
+    let (dx, x, g) = (&mut dx[..n], &x[..n], &g[..n]);
+    for ((o, &v), &gv) in dx.iter_mut().zip(x).zip(g) {
+        *o = if v > 0.0 { gv } else { s * gv };
+    }
+    let mut lanes = [0f32; 16];
+    let (xc, gc) = (x.chunks_exact(16), g.chunks_exact(16));
+    let (xr, gr) = (xc.remainder(), gc.remainder());
+    for (a, b) in xc.zip(gc) {
+        for k in 0..16 {
+            lanes[k] += if a[k] <= 0.0 { a[k] * b[k] } else { 0.0 };
+        }
+    }
+    let mut sum: f32 = lanes.iter().sum();
+    for (&a, &b) in xr.iter().zip(gr) {
+        if a <= 0.0 {
+            sum += a * b;
+        }
+    }
+    sum
+}
+
+/// `(Σ dy, Σ dy · (x − m) · r)` over one plane, in 16 lanes.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
+pub fn sum_and_centred_dot(g: &[f32], x: &[f32], m: f32, r: f32) -> (f32, f32) {
+    let n = g.len().min(x.len());
+    let (g, x) = (&g[..n], &x[..n]);
+    let (mut l1, mut l2) = ([0f32; 16], [0f32; 16]);
+    let (gc, xc) = (g.chunks_exact(16), x.chunks_exact(16));
+    let (gr, xr) = (gc.remainder(), xc.remainder());
+    for (a, b) in gc.zip(xc) {
+        for k in 0..16 {
+            l1[k] += a[k];
+            l2[k] += a[k] * (b[k] - m) * r;
+        }
+    }
+    let (mut s1, mut s2): (f32, f32) = (l1.iter().sum(), l2.iter().sum());
+    for (&a, &b) in gr.iter().zip(xr) {
+        s1 += a;
+        s2 += a * (b - m) * r;
+    }
+    (s1, s2)
+}
+
+/// Batch-norm input gradient over one plane: `dx = k · (N·dy − Σdy − x̂·Σ(dy x̂))` with
+/// `x̂ = (x − m)·r` and `k = γ r / N`.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
+pub fn batch_norm_grad(dx: &mut [f32], x: &[f32], g: &[f32], [m, r, k, total, sd, sdx]: [f32; 6]) {
+    for ((o, &xv), &gv) in dx.iter_mut().zip(x).zip(g) {
+        let xh = (xv - m) * r;
+        *o = k * (total * gv - sd - xh * sdx);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kernels_by_hand() {
+        let x: Vec<f32> = (0..37).map(|i| i as f32 - 18.0).collect();
+        let g: Vec<f32> = (0..37).map(|i| 0.5 + i as f32 * 0.25).collect();
+        let mut y = vec![1.0f32; 37];
+        axpy(&mut y, 2.0, &x);
+        assert_eq!(y[0], 1.0 - 36.0);
+        assert_eq!(dot(&x, &g), x.iter().zip(&g).map(|(a, b)| a * b).sum::<f32>());
+        affine(&mut y, &x, 3.0, 1.0);
+        assert_eq!(y[36], 18.0 * 3.0 + 1.0);
+        prelu(&mut y, &x, 0.25);
+        assert_eq!((y[0], y[18], y[36]), (-4.5, 0.0, 18.0));
+        let mut dx = vec![0f32; 37];
+        let ds = prelu_grad(&mut dx, &x, &g, 0.25);
+        assert_eq!((dx[0], dx[36]), (0.125, g[36]));
+        let want: f32 = x.iter().zip(&g).filter(|(a, _)| **a <= 0.0).map(|(a, b)| a * b).sum();
+        assert!((ds - want).abs() <= 1e-4 * want.abs());
+        let (s1, s2) = sum_and_centred_dot(&g, &x, 1.0, 0.5);
+        assert!((s1 - g.iter().sum::<f32>()).abs() < 1e-4);
+        let w2: f32 = g.iter().zip(&x).map(|(a, b)| a * (b - 1.0) * 0.5).sum();
+        assert!((s2 - w2).abs() <= 1e-4 * w2.abs());
+    }
+}

@@ -213,9 +213,9 @@ pub fn simulate(
         let writer = scope.spawn(move || -> Result<()> {
             for buf in done_rx {
                 to.write_all(&buf).map_err(|e| anyhow!("the encoder stopped: {e}"))?;
-                if free_tx.send(buf).is_err() {
-                    break;
-                }
+                // After the last frame the reader is gone and takes no buffer back; the
+                // frames still queued must be written all the same.
+                let _ = free_tx.send(buf);
             }
             Ok(())
         });

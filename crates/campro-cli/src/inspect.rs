@@ -207,7 +207,7 @@ fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, Stri
         html_escape(params)
     );
     for (picture, v) in items {
-        let count = |panel: usize, what: &str| v["panels"][panel][what].as_array().map_or(0, |a| a.len());
+        let count = |panel, what| count(v, panel, what);
         let link = href(picture, out);
         let json_link = href(&picture.with_extension("json"), out);
         let name = html_escape(&href_name(picture, out));
@@ -230,6 +230,11 @@ fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, Stri
         s += "</ul>\n";
     }
     s + "</body></html>\n"
+}
+
+/// How many `what` ("faces" or "people") panel `panel` of an image's JSON lists.
+fn count(v: &Value, panel: usize, what: &str) -> usize {
+    v["panels"][panel][what].as_array().map_or(0, |a| a.len())
 }
 
 /// The picture's path under `out`, for display.
@@ -297,8 +302,8 @@ pub fn inspect(
         "confidence": det.confidence,
         "images": done.iter().map(|(o, v)| json!({
             "input": v["input"], "picture": href(o, out), "json": href(&o.with_extension("json"), out),
-            "faces": [v["panels"][0]["faces"].as_array().map_or(0, |a| a.len()), v["panels"][1]["faces"].as_array().map_or(0, |a| a.len())],
-            "people": [v["panels"][0]["people"].as_array().map_or(0, |a| a.len()), v["panels"][1]["people"].as_array().map_or(0, |a| a.len())],
+            "faces": [count(v, 0, "faces"), count(v, 1, "faces")],
+            "people": [count(v, 0, "people"), count(v, 1, "people")],
         })).collect::<Vec<_>>(),
         "failed": failed.iter().map(|(i, e)| json!({"input": i.display().to_string(), "error": e})).collect::<Vec<_>>(),
     });
@@ -308,7 +313,7 @@ pub fn inspect(
         say!("{}", serde_json::to_string(&index)?);
     } else {
         for (o, v) in &done {
-            let n = |panel: usize, what: &str| v["panels"][panel][what].as_array().map_or(0, |a| a.len());
+            let n = |panel, what| count(v, panel, what);
             say!(
                 "{}: faces {} raw, {} protected; people {} raw, {} protected",
                 escape(&href_name(o, out)),

@@ -7,9 +7,7 @@ use candle_core::{CpuStorage, CustomOp1, CustomOp3, Layout, Result, Shape, Tenso
 use rayon::prelude::*;
 
 fn slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
-    let CpuStorage::F32(v) = s else { candle_core::bail!("batch norm: f32 only") };
-    let Some((a, b)) = l.contiguous_offsets() else { candle_core::bail!("batch norm: contiguous operands only") };
-    Ok(&v[a..b])
+    crate::conv::slice(s, l, "batch norm")
 }
 
 fn dims(l: &Layout) -> Result<(usize, usize, usize)> {
@@ -200,12 +198,9 @@ impl ChannelAffine {
                 (sx as f64, s as f64)
             })
             .collect();
-        let mut out = vec![(0f64, 0f64); c];
-        for (p, (sx, s)) in per.into_iter().enumerate() {
-            out[p % c].0 += sx;
-            out[p % c].1 += s;
-        }
-        out
+        let sx = crate::conv::per_channel(per.iter().map(|p| p.0), c);
+        let s = crate::conv::per_channel(per.iter().map(|p| p.1), c);
+        sx.into_iter().zip(s).collect()
     }
 }
 

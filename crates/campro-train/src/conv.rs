@@ -10,13 +10,14 @@
 //! candle's generic ops instead (one product per kernel tap on shifted copies, then
 //! subsampling), the convolutions and their accumulations were most of a training step.
 //!
-//! Numerics: f32 throughout, as candle's `conv2d`; `tests/conv_ops.rs` checks both directions
+//! Numerics: f32 throughout, as candle's `conv2d`; `tests/networks.rs` checks both directions
 //! against candle's `conv2d` and finite differences.
 
 use candle_core::{CpuStorage, CustomOp2, Layout, Result, Shape, Tensor};
 use rayon::prelude::*;
 
-fn slice<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
+/// The f32 values of a contiguous CPU operand of campro's ops (`what` names the op in errors).
+pub(crate) fn slice<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
     let CpuStorage::F32(v) = s else { candle_core::bail!("{what}: f32 only") };
     let Some((a, b)) = l.contiguous_offsets() else { candle_core::bail!("{what}: contiguous operands only") };
     Ok(&v[a..b])
@@ -442,15 +443,22 @@ impl candle_core::CustomOp3 for PreluGrad {
             })
             .collect();
         if self.slopes {
-            let mut acc = vec![0f64; c];
-            for (pl, v) in per.iter().enumerate() {
-                acc[pl % c] += *v as f64;
-            }
+            let acc = per_channel(per.iter().map(|&v| v as f64), c);
             da.iter_mut().zip(acc).for_each(|(o, v)| *o = v as f32);
         }
         let len = out.len();
         Ok((CpuStorage::F32(out), Shape::from(len)))
     }
+}
+
+/// Per-plane values of a (B, C, ...) tensor (plane p is channel p mod C) summed per channel,
+/// in f64.
+pub(crate) fn per_channel(per_plane: impl IntoIterator<Item = f64>, c: usize) -> Vec<f64> {
+    let mut out = vec![0f64; c];
+    for (p, v) in per_plane.into_iter().enumerate() {
+        out[p % c] += v;
+    }
+    out
 }
 
 /// (channels, plane size) of a (B, C, ...) tensor whose slopes number `slopes`.
@@ -563,10 +571,7 @@ impl candle_core::CustomOp1 for ChannelSum {
         let g = slice(s, l, "bias")?;
         let (c, n) = plane(l.dims(), self.c)?;
         let per: Vec<f64> = g.par_chunks(n).map(|p| p.iter().map(|&v| v as f64).sum()).collect();
-        let mut out = vec![0f32; c];
-        for (p, v) in per.iter().enumerate() {
-            out[p % c] += *v as f32;
-        }
+        let out: Vec<f32> = per_channel(per, c).into_iter().map(|v| v as f32).collect();
         Ok((CpuStorage::F32(out), Shape::from(c)))
     }
 }

@@ -60,9 +60,7 @@ impl Geo {
 }
 
 fn slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
-    let CpuStorage::F32(v) = s else { candle_core::bail!("depthwise: f32 only") };
-    let Some((a, b)) = l.contiguous_offsets() else { candle_core::bail!("depthwise: contiguous operands only") };
-    Ok(&v[a..b])
+    crate::conv::slice(s, l, "depthwise")
 }
 
 /// out = depthwise(x, w).

@@ -14,6 +14,7 @@ pub mod ap;
 pub mod atomic;
 pub mod baselines;
 pub mod data;
+pub mod enhance;
 pub mod error;
 pub mod face;
 pub mod geometry;

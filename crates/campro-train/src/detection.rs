@@ -274,7 +274,7 @@ pub fn student(
     cfg: &crate::config::DetectorConfig,
     seed: u64,
     dev: &candle_core::Device,
-) -> std::result::Result<Yolox, crate::yolox::YoloxError> {
+) -> std::result::Result<Yolox, crate::onnx_net::GraphError> {
     let det = Yolox::load(&cfg.model, dev)?;
     if cfg.adapter > 0 {
         det.with_adapter(cfg.adapter, seed, dev)
@@ -288,7 +288,7 @@ pub fn student(
 pub fn teacher(
     cfg: &crate::config::DetectorConfig,
     dev: &candle_core::Device,
-) -> std::result::Result<Option<Yolox>, crate::yolox::YoloxError> {
+) -> std::result::Result<Option<Yolox>, crate::onnx_net::GraphError> {
     if cfg.distill > 0.0 {
         Yolox::load(&cfg.model, dev).map(Some)
     } else {

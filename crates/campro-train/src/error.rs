@@ -15,7 +15,7 @@ pub enum TrainError {
     #[error(transparent)]
     Eval(#[from] campro_eval::EvalError),
     #[error(transparent)]
-    Detector(#[from] crate::yolox::YoloxError),
+    Graph(#[from] crate::onnx_net::GraphError),
     #[error("{0}")]
     Unsupported(String),
     #[error("training diverged: {0}")]

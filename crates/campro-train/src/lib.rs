@@ -20,9 +20,11 @@ pub mod finetune;
 pub mod kernels;
 pub mod log;
 pub mod mobilefacenet;
+pub mod onnx_net;
 pub mod persons;
 pub mod torch_legacy;
 pub mod train;
+pub mod unet;
 pub mod yolox;
 
 pub use candle_core::{Device, Tensor};

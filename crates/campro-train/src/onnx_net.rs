@@ -1,0 +1,403 @@
+//! A small ONNX graph interpreter on candle: the networks campro trains (YOLOX-Nano, read
+//! from its batch-norm folded file; the enhancer's U-Net, built as ONNX) are run node by node
+//! over the few operators they use (Conv, Relu, Sigmoid, Mul, Add, Concat, Slice, MaxPool,
+//! Resize, Reshape, Transpose), with every Conv weight and bias a trainable [`Var`], and written
+//! back as ONNX with the current weights, so what tract evaluates is what was trained.
+
+use candle_core::{Result, Tensor, Var};
+use prost::Message;
+use std::collections::HashMap;
+use std::path::Path;
+use tract_onnx::pb;
+
+/// Why an ONNX graph could not be read, interpreted or written.
+#[derive(Debug, thiserror::Error)]
+pub enum GraphError {
+    #[error("{path}: {message}")]
+    Io { path: String, message: String },
+    #[error("{path}: {message}")]
+    Graph { path: String, message: String },
+    #[error("tensor: {0}")]
+    Tensor(#[from] candle_core::Error),
+}
+
+
+#[derive(Debug, Clone)]
+enum Op {
+    /// One axis, from `start` to `end` (clamped) by `step`.
+    Slice {
+        axis: usize,
+        start: usize,
+        end: i64,
+        step: usize,
+    },
+    Concat(usize),
+    Conv {
+        w: String,
+        b: Option<String>,
+        stride: usize,
+        pad: usize,
+        depthwise: bool,
+    },
+    Sigmoid,
+    Relu,
+    /// `x · σ(x)`: a Sigmoid and the Mul of its input by it, fused at load time.
+    Silu,
+    Mul,
+    /// Multiplication by a constant scalar.
+    Scale(f32),
+    Add,
+    /// Stride-1 max pooling, `k` x `k`, padding (k − 1) / 2.
+    MaxPool(usize),
+    /// Nearest-neighbour upsampling by an integer factor.
+    Upsample(usize),
+    /// (B, C, H, W) → (B, C, H·W).
+    Flatten,
+    /// (B, C, N) → (B, N, C).
+    Transpose,
+}
+
+#[derive(Debug, Clone)]
+struct Node {
+    op: Op,
+    inputs: Vec<String>,
+    output: String,
+}
+
+/// An ONNX graph with trainable convolutions.
+pub struct OnnxNet {
+    nodes: Vec<Node>,
+    /// The graph's (first non-constant) input.
+    pub(crate) input: String,
+    /// The graph's first output.
+    pub(crate) output: String,
+    /// Conv weights and biases by initializer name, in graph order.
+    pub(crate) params: Vec<(String, Var)>,
+    pub(crate) index: HashMap<String, usize>,
+    /// The file as read, to write back with new weights.
+    model: pb::ModelProto,
+}
+
+fn ints(t: &pb::TensorProto) -> Vec<i64> {
+    if !t.int64_data.is_empty() {
+        return t.int64_data.clone();
+    }
+    t.raw_data.chunks_exact(8).map(|c| i64::from_le_bytes(c.try_into().expect("8 bytes"))).collect()
+}
+
+fn floats(t: &pb::TensorProto) -> Vec<f32> {
+    if !t.float_data.is_empty() {
+        return t.float_data.clone();
+    }
+    t.raw_data.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect()
+}
+
+/// An f32 initializer `name` of shape `dims` (raw little-endian data).
+pub(crate) fn f32_tensor(name: &str, dims: Vec<i64>, v: &[f32]) -> pb::TensorProto {
+    pb::TensorProto {
+        name: name.into(),
+        dims,
+        data_type: 1,
+        raw_data: v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+        ..Default::default()
+    }
+}
+
+/// An integer-list attribute.
+pub(crate) fn ints_attr(name: &str, v: Vec<i64>) -> pb::AttributeProto {
+    pb::AttributeProto { name: name.into(), r#type: 7, ints: v, ..Default::default() }
+}
+
+/// A string attribute.
+pub(crate) fn string_attr(name: &str, v: &str) -> pb::AttributeProto {
+    pb::AttributeProto { name: name.into(), r#type: 3, s: v.as_bytes().to_vec(), ..Default::default() }
+}
+
+/// A node named after its one output.
+pub(crate) fn node(op: &str, inputs: &[&str], output: &str, attribute: Vec<pb::AttributeProto>) -> pb::NodeProto {
+    pb::NodeProto {
+        name: format!("{op}_{output}"),
+        op_type: op.into(),
+        input: inputs.iter().map(|s| s.to_string()).collect(),
+        output: vec![output.into()],
+        attribute,
+        ..Default::default()
+    }
+}
+
+/// The attributes of a square `k` x `k` convolution with symmetric padding.
+pub(crate) fn conv_attrs(k: i64, stride: i64, pad: i64) -> Vec<pb::AttributeProto> {
+    vec![
+        ints_attr("kernel_shape", vec![k, k]),
+        ints_attr("strides", vec![stride, stride]),
+        ints_attr("pads", vec![pad, pad, pad, pad]),
+        ints_attr("dilations", vec![1, 1]),
+    ]
+}
+
+impl OnnxNet {
+    /// Reads the ONNX file; any operator or attribute outside what YOLOX uses is an error
+    /// naming the node.
+    pub fn load(path: &Path, dev: &candle_core::Device) -> std::result::Result<Self, GraphError> {
+        let p = path.display().to_string();
+        let bytes = campro::file::read_capped(path, 256 << 20, "an ONNX model")
+            .map_err(|e| GraphError::Io { path: p.clone(), message: e.reason() })?;
+        let model = pb::ModelProto::decode(bytes.as_slice())
+            .map_err(|e| GraphError::Graph { path: p.clone(), message: format!("not an ONNX model: {e}") })?;
+        Self::from_model(model, p, dev)
+    }
+
+    pub(crate) fn from_model(
+        model: pb::ModelProto,
+        p: String,
+        dev: &candle_core::Device,
+    ) -> std::result::Result<Self, GraphError> {
+        let bad = |m: String| GraphError::Graph { path: p.clone(), message: m };
+        let graph = model.graph.as_ref().ok_or_else(|| bad("no graph".into()))?;
+        let inits: HashMap<&str, &pb::TensorProto> = graph.initializer.iter().map(|t| (t.name.as_str(), t)).collect();
+        let int_of = |name: &str| -> std::result::Result<i64, GraphError> {
+            let t = inits.get(name).ok_or_else(|| bad(format!("{name}: expected a constant")))?;
+            ints(t).first().copied().ok_or_else(|| bad(format!("{name}: empty constant")))
+        };
+        let mut nodes = Vec::new();
+        let mut params = Vec::new();
+        for n in &graph.node {
+            let what = format!("node {} ({})", n.name, n.op_type);
+            let attr = |name: &str| n.attribute.iter().find(|a| a.name == name);
+            let attr_ints = |name: &str| attr(name).map(|a| a.ints.clone()).unwrap_or_default();
+            let data: Vec<String> =
+                n.input.iter().filter(|i| !inits.contains_key(i.as_str()) && !i.is_empty()).cloned().collect();
+            let op = match n.op_type.as_str() {
+                "Slice" => {
+                    let arg = |k: usize| int_of(&n.input[k]);
+                    if n.input.len() != 5 {
+                        return Err(bad(format!("{what}: expected data, starts, ends, axes, steps")));
+                    }
+                    let (start, end, axis, step) = (arg(1)?, arg(2)?, arg(3)?, arg(4)?);
+                    if start < 0 || !(0..4).contains(&axis) || step < 1 {
+                        return Err(bad(format!("{what}: start {start}, axis {axis}, step {step} unsupported")));
+                    }
+                    Op::Slice { axis: axis as usize, start: start as usize, end, step: step as usize }
+                }
+                "Concat" => Op::Concat(attr("axis").map_or(0, |a| a.i) as usize),
+                "Conv" => {
+                    let w = inits
+                        .get(n.input[1].as_str())
+                        .ok_or_else(|| bad(format!("{what}: weight is not a constant")))?;
+                    let (stride, pads, dil, group) = (
+                        attr_ints("strides"),
+                        attr_ints("pads"),
+                        attr_ints("dilations"),
+                        attr("group").map_or(1, |a| a.i),
+                    );
+                    let pad = pads.first().copied().unwrap_or(0);
+                    if pads.iter().any(|&q| q != pad)
+                        || dil.iter().any(|&d| d != 1)
+                        || stride.len() != 2
+                        || stride[0] != stride[1]
+                    {
+                        return Err(bad(format!("{what}: only symmetric padding, square strides and no dilation")));
+                    }
+                    let depthwise = group != 1;
+                    if depthwise && (w.dims.get(1) != Some(&1) || w.dims[0] != group) {
+                        return Err(bad(format!("{what}: grouped convolution that is not depthwise")));
+                    }
+                    let b = n.input.get(2).cloned();
+                    for name in std::iter::once(&n.input[1]).chain(b.iter()) {
+                        let t = inits[name.as_str()];
+                        let dims: Vec<usize> = t.dims.iter().map(|&d| d as usize).collect();
+                        params.push((name.clone(), Var::from_vec(floats(t), dims, dev)?));
+                    }
+                    Op::Conv { w: n.input[1].clone(), b, stride: stride[0] as usize, pad: pad as usize, depthwise }
+                }
+                "Sigmoid" => Op::Sigmoid,
+                "Relu" => Op::Relu,
+                "Mul" => match n.input.iter().find_map(|i| inits.get(i.as_str())) {
+                    Some(c) if data.len() == 1 && c.dims.iter().all(|&d| d == 1) && floats(c).len() == 1 => {
+                        Op::Scale(floats(c)[0])
+                    }
+                    Some(_) => return Err(bad(format!("{what}: a constant factor must be a scalar"))),
+                    None => Op::Mul,
+                },
+                "Add" => Op::Add,
+                "MaxPool" => {
+                    let k = attr_ints("kernel_shape");
+                    let (s, pads) = (attr_ints("strides"), attr_ints("pads"));
+                    if k.len() != 2
+                        || k[0] != k[1]
+                        || k[0] % 2 == 0
+                        || s.iter().any(|&v| v != 1)
+                        || pads.iter().any(|&q| q != k[0] / 2)
+                    {
+                        return Err(bad(format!("{what}: only odd square stride-1 'same' pooling")));
+                    }
+                    Op::MaxPool(k[0] as usize)
+                }
+                "Resize" => {
+                    let mode = attr("mode").map(|a| String::from_utf8_lossy(&a.s).to_string()).unwrap_or_default();
+                    let scales =
+                        n.input.get(2).and_then(|s| inits.get(s.as_str())).map(|t| floats(t)).unwrap_or_default();
+                    let f = scales.get(2).copied().unwrap_or(0.0);
+                    if mode != "nearest" || scales.len() != 4 || scales[3] != f || f.fract() != 0.0 || f < 1.0 {
+                        return Err(bad(format!(
+                            "{what}: only nearest upsampling by an integer factor (mode {mode}, scales {scales:?})"
+                        )));
+                    }
+                    Op::Upsample(f as usize)
+                }
+                "Reshape" => Op::Flatten,
+                "Transpose" => {
+                    if attr_ints("perm") != [0, 2, 1] {
+                        return Err(bad(format!("{what}: only perm [0, 2, 1]")));
+                    }
+                    Op::Transpose
+                }
+                other => return Err(bad(format!("{what}: operator {other} is not supported"))),
+            };
+            let output = n.output.first().cloned().ok_or_else(|| bad(format!("{what}: no output")))?;
+            nodes.push(Node { op, inputs: data, output });
+        }
+        let input = graph
+            .input
+            .iter()
+            .map(|i| i.name.clone())
+            .find(|n| !inits.contains_key(n.as_str()))
+            .ok_or_else(|| bad("no input".into()))?;
+        let output = graph.output.first().map(|o| o.name.clone()).ok_or_else(|| bad("no output".into()))?;
+        let index = params.iter().enumerate().map(|(i, (n, _))| (n.clone(), i)).collect();
+        fuse_silu(&mut nodes, &output);
+        Ok(Self { nodes, input, output, params, index, model })
+    }
+
+    /// Every trainable tensor (conv weights and biases).
+    pub fn vars(&self) -> Vec<Var> {
+        self.params.iter().map(|(_, v)| v.clone()).collect()
+    }
+
+    /// Every trainable tensor with its ONNX initializer name.
+    pub fn named_vars(&self) -> Vec<(String, Var)> {
+        self.params.clone()
+    }
+
+    fn param(&self, name: &str) -> &Var {
+        &self.params[self.index[name]].1
+    }
+
+    /// Interprets the graph on `x`, up to the node writing `until` (all of it if None).
+    pub(crate) fn run(&self, x: &Tensor, until: Option<&str>) -> Result<HashMap<&str, Tensor>> {
+        let mut values: HashMap<&str, Tensor> = HashMap::new();
+        values.insert(&self.input, x.clone());
+        for n in &self.nodes {
+            if until.is_some_and(|u| values.contains_key(u)) {
+                break;
+            }
+            let arg = |k: usize| -> Result<&Tensor> {
+                values
+                    .get(n.inputs[k].as_str())
+                    .ok_or_else(|| candle_core::Error::Msg(format!("{} not computed", n.inputs[k])))
+            };
+            let y = match &n.op {
+                Op::Slice { axis, start, end, step } => {
+                    let x = arg(0)?;
+                    let len = x.dim(*axis)?;
+                    let end = (*end).clamp(0, len as i64) as usize;
+                    let x = x.narrow(*axis, *start, end.saturating_sub(*start))?;
+                    crate::conv::subsample(&x, *axis, *step)?
+                }
+                Op::Concat(axis) => Tensor::cat(&(0..n.inputs.len()).map(arg).collect::<Result<Vec<_>>>()?, *axis)?,
+                Op::Conv { w, b, stride, pad, depthwise } => {
+                    let w = self.param(w).as_tensor();
+                    let y = if *depthwise {
+                        crate::dwconv::depthwise(arg(0)?, w, *stride, *pad)?
+                    } else {
+                        crate::conv::conv2d(arg(0)?, w, *stride, *pad)?
+                    };
+                    match b {
+                        Some(b) => crate::conv::channel_bias(&y, self.param(b).as_tensor())?,
+                        None => y,
+                    }
+                }
+                Op::Sigmoid => candle_nn::ops::sigmoid(arg(0)?)?,
+                Op::Relu => arg(0)?.relu()?,
+                Op::Silu => crate::conv::silu(arg(0)?)?,
+                Op::Mul => arg(0)?.broadcast_mul(arg(1)?)?,
+                Op::Scale(c) => (arg(0)? * *c as f64)?,
+                Op::Add => arg(0)?.broadcast_add(arg(1)?)?,
+                Op::MaxPool(k) => max_pool_same(arg(0)?, *k)?,
+                Op::Upsample(f) => {
+                    let (_, _, h, w) = arg(0)?.dims4()?;
+                    arg(0)?.upsample_nearest2d(h * f, w * f)?
+                }
+                Op::Flatten => arg(0)?.flatten_from(2)?,
+                Op::Transpose => arg(0)?.transpose(1, 2)?.contiguous()?,
+            };
+            values.insert(&n.output, y);
+        }
+        Ok(values)
+    }
+
+    /// Writes the model with the current weights as ONNX (temporary file, then rename).
+    pub fn save_onnx(&self, path: &Path) -> std::result::Result<(), GraphError> {
+        let p = path.display().to_string();
+        let model = self.current()?;
+        let io = |e: std::io::Error| GraphError::Io { path: p.clone(), message: e.to_string() };
+        campro_eval::atomic::write(path, &model.encode_to_vec(), true).map_err(io)
+    }
+
+    /// The ONNX model with the current weights.
+    pub(crate) fn current(&self) -> Result<pb::ModelProto> {
+        let mut model = self.model.clone();
+        let graph = model.graph.as_mut().expect("checked in load");
+        for t in graph.initializer.iter_mut() {
+            if let Some(&i) = self.index.get(&t.name) {
+                let v: Vec<f32> = self.params[i].1.as_tensor().flatten_all()?.to_vec1()?;
+                t.float_data.clear();
+                t.raw_data = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+            }
+        }
+        Ok(model)
+    }
+}
+
+/// Replaces each `s = Sigmoid(x)` followed by `Mul(x, s)` (either order), where nothing else
+/// reads `s` and `s` is not the graph's output, by one `Silu(x)` node writing the Mul's output.
+fn fuse_silu(nodes: &mut Vec<Node>, graph_output: &str) {
+    let mut i = 0;
+    while i < nodes.len() {
+        if matches!(nodes[i].op, Op::Sigmoid) && nodes[i].output != graph_output {
+            let (x, s) = (nodes[i].inputs[0].clone(), nodes[i].output.clone());
+            let readers: Vec<usize> = (0..nodes.len()).filter(|&j| nodes[j].inputs.contains(&s)).collect();
+            if let [j] = readers[..] {
+                let m = &nodes[j];
+                let pair = m.inputs.len() == 2
+                    && ((m.inputs[0] == x && m.inputs[1] == s) || (m.inputs[0] == s && m.inputs[1] == x));
+                if matches!(m.op, Op::Mul) && pair && j > i {
+                    nodes[j] = Node { op: Op::Silu, inputs: vec![x], output: nodes[j].output.clone() };
+                    nodes.remove(i);
+                    continue;
+                }
+            }
+        }
+        i += 1;
+    }
+}
+
+/// Stride-1 `k` x `k` max pooling with (k − 1)/2 padding that never wins (ONNX's −∞), as two
+/// separable passes of element-wise maxima (differentiable; candle's pooling backward needs
+/// stride = kernel).
+fn max_pool_same(x: &Tensor, k: usize) -> Result<Tensor> {
+    let r = k / 2;
+    let pass = |x: &Tensor, dim: usize| -> Result<Tensor> {
+        let n = x.dim(dim)?;
+        let mut shape = x.dims().to_vec();
+        shape[dim] = r;
+        let wall = Tensor::full(f32::MIN, shape, x.device())?;
+        let padded = Tensor::cat(&[&wall, x, &wall], dim)?;
+        let mut m = padded.narrow(dim, 0, n)?;
+        for s in 1..k {
+            m = m.maximum(&padded.narrow(dim, s, n)?)?;
+        }
+        Ok(m)
+    };
+    pass(&pass(x, 3)?, 2)
+}

@@ -1,0 +1,247 @@
+//! The image enhancer R of CamPro (paper Sec. IV-D): a small U-Net from a captured
+//! (protected) image back to the raw scene, built as an ONNX graph and trained through
+//! [`OnnxNet`], so the file tract runs is the network that was trained.
+//!
+//! Shape, for widths `w₀ … w_L` (one level per width, each level below the first at half
+//! the resolution of the one above):
+//! - encoder: level 0 is two 3x3 convolutions (3 → w₀ → w₀); level l is a stride-2 3x3
+//!   convolution (w_{l−1} → w_l) and a 3x3 convolution (w_l → w_l); ReLU after each;
+//! - decoder, from the bottom up: a 3x3 convolution (w_{l+1} → w_l, ReLU) at the lower
+//!   resolution, nearest 2x upsampling, concatenation with the encoder's level l, a 3x3
+//!   convolution (2·w_l → w_l, ReLU);
+//! - output: a 1x1 convolution (w₀ → 3) added to the input (a residual, zero at start, so an
+//!   untrained enhancer returns the captured image unchanged).
+//!
+//! Input and output: (B, 3, H, W) RGB in [0, 1] (the output is not clamped; callers clamp
+//! when they quantise), H and W multiples of [`Unet::multiple`]. No normalisation layers:
+//! inference is one pass with no batch statistics.
+
+use crate::onnx_net::{conv_attrs, f32_tensor, node, string_attr, GraphError, OnnxNet};
+pub use campro_eval::enhance::{INPUT, MULTIPLE_KEY, OUTPUT};
+use candle_core::{Result, Tensor, Var};
+use rand::SeedableRng;
+use rand_distr::Distribution;
+use std::path::Path;
+use tract_onnx::pb;
+
+/// The enhancer network.
+pub struct Unet {
+    net: OnnxNet,
+    widths: Vec<usize>,
+}
+
+/// Parameters of a U-Net with these widths (weights and biases).
+pub fn parameter_count(widths: &[usize]) -> usize {
+    let conv = |i: usize, o: usize, k: usize| i * o * k * k + o;
+    let mut n = conv(3, widths[0], 3) + conv(widths[0], widths[0], 3);
+    for l in 1..widths.len() {
+        n += conv(widths[l - 1], widths[l], 3) + conv(widths[l], widths[l], 3);
+        n += conv(widths[l], widths[l - 1], 3) + conv(2 * widths[l - 1], widths[l - 1], 3);
+    }
+    n + conv(widths[0], 3, 1)
+}
+
+/// Multiply-accumulates per input pixel of one forward pass (a level l convolution runs on
+/// 4^−l of the pixels).
+pub fn macs_per_pixel(widths: &[usize]) -> f64 {
+    let area = |l: usize| 0.25f64.powi(l as i32);
+    let conv = |i: usize, o: usize, k: usize, l: usize| (i * o * k * k) as f64 * area(l);
+    let mut m = conv(3, widths[0], 3, 0) + conv(widths[0], widths[0], 3, 0) + conv(widths[0], 3, 1, 0);
+    for l in 1..widths.len() {
+        m += conv(widths[l - 1], widths[l], 3, l) + conv(widths[l], widths[l], 3, l);
+        m += conv(widths[l], widths[l - 1], 3, l) + conv(2 * widths[l - 1], widths[l - 1], 3, l - 1);
+    }
+    m
+}
+
+impl Unet {
+    /// A fresh network: He-normal 3x3 weights drawn from `seed`, zero biases, a zero output
+    /// convolution (the identity map at start). `widths`: 1 to 6 levels, each 1..=512.
+    pub fn new(widths: &[usize], seed: u64, dev: &candle_core::Device) -> std::result::Result<Self, GraphError> {
+        if widths.is_empty() || widths.len() > 6 || widths.iter().any(|w| !(1..=512).contains(w)) {
+            return Err(GraphError::Graph {
+                path: "unet".into(),
+                message: format!("widths {widths:?}: 1 to 6 levels of 1..=512 channels"),
+            });
+        }
+        let model = graph(widths, seed);
+        Ok(Self { net: OnnxNet::from_model(model, "unet".into(), dev)?, widths: widths.to_vec() })
+    }
+
+    /// Reads an enhancer written by [`Self::save_onnx`].
+    pub fn load(path: &Path, dev: &candle_core::Device) -> std::result::Result<Self, GraphError> {
+        let net = OnnxNet::load(path, dev)?;
+        let p = path.display().to_string();
+        // The widths are the output channels of the encoder's convolutions, in order.
+        let widths: Vec<usize> = net
+            .named_vars()
+            .iter()
+            .filter(|(n, _)| n.starts_with("enc") && n.ends_with(".b") && n.contains("conv1"))
+            .map(|(_, v)| v.dims()[0])
+            .collect();
+        if widths.is_empty() || net.input != INPUT || net.output != OUTPUT {
+            return Err(GraphError::Graph { path: p, message: "not an enhancer written by campro".into() });
+        }
+        Ok(Self { net, widths })
+    }
+
+    pub fn widths(&self) -> &[usize] {
+        &self.widths
+    }
+
+    /// Height and width must be multiples of this (2^(levels − 1)).
+    pub fn multiple(&self) -> usize {
+        1 << (self.widths.len() - 1)
+    }
+
+    /// Every trainable tensor.
+    pub fn vars(&self) -> Vec<Var> {
+        self.net.vars()
+    }
+
+    /// Every trainable tensor by name (checkpoints).
+    pub fn named_vars(&self) -> Vec<(String, Var)> {
+        self.net.named_vars()
+    }
+
+    /// The enhanced image (B, 3, H, W) of captured images `x` (B, 3, H, W) in [0, 1].
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let (_, _, h, w) = x.dims4()?;
+        let m = self.multiple();
+        if h % m != 0 || w % m != 0 {
+            candle_core::bail!("enhancer input {h}x{w}: height and width must be multiples of {m}");
+        }
+        self.net
+            .run(x, None)?
+            .remove(OUTPUT)
+            .ok_or_else(|| candle_core::Error::Msg("enhancer output not computed".into()))
+    }
+
+    /// Writes the network with its current weights as ONNX (temporary file, then rename).
+    pub fn save_onnx(&self, path: &Path) -> std::result::Result<(), GraphError> {
+        self.net.save_onnx(path)
+    }
+}
+
+/// The paper's face-masked L1 loss `mean(s ⊙ |pred − target|)`: `pred` and `target`
+/// (B, 3, H, W), `keep` (B, 1, H, W), 1 where the image is to be restored and 0 on faces.
+/// With `keep` all ones it is the plain L1 loss (the restoration attack's).
+pub fn masked_l1(pred: &Tensor, target: &Tensor, keep: &Tensor) -> Result<Tensor> {
+    (pred - target)?.abs()?.broadcast_mul(keep)?.mean_all()
+}
+
+/// Mean `|pred − target|` over the pixels where `keep` is 0 (the faces), or None when there
+/// are none: how far the enhancer stays from restoring faces.
+pub fn face_l1(pred: &Tensor, target: &Tensor, keep: &Tensor) -> Result<Option<f64>> {
+    let face = (1.0 - keep)?;
+    let pixels = face.sum_all()?.to_scalar::<f32>()? as f64;
+    if pixels < 1.0 {
+        return Ok(None);
+    }
+    let s = (pred - target)?.abs()?.broadcast_mul(&face)?.sum_all()?.to_scalar::<f32>()? as f64;
+    Ok(Some(s / (3.0 * pixels)))
+}
+
+fn value_info(name: &str) -> pb::ValueInfoProto {
+    use pb::tensor_shape_proto::{dimension::Value, Dimension};
+    let dim = |v: Value| Dimension { value: Some(v), ..Default::default() };
+    pb::ValueInfoProto {
+        name: name.into(),
+        r#type: Some(pb::TypeProto {
+            value: Some(pb::type_proto::Value::TensorType(pb::type_proto::Tensor {
+                elem_type: 1,
+                shape: Some(pb::TensorShapeProto {
+                    dim: vec![
+                        dim(Value::DimParam("N".into())),
+                        dim(Value::DimValue(3)),
+                        dim(Value::DimParam("H".into())),
+                        dim(Value::DimParam("W".into())),
+                    ],
+                }),
+            })),
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+/// Initializers and nodes of a graph being built, weights drawn from `rng`.
+struct Builder {
+    inits: Vec<pb::TensorProto>,
+    nodes: Vec<pb::NodeProto>,
+    rng: rand_chacha::ChaCha8Rng,
+}
+
+impl Builder {
+    /// A convolution `name` (i → o channels, k x k, padding k / 2) on `x`, He-normal weights
+    /// and a ReLU, or zero weights and no ReLU; returns its output's name.
+    fn conv(&mut self, name: &str, x: &str, (i, o): (usize, usize), k: usize, stride: i64, relu: bool) -> String {
+        let n = o * i * k * k;
+        let w: Vec<f32> = if relu {
+            let normal = rand_distr::Normal::new(0.0f32, (2.0 / (i * k * k) as f32).sqrt()).expect("valid");
+            (0..n).map(|_| normal.sample(&mut self.rng)).collect()
+        } else {
+            vec![0.0; n]
+        };
+        let (wn, bn, y) = (format!("{name}.w"), format!("{name}.b"), format!("{name}.y"));
+        self.inits.push(f32_tensor(&wn, vec![o as i64, i as i64, k as i64, k as i64], &w));
+        self.inits.push(f32_tensor(&bn, vec![o as i64], &vec![0.0; o]));
+        self.nodes.push(node("Conv", &[x, &wn, &bn], &y, conv_attrs(k as i64, stride, (k / 2) as i64)));
+        if !relu {
+            return y;
+        }
+        let r = format!("{name}.r");
+        self.nodes.push(node("Relu", &[&y], &r, vec![]));
+        r
+    }
+}
+
+/// The U-Net of `widths` as an ONNX model (opset 13), weights drawn from `seed`.
+fn graph(widths: &[usize], seed: u64) -> pb::ModelProto {
+    let mut b = Builder { inits: Vec::new(), nodes: Vec::new(), rng: rand_chacha::ChaCha8Rng::seed_from_u64(seed) };
+    let mut x = b.conv("enc0.conv0", INPUT, (3, widths[0]), 3, 1, true);
+    x = b.conv("enc0.conv1", &x, (widths[0], widths[0]), 3, 1, true);
+    let mut skips = vec![x.clone()];
+    for l in 1..widths.len() {
+        x = b.conv(&format!("enc{l}.conv0"), &x, (widths[l - 1], widths[l]), 3, 2, true);
+        x = b.conv(&format!("enc{l}.conv1"), &x, (widths[l], widths[l]), 3, 1, true);
+        skips.push(x.clone());
+    }
+    b.inits.push(f32_tensor("up.scales", vec![4], &[1.0, 1.0, 2.0, 2.0]));
+    for l in (0..widths.len() - 1).rev() {
+        let t = b.conv(&format!("dec{l}.conv0"), &x, (widths[l + 1], widths[l]), 3, 1, true);
+        let (up, cat) = (format!("dec{l}.up"), format!("dec{l}.cat"));
+        let resize = vec![
+            string_attr("mode", "nearest"),
+            string_attr("coordinate_transformation_mode", "asymmetric"),
+            string_attr("nearest_mode", "floor"),
+        ];
+        b.nodes.push(node("Resize", &[&t, "", "up.scales"], &up, resize));
+        let mut concat = node("Concat", &[&up, &skips[l]], &cat, vec![]);
+        concat.attribute.push(pb::AttributeProto { name: "axis".into(), r#type: 2, i: 1, ..Default::default() });
+        b.nodes.push(concat);
+        x = b.conv(&format!("dec{l}.conv1"), &cat, (2 * widths[l], widths[l]), 3, 1, true);
+    }
+    let r = b.conv("out", &x, (widths[0], 3), 1, 1, false);
+    b.nodes.push(node("Add", &[INPUT, &r], OUTPUT, vec![]));
+    pb::ModelProto {
+        ir_version: 8,
+        opset_import: vec![pb::OperatorSetIdProto { domain: String::new(), version: 13 }],
+        producer_name: "campro".into(),
+        producer_version: env!("CARGO_PKG_VERSION").into(),
+        doc_string: format!("CamPro image enhancer: U-Net, widths {widths:?}"),
+        metadata_props: vec![pb::StringStringEntryProto {
+            key: MULTIPLE_KEY.into(),
+            value: (1usize << (widths.len() - 1)).to_string(),
+        }],
+        graph: Some(pb::GraphProto {
+            name: "campro-enhancer".into(),
+            node: b.nodes,
+            initializer: b.inits,
+            input: vec![value_info(INPUT)],
+            output: vec![value_info(OUTPUT)],
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}

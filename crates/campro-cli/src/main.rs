@@ -250,6 +250,10 @@ enum Cmd {
         #[arg(long)]
         force: bool,
     },
+    /// Train the image enhancer of a parameter set (paper Sec. IV-D: a U-Net from captured
+    /// images back to the scene, faces left unrestored): writes PARAMS.enhancer.onnx and
+    /// PARAMS.enhancer.json beside PARAMS and names them in its provenance.
+    TrainEnhancer(train::TrainEnhancerArgs),
     /// Run the recommended learnt preset (or --params) on a built-in chart: before/after PNGs, Camera2 values, error report.
     Demo {
         /// Output folder.
@@ -273,6 +277,9 @@ enum BenchWhat {
     /// 1x3x416x416 (forward, sum, backward; the PyTorch anchor's shapes) and the attacker,
     /// privacy and detector steps at the configuration's shapes.
     Train(train::BenchTrainArgs),
+    /// The enhancer's cost per U-Net size: parameters, multiply-accumulates per pixel, ONNX
+    /// bytes, tract's time per 640x480 frame on one thread and a training step's time.
+    Enhancer(train::BenchEnhancerArgs),
 }
 
 #[derive(Args, Clone)]
@@ -494,6 +501,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::FinetuneDetector { params, config, steps, seconds, log, force } => {
             train::finetune_detector(&params, config.as_deref(), steps, seconds, log.as_deref(), force)
         }
+        Cmd::TrainEnhancer(a) => train::train_enhancer(&a),
         Cmd::Completions { shell } => {
             let mut buf = Vec::new();
             clap_complete::generate(shell, &mut <Cli as clap::CommandFactory>::command(), "campro", &mut buf);
@@ -659,6 +667,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Cmd::Demo { output, params, force, format } => demo(&output, params.as_deref(), force, format),
         Cmd::Bench { what: Some(BenchWhat::Train(a)), .. } => train::bench_train(&a),
+        Cmd::Bench { what: Some(BenchWhat::Enhancer(a)), .. } => train::bench_enhancer(&a),
         Cmd::Bench { what: None, params, quick, format } => {
             let p = match params {
                 Some(path) => load_params(&path)?,

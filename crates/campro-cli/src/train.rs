@@ -189,6 +189,125 @@ pub fn finetune_detector(
     Ok(())
 }
 
+/// `campro train-enhancer`.
+#[derive(clap::Args)]
+pub struct TrainEnhancerArgs {
+    /// The parameter set (JSON) whose camera the enhancer inverts; its provenance gains
+    /// `enhancer`. LFW identities it held out (`provenance.data.validation_identities`)
+    /// are never read.
+    params: PathBuf,
+    /// TOML configuration (every key optional: the paper's settings, sized for the CPU).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// The training log (CSV), with LOG-losses.svg and LOG-psnr.svg.
+    #[arg(long)]
+    log: Option<PathBuf>,
+    /// Checkpoint folder (every budget.checkpoint_every steps and at the end).
+    #[arg(long)]
+    checkpoints: Option<PathBuf>,
+    /// Resume from this checkpoint folder (same configuration).
+    #[arg(long)]
+    resume: Option<PathBuf>,
+    /// Replace existing enhancer files and log.
+    #[arg(long)]
+    force: bool,
+}
+
+/// LFW identities a trained parameter set held out (`provenance.data.validation_identities`).
+fn held_out_identities(params: &campro::Params) -> Option<Vec<String>> {
+    let list = params.provenance.get("data")?.get("validation_identities")?.as_array()?;
+    list.iter().map(|v| v.as_str().map(str::to_string)).collect()
+}
+
+pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
+    let cfg: campro_train::config::EnhancerConfig = match &a.config {
+        Some(c) => campro_train::config::load(c)?,
+        None => Default::default(),
+    };
+    let mut params = load_params(&a.params)?;
+    let held_out = match held_out_identities(&params) {
+        Some(h) => h,
+        None if cfg.data.lfw_images == 0 => Vec::new(),
+        None => bail!(
+            "{}: provenance.data.validation_identities: missing, so LFW's held-out identities are unknown (train from a preset of campro train, or set data.lfw_images = 0)",
+            a.params.display()
+        ),
+    };
+    let onnx = a.params.with_extension("enhancer.onnx");
+    let manifest = a.params.with_extension("enhancer.json");
+    for p in [Some(&onnx), Some(&manifest), a.log.as_ref()].into_iter().flatten() {
+        if p.exists() && !a.force {
+            bail!("{} exists (use --force to replace it)", p.display());
+        }
+    }
+    if let Some(c) = &a.checkpoints {
+        if a.resume.as_deref() != Some(c.as_path()) {
+            crate::check_output_folder(c, a.force, "--checkpoints")?;
+        }
+    }
+    let opts = campro_train::enhancer::EnhancerOptions { checkpoints: a.checkpoints.clone(), resume: a.resume.clone() };
+    let pb = indicatif::ProgressBar::new(cfg.budget.steps as u64);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("train-enhancer [{bar:30}] step {pos}/{len} {elapsed_precise} eta {eta} {msg}")
+            .unwrap()
+            .progress_chars("=> "),
+    );
+    let out = campro_train::enhancer::run(&cfg, &params, &held_out, &opts, |r| {
+        pb.set_position(r.step as u64);
+        pb.set_message(format!("L1 {:.4}", r.loss));
+        if let Some(v) = &r.validation {
+            let line = format!(
+                "step {}: validation PSNR {:.2} dB (captured {:.2}), masked L1 {:.4}, face L1 {} (captured {}) ({:.0} s)",
+                r.step,
+                v.psnr,
+                v.psnr_captured,
+                v.masked_l1,
+                v.face_l1.map_or("-".into(), |f| format!("{f:.4}")),
+                v.face_l1_captured.map_or("-".into(), |f| format!("{f:.4}")),
+                r.seconds
+            );
+            if pb.is_hidden() {
+                eprintln!("{line}");
+            } else {
+                pb.println(line);
+            }
+        }
+    })?;
+    pb.finish_and_clear();
+    if let Some(l) = &a.log {
+        write_atomic(l, campro_train::enhancer::log_csv(&out.log).as_bytes(), a.force)?;
+        let (losses, psnr) = campro_train::enhancer::plot_log(&out.log);
+        let stem = l.with_extension("");
+        write_atomic(&PathBuf::from(format!("{}-losses.svg", stem.display())), losses.as_bytes(), true)?;
+        write_atomic(&PathBuf::from(format!("{}-psnr.svg", stem.display())), psnr.as_bytes(), true)?;
+    }
+    out.unet.save_onnx(&onnx)?;
+    let file = |p: &Path| p.file_name().expect("a file name").to_string_lossy().into_owned();
+    let m = serde_json::json!({
+        "name": format!("campro enhancer ({})", params.name),
+        "kind": "image_enhancer",
+        "file": file(&onnx),
+        "widths": out.unet.widths(),
+        "multiple": out.unet.multiple(),
+        "provenance": out.provenance,
+    });
+    write_atomic(&manifest, (serde_json::to_string_pretty(&m)? + "\n").as_bytes(), a.force)?;
+    let last = out.log.iter().rev().find_map(|r| r.validation.clone());
+    params.provenance.insert(
+        "enhancer".into(),
+        serde_json::json!({ "onnx": file(&onnx), "manifest": file(&manifest), "steps": out.log.last().map_or(0, |r| r.step),
+                            "seconds": out.seconds, "validation": last }),
+    );
+    write_atomic(&a.params, params.to_json().as_bytes(), true)?;
+    eprintln!(
+        "trained the enhancer {} steps in {:.0} s -> {}",
+        out.log.last().map_or(0, |r| r.step),
+        out.seconds,
+        onnx.display()
+    );
+    Ok(())
+}
+
 /// `campro bench train`.
 #[derive(clap::Args)]
 pub struct BenchTrainArgs {
@@ -312,4 +431,85 @@ fn run_anchor(python: &Path, shared: &Path, threads: usize) -> Result<serde_json
     let text = String::from_utf8_lossy(&out.stdout);
     let last = text.lines().last().unwrap_or("");
     serde_json::from_str(last).map_err(|e| anyhow::anyhow!("--anchor: the anchor printed no JSON ({e})"))
+}
+
+/// `campro bench enhancer`.
+#[derive(clap::Args)]
+pub struct BenchEnhancerArgs {
+    /// U-Net widths to compare, comma-separated, full resolution first (repeatable; default:
+    /// the configuration's).
+    #[arg(long = "widths", value_delimiter = ',', num_args = 1.., action = clap::ArgAction::Append)]
+    widths: Vec<usize>,
+    /// Several sizes: repeat --size; each is one comma-separated list (overrides --widths).
+    #[arg(long = "size", value_name = "W0,W1,...")]
+    sizes: Vec<String>,
+    /// Threads for the training step (default: all cores); inference runs on one.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    threads: Option<u32>,
+    /// Timed runs (the median is reported, after one warm-up).
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    runs: u32,
+    /// The configuration whose widths, batch and crop are used (default: the built-in one).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// A table, or one JSON object.
+    #[arg(long, value_enum, default_value_t = crate::Report::Text)]
+    format: crate::Report,
+}
+
+pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
+    let threads = a.threads.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |t| t as usize);
+    std::env::set_var("RAYON_NUM_THREADS", threads.to_string());
+    let cfg: campro_train::config::EnhancerConfig = match &a.config {
+        Some(c) => campro_train::config::load(c)?,
+        None => Default::default(),
+    };
+    let mut sizes: Vec<Vec<usize>> = Vec::new();
+    for s in &a.sizes {
+        let w: Vec<usize> = s
+            .split(',')
+            .map(|v| v.trim().parse::<usize>())
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|e| anyhow::anyhow!("--size {s}: {e}"))?;
+        sizes.push(w);
+    }
+    if sizes.is_empty() {
+        sizes.push(if a.widths.is_empty() { cfg.model.widths.clone() } else { a.widths.clone() });
+    }
+    let frame = image::RgbImage::from_fn(640, 480, |x, y| image::Rgb([(x % 256) as u8, (y % 256) as u8, ((x + y) % 256) as u8]));
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let mut rows = Vec::new();
+    for w in &sizes {
+        let unet = campro_train::unet::Unet::new(w, 1, &campro_train::Device::Cpu)?;
+        let onnx = unet.onnx_bytes()?;
+        let bytes = onnx.len();
+        let enh = campro_eval::enhance::Enhancer::from_bytes(&onnx, Path::new("the benchmark's U-Net"))?;
+        let infer = campro_train::bench::median_secs(a.runs as usize, || {
+            enh.enhance(&frame)?;
+            Ok(())
+        })?;
+        let step = pool.install(|| campro_train::bench::enhancer_step(w, cfg.data.batch, cfg.data.crop, a.runs as usize))?;
+        rows.push(serde_json::json!({
+            "widths": w, "parameters": campro_train::unet::parameter_count(w),
+            "macs_per_pixel": campro_train::unet::macs_per_pixel(w), "onnx_bytes": bytes,
+            "tract_640x480_ms": infer * 1e3, "tract_fps": 1.0 / infer,
+            "train_step_ms": step * 1e3, "batch": cfg.data.batch, "crop": cfg.data.crop, "threads": threads,
+        }));
+    }
+    match a.format {
+        crate::Report::Json => crate::say!("{}", serde_json::Value::Array(rows)),
+        crate::Report::Text => {
+            crate::say!("| widths | parameters | MACs/pixel | ONNX | tract 640x480, 1 thread | training step ({} x {}², {threads} threads) |", cfg.data.batch, cfg.data.crop);
+            crate::say!("|---|---|---|---|---|---|");
+            for r in &rows {
+                crate::say!(
+                    "| {} | {} | {:.0} | {:.2} MB | {:.0} ms ({:.1} fps) | {:.0} ms |",
+                    r["widths"], r["parameters"], r["macs_per_pixel"].as_f64().unwrap_or(0.0),
+                    r["onnx_bytes"].as_f64().unwrap_or(0.0) / 1e6, r["tract_640x480_ms"].as_f64().unwrap_or(0.0),
+                    r["tract_fps"].as_f64().unwrap_or(0.0), r["train_step_ms"].as_f64().unwrap_or(0.0)
+                );
+            }
+        }
+    }
+    Ok(())
 }

@@ -21,9 +21,13 @@ pub const MULTIPLE_KEY: &str = "campro.multiple";
 /// Largest enhancer file read (bytes): the recommended ones are at most 2 MB.
 pub const MAX_FILE: u64 = 64 << 20;
 
-/// A loaded enhancer; `enhance` takes `&self`, so one can serve several threads.
+/// A loaded enhancer; `enhance` takes `&self`, so one can serve several threads. tract
+/// cannot prove that the U-Net's strided and upsampled shapes agree for a symbolic size, so
+/// the graph is optimised once per padded image size and kept (a video or LFW has one
+/// size; COCO has a few dozen).
 pub struct Enhancer {
-    plan: std::sync::Arc<TypedSimplePlan>,
+    model: InferenceModel,
+    plans: std::sync::Mutex<std::collections::HashMap<(usize, usize), std::sync::Arc<TypedSimplePlan>>>,
     multiple: usize,
     path: PathBuf,
 }
@@ -31,11 +35,15 @@ pub struct Enhancer {
 impl Enhancer {
     /// Reads and optimises the ONNX file at `path` (at most [`MAX_FILE`] bytes).
     pub fn load(path: &Path) -> Result<Self> {
+        Self::from_bytes(&campro::file::read_capped(path, MAX_FILE, "an enhancer (ONNX)")?, path)
+    }
+
+    /// Reads an enhancer from the bytes of its ONNX file; `path` names it in errors.
+    pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self> {
         let bad = |m: String| EvalError::Model { path: path.to_path_buf(), message: m };
-        let bytes = campro::file::read_capped(path, MAX_FILE, "an enhancer (ONNX)")?;
-        let built = std::panic::catch_unwind(|| -> TractResult<(usize, std::sync::Arc<TypedSimplePlan>)> {
+        let built = std::panic::catch_unwind(|| -> TractResult<(usize, InferenceModel)> {
             let onnx = tract_onnx::onnx();
-            let proto = onnx.proto_model_for_read(&mut bytes.as_slice())?;
+            let proto = onnx.proto_model_for_read(&mut &bytes[..])?;
             let multiple = proto
                 .metadata_props
                 .iter()
@@ -48,16 +56,40 @@ impl Enhancer {
             if names != (Some(INPUT), Some(OUTPUT)) {
                 bail!("input {:?} and output {:?}, expected {INPUT:?} and {OUTPUT:?}", names.0, names.1);
             }
-            let mut model = onnx.model_for_proto_model(&proto)?;
-            let (h, w) = (model.symbols.sym("H"), model.symbols.sym("W"));
-            model.set_input_fact(0, f32::fact([1.to_dim(), 3.to_dim(), h.into(), w.into()]).into())?;
-            Ok((multiple, model.into_optimized()?.into_runnable()?))
+            Ok((multiple, onnx.model_for_proto_model(&proto)?))
         });
-        match built {
-            Ok(Ok((multiple, plan))) => Ok(Self { plan, multiple, path: path.to_path_buf() }),
-            Ok(Err(e)) => Err(bad(format!("{e:#}"))),
-            Err(_) => Err(bad("tract could not build it (malformed graph)".into())),
+        let e = match built {
+            Ok(Ok((multiple, model))) => Self { model, plans: Default::default(), multiple, path: path.to_path_buf() },
+            Ok(Err(e)) => return Err(bad(format!("{e:#}"))),
+            Err(_) => return Err(bad("tract could not read it (malformed graph)".into())),
+        };
+        // Built once at the smallest size, so a graph that cannot run fails here.
+        e.plan(e.multiple, e.multiple)?;
+        Ok(e)
+    }
+
+    /// The plan for a padded `w` x `h` input (built on first use).
+    fn plan(&self, w: usize, h: usize) -> Result<std::sync::Arc<TypedSimplePlan>> {
+        let mut plans = self.plans.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(p) = plans.get(&(w, h)) {
+            return Ok(p.clone());
         }
+        let model = self.model.clone();
+        // The model is a fresh copy, dropped on a panic.
+        let built = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> TractResult<std::sync::Arc<TypedSimplePlan>> {
+            model.with_input_fact(0, f32::fact([1, 3, h, w]).into())?.into_optimized()?.into_runnable()
+        }));
+        let plan = match built {
+            Ok(r) => r.map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") })?,
+            Err(_) => {
+                return Err(EvalError::Model {
+                    path: self.path.clone(),
+                    message: format!("cannot be run at input 1x3x{h}x{w} (tract refused the shapes)"),
+                })
+            }
+        };
+        plans.insert((w, h), plan.clone());
+        Ok(plan)
     }
 
     /// Height and width multiple the network needs (images are padded to it).
@@ -68,20 +100,10 @@ impl Enhancer {
     /// The enhanced image of a captured 8-bit image (same size).
     pub fn enhance(&self, img: &RgbImage) -> Result<RgbImage> {
         let (w, h) = (img.width() as usize, img.height() as usize);
-        let m = self.multiple;
-        let (pw, ph) = (w.div_ceil(m) * m, h.div_ceil(m) * m);
-        let mut data = vec![0f32; 3 * pw * ph];
-        for y in 0..ph {
-            for x in 0..pw {
-                let p = img.get_pixel(x.min(w - 1) as u32, y.min(h - 1) as u32).0;
-                for c in 0..3 {
-                    data[c * pw * ph + y * pw + x] = p[c] as f32 / 255.0;
-                }
-            }
-        }
+        let (data, pw, ph) = padded_chw(img, self.multiple);
         let input = Tensor::from_shape(&[1, 3, ph, pw], &data).expect("shape matches data");
         let out = self
-            .plan
+            .plan(pw, ph)?
             .run(tvec!(input.into()))
             .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") })?;
         let v = out[0]
@@ -100,4 +122,21 @@ impl Enhancer {
             image::Rgb([q(v[i]), q(v[pw * ph + i]), q(v[2 * pw * ph + i])])
         }))
     }
+}
+
+/// `img` as (3, H', W') floats in [0, 1], H' and W' rounded up to multiples of `multiple` by
+/// repeating the last row and column; returns the data, W' and H'.
+pub fn padded_chw(img: &RgbImage, multiple: usize) -> (Vec<f32>, usize, usize) {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let (pw, ph) = (w.div_ceil(multiple) * multiple, h.div_ceil(multiple) * multiple);
+    let mut data = vec![0f32; 3 * pw * ph];
+    for y in 0..ph {
+        for x in 0..pw {
+            let p = img.get_pixel(x.min(w - 1) as u32, y.min(h - 1) as u32).0;
+            for c in 0..3 {
+                data[c * pw * ph + y * pw + x] = p[c] as f32 / 255.0;
+            }
+        }
+    }
+    (data, pw, ph)
 }

@@ -32,9 +32,9 @@ fn atomic(dir: &Path, name: &str, bytes: &[u8]) -> Result<(), CheckpointError> {
     campro_eval::atomic::write(&dir.join(name), bytes, true).map_err(io)
 }
 
-/// Writes `tensors` and `state` into `dir` (tensors first: a state always names a complete
-/// tensor file).
-pub fn save(dir: &Path, tensors: &HashMap<String, Tensor>, state: &State) -> Result<(), CheckpointError> {
+/// Writes `tensors` and `state` (the optimiser's [`State`], or another run's) into `dir`
+/// (tensors first: a state always names a complete tensor file).
+pub fn save<S: Serialize>(dir: &Path, tensors: &HashMap<String, Tensor>, state: &S) -> Result<(), CheckpointError> {
     write_tensors(dir, TENSORS, tensors)?;
     atomic(dir, STATE, &serde_json::to_vec_pretty(state).expect("state serialises"))
 }
@@ -47,11 +47,14 @@ pub fn write_tensors(dir: &Path, name: &str, tensors: &HashMap<String, Tensor>) 
 }
 
 /// Reads a checkpoint written by [`save`].
-pub fn load(dir: &Path, device: &Device) -> Result<(HashMap<String, Tensor>, State), CheckpointError> {
+pub fn load<S: serde::de::DeserializeOwned>(
+    dir: &Path,
+    device: &Device,
+) -> Result<(HashMap<String, Tensor>, S), CheckpointError> {
     let sp = dir.join(STATE);
     let text = campro::file::read_capped(&sp, 16 << 20, "a checkpoint state")
         .map_err(|e| CheckpointError::Io { path: sp.clone(), message: e.reason() })?;
-    let state: State =
+    let state: S =
         serde_json::from_slice(&text).map_err(|e| CheckpointError::Format { path: sp, message: e.to_string() })?;
     let tp = dir.join(TENSORS);
     let tensors = candle_core::safetensors::load(&tp, device)

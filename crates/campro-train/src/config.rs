@@ -210,31 +210,44 @@ impl Default for BudgetConfig {
     }
 }
 
+/// A configuration file's rules: the first broken one as (key, rule).
+pub trait Rules {
+    fn check(&self) -> Result<(), (&'static str, &'static str)>;
+}
+
+/// Reads and checks a TOML configuration (missing keys take their defaults): a regular
+/// file of at most 1 MiB.
+pub fn load<T: serde::de::DeserializeOwned + Rules>(path: &Path) -> Result<T, ConfigError> {
+    let p = path.display().to_string();
+    let text = campro::file::read_text_capped(path, 1 << 20, "a configuration")
+        .map_err(|e| ConfigError::Parse { path: p.clone(), message: e.reason() })?;
+    parse(&text, &p)
+}
+
+/// Parses and checks a TOML configuration; `origin` names it in errors.
+pub fn parse<T: serde::de::DeserializeOwned + Rules>(text: &str, origin: &str) -> Result<T, ConfigError> {
+    let c: T = toml::from_str(text).map_err(|e| ConfigError::Parse {
+        path: origin.into(),
+        message: e.message().to_string() + &span(text, e.span()),
+    })?;
+    c.check().map_err(|(key, rule)| ConfigError::Rule { path: origin.into(), key: key.into(), rule: rule.into() })?;
+    Ok(c)
+}
+
 impl Config {
     /// Reads and checks a TOML file (missing keys take the paper's defaults).
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let p = path.display().to_string();
-        // A configuration is a few KiB: read as a regular file, at most 1 MiB.
-        let text = campro::file::read_text_capped(path, 1 << 20, "a configuration")
-            .map_err(|e| ConfigError::Parse { path: p.clone(), message: e.reason() })?;
-        Self::parse(&text, &p)
+        load(path)
     }
 
     pub fn parse(text: &str, origin: &str) -> Result<Self, ConfigError> {
-        let c: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            path: origin.into(),
-            message: e.message().to_string() + &span(text, e.span()),
-        })?;
-        c.check().map_err(|(key, rule)| ConfigError::Rule {
-            path: origin.into(),
-            key: key.into(),
-            rule: rule.into(),
-        })?;
-        Ok(c)
+        parse(text, origin)
     }
+}
 
+impl Rules for Config {
     /// Every rule, first broken one reported.
-    pub fn check(&self) -> Result<(), (&'static str, &'static str)> {
+    fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let finite_pos = |v: f64| v.is_finite() && v > 0.0;
         let checks: [(bool, &str, &str); 21] = [
             ((2..=1024).contains(&self.camera.knots), "camera.knots", "must be in 2..=1024"),
@@ -309,5 +322,161 @@ fn span(text: &str, span: Option<std::ops::Range<usize>>) -> String {
             format!(" (line {line})")
         }
         None => String::new(),
+    }
+}
+
+/// `campro train-enhancer`'s configuration: the enhancer's U-Net (paper Sec. IV-D), its data
+/// and its optimiser. Every key is optional; unknown keys are refused.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct EnhancerConfig {
+    /// Seed of every random choice (initial weights, data order, crops, validation split).
+    pub seed: u64,
+    pub model: UnetConfig,
+    pub data: SceneConfig,
+    pub optimiser: AdamWConfig,
+    pub budget: StepBudget,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct UnetConfig {
+    /// Channels per level, full resolution first; each further level halves the resolution
+    /// ([`crate::unet`]). 1 to 6 levels of 1..=512.
+    pub widths: Vec<usize>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SceneConfig {
+    /// COCO person folder: its training part only (never the held-out images).
+    pub coco: PathBuf,
+    /// LFW folder: photos of training identities only (never the preset's held-out ones).
+    pub lfw: PathBuf,
+    /// Models folder (YuNet, for the face masks).
+    pub models: PathBuf,
+    /// Use at most this many COCO training images (first by id); None: all.
+    pub max_images: Option<usize>,
+    /// LFW photos of training identities to add (seeded choice); 0: none.
+    pub lfw_images: usize,
+    /// Training images kept aside (seeded) to validate on; never trained on.
+    pub validation_images: usize,
+    /// Side of the square training crops (pixels, a multiple of the U-Net's multiple).
+    pub crop: usize,
+    /// Crops per step.
+    pub batch: usize,
+    /// Each YuNet face box grows by this fraction of its width left and right and of its
+    /// height below, and by twice that above (hair), before it is masked.
+    pub face_margin: f64,
+    /// What the loss asks of the face boxes ([`FaceTarget`]).
+    pub faces: FaceTarget,
+}
+
+/// What the enhancer's loss asks of the pixels inside the (enlarged) face boxes.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum FaceTarget {
+    /// Keep them as the camera captured them: L1 to the captured image there, to the raw
+    /// image elsewhere. The enhanced face is then exactly as private as the captured one.
+    Captured,
+    /// The paper's loss as written, `mean(s ⊙ |R(C(x)) − x|)`: nothing asked of faces, so
+    /// they come out however the network generalises (partly restored, measured).
+    Free,
+    /// No mask: restore faces too. The restoration attacker's network (Sec. VII), not an
+    /// enhancer to ship.
+    Restore,
+}
+
+/// AdamW (the paper's enhancer: lr 3e-4, weight decay 1e-2).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct AdamWConfig {
+    pub lr: f64,
+    pub weight_decay: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct StepBudget {
+    /// Optimiser steps in all (a resumed run continues the count).
+    pub steps: usize,
+    /// Stop after this many seconds in this invocation (checkpoint written).
+    pub seconds: f64,
+    /// Checkpoint and validate every this many steps.
+    pub checkpoint_every: usize,
+}
+
+impl Default for UnetConfig {
+    fn default() -> Self {
+        Self { widths: vec![16, 32, 64, 128] }
+    }
+}
+impl Default for SceneConfig {
+    fn default() -> Self {
+        Self {
+            coco: "../shared/data/coco-person".into(),
+            lfw: "../shared/data/lfw".into(),
+            models: "../shared/models".into(),
+            max_images: None,
+            lfw_images: 1000,
+            validation_images: 32,
+            crop: 128,
+            batch: 8,
+            face_margin: 0.3,
+            faces: FaceTarget::Captured,
+        }
+    }
+}
+impl Default for AdamWConfig {
+    fn default() -> Self {
+        Self { lr: 3e-4, weight_decay: 1e-2 }
+    }
+}
+impl Default for StepBudget {
+    fn default() -> Self {
+        Self { steps: 20_000, seconds: 4.0 * 3600.0, checkpoint_every: 500 }
+    }
+}
+
+impl Rules for EnhancerConfig {
+    fn check(&self) -> Result<(), (&'static str, &'static str)> {
+        let w = &self.model.widths;
+        let multiple = 1usize << w.len().clamp(1, 6).saturating_sub(1);
+        let checks: [(bool, &str, &str); 10] = [
+            (
+                (1..=6).contains(&w.len()) && w.iter().all(|c| (1..=512).contains(c)),
+                "model.widths",
+                "must hold 1 to 6 levels of 1..=512 channels",
+            ),
+            (
+                (16..=1024).contains(&self.data.crop) && self.data.crop.is_multiple_of(multiple),
+                "data.crop",
+                "must be in 16..=1024 and a multiple of 2^(levels - 1)",
+            ),
+            ((1..=256).contains(&self.data.batch), "data.batch", "must be in 1..=256"),
+            (
+                self.data.face_margin.is_finite() && (0.0..=2.0).contains(&self.data.face_margin),
+                "data.face_margin",
+                "must be in [0, 2]",
+            ),
+            (self.data.max_images != Some(0), "data.max_images", "must be at least 1 (leave it out for all)"),
+            (self.data.lfw_images <= 100_000, "data.lfw_images", "must be at most 100000"),
+            (
+                self.optimiser.lr.is_finite() && self.optimiser.lr > 0.0,
+                "optimiser.lr",
+                "must be finite and > 0",
+            ),
+            (
+                self.optimiser.weight_decay.is_finite() && self.optimiser.weight_decay >= 0.0,
+                "optimiser.weight_decay",
+                "must be finite and ≥ 0",
+            ),
+            (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
+            (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
+        ];
+        match checks.iter().find(|c| !c.0) {
+            Some(&(_, key, rule)) => Err((key, rule)),
+            None => Ok(()),
+        }
     }
 }

@@ -336,6 +336,11 @@ impl OnnxNet {
         Ok(values)
     }
 
+    /// The model with the current weights, encoded as an ONNX file.
+    pub fn onnx_bytes(&self) -> Result<Vec<u8>> {
+        Ok(self.current()?.encode_to_vec())
+    }
+
     /// Writes the model with the current weights as ONNX (temporary file, then rename).
     pub fn save_onnx(&self, path: &Path) -> std::result::Result<(), GraphError> {
         let p = path.display().to_string();

@@ -306,7 +306,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     };
     let (mut first_round, mut log, mut earlier_seconds) = (1, Vec::new(), 0.0);
     if let Some(dir) = &opts.resume {
-        let (tensors, state) = crate::checkpoint::load(dir, &dev)?;
+        let (tensors, state) = crate::checkpoint::load::<crate::checkpoint::State>(dir, &dev)?;
         if state.classes != faces.classes || state.seed != cfg.seed {
             return Err(TrainError::Unsupported(format!(
                 "{}: checkpoint of another face set or seed: resume with its own configuration",

@@ -18,6 +18,7 @@
 
 use crate::onnx_net::{conv_attrs, f32_tensor, node, string_attr, GraphError, OnnxNet};
 pub use campro_eval::enhance::{INPUT, MULTIPLE_KEY, OUTPUT};
+use crate::config::FaceTarget;
 use candle_core::{Result, Tensor, Var};
 use rand::SeedableRng;
 use rand_distr::Distribution;
@@ -117,6 +118,11 @@ impl Unet {
             .ok_or_else(|| candle_core::Error::Msg("enhancer output not computed".into()))
     }
 
+    /// The network with its current weights, encoded as an ONNX file.
+    pub fn onnx_bytes(&self) -> Result<Vec<u8>> {
+        self.net.onnx_bytes()
+    }
+
     /// Writes the network with its current weights as ONNX (temporary file, then rename).
     pub fn save_onnx(&self, path: &Path) -> std::result::Result<(), GraphError> {
         self.net.save_onnx(path)
@@ -128,6 +134,18 @@ impl Unet {
 /// With `keep` all ones it is the plain L1 loss (the restoration attack's).
 pub fn masked_l1(pred: &Tensor, target: &Tensor, keep: &Tensor) -> Result<Tensor> {
     (pred - target)?.abs()?.broadcast_mul(keep)?.mean_all()
+}
+
+/// The enhancer's training loss for `faces` ([`FaceTarget`]): the masked L1 to `raw`, plus,
+/// with [`FaceTarget::Captured`], the L1 to `captured` inside the faces.
+pub fn enhancer_loss(pred: &Tensor, raw: &Tensor, captured: &Tensor, keep: &Tensor, faces: FaceTarget) -> Result<Tensor> {
+    match faces {
+        FaceTarget::Free | FaceTarget::Restore => masked_l1(pred, raw, keep),
+        FaceTarget::Captured => {
+            let target = (raw.broadcast_mul(keep)? + captured.broadcast_mul(&(1.0 - keep)?)?)?;
+            (pred - target)?.abs()?.mean_all()
+        }
+    }
 }
 
 /// Mean `|pred − target|` over the pixels where `keep` is 0 (the faces), or None when there

@@ -1,0 +1,282 @@
+//! Training the image enhancer R (paper Sec. IV-D): AdamW on the face-masked L1 loss
+//! `mean(s ⊙ |R(C(x)) − x|)` over random crops of the training scenes ([`crate::scenes`]);
+//! by default the face boxes are also held to the captured image
+//! ([`crate::config::FaceTarget`]). Checkpoints, resume, a log, and a validation on scenes
+//! never trained on.
+//!
+//! With `data.faces = "restore"` the same run trains a plain restoration network: the
+//! adaptive attacker's (Sec. VII), which is trained to restore faces too.
+
+use crate::config::EnhancerConfig;
+use crate::error::TrainError;
+use crate::scenes::{chw_tensor, Scene, SceneSet};
+use crate::unet::{enhancer_loss, face_l1, masked_l1, Unet};
+use candle_core::{Device, Tensor};
+use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+use rand::SeedableRng;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// Steps per log row (the row's loss is their mean).
+pub const LOG_EVERY: usize = 10;
+
+/// One line of the enhancer's log.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EnhancerRow {
+    pub step: usize,
+    /// Training time over all resumed parts (s).
+    pub seconds: f64,
+    /// The training loss ([`crate::unet::enhancer_loss`]) on the crops, mean of the steps
+    /// since the previous row (0..1).
+    pub loss: f64,
+    /// At checkpoints: the validation scenes, whole.
+    pub validation: Option<Validation>,
+}
+
+/// The enhancer on the validation scenes (whole images, 8-bit output), means over scenes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Validation {
+    /// Masked L1 (0..1).
+    pub masked_l1: f64,
+    /// Mean |R(C(x)) − x| inside the face boxes (0..1); None without faces. Stays high
+    /// when faces are not restored.
+    pub face_l1: Option<f64>,
+    /// The same for the captured image (the camera's own face error).
+    pub face_l1_captured: Option<f64>,
+    /// PSNR against raw (dB), and the captured image's.
+    pub psnr: f64,
+    pub psnr_captured: f64,
+}
+
+/// A checkpoint's state (beside the network's tensors).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct EnhancerState {
+    pub step: usize,
+    pub seed: u64,
+    pub widths: Vec<usize>,
+    pub log: Vec<EnhancerRow>,
+}
+
+/// Where checkpoints go, and which one to resume from.
+#[derive(Debug, Clone, Default)]
+pub struct EnhancerOptions {
+    pub checkpoints: Option<PathBuf>,
+    pub resume: Option<PathBuf>,
+}
+
+/// The trained enhancer and how it was trained.
+pub struct EnhancerOutcome {
+    pub unet: Unet,
+    pub log: Vec<EnhancerRow>,
+    pub seconds: f64,
+    pub provenance: serde_json::Map<String, serde_json::Value>,
+}
+
+/// One scene's validation terms: masked L1, face L1 of the enhanced and of the captured
+/// image (None without faces), PSNR of both against raw.
+fn validate_scene(unet: &Unet, sc: &Scene, dev: &Device) -> Result<[Option<f64>; 5], TrainError> {
+    let out = enhance(unet, &sc.captured, dev)?;
+    let (w, h) = sc.raw.dimensions();
+    let keep = Tensor::from_vec(sc.keep(0, 0, w, h), (1, 1, h as usize, w as usize), dev)?;
+    let (o, c, r) = (chw_tensor(&out, dev)?, chw_tensor(&sc.captured, dev)?, chw_tensor(&sc.raw, dev)?);
+    Ok([
+        Some(masked_l1(&o, &r, &keep)?.to_scalar::<f32>()? as f64),
+        face_l1(&o, &r, &keep)?,
+        face_l1(&c, &r, &keep)?,
+        Some(campro_eval::quality::psnr(&out, &sc.raw)),
+        Some(campro_eval::quality::psnr(&sc.captured, &sc.raw)),
+    ])
+}
+
+/// The enhancer on a whole 8-bit image (padded to its multiple, cropped back, rounded).
+pub fn enhance(unet: &Unet, img: &image::RgbImage, dev: &Device) -> Result<image::RgbImage, TrainError> {
+    let (w, h) = img.dimensions();
+    let (data, pw, ph) = campro_eval::enhance::padded_chw(img, unet.multiple());
+    let y = unet.forward(&Tensor::from_vec(data, (1, 3, ph, pw), dev)?)?;
+    let v: Vec<f32> = y.flatten_all()?.to_vec1()?;
+    let q = |f: f32| (f * 255.0).round().clamp(0.0, 255.0) as u8;
+    Ok(image::RgbImage::from_fn(w, h, |x, y| {
+        let i = y as usize * pw + x as usize;
+        image::Rgb([q(v[i]), q(v[pw * ph + i]), q(v[2 * pw * ph + i])])
+    }))
+}
+
+/// Means of the validation terms over `scenes`.
+pub fn validate(unet: &Unet, scenes: &[Scene], dev: &Device) -> Result<Option<Validation>, TrainError> {
+    if scenes.is_empty() {
+        return Ok(None);
+    }
+    let rows = scenes.iter().map(|sc| validate_scene(unet, sc, dev)).collect::<Result<Vec<_>, _>>()?;
+    // The mean of term k over the scenes that have it.
+    let mean = |k: usize| {
+        let v: Vec<f64> = rows.iter().filter_map(|r| r[k]).collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    Ok(Some(Validation {
+        masked_l1: mean(0).unwrap_or(f64::NAN),
+        face_l1: mean(1),
+        face_l1_captured: mean(2),
+        psnr: mean(3).unwrap_or(f64::NAN),
+        psnr_captured: mean(4).unwrap_or(f64::NAN),
+    }))
+}
+
+/// Trains the enhancer of the camera `params` (`held_out`: LFW identities never read);
+/// `on_row` sees every log line as it happens.
+pub fn run(
+    cfg: &EnhancerConfig,
+    params: &campro::Params,
+    held_out: &[String],
+    opts: &EnhancerOptions,
+    mut on_row: impl FnMut(&EnhancerRow),
+) -> Result<EnhancerOutcome, TrainError> {
+    let start = std::time::Instant::now();
+    let dev = Device::Cpu;
+    let scenes = SceneSet::load(&cfg.data, params, held_out, cfg.seed)?;
+    if scenes.train.is_empty() {
+        return Err(TrainError::Unsupported(format!(
+            "no training scene of at least {0}x{0} pixels (data.crop)",
+            cfg.data.crop
+        )));
+    }
+    let unet = Unet::new(&cfg.model.widths, cfg.seed, &dev)?;
+    let (mut first, mut log, mut earlier) = (1, Vec::new(), 0.0);
+    if let Some(dir) = &opts.resume {
+        let (tensors, state) = crate::checkpoint::load::<EnhancerState>(dir, &dev)?;
+        if state.seed != cfg.seed || state.widths != cfg.model.widths {
+            return Err(TrainError::Unsupported(format!(
+                "{}: checkpoint of another seed or model.widths: resume with its own configuration",
+                dir.display()
+            )));
+        }
+        for (name, var) in unet.named_vars() {
+            let t = tensors.get(&name).ok_or_else(|| {
+                TrainError::Unsupported(format!("{}: {name} missing from the checkpoint", dir.display()))
+            })?;
+            var.set(t)?;
+        }
+        first = state.step + 1;
+        earlier = state.log.last().map_or(0.0, |r| r.seconds);
+        log = state.log;
+    }
+    let seconds = || earlier + start.elapsed().as_secs_f64();
+    let save = |step: usize, log: &[EnhancerRow]| -> Result<(), TrainError> {
+        let Some(dir) = &opts.checkpoints else { return Ok(()) };
+        let tensors = unet.named_vars().into_iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
+        let state = EnhancerState { step, seed: cfg.seed, widths: cfg.model.widths.clone(), log: log.to_vec() };
+        Ok(crate::checkpoint::save(dir, &tensors, &state)?)
+    };
+    let mut adam = AdamW::new(
+        unet.vars(),
+        ParamsAdamW { lr: cfg.optimiser.lr, weight_decay: cfg.optimiser.weight_decay, ..Default::default() },
+    )?;
+    // Reseeded from the step on resume (see `checkpoint`).
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ ((first as u64 - 1) << 32) ^ 0xe4a);
+    let pool: Vec<usize> = (0..scenes.train.len()).collect();
+    let mut order = Vec::new();
+    let (mut sum, mut count) = (0.0, 0usize);
+    if first == 1 {
+        let row = EnhancerRow { step: 0, seconds: seconds(), loss: f64::NAN, validation: validate(&unet, &scenes.validation, &dev)? };
+        on_row(&row);
+        log.push(row);
+    }
+    for step in first..=cfg.budget.steps.max(first - 1) {
+        let idx = crate::train::draw(&mut order, &pool, cfg.data.batch, &mut rng);
+        let b = scenes.batch(&idx, cfg.data.crop, &mut rng, &dev)?;
+        let loss = enhancer_loss(&unet.forward(&b.captured)?, &b.raw, &b.captured, &b.keep, cfg.data.faces)?;
+        let v = loss.to_scalar::<f32>()? as f64;
+        if !v.is_finite() {
+            return Err(TrainError::Diverged(format!("enhancer loss is {v}: lower optimiser.lr")));
+        }
+        adam.step(&loss.backward()?)?;
+        (sum, count) = (sum + v, count + 1);
+        let last = step == cfg.budget.steps || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
+        let checkpoint = step % cfg.budget.checkpoint_every == 0 || last;
+        if step % LOG_EVERY == 0 || checkpoint {
+            let validation = if checkpoint { validate(&unet, &scenes.validation, &dev)? } else { None };
+            let row = EnhancerRow { step, seconds: seconds(), loss: sum / count as f64, validation };
+            (sum, count) = (0.0, 0);
+            on_row(&row);
+            log.push(row);
+        }
+        if checkpoint {
+            save(step, &log)?;
+        }
+        if last {
+            break;
+        }
+    }
+    let prov = serde_json::json!({
+        "trainer": "campro train-enhancer",
+        "config": cfg,
+        "camera": params.name,
+        "parameters": crate::unet::parameter_count(&cfg.model.widths),
+        "data": { "coco_images": scenes.coco, "lfw_images": scenes.lfw, "too_small": scenes.too_small,
+                  "face_boxes": scenes.faces, "train_scenes": scenes.train.len(), "validation_scenes": scenes.validation.len(),
+                  "coco_held_out": format!("COCO id % {} == 0 (never trained on)", campro_eval::data::HOLDOUT_EVERY),
+                  "lfw_held_out_identities": held_out.len() },
+        "steps": log.last().map_or(0, |r| r.step),
+        "final": log.iter().rev().find(|r| r.validation.is_some()),
+        "seconds": seconds(),
+    });
+    let serde_json::Value::Object(provenance) = prov else { unreachable!("a JSON object") };
+    Ok(EnhancerOutcome { unet, log, seconds: seconds(), provenance })
+}
+
+/// The log as CSV: step, seconds, loss, then the validation columns (empty between
+/// checkpoints).
+pub fn log_csv(log: &[EnhancerRow]) -> String {
+    let mut csv = String::from("step,seconds,loss,val_masked_l1,val_face_l1,val_face_l1_captured,val_psnr,val_psnr_captured\n");
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
+    for r in log {
+        let v = r.validation.as_ref();
+        csv += &format!(
+            "{},{:.3},{:.6},{},{},{},{},{}\n",
+            r.step,
+            r.seconds,
+            r.loss,
+            opt(v.map(|v| v.masked_l1)),
+            opt(v.and_then(|v| v.face_l1)),
+            opt(v.and_then(|v| v.face_l1_captured)),
+            opt(v.map(|v| v.psnr)),
+            opt(v.map(|v| v.psnr_captured)),
+        );
+    }
+    csv
+}
+
+/// The log as two SVG charts: the losses (training masked L1, validation masked and face
+/// L1) and the validation PSNR, by step.
+pub fn plot_log(log: &[EnhancerRow]) -> (String, String) {
+    use campro_eval::plot::{chart, Series, Style};
+    let series = |name: &str, f: &dyn Fn(&EnhancerRow) -> Option<f64>| Series {
+        name: name.into(),
+        points: log.iter().filter_map(|r| f(r).filter(|v| v.is_finite()).map(|v| (r.step as f64, v))).collect(),
+    };
+    let losses = chart(
+        "campro train-enhancer: L1",
+        "step",
+        "mean |R(C(x)) − x|",
+        &[
+            series("training, masked", &|r| Some(r.loss)),
+            series("validation, masked", &|r| r.validation.as_ref().map(|v| v.masked_l1)),
+            series("validation, faces", &|r| r.validation.as_ref().and_then(|v| v.face_l1)),
+        ],
+        Style::Lines,
+        None,
+        None,
+    );
+    let psnr = chart(
+        "campro train-enhancer: validation PSNR",
+        "step",
+        "dB",
+        &[
+            series("enhanced", &|r| r.validation.as_ref().map(|v| v.psnr)),
+            series("captured", &|r| r.validation.as_ref().map(|v| v.psnr_captured)),
+        ],
+        Style::Lines,
+        None,
+        None,
+    );
+    (losses, psnr)
+}

@@ -1,0 +1,203 @@
+//! The enhancer's data (paper Sec. IV-D): raw scenes, what the camera captures of them (the
+//! exact 8-bit pipeline, the same bytes `campro simulate` writes) and where their faces are.
+//!
+//! Scenes are the COCO person training images (never the held-out ones, see
+//! [`campro_eval::data::detector_held_out`]) plus LFW photos of identities the preset did not
+//! hold out. Faces are found by YuNet on the raw image; each box is enlarged to cover the
+//! head and hair ([`crate::config::SceneConfig::face_margin`]) and masked out of the loss.
+
+use crate::config::SceneConfig;
+use campro::pipeline::fast::Exact8;
+use campro_eval::data::{coco_person, detector_held_out, read_rgb8, Lfw};
+use campro_eval::face::FaceDetector;
+use campro_eval::manifest::Manifest;
+use campro_eval::model::Model;
+use candle_core::{Device, Tensor};
+use image::RgbImage;
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+use std::path::Path;
+
+const YUNET: &str = include_str!("../../campro-eval/models/yunet.json");
+
+/// One training scene.
+pub struct Scene {
+    pub raw: RgbImage,
+    /// The camera's 8-bit output of `raw`.
+    pub captured: RgbImage,
+    /// Enlarged face boxes `[x0, y0, x1, y1]` in pixels (clipped to the image).
+    pub faces: Vec<[u32; 4]>,
+}
+
+impl Scene {
+    /// 1 where the loss restores the image, 0 inside a face box; row-major, `w` x `h` from
+    /// (`x0`, `y0`).
+    pub fn keep(&self, x0: u32, y0: u32, w: u32, h: u32) -> Vec<f32> {
+        let mut m = vec![1f32; (w * h) as usize];
+        for f in &self.faces {
+            for y in f[1].max(y0)..f[3].min(y0 + h) {
+                for x in f[0].max(x0)..f[2].min(x0 + w) {
+                    m[((y - y0) * w + (x - x0)) as usize] = 0.0;
+                }
+            }
+        }
+        m
+    }
+}
+
+/// Training and validation scenes.
+pub struct SceneSet {
+    pub train: Vec<Scene>,
+    pub validation: Vec<Scene>,
+    /// COCO and LFW images read.
+    pub coco: usize,
+    pub lfw: usize,
+    /// Images left out for being smaller than a crop.
+    pub too_small: usize,
+    /// Face boxes masked, in all.
+    pub faces: usize,
+}
+
+/// One training batch.
+pub struct SceneBatch {
+    /// Captured crops (B, 3, S, S) in [0, 1].
+    pub captured: Tensor,
+    /// The raw crops (B, 3, S, S) in [0, 1].
+    pub raw: Tensor,
+    /// (B, 1, S, S): 0 on faces, 1 elsewhere (all ones when faces are restored too).
+    pub keep: Tensor,
+}
+
+/// `img` as (3, H, W) floats in [0, 1], appended to `out`.
+pub fn push_chw(img: &RgbImage, out: &mut Vec<f32>) {
+    for c in 0..3 {
+        out.extend(img.pixels().map(|p| p.0[c] as f32 / 255.0));
+    }
+}
+
+/// `img` as a (1, 3, H, W) tensor in [0, 1].
+pub fn chw_tensor(img: &RgbImage, dev: &Device) -> candle_core::Result<Tensor> {
+    let mut v = Vec::with_capacity(3 * img.as_raw().len());
+    push_chw(img, &mut v);
+    Tensor::from_vec(v, (1, 3, img.height() as usize, img.width() as usize), dev)
+}
+
+impl SceneSet {
+    /// Reads the scenes `cfg` names, captures them through `params` and finds their faces.
+    /// `held_out`: LFW identities never to read (the preset's held-out ones).
+    pub fn load(
+        cfg: &SceneConfig,
+        params: &campro::Params,
+        held_out: &[String],
+        seed: u64,
+    ) -> Result<Self, crate::TrainError> {
+        let mut paths = Vec::new();
+        let mut coco = coco_person(&cfg.coco)?;
+        coco.retain(|im| !detector_held_out(im.id));
+        coco.truncate(cfg.max_images.unwrap_or(usize::MAX));
+        let n_coco = coco.len();
+        paths.extend(coco.into_iter().map(|im| im.path));
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut n_lfw = 0;
+        if cfg.lfw_images > 0 {
+            let lfw = Lfw::open(&cfg.lfw)?;
+            let mut photos: Vec<_> = lfw
+                .people
+                .iter()
+                .filter(|(name, _)| !held_out.contains(name))
+                .flat_map(|(_, ps)| ps.iter().cloned())
+                .collect();
+            photos.shuffle(&mut rng);
+            photos.truncate(cfg.lfw_images);
+            n_lfw = photos.len();
+            paths.extend(photos);
+        }
+        if paths.is_empty() {
+            return Err(crate::TrainError::Unsupported(format!(
+                "{}: no training images (data.max_images, data.lfw_images)",
+                cfg.coco.display()
+            )));
+        }
+        let det = FaceDetector::new(Model::load(Manifest::parse(YUNET, Path::new("bundled yunet.json"), &cfg.models)?)?)?;
+        let camera = Exact8::new(params);
+        let margin = cfg.face_margin as f32;
+        let scenes: Vec<Option<Scene>> = paths
+            .par_iter()
+            .map(|p| -> campro_eval::Result<Option<Scene>> {
+                let raw = read_rgb8(p)?;
+                if raw.width() < cfg.crop as u32 || raw.height() < cfg.crop as u32 {
+                    return Ok(None);
+                }
+                let mut captured = RgbImage::new(raw.width(), raw.height());
+                camera.run(raw.as_raw(), &mut captured);
+                let faces = if cfg.faces != crate::config::FaceTarget::Restore {
+                    det.detect(&raw)?.iter().map(|f| enlarge(f.bbox, margin, raw.width(), raw.height())).collect()
+                } else {
+                    Vec::new()
+                };
+                Ok(Some(Scene { raw, captured, faces }))
+            })
+            .collect::<campro_eval::Result<_>>()?;
+        let too_small = scenes.iter().filter(|s| s.is_none()).count();
+        let mut scenes: Vec<Scene> = scenes.into_iter().flatten().collect();
+        // The validation scenes: a seeded choice, never trained on.
+        let mut order: Vec<usize> = (0..scenes.len()).collect();
+        order.shuffle(&mut rng);
+        let n_val = cfg.validation_images.min(scenes.len().saturating_sub(1));
+        let mut val_idx: Vec<usize> = order[..n_val].to_vec();
+        val_idx.sort_unstable_by(|a, b| b.cmp(a));
+        let mut validation: Vec<Scene> = val_idx.iter().map(|&i| scenes.swap_remove(i)).collect();
+        validation.reverse();
+        let faces = scenes.iter().chain(&validation).map(|s| s.faces.len()).sum();
+        Ok(Self { train: scenes, validation, coco: n_coco, lfw: n_lfw, too_small, faces })
+    }
+
+    /// Random `size` x `size` crops of the training scenes `idx`, each flipped left-right
+    /// with probability 1/2.
+    pub fn batch(
+        &self,
+        idx: &[usize],
+        size: usize,
+        rng: &mut rand_chacha::ChaCha8Rng,
+        dev: &Device,
+    ) -> candle_core::Result<SceneBatch> {
+        let s = size as u32;
+        let (mut cap, mut raw, mut keep) = (Vec::new(), Vec::new(), Vec::new());
+        for &i in idx {
+            let sc = &self.train[i];
+            let x0 = rng.random_range(0..=sc.raw.width() - s);
+            let y0 = rng.random_range(0..=sc.raw.height() - s);
+            let flip = rng.random_bool(0.5);
+            let crop = |img: &RgbImage| {
+                let c = image::imageops::crop_imm(img, x0, y0, s, s).to_image();
+                if flip {
+                    image::imageops::flip_horizontal(&c)
+                } else {
+                    c
+                }
+            };
+            push_chw(&crop(&sc.captured), &mut cap);
+            push_chw(&crop(&sc.raw), &mut raw);
+            let mut k = sc.keep(x0, y0, s, s);
+            if flip {
+                k.chunks_mut(size).for_each(|row| row.reverse());
+            }
+            keep.extend(k);
+        }
+        let b = idx.len();
+        Ok(SceneBatch {
+            captured: Tensor::from_vec(cap, (b, 3, size, size), dev)?,
+            raw: Tensor::from_vec(raw, (b, 3, size, size), dev)?,
+            keep: Tensor::from_vec(keep, (b, 1, size, size), dev)?,
+        })
+    }
+}
+
+/// A face box grown by `m` of its width left and right, of its height below and by twice
+/// that above, clipped to the `w` x `h` image.
+pub fn enlarge(b: [f32; 4], m: f32, w: u32, h: u32) -> [u32; 4] {
+    let (bw, bh) = (b[2] - b[0], b[3] - b[1]);
+    let clip = |v: f32, hi: u32| v.round().clamp(0.0, hi as f32) as u32;
+    [clip(b[0] - m * bw, w), clip(b[1] - 2.0 * m * bh, h), clip(b[2] + m * bw, w), clip(b[3] + m * bh, h)]
+}

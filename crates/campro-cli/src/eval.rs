@@ -89,6 +89,30 @@ pub struct Common {
     /// Write into an output folder that already holds files (replacing its reports).
     #[arg(long)]
     force: bool,
+    /// Also score what each parameter set's image enhancer (provenance.enhancer) makes of
+    /// its captured images: rows "NAME enhanced".
+    #[arg(long)]
+    enhanced: bool,
+}
+
+/// The first error an enhancer met inside an evaluation (protections cannot fail, so an
+/// enhanced condition records it here and passes the captured image on; the evaluation is
+/// then refused).
+#[derive(Clone, Default)]
+pub(crate) struct Failures(std::sync::Arc<std::sync::Mutex<Option<String>>>);
+
+impl Failures {
+    fn record(&self, what: String) {
+        self.0.lock().unwrap_or_else(|p| p.into_inner()).get_or_insert(what);
+    }
+
+    /// An error if any enhancement failed.
+    fn check(&self) -> Result<()> {
+        match self.0.lock().unwrap_or_else(|p| p.into_inner()).as_ref() {
+            Some(e) => bail!("{e}"),
+            None => Ok(()),
+        }
+    }
 }
 
 /// `--limit`: at least 1 (an empty selection has nothing to score).
@@ -201,8 +225,9 @@ impl Common {
         self.models.clone().unwrap_or_else(|| self.shared().join("models"))
     }
 
-    /// Raw, then each parameter set, then the baselines.
-    fn conditions(&self) -> Result<Vec<Condition>> {
+    /// Raw, then each parameter set (and, with --enhanced, its enhanced images), then the
+    /// baselines; enhancement errors are recorded in `failures`.
+    fn conditions(&self, failures: &Failures) -> Result<Vec<Condition>> {
         let mut c = vec![Condition::raw()];
         for path in &self.params {
             let p = crate::load_params(path)?;
@@ -210,7 +235,22 @@ impl Common {
             if c.iter().any(|x| x.name == name) {
                 bail!("{}: two parameter sets are named {name:?}", path.display());
             }
-            c.push(params_condition(name, p));
+            let enhancer = if self.enhanced { Some(crate::simulate::enhancer_of(path, &p)?) } else { None };
+            let camera = params_condition(name.clone(), p);
+            if let (Some(e), Some(protect)) = (enhancer, camera.protect.clone()) {
+                let f = failures.clone();
+                let shown = path.display().to_string();
+                c.push(camera);
+                c.push(Condition::new(format!("{name} enhanced"), move |img: &RgbImage| {
+                    let captured = protect(img);
+                    e.enhance(&captured).unwrap_or_else(|err| {
+                        f.record(format!("{shown}: the enhancer: {err}"));
+                        captured
+                    })
+                }));
+            } else {
+                c.push(camera);
+            }
         }
         let mut b = self.baselines.clone();
         if self.paper_baselines {
@@ -376,14 +416,24 @@ fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utili
     let own = if a.own_detector { own_detectors(&c.params)? } else { HashMap::new() };
     let shared: Vec<Condition> = conds.iter().filter(|x| !own.contains_key(&x.name)).cloned().collect();
     let mut r = utility::evaluate(&images, &det, &name, &shared, &o)?;
-    for x in conds.iter().filter(|x| own.contains_key(&x.name)) {
-        let m = load(&own[&x.name].to_string_lossy(), &c.models_dir())?;
-        let rx = utility::evaluate(&images, &PersonDetector::new(m)?, &x.name, std::slice::from_ref(x), &o)?;
+    // Each set's captured images with its own detector, and its enhanced ones with both.
+    let mut order: Vec<String> = Vec::new();
+    for x in conds {
+        order.push(x.name.clone());
+        let base = x.name.strip_suffix(" enhanced").unwrap_or(&x.name);
+        let Some(manifest) = own.get(base) else { continue };
+        let m = load(&manifest.to_string_lossy(), &c.models_dir())?;
+        let mut y = x.clone();
+        if base != x.name {
+            y.name = format!("{} (own detector)", x.name);
+            order.push(y.name.clone());
+        }
+        let rx = utility::evaluate(&images, &PersonDetector::new(m)?, &y.name, std::slice::from_ref(&y), &o)?;
         r.rows.extend(rx.rows);
         r.seconds += rx.seconds;
     }
     if !own.is_empty() {
-        r.rows.sort_by_key(|row| conds.iter().position(|x| x.name == row.condition));
+        r.rows.sort_by_key(|row| order.iter().position(|n| *n == row.condition));
         let mut names: Vec<&String> = own.keys().collect();
         names.sort();
         r.detector = format!(
@@ -446,15 +496,19 @@ pub fn run(cmd: EvalCmd) -> Result<()> {
     | EvalCmd::Quality { common, .. }
     | EvalCmd::All { common, .. }) = &cmd;
     common.check_output()?;
+    let f = Failures::default();
     match cmd {
-        EvalCmd::Privacy { common, p } => run_privacy(&common, &p, &common.conditions()?).map(drop),
-        EvalCmd::Utility { common, u } => run_utility(&common, &u, &common.conditions()?).map(drop),
-        EvalCmd::Quality { common, images } => run_quality(&common, images.as_deref(), &common.conditions()?).map(drop),
+        EvalCmd::Privacy { common, p } => run_privacy(&common, &p, &common.conditions(&f)?).and(f.check()),
+        EvalCmd::Utility { common, u } => run_utility(&common, &u, &common.conditions(&f)?).and(f.check()),
+        EvalCmd::Quality { common, images } => {
+            run_quality(&common, images.as_deref(), &common.conditions(&f)?).and(f.check())
+        }
         EvalCmd::All { common, p, u } => {
-            let conds = common.conditions()?;
+            let conds = common.conditions(&f)?;
             let q = run_quality(&common, None, &conds)?;
             let ur = run_utility(&common, &u, &conds)?;
             let pr = run_privacy(&common, &p, &conds)?;
+            f.check()?;
             report::write_summary(&pr, &ur, &q, &common.output)?;
             eprintln!("report: {}", common.output.join("report.md").display());
             Ok(())

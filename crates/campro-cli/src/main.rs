@@ -113,6 +113,10 @@ enum Cmd {
         /// Video encoder preset (libx264/libx265: ultrafast ... veryslow).
         #[arg(long)]
         preset: Option<String>,
+        /// Also run the preset's image enhancer (provenance.enhancer, from campro
+        /// train-enhancer) on the camera's 8-bit output: what a human viewer is shown.
+        #[arg(long, conflicts_with = "bit_depth")]
+        enhance: bool,
     },
     /// Look at what a parameter set does to your images: raw | protected side by side with
     /// the faces (YuNet) and people (person detector) found on each, a JSON of the
@@ -615,9 +619,10 @@ fn run(cli: Cli) -> Result<()> {
                 }
             }
         }
-        Cmd::Simulate { params, inputs, output, bit_depth, force, jobs, codec, crf, bitrate, preset } => {
+        Cmd::Simulate { params, inputs, output, bit_depth, force, jobs, codec, crf, bitrate, preset, enhance } => {
             let enc = video::Encoding { codec, crf: Some(crf), bitrate, preset };
             let p = load_params(&params)?;
+            let enhancer = if enhance { Some(simulate::enhancer_of(&params, &p)?) } else { None };
             simulate::simulate(
                 &p,
                 &inputs,
@@ -629,6 +634,7 @@ fn run(cli: Cli) -> Result<()> {
                 force,
                 jobs.map(|j| j as usize),
                 &enc,
+                enhancer.as_ref(),
             )
         }
         Cmd::Inspect {

@@ -30,6 +30,58 @@ pub const DECODE_BUDGET: u64 = 768 << 20;
 /// decoded size.
 const BYTES_PER_SAMPLE_PEAK: u64 = 4;
 
+/// Largest image the enhancer runs on (pixels, 3840 x 2160): its activations take about
+/// 200 bytes a pixel at the recommended size.
+pub const MAX_ENHANCE_PIXELS: u64 = 3840 * 2160;
+
+/// What `simulate` does to an 8-bit frame: the camera (exact, on every core), then, with
+/// `--enhance`, the preset's enhancer (tract, one thread a frame).
+pub(crate) struct Capture<'a, 'p> {
+    pub fast8: &'a Exact8<'p>,
+    pub enhancer: Option<&'a campro_eval::enhance::Enhancer>,
+}
+
+impl Capture<'_, '_> {
+    /// `dst` = the capture of the `w` x `h` RGB frame `src`.
+    pub fn run(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32) -> Result<()> {
+        let row = 3 * w as usize;
+        src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| {
+            self.fast8.run(s, d);
+        });
+        if let Some(e) = self.enhancer {
+            if w as u64 * h as u64 > MAX_ENHANCE_PIXELS {
+                bail!("--enhance: the frame is {w} x {h}; the enhancer runs on at most 3840 x 2160 pixels");
+            }
+            let captured = image::RgbImage::from_raw(w, h, dst.to_vec()).expect("a whole frame");
+            dst.copy_from_slice(e.enhance(&captured)?.as_raw());
+        }
+        Ok(())
+    }
+}
+
+/// The enhancer a parameter set names (`provenance.enhancer.onnx`, beside the file at
+/// `params_path`).
+pub fn enhancer_of(params_path: &Path, p: &Params) -> Result<campro_eval::enhance::Enhancer> {
+    let file = p
+        .provenance
+        .get("enhancer")
+        .and_then(|e| e.get("onnx"))
+        .and_then(|f| f.as_str())
+        .ok_or_else(|| {
+            anyhow!(
+                "{}: provenance.enhancer.onnx: missing (this preset has no enhancer; train one with campro train-enhancer)",
+                params_path.display()
+            )
+        })?;
+    // A bare file name beside the preset: never a path taken from the file's contents.
+    let name = Path::new(file);
+    if name.components().count() != 1 || name.file_name().is_none() {
+        bail!("{}: provenance.enhancer.onnx: must be a file name beside the preset, got {file:?}", params_path.display());
+    }
+    let dir = params_path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    Ok(campro_eval::enhance::Enhancer::load(&dir.join(name))?)
+}
+
 /// A counting semaphore of bytes.
 pub(crate) struct Budget {
     free: Mutex<u64>,
@@ -154,6 +206,7 @@ pub fn simulate(
     force: bool,
     jobs: Option<usize>,
     enc: &Encoding,
+    enhancer: Option<&campro_eval::enhance::Enhancer>,
 ) -> Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = match jobs {
@@ -195,7 +248,8 @@ pub fn simulate(
     let prepared16 = std::sync::OnceLock::new();
     let budget = Budget::new(DECODE_BUDGET);
     let failed = AtomicUsize::new(0);
-    let paths = Paths { fast8: &fast8, p8: &prepared8, p16: &prepared16, budget: &budget, depth, force };
+    let capture = Capture { fast8: &fast8, enhancer };
+    let paths = Paths { capture: &capture, p8: &prepared8, p16: &prepared16, budget: &budget, depth, force };
     pool.install(|| {
         images.par_iter().for_each(|(i, o)| {
             let r = if !force && o.exists() {
@@ -225,7 +279,7 @@ pub fn simulate(
         let r = if !force && o.exists() {
             Err(anyhow!("{} exists (use --force to overwrite)", o.display()))
         } else {
-            pool.install(|| video::simulate(&fast8, i, &o, enc, force, &warn))
+            pool.install(|| video::simulate(&capture, i, &o, enc, force, &warn))
         };
         match r {
             Ok(n) => eprintln!("simulated {n} frames of {} into {}", i.display(), o.display()),
@@ -243,7 +297,7 @@ pub fn simulate(
 
 /// What every job shares.
 struct Paths<'a, 'p> {
-    fast8: &'a Exact8<'p>,
+    capture: &'a Capture<'a, 'p>,
     p8: &'a Prepared<'p>,
     p16: &'a std::sync::OnceLock<Prepared<'p>>,
     budget: &'a Budget,
@@ -257,14 +311,15 @@ impl Paths<'_, '_> {
         let (w, h) = (img.width(), img.height());
         let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
         let row = 3 * w as usize;
-        if !sixteen && self.depth == Depth::Eight {
+        if self.capture.enhancer.is_some() || (!sixteen && self.depth == Depth::Eight) {
             // 8 bits in and out: the exact path (AVX-512 blocks where the CPU has them),
-            // bit-identical to the reference.
+            // bit-identical to the reference; the enhancer reads what an 8-bit camera gives.
+            if sixteen {
+                warn("--enhance: read as 8 bits (the enhancer takes the camera's 8-bit output)");
+            }
             let src = img.into_rgb8().into_raw();
             let mut dst = vec![0u8; src.len()];
-            src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| {
-                self.fast8.run(s, d);
-            });
+            self.capture.run(&src, &mut dst, w, h)?;
             drop(src);
             return write_atomic(output, &encode_png8(&dst, w, h)?, self.force);
         }

@@ -9,8 +9,6 @@
 //! destination and renamed when ffmpeg has finished, under the usual overwrite rules.
 
 use anyhow::{anyhow, bail, Context, Result};
-use campro::pipeline::fast::Exact8;
-use rayon::prelude::*;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -123,7 +121,7 @@ pub fn probe(input: &Path) -> Result<Probe> {
 
 /// Simulates `params`' camera on `input` into `output` (which the caller checked).
 pub fn simulate(
-    fast8: &Exact8,
+    capture: &crate::simulate::Capture,
     input: &Path,
     output: &Path,
     enc: &Encoding,
@@ -188,7 +186,6 @@ pub fn simulate(
     // the camera on every core, a writer thread feeds the encoder. Frames circulate through
     // a fixed pool of IN_FLIGHT buffers, so memory stays bounded whatever the length.
     const IN_FLIGHT: usize = 4;
-    let row = 3 * p.width as usize;
     let mut frames = 0u64;
     let mut from = decode.stdout.take().expect("piped");
     let mut to = encode.stdin.take().expect("piped");
@@ -220,10 +217,12 @@ pub fn simulate(
             Ok(())
         });
         let mut out = vec![0u8; frame_bytes];
+        let mut failure = None;
         for src in full_rx.iter() {
-            src.par_chunks(row * 16).zip(out.par_chunks_mut(row * 16)).for_each(|(s, d)| {
-                fast8.run(s, d);
-            });
+            if let Err(e) = capture.run(&src, &mut out, p.width, p.height) {
+                failure = Some(e);
+                break;
+            }
             // The processed frame goes to the writer; its input buffer becomes the next output.
             let processed = std::mem::replace(&mut out, src);
             if done_tx.send(processed).is_err() {
@@ -237,7 +236,10 @@ pub fn simulate(
         drop(full_rx);
         let w = writer.join().unwrap_or_else(|_| Err(anyhow!("the writer thread panicked")));
         let r = reader.join().unwrap_or_else(|_| Err(anyhow!("the reader thread panicked")));
-        r.and(w)
+        match failure {
+            Some(e) => Err(e),
+            None => r.and(w),
+        }
     });
     bar.finish_and_clear();
     let dec = decode.wait_with_output()?;

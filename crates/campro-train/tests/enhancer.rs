@@ -1,0 +1,165 @@
+//! The image enhancer: the U-Net trained by candle against the same ONNX file run by tract,
+//! its size formulas against hand counts, the losses against hand values, the face boxes
+//! against hand geometry, and learning on a fixed batch.
+
+use campro_eval::enhance::Enhancer;
+use campro_train::config::{EnhancerConfig, FaceTarget};
+use campro_train::scenes::{enlarge, Scene};
+use campro_train::unet::{enhancer_loss, face_l1, macs_per_pixel, masked_l1, parameter_count, Unet};
+use candle_core::{Device, Tensor};
+use image::RgbImage;
+use std::path::Path;
+
+fn noise(shape: &[usize], seed: u64, scale: f32) -> Tensor {
+    let n: usize = shape.iter().product();
+    let mut s = seed;
+    let v: Vec<f32> = (0..n)
+        .map(|_| {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0) * scale
+        })
+        .collect();
+    Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
+}
+
+fn test_image(w: u32, h: u32) -> RgbImage {
+    RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 7 + y * 3) as u8, (x * x + 5 * y) as u8, (200 - x - y) as u8]))
+}
+
+/// A U-Net with every weight drawn at random (the output convolution too, which starts at zero).
+fn random_unet(widths: &[usize]) -> Unet {
+    let u = Unet::new(widths, 3, &Device::Cpu).unwrap();
+    for (i, (_, v)) in u.named_vars().into_iter().enumerate() {
+        let scale = if v.dims().len() == 4 { (2.0 / (v.dims()[1] * v.dims()[2] * v.dims()[3]) as f32).sqrt() } else { 0.05 };
+        v.set(&noise(v.dims(), 100 + i as u64, scale)).unwrap();
+    }
+    u
+}
+
+#[test]
+fn candle_and_tract_agree_on_the_written_onnx() {
+    let u = random_unet(&[4, 8, 16]);
+    let tract = Enhancer::from_bytes(&u.onnx_bytes().unwrap(), Path::new("test")).unwrap();
+    assert_eq!(tract.multiple(), 4);
+    // A size that is a multiple, and one that needs padding.
+    for (w, h) in [(56, 40), (53, 37)] {
+        let img = test_image(w, h);
+        let a = campro_train::enhancer::enhance(&u, &img, &Device::Cpu).unwrap();
+        let b = tract.enhance(&img).unwrap();
+        let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+        assert!(worst <= 1, "{w}x{h}: candle and tract differ by {worst} LSB");
+        // The network changes the image (else the comparison above proves nothing).
+        let moved = a.as_raw().iter().zip(img.as_raw()).filter(|(x, y)| x.abs_diff(**y) > 4).count();
+        assert!(moved > a.as_raw().len() / 4, "{w}x{h}: only {moved} samples changed");
+    }
+}
+
+#[test]
+fn a_fresh_enhancer_returns_the_captured_image() {
+    let u = Unet::new(&[4, 8], 1, &Device::Cpu).unwrap();
+    let tract = Enhancer::from_bytes(&u.onnx_bytes().unwrap(), Path::new("test")).unwrap();
+    let img = test_image(31, 17);
+    assert_eq!(tract.enhance(&img).unwrap(), img);
+}
+
+#[test]
+fn size_formulas_match_hand_counts() {
+    // [8, 16]: 3→8 (224), 8→8 (584), 8→16 s2 (1168), 16→16 (2320), decoder 16→8 (1160),
+    // 16→8 (1160), output 8→3 1x1 (27).
+    assert_eq!(parameter_count(&[8, 16]), 6643);
+    let u = Unet::new(&[8, 16], 1, &Device::Cpu).unwrap();
+    let counted: usize = u.vars().iter().map(|v| v.elem_count()).sum();
+    assert_eq!(counted, 6643);
+    assert_eq!(parameter_count(&[16, 32, 64, 128]), {
+        let u = Unet::new(&[16, 32, 64, 128], 1, &Device::Cpu).unwrap();
+        u.vars().iter().map(|v| v.elem_count()).sum::<usize>()
+    });
+    // Level 0: 216 + 576 + 24; level 1 at a quarter: (1152 + 2304 + 1152) / 4; the decoder's
+    // second convolution at level 0: 1152.
+    assert_eq!(macs_per_pixel(&[8, 16]), 816.0 + 864.0 + 288.0 + 1152.0);
+    assert_eq!(u.multiple(), 2);
+}
+
+#[test]
+fn losses_match_hand_values() {
+    let dev = Device::Cpu;
+    let t = |v: &[f32], c: usize| Tensor::from_vec(v.to_vec(), (1, c, 1, 2), &dev).unwrap();
+    // Two pixels, three channels; the second pixel is a face.
+    let raw = t(&[0.5, 0.5, 0.2, 0.2, 1.0, 1.0], 3);
+    let cap = t(&[0.1, 0.9, 0.6, 0.6, 0.0, 0.4], 3);
+    let keep = t(&[1.0, 0.0], 1);
+    let pred = t(&[0.4, 0.5, 0.5, 0.2, 0.7, 1.0], 3);
+    let v = |x: Tensor| x.to_scalar::<f32>().unwrap();
+    // |pred − raw| = [.1, 0, .3, 0, .3, 0]; masked: first pixel only: (.1 + .3 + .3) / 6.
+    assert!((v(masked_l1(&pred, &raw, &keep).unwrap()) - 0.7 / 6.0).abs() < 1e-6);
+    // Face L1: the second pixel's channels: (0 + 0 + 0) / 3.
+    assert_eq!(face_l1(&pred, &raw, &keep).unwrap(), Some(0.0));
+    // Captured target: the face pixel against cap: |.5−.9| + |.2−.6| + |1−.4| = 1.4.
+    let l = v(enhancer_loss(&pred, &raw, &cap, &keep, FaceTarget::Captured).unwrap());
+    assert!((l - (0.7 + 1.4) / 6.0).abs() < 1e-6, "{l}");
+    assert!((v(enhancer_loss(&pred, &raw, &cap, &keep, FaceTarget::Free).unwrap()) - 0.7 / 6.0).abs() < 1e-6);
+    // No face: None.
+    assert_eq!(face_l1(&pred, &raw, &t(&[1.0, 1.0], 1)).unwrap(), None);
+}
+
+#[test]
+fn face_boxes_grow_and_mask_by_hand() {
+    // A 10 x 20 box at (20, 40), margin 0.5: 5 px left and right, 10 below, 20 above.
+    assert_eq!(enlarge([20.0, 40.0, 30.0, 60.0], 0.5, 100, 100), [15, 20, 35, 70]);
+    // Clipped to the image.
+    assert_eq!(enlarge([2.0, 2.0, 12.0, 12.0], 0.5, 14, 14), [0, 0, 14, 14]);
+    let sc = Scene { raw: RgbImage::new(6, 4), captured: RgbImage::new(6, 4), faces: vec![[1, 1, 3, 2]] };
+    let k = sc.keep(0, 0, 6, 4);
+    let zeros: Vec<usize> = (0..k.len()).filter(|&i| k[i] == 0.0).collect();
+    assert_eq!(zeros, vec![7, 8]);
+    // A crop from (2, 1): the box's column 2 lands at column 0.
+    assert_eq!(sc.keep(2, 1, 3, 2), vec![0.0, 1.0, 1.0, 1.0, 1.0, 1.0]);
+}
+
+#[test]
+fn training_on_a_fixed_batch_lowers_the_loss() {
+    use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+    let u = Unet::new(&[4, 8], 5, &Device::Cpu).unwrap();
+    let raw = (noise(&[2, 3, 16, 16], 7, 0.5) + 0.5).unwrap();
+    // A colour map to undo: each channel inverted.
+    let cap = (1.0 - &raw).unwrap();
+    let keep = Tensor::ones((2, 1, 16, 16), candle_core::DType::F32, &Device::Cpu).unwrap();
+    let mut adam = AdamW::new(u.vars(), ParamsAdamW { lr: 1e-2, weight_decay: 0.0, ..Default::default() }).unwrap();
+    let loss = |u: &Unet| masked_l1(&u.forward(&cap).unwrap(), &raw, &keep).unwrap();
+    let first = loss(&u).to_scalar::<f32>().unwrap();
+    for _ in 0..100 {
+        adam.step(&loss(&u).backward().unwrap()).unwrap();
+    }
+    let last = loss(&u).to_scalar::<f32>().unwrap();
+    assert!(last < 0.5 * first, "L1 {first} -> {last}");
+}
+
+#[test]
+fn the_enhancer_configuration_names_its_broken_rule() {
+    let bad = |text: &str, key: &str| {
+        let e = campro_train::config::parse::<EnhancerConfig>(text, "t.toml").unwrap_err().to_string();
+        assert!(e.contains(key), "{text:?}: {e}");
+    };
+    bad("[model]\nwidths = []\n", "model.widths");
+    bad("[model]\nwidths = [8, 16, 32, 64]\n[data]\ncrop = 100\n", "data.crop");
+    bad("[data]\nfaces = \"blur\"\n", "unknown variant");
+    bad("[data]\nmax_images = 0\n", "data.max_images");
+    bad("[optimiser]\nlr = -1.0\n", "optimiser.lr");
+    bad("colour = 1\n", "unknown field");
+    let ok: EnhancerConfig = campro_train::config::parse("[data]\nfaces = \"restore\"\n", "t.toml").unwrap();
+    assert_eq!(ok.data.faces, FaceTarget::Restore);
+    assert_eq!((ok.optimiser.lr, ok.optimiser.weight_decay), (3e-4, 1e-2));
+}
+
+#[test]
+fn a_damaged_enhancer_file_is_refused_by_name() {
+    let u = Unet::new(&[4, 8], 1, &Device::Cpu).unwrap();
+    let bytes = u.onnx_bytes().unwrap();
+    for cut in [0, 10, bytes.len() / 2] {
+        let e = Enhancer::from_bytes(&bytes[..cut], Path::new("bad.onnx")).err().expect("refused");
+        assert!(e.to_string().contains("bad.onnx"), "{e}");
+    }
+    // A valid ONNX file that is not an enhancer (no multiple entry).
+    let e = Enhancer::from_bytes(b"", Path::new("empty.onnx")).err().expect("refused").to_string();
+    assert!(e.contains("empty.onnx"), "{e}");
+}

@@ -7,7 +7,7 @@
 //! With `data.faces = "restore"` the same run trains a plain restoration network: the
 //! adaptive attacker's (Sec. VII), which is trained to restore faces too.
 
-use crate::config::EnhancerConfig;
+use crate::config::{EnhancerConfig, FaceTarget};
 use crate::error::TrainError;
 use crate::scenes::{chw_tensor, Scene, SceneSet};
 use crate::unet::{enhancer_loss, face_l1, masked_l1, Unet};
@@ -27,7 +27,8 @@ pub struct EnhancerRow {
     /// Training time over all resumed parts (s).
     pub seconds: f64,
     /// The training loss ([`crate::unet::enhancer_loss`]) on the crops, mean of the steps
-    /// since the previous row (0..1).
+    /// since the previous row (0..1; NaN at step 0).
+    #[serde(deserialize_with = "crate::log::nan_if_null")]
     pub loss: f64,
     /// At checkpoints: the validation scenes, whole.
     pub validation: Option<Validation>,
@@ -37,14 +38,18 @@ pub struct EnhancerRow {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Validation {
     /// Masked L1 (0..1).
+    #[serde(deserialize_with = "crate::log::nan_if_null")]
     pub masked_l1: f64,
     /// Mean |R(C(x)) − x| inside the face boxes (0..1); None without faces. Stays high
     /// when faces are not restored.
     pub face_l1: Option<f64>,
     /// The same for the captured image (the camera's own face error).
     pub face_l1_captured: Option<f64>,
-    /// PSNR against raw (dB), and the captured image's.
+    /// PSNR against raw (dB), and the captured image's (infinite for identical images:
+    /// null in a checkpoint, read back as NaN).
+    #[serde(deserialize_with = "crate::log::nan_if_null")]
     pub psnr: f64,
+    #[serde(deserialize_with = "crate::log::nan_if_null")]
     pub psnr_captured: f64,
 }
 
@@ -182,7 +187,7 @@ pub fn run(
     }
     for step in first..=cfg.budget.steps.max(first - 1) {
         let idx = crate::train::draw(&mut order, &pool, cfg.data.batch, &mut rng);
-        let b = scenes.batch(&idx, cfg.data.crop, &mut rng, &dev)?;
+        let b = scenes.batch(&idx, cfg.data.crop, cfg.data.faces != FaceTarget::Restore, &mut rng, &dev)?;
         let loss = enhancer_loss(&unet.forward(&b.captured)?, &b.raw, &b.captured, &b.keep, cfg.data.faces)?;
         let v = loss.to_scalar::<f32>()? as f64;
         if !v.is_finite() {

@@ -131,11 +131,9 @@ impl SceneSet {
                 }
                 let mut captured = RgbImage::new(raw.width(), raw.height());
                 camera.run(raw.as_raw(), &mut captured);
-                let faces = if cfg.faces != crate::config::FaceTarget::Restore {
-                    det.detect(&raw)?.iter().map(|f| enlarge(f.bbox, margin, raw.width(), raw.height())).collect()
-                } else {
-                    Vec::new()
-                };
+                // Found in every mode: a restoration network is measured on the faces too.
+                let faces =
+                    det.detect(&raw)?.iter().map(|f| enlarge(f.bbox, margin, raw.width(), raw.height())).collect();
                 Ok(Some(Scene { raw, captured, faces }))
             })
             .collect::<campro_eval::Result<_>>()?;
@@ -154,11 +152,12 @@ impl SceneSet {
     }
 
     /// Random `size` x `size` crops of the training scenes `idx`, each flipped left-right
-    /// with probability 1/2.
+    /// with probability 1/2; `mask_faces` false gives a `keep` of all ones.
     pub fn batch(
         &self,
         idx: &[usize],
         size: usize,
+        mask_faces: bool,
         rng: &mut rand_chacha::ChaCha8Rng,
         dev: &Device,
     ) -> candle_core::Result<SceneBatch> {
@@ -179,7 +178,7 @@ impl SceneSet {
             };
             push_chw(&crop(&sc.captured), &mut cap);
             push_chw(&crop(&sc.raw), &mut raw);
-            let mut k = sc.keep(x0, y0, s, s);
+            let mut k = if mask_faces { sc.keep(x0, y0, s, s) } else { vec![1.0; size * size] };
             if flip {
                 k.chunks_mut(size).for_each(|row| row.reverse());
             }

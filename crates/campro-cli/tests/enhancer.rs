@@ -1,0 +1,154 @@
+//! `campro train-enhancer` on tiny data (the CI smoke run): the masked loss falls, the
+//! faces stay as the camera left them, resume continues the run, and the written enhancer is
+//! what `simulate --enhance` and `eval --enhanced` run. Bad enhancer references get one line.
+
+mod common;
+use common::{bundled, campro, fails_with};
+use std::path::Path;
+
+/// Columns of the enhancer's CSV log as numbers (None where empty).
+fn column(csv: &str, name: &str) -> Vec<(usize, Option<f64>)> {
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let k = header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}"));
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (f[0].parse().unwrap(), f[k].parse::<f64>().ok().filter(|v| v.is_finite()))
+        })
+        .collect()
+}
+
+#[test]
+fn train_enhancer_restores_the_scene_but_not_the_faces() {
+    let Some(models) = campro_testkit::shared("models/yunet_s_640_640.onnx") else { return };
+    let Some(lfw) = campro_testkit::shared("data/lfw/pairs.txt") else { return };
+    let Some(coco) = campro_testkit::shared("data/coco-person/instances_person.json") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let q = |p: &Path| format!("{:?}", p.to_str().unwrap());
+    let p = d.join("p.json");
+    std::fs::copy(bundled("campro-omega-0.5.json"), &p).unwrap();
+    let config = |steps: usize, faces: &str| {
+        format!(
+            "[model]\nwidths = [4, 8, 16]\n[data]\nfaces = {faces:?}\ncoco = {}\nlfw = {}\nmodels = {}\nmax_images = 12\nlfw_images = 12\nvalidation_images = 6\ncrop = 64\nbatch = 4\n[optimiser]\nlr = 3e-3\n[budget]\nsteps = {steps}\ncheckpoint_every = 30\n",
+            q(coco.parent().unwrap()),
+            q(lfw.parent().unwrap()),
+            q(models.parent().unwrap())
+        )
+    };
+    std::fs::write(d.join("tiny.toml"), config(60, "captured")).unwrap();
+    let train = |cfg: &str| {
+        let mut c = campro();
+        c.arg("train-enhancer").arg(&p).arg("--config").arg(d.join(cfg)).arg("--log").arg(d.join("log.csv"));
+        c.arg("--checkpoints").arg(d.join("ck"));
+        c
+    };
+    train("tiny.toml").assert().success();
+    let log = std::fs::read_to_string(d.join("log.csv")).unwrap();
+    // The masked loss falls: training rows and the validation scenes.
+    let loss = column(&log, "loss");
+    let (first, last) = (loss[1].1.unwrap(), loss.last().unwrap().1.unwrap());
+    assert!(last < 0.8 * first, "training loss {first} -> {last}\n{log}");
+    let val = column(&log, "val_masked_l1");
+    let val: Vec<f64> = val.iter().filter_map(|r| r.1).collect();
+    assert!(val.len() == 3 && val[2] < 0.8 * val[0], "validation masked L1 {val:?}");
+    // The faces are not restored: their error to the raw image stays near the camera's own,
+    // while the same run without the mask (the restoration attacker's network) restores them.
+    let face = column(&log, "val_face_l1").last().unwrap().1.expect("validation scenes with faces");
+    let camera = column(&log, "val_face_l1_captured").last().unwrap().1.unwrap();
+    let r = d.join("r.json");
+    std::fs::copy(bundled("campro-omega-0.5.json"), &r).unwrap();
+    std::fs::write(d.join("restore.toml"), config(60, "restore")).unwrap();
+    campro()
+        .arg("train-enhancer")
+        .arg(&r)
+        .arg("--config")
+        .arg(d.join("restore.toml"))
+        .arg("--log")
+        .arg(d.join("restore.csv"))
+        .assert()
+        .success();
+    let restored = column(&std::fs::read_to_string(d.join("restore.csv")).unwrap(), "val_face_l1").last().unwrap().1.unwrap();
+    assert!(
+        face > 0.75 * camera && face > restored + 0.25 * (camera - restored),
+        "face L1: enhancer {face}, camera {camera}, restoration network {restored}"
+    );
+    let psnr = column(&log, "val_psnr");
+    let cap = column(&log, "val_psnr_captured");
+    assert!(psnr.last().unwrap().1.unwrap() > cap.last().unwrap().1.unwrap() + 1.0, "{log}");
+    // Outputs: the ONNX file, its manifest, the preset's provenance.
+    let m: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("p.enhancer.json")).unwrap()).unwrap();
+    assert_eq!((m["kind"].as_str(), m["multiple"].as_u64(), m["file"].as_str()), (Some("image_enhancer"), Some(4), Some("p.enhancer.onnx")));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+    assert_eq!(v["provenance"]["enhancer"]["onnx"], "p.enhancer.onnx");
+    assert_eq!(v["provenance"]["enhancer"]["steps"], 60);
+    assert!(d.join("log-losses.svg").is_file() && d.join("log-psnr.svg").is_file());
+    // Not replaced without --force.
+    fails_with(&mut train("tiny.toml"), "exists (use --force");
+    // Resume: the run goes on from step 60 and keeps its log.
+    std::fs::write(d.join("more.toml"), config(90, "captured")).unwrap();
+    let mut c = train("more.toml");
+    c.arg("--resume").arg(d.join("ck")).arg("--force").assert().success();
+    let steps: Vec<usize> = column(&std::fs::read_to_string(d.join("log.csv")).unwrap(), "loss").iter().map(|r| r.0).collect();
+    assert_eq!((steps[0], *steps.last().unwrap()), (0, 90));
+    assert!(steps.windows(2).all(|w| w[0] < w[1]), "{steps:?}");
+
+    // simulate --enhance = the enhancer (tract) on simulate's own 8-bit output.
+    let img = coco.parent().unwrap().join("images/000000000139.jpg");
+    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("cap")).assert().success();
+    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("enh")).arg("--enhance").assert().success();
+    let captured = image::open(d.join("cap/000000000139.png")).unwrap().to_rgb8();
+    let enhanced = image::open(d.join("enh/000000000139.png")).unwrap().to_rgb8();
+    let e = campro_eval::enhance::Enhancer::load(&d.join("p.enhancer.onnx")).unwrap();
+    assert_eq!(e.enhance(&captured).unwrap(), enhanced);
+    assert_ne!(captured, enhanced);
+
+    // eval quality --enhanced scores the enhanced images beside the captured ones.
+    let shared = models.parent().unwrap().parent().unwrap();
+    campro()
+        .args(["eval", "quality"])
+        .arg(&p)
+        .arg("--enhanced")
+        .args(["--limit", "2", "--shared"])
+        .arg(shared)
+        .arg("-o")
+        .arg(d.join("ev"))
+        .assert()
+        .success();
+    let report = std::fs::read_to_string(d.join("ev/quality.md")).unwrap();
+    assert!(report.contains("| p enhanced"), "{report}");
+}
+
+#[test]
+fn simulate_enhance_refuses_bad_references_with_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let img = d.join("a.png");
+    image::RgbImage::from_pixel(8, 8, image::Rgb([100, 150, 200])).save(&img).unwrap();
+    let sim = |params: &Path| {
+        let mut c = campro();
+        c.arg("simulate").arg(params).arg(&img).arg("-o").arg(d.join("out")).arg("--enhance");
+        c
+    };
+    fails_with(&mut sim(&bundled("identity.json")), "provenance.enhancer.onnx: missing");
+    let with = |name: &str, file: &str| {
+        let mut v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(bundled("campro-omega-0.5.json")).unwrap()).unwrap();
+        v["provenance"]["enhancer"] = serde_json::json!({ "onnx": file });
+        let p = d.join(name);
+        std::fs::write(&p, serde_json::to_string(&v).unwrap()).unwrap();
+        p
+    };
+    fails_with(&mut sim(&with("up.json", "../evil.onnx")), "must be a file name beside the preset");
+    fails_with(&mut sim(&with("abs.json", "/etc/passwd")), "must be a file name beside the preset");
+    fails_with(&mut sim(&with("gone.json", "gone.onnx")), "gone.onnx");
+    std::fs::write(d.join("junk.onnx"), b"not a model at all").unwrap();
+    fails_with(&mut sim(&with("junk.json", "junk.onnx")), "junk.onnx");
+    std::fs::create_dir(d.join("dir.onnx")).unwrap();
+    fails_with(&mut sim(&with("dir.json", "dir.onnx")), "dir.onnx");
+    let mut c = sim(&with("deep.json", "x.onnx"));
+    c.args(["--bit-depth", "16"]);
+    fails_with(&mut c, "cannot be used with");
+    assert!(!d.join("out").join("a.png").exists());
+}

@@ -153,6 +153,7 @@ fn one(
     input: &Path,
     picture: &Path,
     fast: &Exact8,
+    enhancer: Option<&campro_eval::enhance::Enhancer>,
     det: &Detectors,
     budget: &Budget,
     warn: &dyn Fn(&str),
@@ -163,8 +164,22 @@ fn one(
     };
     let mut protected = RgbImage::new(raw.width(), raw.height());
     fast.run(raw.as_raw(), &mut protected);
-    let mut panels = Vec::with_capacity(2);
-    for (name, image) in [("raw", raw), ("protected", protected)] {
+    let enhanced = match enhancer {
+        Some(e) => {
+            if raw.width() as u64 * raw.height() as u64 > simulate::MAX_ENHANCE_PIXELS {
+                bail!(
+                    "--enhance: the image is {} x {}; the enhancer runs on at most 3840 x 2160 pixels",
+                    raw.width(),
+                    raw.height()
+                );
+            }
+            Some(e.enhance(&protected)?)
+        }
+        None => None,
+    };
+    let mut panels = Vec::with_capacity(3);
+    let named = [("raw", raw), ("protected", protected)].into_iter().chain(enhanced.map(|e| ("enhanced", e)));
+    for (name, image) in named {
         let (pname, pdet) = match (&det.own, name) {
             (Some(own), "protected") => own,
             _ => &det.people,
@@ -193,6 +208,12 @@ fn one(
 
 /// The index page: a row per image with its picture, counts and JSON link.
 fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, String)], out: &Path) -> String {
+    let panels: Vec<String> = items
+        .first()
+        .and_then(|(_, v)| v["panels"].as_array())
+        .map(|a| a.iter().filter_map(|p| p["panel"].as_str().map(str::to_string)).collect())
+        .unwrap_or_else(|| vec!["raw".into(), "protected".into()]);
+    let arrows = panels.join(" &rarr; ");
     let mut s = String::from(
         "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>campro inspect</title>\n\
          <style>body{font-family:sans-serif;margin:1em}img{max-width:100%;height:auto}\
@@ -200,25 +221,25 @@ fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, Stri
          .face{color:#c0c}.person{color:#080}</style></head><body>\n",
     );
     s += &format!(
-        "<h1>campro inspect</h1>\n<p>Parameters: {}. Left: raw; right: protected. \
+        "<h1>campro inspect</h1>\n<p>Parameters: {}. Panels, left to right: {}. \
          <span class=\"face\">Faces</span> (YuNet, with landmarks) and <span class=\"person\">people</span> \
          (the person detector) found on each.</p>\n<table>\n\
-         <tr><th>image</th><th>faces raw &rarr; protected</th><th>people raw &rarr; protected</th><th>detections</th></tr>\n",
-        html_escape(params)
+         <tr><th>image</th><th>faces {arrows}</th><th>people {arrows}</th><th>detections</th></tr>\n",
+        html_escape(params),
+        panels.join(", ")
     );
     for (picture, v) in items {
-        let count = |panel, what| count(v, panel, what);
+        let counts =
+            |what| (0..panels.len()).map(|k| count(v, k, what).to_string()).collect::<Vec<_>>().join(" &rarr; ");
         let link = href(picture, out);
         let json_link = href(&picture.with_extension("json"), out);
         let name = html_escape(&href_name(picture, out));
         s += &format!(
             "<tr><td><a href=\"{link}\"><img src=\"{link}\" alt=\"{name}\" width=\"640\"></a><br>{name}</td>\
-             <td class=\"face\">{} &rarr; {}</td><td class=\"person\">{} &rarr; {}</td>\
+             <td class=\"face\">{}</td><td class=\"person\">{}</td>\
              <td><a href=\"{json_link}\">JSON</a></td></tr>\n",
-            count(0, "faces"),
-            count(1, "faces"),
-            count(0, "people"),
-            count(1, "people"),
+            counts("faces"),
+            counts("people"),
         );
     }
     s += "</table>\n";
@@ -251,6 +272,7 @@ pub fn inspect(
     inputs: &[PathBuf],
     out: &Path,
     det: &Detectors,
+    enhancer: Option<&campro_eval::enhance::Enhancer>,
     json_out: bool,
 ) -> Result<()> {
     let found = simulate::collect_inputs(inputs, out)?;
@@ -275,7 +297,7 @@ pub fn inspect(
         .par_iter()
         .map(|(i, o)| {
             let warn = |w: &str| bar.suspend(|| eprintln!("warning: {}: {w}", escape(&i.display().to_string())));
-            let r = one(i, o, &fast, det, &budget, &warn);
+            let r = one(i, o, &fast, enhancer, det, &budget, &warn);
             bar.inc(1);
             r
         })
@@ -294,16 +316,19 @@ pub fn inspect(
         }
     }
     let params_name = format!("{} ({})", params_file.display(), p.name);
+    let panel_names: &[&str] =
+        if enhancer.is_some() { &["raw", "protected", "enhanced"] } else { &["raw", "protected"] };
     let index = json!({
         "params": params_name,
         "face_detector": "yunet",
         "person_detector": det.people.0,
         "own_detector": det.own.as_ref().map(|o| o.0.clone()),
         "confidence": det.confidence,
+        "panels": panel_names,
         "images": done.iter().map(|(o, v)| json!({
             "input": v["input"], "picture": href(o, out), "json": href(&o.with_extension("json"), out),
-            "faces": [count(v, 0, "faces"), count(v, 1, "faces")],
-            "people": [count(v, 0, "people"), count(v, 1, "people")],
+            "faces": (0..panel_names.len()).map(|k| count(v, k, "faces")).collect::<Vec<_>>(),
+            "people": (0..panel_names.len()).map(|k| count(v, k, "people")).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
         "failed": failed.iter().map(|(i, e)| json!({"input": i.display().to_string(), "error": e})).collect::<Vec<_>>(),
     });
@@ -313,15 +338,15 @@ pub fn inspect(
         say!("{}", serde_json::to_string(&index)?);
     } else {
         for (o, v) in &done {
-            let n = |panel, what| count(v, panel, what);
-            say!(
-                "{}: faces {} raw, {} protected; people {} raw, {} protected",
-                escape(&href_name(o, out)),
-                n(0, "faces"),
-                n(1, "faces"),
-                n(0, "people"),
-                n(1, "people")
-            );
+            let n = |what| {
+                panel_names
+                    .iter()
+                    .enumerate()
+                    .map(|(k, p)| format!("{} {p}", count(v, k, what)))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            say!("{}: faces {}; people {}", escape(&href_name(o, out)), n("faces"), n("people"));
         }
         say!("index: {}", out.join("index.html").display());
     }

@@ -151,6 +151,10 @@ enum Cmd {
         /// A line per image, or the index as one JSON object.
         #[arg(long, value_enum, default_value_t = Report::Text)]
         format: Report,
+        /// Add a third panel: the preset's image enhancer on the protected image
+        /// (provenance.enhancer), with what each detector finds there.
+        #[arg(long)]
+        enhance: bool,
     },
     /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
     Compare {
@@ -648,9 +652,11 @@ fn run(cli: Cli) -> Result<()> {
             confidence,
             force,
             format,
+            enhance,
         } => {
             let p = load_params(&params)?;
             check_output_folder(&output, force, "--output")?;
+            let enhancer = if enhance { Some(simulate::enhancer_of(&params, &p)?) } else { None };
             let models = models.unwrap_or_else(|| eval::shared_dir(shared.as_deref()).join("models"));
             let people = eval::load(&person_detector, &models)?;
             let own = if own_detector {
@@ -669,7 +675,7 @@ fn run(cli: Cli) -> Result<()> {
                 own,
                 confidence: confidence as f32,
             };
-            inspect::inspect(&params, &p, &inputs, &output, &det, matches!(format, Report::Json))
+            inspect::inspect(&params, &p, &inputs, &output, &det, enhancer.as_ref(), matches!(format, Report::Json))
         }
         Cmd::Demo { output, params, force, format } => demo(&output, params.as_deref(), force, format),
         Cmd::Bench { what: Some(BenchWhat::Train(a)), .. } => train::bench_train(&a),

@@ -62,21 +62,19 @@ impl Capture<'_, '_> {
 /// The enhancer a parameter set names (`provenance.enhancer.onnx`, beside the file at
 /// `params_path`).
 pub fn enhancer_of(params_path: &Path, p: &Params) -> Result<campro_eval::enhance::Enhancer> {
-    let file = p
-        .provenance
-        .get("enhancer")
-        .and_then(|e| e.get("onnx"))
-        .and_then(|f| f.as_str())
-        .ok_or_else(|| {
-            anyhow!(
-                "{}: provenance.enhancer.onnx: missing (this preset has no enhancer; train one with campro train-enhancer)",
-                params_path.display()
-            )
-        })?;
+    let file = p.provenance.get("enhancer").and_then(|e| e.get("onnx")).and_then(|f| f.as_str()).ok_or_else(|| {
+        anyhow!(
+            "{}: provenance.enhancer.onnx: missing (this preset has no enhancer; train one with campro train-enhancer)",
+            params_path.display()
+        )
+    })?;
     // A bare file name beside the preset: never a path taken from the file's contents.
     let name = Path::new(file);
     if name.components().count() != 1 || name.file_name().is_none() {
-        bail!("{}: provenance.enhancer.onnx: must be a file name beside the preset, got {file:?}", params_path.display());
+        bail!(
+            "{}: provenance.enhancer.onnx: must be a file name beside the preset, got {file:?}",
+            params_path.display()
+        );
     }
     let dir = params_path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     Ok(campro_eval::enhance::Enhancer::load(&dir.join(name))?)

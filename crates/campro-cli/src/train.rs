@@ -248,9 +248,11 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
     let opts = campro_train::enhancer::EnhancerOptions { checkpoints: a.checkpoints.clone(), resume: a.resume.clone() };
     let pb = indicatif::ProgressBar::new(cfg.budget.steps as u64);
     pb.set_style(
-        indicatif::ProgressStyle::with_template("train-enhancer [{bar:30}] step {pos}/{len} {elapsed_precise} eta {eta} {msg}")
-            .unwrap()
-            .progress_chars("=> "),
+        indicatif::ProgressStyle::with_template(
+            "train-enhancer [{bar:30}] step {pos}/{len} {elapsed_precise} eta {eta} {msg}",
+        )
+        .unwrap()
+        .progress_chars("=> "),
     );
     let out = campro_train::enhancer::run(&cfg, &params, &held_out, &opts, |r| {
         pb.set_position(r.step as u64);
@@ -476,7 +478,9 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
     if sizes.is_empty() {
         sizes.push(if a.widths.is_empty() { cfg.model.widths.clone() } else { a.widths.clone() });
     }
-    let frame = image::RgbImage::from_fn(640, 480, |x, y| image::Rgb([(x % 256) as u8, (y % 256) as u8, ((x + y) % 256) as u8]));
+    let frame = image::RgbImage::from_fn(640, 480, |x, y| {
+        image::Rgb([(x % 256) as u8, (y % 256) as u8, ((x + y) % 256) as u8])
+    });
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
     let mut rows = Vec::new();
     for w in &sizes {
@@ -488,7 +492,8 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
             enh.enhance(&frame)?;
             Ok(())
         })?;
-        let step = pool.install(|| campro_train::bench::enhancer_step(w, cfg.data.batch, cfg.data.crop, a.runs as usize))?;
+        let step =
+            pool.install(|| campro_train::bench::enhancer_step(w, cfg.data.batch, cfg.data.crop, a.runs as usize))?;
         rows.push(serde_json::json!({
             "widths": w, "parameters": campro_train::unet::parameter_count(w),
             "macs_per_pixel": campro_train::unet::macs_per_pixel(w), "onnx_bytes": bytes,
@@ -504,9 +509,13 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
             for r in &rows {
                 crate::say!(
                     "| {} | {} | {:.0} | {:.2} MB | {:.0} ms ({:.1} fps) | {:.0} ms |",
-                    r["widths"], r["parameters"], r["macs_per_pixel"].as_f64().unwrap_or(0.0),
-                    r["onnx_bytes"].as_f64().unwrap_or(0.0) / 1e6, r["tract_640x480_ms"].as_f64().unwrap_or(0.0),
-                    r["tract_fps"].as_f64().unwrap_or(0.0), r["train_step_ms"].as_f64().unwrap_or(0.0)
+                    r["widths"],
+                    r["parameters"],
+                    r["macs_per_pixel"].as_f64().unwrap_or(0.0),
+                    r["onnx_bytes"].as_f64().unwrap_or(0.0) / 1e6,
+                    r["tract_640x480_ms"].as_f64().unwrap_or(0.0),
+                    r["tract_fps"].as_f64().unwrap_or(0.0),
+                    r["train_step_ms"].as_f64().unwrap_or(0.0)
                 );
             }
         }

@@ -69,7 +69,8 @@ fn train_enhancer_restores_the_scene_but_not_the_faces() {
         .arg(d.join("restore.csv"))
         .assert()
         .success();
-    let restored = column(&std::fs::read_to_string(d.join("restore.csv")).unwrap(), "val_face_l1").last().unwrap().1.unwrap();
+    let restored =
+        column(&std::fs::read_to_string(d.join("restore.csv")).unwrap(), "val_face_l1").last().unwrap().1.unwrap();
     assert!(
         face > 0.75 * camera && face > restored + 0.25 * (camera - restored),
         "face L1: enhancer {face}, camera {camera}, restoration network {restored}"
@@ -78,8 +79,12 @@ fn train_enhancer_restores_the_scene_but_not_the_faces() {
     let cap = column(&log, "val_psnr_captured");
     assert!(psnr.last().unwrap().1.unwrap() > cap.last().unwrap().1.unwrap() + 1.0, "{log}");
     // Outputs: the ONNX file, its manifest, the preset's provenance.
-    let m: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("p.enhancer.json")).unwrap()).unwrap();
-    assert_eq!((m["kind"].as_str(), m["multiple"].as_u64(), m["file"].as_str()), (Some("image_enhancer"), Some(4), Some("p.enhancer.onnx")));
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("p.enhancer.json")).unwrap()).unwrap();
+    assert_eq!(
+        (m["kind"].as_str(), m["multiple"].as_u64(), m["file"].as_str()),
+        (Some("image_enhancer"), Some(4), Some("p.enhancer.onnx"))
+    );
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
     assert_eq!(v["provenance"]["enhancer"]["onnx"], "p.enhancer.onnx");
     assert_eq!(v["provenance"]["enhancer"]["steps"], 60);
@@ -90,7 +95,8 @@ fn train_enhancer_restores_the_scene_but_not_the_faces() {
     std::fs::write(d.join("more.toml"), config(90, "captured")).unwrap();
     let mut c = train("more.toml");
     c.arg("--resume").arg(d.join("ck")).arg("--force").assert().success();
-    let steps: Vec<usize> = column(&std::fs::read_to_string(d.join("log.csv")).unwrap(), "loss").iter().map(|r| r.0).collect();
+    let steps: Vec<usize> =
+        column(&std::fs::read_to_string(d.join("log.csv")).unwrap(), "loss").iter().map(|r| r.0).collect();
     assert_eq!((steps[0], *steps.last().unwrap()), (0, 90));
     assert!(steps.windows(2).all(|w| w[0] < w[1]), "{steps:?}");
 
@@ -104,8 +110,33 @@ fn train_enhancer_restores_the_scene_but_not_the_faces() {
     assert_eq!(e.enhance(&captured).unwrap(), enhanced);
     assert_ne!(captured, enhanced);
 
-    // eval quality --enhanced scores the enhanced images beside the captured ones.
+    // inspect --enhance: raw | protected | enhanced, detections counted per panel.
     let shared = models.parent().unwrap().parent().unwrap();
+    campro()
+        .arg("inspect")
+        .arg(&p)
+        .arg(&img)
+        .arg("-o")
+        .arg(d.join("insp"))
+        .arg("--enhance")
+        .arg("--shared")
+        .arg(shared)
+        .assert()
+        .success();
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("insp/index.json")).unwrap()).unwrap();
+    assert_eq!(index["panels"], serde_json::json!(["raw", "protected", "enhanced"]));
+    assert_eq!(index["images"][0]["faces"].as_array().unwrap().len(), 3);
+    let picture = image::open(d.join("insp/000000000139.png")).unwrap().to_rgb8();
+    assert_eq!(picture.width(), 3 * captured.width() + 2 * 8);
+    // The enhanced panel is the enhancer's output wherever nothing is drawn: its corner.
+    let x0 = 2 * (captured.width() + 8);
+    assert_eq!(
+        picture.get_pixel(x0 + captured.width() / 2, captured.height() - 1),
+        enhanced.get_pixel(captured.width() / 2, captured.height() - 1)
+    );
+
+    // eval quality --enhanced scores the enhanced images beside the captured ones.
     campro()
         .args(["eval", "quality"])
         .arg(&p)

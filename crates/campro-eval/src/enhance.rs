@@ -50,7 +50,9 @@ impl Enhancer {
                 .find(|p| p.key == MULTIPLE_KEY)
                 .and_then(|p| p.value.parse::<usize>().ok())
                 .filter(|m| m.is_power_of_two() && *m <= 64)
-                .ok_or_else(|| format_err!("no {MULTIPLE_KEY} entry (a power of two up to 64): not a campro enhancer"))?;
+                .ok_or_else(|| {
+                    format_err!("no {MULTIPLE_KEY} entry (a power of two up to 64): not a campro enhancer")
+                })?;
             let graph = proto.graph.as_ref().ok_or_else(|| format_err!("no graph"))?;
             let names = (graph.input.first().map(|i| i.name.as_str()), graph.output.first().map(|o| o.name.as_str()));
             if names != (Some(INPUT), Some(OUTPUT)) {
@@ -76,9 +78,11 @@ impl Enhancer {
         }
         let model = self.model.clone();
         // The model is a fresh copy, dropped on a panic.
-        let built = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> TractResult<std::sync::Arc<TypedSimplePlan>> {
-            model.with_input_fact(0, f32::fact([1, 3, h, w]).into())?.into_optimized()?.into_runnable()
-        }));
+        let built = std::panic::catch_unwind(std::panic::AssertUnwindSafe(
+            || -> TractResult<std::sync::Arc<TypedSimplePlan>> {
+                model.with_input_fact(0, f32::fact([1, 3, h, w]).into())?.into_optimized()?.into_runnable()
+            },
+        ));
         let plan = match built {
             Ok(r) => r.map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") })?,
             Err(_) => {

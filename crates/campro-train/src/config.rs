@@ -370,6 +370,8 @@ pub struct SceneConfig {
     pub face_margin: f64,
     /// What the loss asks of the face boxes ([`FaceTarget`]).
     pub faces: FaceTarget,
+    /// YuNet's face boxes are cached here (one file per image list and model folder).
+    pub cache: PathBuf,
 }
 
 /// What the enhancer's loss asks of the pixels inside the (enlarged) face boxes.
@@ -424,6 +426,7 @@ impl Default for SceneConfig {
             batch: 8,
             face_margin: 0.3,
             faces: FaceTarget::Captured,
+            cache: "target/campro-train-cache".into(),
         }
     }
 }
@@ -461,11 +464,7 @@ impl Rules for EnhancerConfig {
             ),
             (self.data.max_images != Some(0), "data.max_images", "must be at least 1 (leave it out for all)"),
             (self.data.lfw_images <= 100_000, "data.lfw_images", "must be at most 100000"),
-            (
-                self.optimiser.lr.is_finite() && self.optimiser.lr > 0.0,
-                "optimiser.lr",
-                "must be finite and > 0",
-            ),
+            (self.optimiser.lr.is_finite() && self.optimiser.lr > 0.0, "optimiser.lr", "must be finite and > 0"),
             (
                 self.optimiser.weight_decay.is_finite() && self.optimiser.weight_decay >= 0.0,
                 "optimiser.weight_decay",

@@ -181,7 +181,12 @@ pub fn run(
     let mut order = Vec::new();
     let (mut sum, mut count) = (0.0, 0usize);
     if first == 1 {
-        let row = EnhancerRow { step: 0, seconds: seconds(), loss: f64::NAN, validation: validate(&unet, &scenes.validation, &dev)? };
+        let row = EnhancerRow {
+            step: 0,
+            seconds: seconds(),
+            loss: f64::NAN,
+            validation: validate(&unet, &scenes.validation, &dev)?,
+        };
         on_row(&row);
         log.push(row);
     }
@@ -231,7 +236,8 @@ pub fn run(
 /// The log as CSV: step, seconds, loss, then the validation columns (empty between
 /// checkpoints).
 pub fn log_csv(log: &[EnhancerRow]) -> String {
-    let mut csv = String::from("step,seconds,loss,val_masked_l1,val_face_l1,val_face_l1_captured,val_psnr,val_psnr_captured\n");
+    let mut csv =
+        String::from("step,seconds,loss,val_masked_l1,val_face_l1,val_face_l1_captured,val_psnr,val_psnr_captured\n");
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
     for r in log {
         let v = r.validation.as_ref();

@@ -21,7 +21,6 @@ pub enum GraphError {
     Tensor(#[from] candle_core::Error),
 }
 
-
 #[derive(Debug, Clone)]
 enum Op {
     /// One axis, from `start` to `end` (clamped) by `step`.

@@ -119,12 +119,13 @@ impl SceneSet {
                 cfg.coco.display()
             )));
         }
-        let det = FaceDetector::new(Model::load(Manifest::parse(YUNET, Path::new("bundled yunet.json"), &cfg.models)?)?)?;
+        let boxes = face_boxes(&paths, &cfg.models, &cfg.cache)?;
         let camera = Exact8::new(params);
         let margin = cfg.face_margin as f32;
         let scenes: Vec<Option<Scene>> = paths
             .par_iter()
-            .map(|p| -> campro_eval::Result<Option<Scene>> {
+            .zip(&boxes)
+            .map(|(p, found)| -> campro_eval::Result<Option<Scene>> {
                 let raw = read_rgb8(p)?;
                 if raw.width() < cfg.crop as u32 || raw.height() < cfg.crop as u32 {
                     return Ok(None);
@@ -132,8 +133,7 @@ impl SceneSet {
                 let mut captured = RgbImage::new(raw.width(), raw.height());
                 camera.run(raw.as_raw(), &mut captured);
                 // Found in every mode: a restoration network is measured on the faces too.
-                let faces =
-                    det.detect(&raw)?.iter().map(|f| enlarge(f.bbox, margin, raw.width(), raw.height())).collect();
+                let faces = found.iter().map(|&b| enlarge(b, margin, raw.width(), raw.height())).collect();
                 Ok(Some(Scene { raw, captured, faces }))
             })
             .collect::<campro_eval::Result<_>>()?;
@@ -191,6 +191,35 @@ impl SceneSet {
             keep: Tensor::from_vec(keep, (b, 1, size, size), dev)?,
         })
     }
+}
+
+/// YuNet's face boxes `[x0, y0, x1, y1]` (pixels) on each image of `paths`, read from
+/// `cache` when an earlier run found them for the same list and models, else found and
+/// cached (temporary file + rename; a cache that cannot be written only costs the next run).
+fn face_boxes(
+    paths: &[std::path::PathBuf],
+    models: &Path,
+    cache: &Path,
+) -> Result<Vec<Vec<[f32; 4]>>, crate::TrainError> {
+    let list: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+    let key = crate::faces::fnv(&format!("{}|{}|{YUNET}", list.join("\n"), models.display()));
+    let file = cache.join(format!("face-boxes-{key:016x}.json"));
+    if let Ok(bytes) = campro::file::read_capped(&file, 256 << 20, "a face-box cache") {
+        if let Ok(b) = serde_json::from_slice::<Vec<Vec<[f32; 4]>>>(&bytes) {
+            if b.len() == paths.len() {
+                return Ok(b);
+            }
+        }
+    }
+    let det = FaceDetector::new(Model::load(Manifest::parse(YUNET, Path::new("bundled yunet.json"), models)?)?)?;
+    let boxes: Vec<Vec<[f32; 4]>> = paths
+        .par_iter()
+        .map(|p| -> campro_eval::Result<Vec<[f32; 4]>> {
+            Ok(det.detect(&read_rgb8(p)?)?.iter().map(|f| f.bbox).collect())
+        })
+        .collect::<campro_eval::Result<_>>()?;
+    let _ = campro_eval::atomic::write(&file, &serde_json::to_vec(&boxes).expect("boxes serialise"), true);
+    Ok(boxes)
 }
 
 /// A face box grown by `m` of its width left and right, of its height below and by twice

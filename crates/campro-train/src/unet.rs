@@ -16,9 +16,9 @@
 //! when they quantise), H and W multiples of [`Unet::multiple`]. No normalisation layers:
 //! inference is one pass with no batch statistics.
 
+use crate::config::FaceTarget;
 use crate::onnx_net::{conv_attrs, f32_tensor, node, string_attr, GraphError, OnnxNet};
 pub use campro_eval::enhance::{INPUT, MULTIPLE_KEY, OUTPUT};
-use crate::config::FaceTarget;
 use candle_core::{Result, Tensor, Var};
 use rand::SeedableRng;
 use rand_distr::Distribution;
@@ -138,7 +138,13 @@ pub fn masked_l1(pred: &Tensor, target: &Tensor, keep: &Tensor) -> Result<Tensor
 
 /// The enhancer's training loss for `faces` ([`FaceTarget`]): the masked L1 to `raw`, plus,
 /// with [`FaceTarget::Captured`], the L1 to `captured` inside the faces.
-pub fn enhancer_loss(pred: &Tensor, raw: &Tensor, captured: &Tensor, keep: &Tensor, faces: FaceTarget) -> Result<Tensor> {
+pub fn enhancer_loss(
+    pred: &Tensor,
+    raw: &Tensor,
+    captured: &Tensor,
+    keep: &Tensor,
+    faces: FaceTarget,
+) -> Result<Tensor> {
     match faces {
         FaceTarget::Free | FaceTarget::Restore => masked_l1(pred, raw, keep),
         FaceTarget::Captured => {

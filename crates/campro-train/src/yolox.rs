@@ -73,7 +73,11 @@ impl Yolox {
         let h = hidden as i64;
         graph.initializer.extend([
             f32_tensor("adapter.in", vec![], &[1.0 / 255.0]),
-            f32_tensor("adapter.w1", vec![h, 3, 1, 1], &(0..3 * hidden).map(|_| normal.sample(&mut rng)).collect::<Vec<_>>()),
+            f32_tensor(
+                "adapter.w1",
+                vec![h, 3, 1, 1],
+                &(0..3 * hidden).map(|_| normal.sample(&mut rng)).collect::<Vec<_>>(),
+            ),
             f32_tensor("adapter.b1", vec![h], &vec![0.0; hidden]),
             f32_tensor("adapter.w2", vec![3, h, 1, 1], &vec![0.0; 3 * hidden]),
             f32_tensor("adapter.b2", vec![3], &[0.0; 3]),
@@ -111,7 +115,8 @@ impl Yolox {
         if h % 32 != 0 || w % 32 != 0 {
             candle_core::bail!("YOLOX input {h}x{w}: height and width must be multiples of 32");
         }
-        self.net.run(x, None)?
+        self.net
+            .run(x, None)?
             .remove(self.net.output.as_str())
             .ok_or_else(|| candle_core::Error::Msg("output not computed".into()))
     }
@@ -125,7 +130,6 @@ impl Yolox {
         let mut v = self.net.run(x, Some(ADAPTED))?;
         v.remove(ADAPTED).ok_or_else(|| candle_core::Error::Msg("the detector has no colour adapter".into()))
     }
-
 }
 
 /// Anchor centres and strides of the output grids for an `h` x `w` input: per anchor

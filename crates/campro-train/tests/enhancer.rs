@@ -30,7 +30,8 @@ fn test_image(w: u32, h: u32) -> RgbImage {
 fn random_unet(widths: &[usize]) -> Unet {
     let u = Unet::new(widths, 3, &Device::Cpu).unwrap();
     for (i, (_, v)) in u.named_vars().into_iter().enumerate() {
-        let scale = if v.dims().len() == 4 { (2.0 / (v.dims()[1] * v.dims()[2] * v.dims()[3]) as f32).sqrt() } else { 0.05 };
+        let scale =
+            if v.dims().len() == 4 { (2.0 / (v.dims()[1] * v.dims()[2] * v.dims()[3]) as f32).sqrt() } else { 0.05 };
         v.set(&noise(v.dims(), 100 + i as u64, scale)).unwrap();
     }
     u

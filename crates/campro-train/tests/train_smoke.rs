@@ -142,7 +142,8 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     assert!(out.log[0].detection_loss.is_nan(), "no detection loss before round 1");
     assert_eq!(out.provenance["data"]["person_images"], 2);
     let detector = out.detector.expect("the fine-tuned detector");
-    let (tensors, _) = campro_train::checkpoint::load::<campro_train::checkpoint::State>(&ckpts, &campro_train::Device::Cpu).unwrap();
+    let (tensors, _) =
+        campro_train::checkpoint::load::<campro_train::checkpoint::State>(&ckpts, &campro_train::Device::Cpu).unwrap();
     let stored = tensors.keys().filter(|k| k.starts_with("detector.")).count();
     assert_eq!(stored, detector.vars().len());
     // With a colour adapter in P: it trains and follows the camera (its output layer leaves
@@ -161,7 +162,9 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     assert_eq!(adapter.len(), 4);
     let w2: Vec<f32> = adapter[2].as_tensor().flatten_all().unwrap().to_vec1().unwrap();
     assert!(w2.iter().any(|v| v.abs() > 1e-3), "{w2:?}");
-    let (tensors, _) = campro_train::checkpoint::load::<campro_train::checkpoint::State>(&ckpts_a, &campro_train::Device::Cpu).unwrap();
+    let (tensors, _) =
+        campro_train::checkpoint::load::<campro_train::checkpoint::State>(&ckpts_a, &campro_train::Device::Cpu)
+            .unwrap();
     assert_eq!(tensors.keys().filter(|k| k.starts_with("detector.")).count(), detector.vars().len());
     assert!(tensors.contains_key("detector.adapter.w2"));
     // Without a detector weight the detector is never loaded.

@@ -445,6 +445,10 @@ pub struct BenchEnhancerArgs {
     /// Several sizes: repeat --size; each is one comma-separated list (overrides --widths).
     #[arg(long = "size", value_name = "W0,W1,...")]
     sizes: Vec<String>,
+    /// Per-pixel stem widths to combine with each size (repeatable; default: the
+    /// configuration's).
+    #[arg(long = "stem")]
+    stems: Vec<usize>,
     /// Threads for the training step (default: all cores); inference runs on one.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
     threads: Option<u32>,
@@ -482,9 +486,15 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
         image::Rgb([(x % 256) as u8, (y % 256) as u8, ((x + y) % 256) as u8])
     });
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let stems = if a.stems.is_empty() { vec![cfg.model.stem] } else { a.stems.clone() };
+    let shapes: Vec<campro_train::config::UnetConfig> = sizes
+        .iter()
+        .flat_map(|w| stems.iter().map(|&stem| campro_train::config::UnetConfig { widths: w.clone(), stem }))
+        .collect();
     let mut rows = Vec::new();
-    for w in &sizes {
-        let unet = campro_train::unet::Unet::new(w, 1, &campro_train::Device::Cpu)?;
+    for shape in &shapes {
+        let w = &shape.widths;
+        let unet = campro_train::unet::Unet::new(shape, 1, &campro_train::Device::Cpu)?;
         let onnx = unet.onnx_bytes()?;
         let bytes = onnx.len();
         let enh = campro_eval::enhance::Enhancer::from_bytes(&onnx, Path::new("the benchmark's U-Net"))?;
@@ -493,10 +503,10 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
             Ok(())
         })?;
         let step =
-            pool.install(|| campro_train::bench::enhancer_step(w, cfg.data.batch, cfg.data.crop, a.runs as usize))?;
+            pool.install(|| campro_train::bench::enhancer_step(shape, cfg.data.batch, cfg.data.crop, a.runs as usize))?;
         rows.push(serde_json::json!({
-            "widths": w, "parameters": campro_train::unet::parameter_count(w),
-            "macs_per_pixel": campro_train::unet::macs_per_pixel(w), "onnx_bytes": bytes,
+            "widths": w, "stem": shape.stem, "parameters": campro_train::unet::parameter_count(shape),
+            "macs_per_pixel": campro_train::unet::macs_per_pixel(shape), "onnx_bytes": bytes,
             "tract_640x480_ms": infer * 1e3, "tract_fps": 1.0 / infer,
             "train_step_ms": step * 1e3, "batch": cfg.data.batch, "crop": cfg.data.crop, "threads": threads,
         }));
@@ -504,12 +514,17 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
     match a.format {
         crate::Report::Json => crate::say!("{}", serde_json::Value::Array(rows)),
         crate::Report::Text => {
-            crate::say!("| widths | parameters | MACs/pixel | ONNX | tract 640x480, 1 thread | training step ({} x {}², {threads} threads) |", cfg.data.batch, cfg.data.crop);
-            crate::say!("|---|---|---|---|---|---|");
+            crate::say!(
+                "| widths | stem | parameters | MACs/pixel | ONNX | tract 640x480, 1 thread | training step ({} x {}², {threads} threads) |",
+                cfg.data.batch,
+                cfg.data.crop
+            );
+            crate::say!("|---|---|---|---|---|---|---|");
             for r in &rows {
                 crate::say!(
-                    "| {} | {} | {:.0} | {:.2} MB | {:.0} ms ({:.1} fps) | {:.0} ms |",
+                    "| {} | {} | {} | {:.0} | {:.2} MB | {:.0} ms ({:.1} fps) | {:.0} ms |",
                     r["widths"],
+                    r["stem"],
                     r["parameters"],
                     r["macs_per_pixel"].as_f64().unwrap_or(0.0),
                     r["onnx_bytes"].as_f64().unwrap_or(0.0) / 1e6,

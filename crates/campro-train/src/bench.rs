@@ -160,10 +160,10 @@ fn seeded(shape: &[usize], scale: f32, seed: u64, dev: &Device) -> candle_core::
 }
 
 /// Median seconds of one enhancer training step (forward, masked L1, backward, AdamW) on
-/// `batch` seeded `crop` x `crop` crops, for a U-Net of `widths`.
-pub fn enhancer_step(widths: &[usize], batch: usize, crop: usize, runs: usize) -> crate::Result<f64> {
+/// `batch` seeded `crop` x `crop` crops, for a U-Net of `shape`.
+pub fn enhancer_step(shape: &crate::config::UnetConfig, batch: usize, crop: usize, runs: usize) -> crate::Result<f64> {
     let dev = Device::Cpu;
-    let unet = crate::unet::Unet::new(widths, 1, &dev)?;
+    let unet = crate::unet::Unet::new(shape, 1, &dev)?;
     let mut adam = AdamW::new(unet.vars(), ParamsAdamW { lr: 3e-4, weight_decay: 1e-2, ..Default::default() })?;
     let x = seeded(&[batch, 3, crop, crop], 1.0, 2, &dev)?;
     let y = seeded(&[batch, 3, crop, crop], 1.0, 3, &dev)?;

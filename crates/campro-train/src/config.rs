@@ -344,6 +344,9 @@ pub struct UnetConfig {
     /// Channels per level, full resolution first; each further level halves the resolution
     /// ([`crate::unet`]). 1 to 6 levels of 1..=512.
     pub widths: Vec<usize>,
+    /// Hidden units of a per-pixel stem (two 1x1 convolutions with ReLU) in front of the
+    /// first level, 0..=256; 0: none.
+    pub stem: usize,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -410,7 +413,7 @@ pub struct StepBudget {
 
 impl Default for UnetConfig {
     fn default() -> Self {
-        Self { widths: vec![16, 32, 64, 128] }
+        Self { widths: vec![8, 16, 32, 64, 128], stem: 0 }
     }
 }
 impl Default for SceneConfig {
@@ -445,12 +448,13 @@ impl Rules for EnhancerConfig {
     fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let w = &self.model.widths;
         let multiple = 1usize << w.len().clamp(1, 6).saturating_sub(1);
-        let checks: [(bool, &str, &str); 10] = [
+        let checks: [(bool, &str, &str); 11] = [
             (
                 (1..=6).contains(&w.len()) && w.iter().all(|c| (1..=512).contains(c)),
                 "model.widths",
                 "must hold 1 to 6 levels of 1..=512 channels",
             ),
+            (self.model.stem <= 256, "model.stem", "must be at most 256 hidden units (0 for none)"),
             (
                 (16..=1024).contains(&self.data.crop) && self.data.crop.is_multiple_of(multiple),
                 "data.crop",

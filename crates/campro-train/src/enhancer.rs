@@ -58,7 +58,7 @@ pub struct Validation {
 pub struct EnhancerState {
     pub step: usize,
     pub seed: u64,
-    pub widths: Vec<usize>,
+    pub model: crate::config::UnetConfig,
     pub log: Vec<EnhancerRow>,
 }
 
@@ -144,13 +144,13 @@ pub fn run(
             cfg.data.crop
         )));
     }
-    let unet = Unet::new(&cfg.model.widths, cfg.seed, &dev)?;
+    let unet = Unet::new(&cfg.model, cfg.seed, &dev)?;
     let (mut first, mut log, mut earlier) = (1, Vec::new(), 0.0);
     if let Some(dir) = &opts.resume {
         let (tensors, state) = crate::checkpoint::load::<EnhancerState>(dir, &dev)?;
-        if state.seed != cfg.seed || state.widths != cfg.model.widths {
+        if state.seed != cfg.seed || state.model != cfg.model {
             return Err(TrainError::Unsupported(format!(
-                "{}: checkpoint of another seed or model.widths: resume with its own configuration",
+                "{}: checkpoint of another seed or [model]: resume with its own configuration",
                 dir.display()
             )));
         }
@@ -168,7 +168,7 @@ pub fn run(
     let save = |step: usize, log: &[EnhancerRow]| -> Result<(), TrainError> {
         let Some(dir) = &opts.checkpoints else { return Ok(()) };
         let tensors = unet.named_vars().into_iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
-        let state = EnhancerState { step, seed: cfg.seed, widths: cfg.model.widths.clone(), log: log.to_vec() };
+        let state = EnhancerState { step, seed: cfg.seed, model: cfg.model.clone(), log: log.to_vec() };
         Ok(crate::checkpoint::save(dir, &tensors, &state)?)
     };
     let mut adam = AdamW::new(
@@ -220,7 +220,7 @@ pub fn run(
         "trainer": "campro train-enhancer",
         "config": cfg,
         "camera": params.name,
-        "parameters": crate::unet::parameter_count(&cfg.model.widths),
+        "parameters": crate::unet::parameter_count(&cfg.model),
         "data": { "coco_images": scenes.coco, "lfw_images": scenes.lfw, "too_small": scenes.too_small,
                   "face_boxes": scenes.faces, "train_scenes": scenes.train.len(), "validation_scenes": scenes.validation.len(),
                   "coco_held_out": format!("COCO id % {} == 0 (never trained on)", campro_eval::data::HOLDOUT_EVERY),

@@ -3,7 +3,8 @@
 //! [`OnnxNet`], so the file tract runs is the network that was trained.
 //!
 //! Shape, for widths `w₀ … w_L` (one level per width, each level below the first at half
-//! the resolution of the one above):
+//! the resolution of the one above), after an optional per-pixel stem (two 1x1
+//! convolutions with ReLU: room for the camera's folded colour map):
 //! - encoder: level 0 is two 3x3 convolutions (3 → w₀ → w₀); level l is a stride-2 3x3
 //!   convolution (w_{l−1} → w_l) and a 3x3 convolution (w_l → w_l); ReLU after each;
 //! - decoder, from the bottom up: a 3x3 convolution (w_{l+1} → w_l, ReLU) at the lower
@@ -16,7 +17,7 @@
 //! when they quantise), H and W multiples of [`Unet::multiple`]. No normalisation layers:
 //! inference is one pass with no batch statistics.
 
-use crate::config::FaceTarget;
+use crate::config::{FaceTarget, UnetConfig};
 use crate::onnx_net::{conv_attrs, f32_tensor, node, string_attr, GraphError, OnnxNet};
 pub use campro_eval::enhance::{INPUT, MULTIPLE_KEY, OUTPUT};
 use candle_core::{Result, Tensor, Var};
@@ -31,10 +32,15 @@ pub struct Unet {
     widths: Vec<usize>,
 }
 
-/// Parameters of a U-Net with these widths (weights and biases).
-pub fn parameter_count(widths: &[usize]) -> usize {
+/// Parameters of a U-Net of this shape (weights and biases).
+pub fn parameter_count(shape: &UnetConfig) -> usize {
+    let (widths, stem) = (&shape.widths[..], shape.stem);
     let conv = |i: usize, o: usize, k: usize| i * o * k * k + o;
-    let mut n = conv(3, widths[0], 3) + conv(widths[0], widths[0], 3);
+    let first = if stem > 0 { stem } else { 3 };
+    let mut n = conv(first, widths[0], 3) + conv(widths[0], widths[0], 3);
+    if stem > 0 {
+        n += conv(3, stem, 1) + conv(stem, stem, 1);
+    }
     for l in 1..widths.len() {
         n += conv(widths[l - 1], widths[l], 3) + conv(widths[l], widths[l], 3);
         n += conv(widths[l], widths[l - 1], 3) + conv(2 * widths[l - 1], widths[l - 1], 3);
@@ -44,10 +50,15 @@ pub fn parameter_count(widths: &[usize]) -> usize {
 
 /// Multiply-accumulates per input pixel of one forward pass (a level l convolution runs on
 /// 4^−l of the pixels).
-pub fn macs_per_pixel(widths: &[usize]) -> f64 {
+pub fn macs_per_pixel(shape: &UnetConfig) -> f64 {
+    let (widths, stem) = (&shape.widths[..], shape.stem);
     let area = |l: usize| 0.25f64.powi(l as i32);
     let conv = |i: usize, o: usize, k: usize, l: usize| (i * o * k * k) as f64 * area(l);
-    let mut m = conv(3, widths[0], 3, 0) + conv(widths[0], widths[0], 3, 0) + conv(widths[0], 3, 1, 0);
+    let first = if stem > 0 { stem } else { 3 };
+    let mut m = conv(first, widths[0], 3, 0) + conv(widths[0], widths[0], 3, 0) + conv(widths[0], 3, 1, 0);
+    if stem > 0 {
+        m += conv(3, stem, 1, 0) + conv(stem, stem, 1, 0);
+    }
     for l in 1..widths.len() {
         m += conv(widths[l - 1], widths[l], 3, l) + conv(widths[l], widths[l], 3, l);
         m += conv(widths[l], widths[l - 1], 3, l) + conv(2 * widths[l - 1], widths[l - 1], 3, l - 1);
@@ -56,16 +67,21 @@ pub fn macs_per_pixel(widths: &[usize]) -> f64 {
 }
 
 impl Unet {
-    /// A fresh network: He-normal 3x3 weights drawn from `seed`, zero biases, a zero output
-    /// convolution (the identity map at start). `widths`: 1 to 6 levels, each 1..=512.
-    pub fn new(widths: &[usize], seed: u64, dev: &candle_core::Device) -> std::result::Result<Self, GraphError> {
-        if widths.is_empty() || widths.len() > 6 || widths.iter().any(|w| !(1..=512).contains(w)) {
+    /// A fresh network: He-normal weights drawn from `seed`, zero biases, a zero output
+    /// convolution (the identity map at start). Widths: 1 to 6 levels, each 1..=512; stem
+    /// at most 256.
+    pub fn new(shape: &UnetConfig, seed: u64, dev: &candle_core::Device) -> std::result::Result<Self, GraphError> {
+        let widths = &shape.widths[..];
+        if widths.is_empty() || widths.len() > 6 || widths.iter().any(|w| !(1..=512).contains(w)) || shape.stem > 256 {
             return Err(GraphError::Graph {
                 path: "unet".into(),
-                message: format!("widths {widths:?}: 1 to 6 levels of 1..=512 channels"),
+                message: format!(
+                    "widths {widths:?}, stem {}: 1 to 6 levels of 1..=512 channels, a stem of at most 256",
+                    shape.stem
+                ),
             });
         }
-        let model = graph(widths, seed);
+        let model = graph(widths, shape.stem, seed);
         Ok(Self { net: OnnxNet::from_model(model, "unet".into(), dev)?, widths: widths.to_vec() })
     }
 
@@ -221,9 +237,15 @@ impl Builder {
 }
 
 /// The U-Net of `widths` as an ONNX model (opset 13), weights drawn from `seed`.
-fn graph(widths: &[usize], seed: u64) -> pb::ModelProto {
+fn graph(widths: &[usize], stem: usize, seed: u64) -> pb::ModelProto {
     let mut b = Builder { inits: Vec::new(), nodes: Vec::new(), rng: rand_chacha::ChaCha8Rng::seed_from_u64(seed) };
-    let mut x = b.conv("enc0.conv0", INPUT, (3, widths[0]), 3, 1, true);
+    let (mut x, mut first) = (INPUT.to_string(), 3);
+    if stem > 0 {
+        x = b.conv("stem.conv0", &x, (3, stem), 1, 1, true);
+        x = b.conv("stem.conv1", &x, (stem, stem), 1, 1, true);
+        first = stem;
+    }
+    x = b.conv("enc0.conv0", &x, (first, widths[0]), 3, 1, true);
     x = b.conv("enc0.conv1", &x, (widths[0], widths[0]), 3, 1, true);
     let mut skips = vec![x.clone()];
     for l in 1..widths.len() {
@@ -253,7 +275,7 @@ fn graph(widths: &[usize], seed: u64) -> pb::ModelProto {
         opset_import: vec![pb::OperatorSetIdProto { domain: String::new(), version: 13 }],
         producer_name: "campro".into(),
         producer_version: env!("CARGO_PKG_VERSION").into(),
-        doc_string: format!("CamPro image enhancer: U-Net, widths {widths:?}"),
+        doc_string: format!("CamPro image enhancer: U-Net, widths {widths:?}, stem {stem}"),
         metadata_props: vec![pb::StringStringEntryProto {
             key: MULTIPLE_KEY.into(),
             value: (1usize << (widths.len() - 1)).to_string(),

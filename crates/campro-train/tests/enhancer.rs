@@ -3,7 +3,7 @@
 //! against hand geometry, and learning on a fixed batch.
 
 use campro_eval::enhance::Enhancer;
-use campro_train::config::{EnhancerConfig, FaceTarget};
+use campro_train::config::{EnhancerConfig, FaceTarget, UnetConfig};
 use campro_train::scenes::{enlarge, Scene};
 use campro_train::unet::{enhancer_loss, face_l1, macs_per_pixel, masked_l1, parameter_count, Unet};
 use candle_core::{Device, Tensor};
@@ -27,8 +27,12 @@ fn test_image(w: u32, h: u32) -> RgbImage {
 }
 
 /// A U-Net with every weight drawn at random (the output convolution too, which starts at zero).
-fn random_unet(widths: &[usize]) -> Unet {
-    let u = Unet::new(widths, 3, &Device::Cpu).unwrap();
+fn shape(widths: &[usize], stem: usize) -> UnetConfig {
+    UnetConfig { widths: widths.to_vec(), stem }
+}
+
+fn random_unet(shape: &UnetConfig) -> Unet {
+    let u = Unet::new(shape, 3, &Device::Cpu).unwrap();
     for (i, (_, v)) in u.named_vars().into_iter().enumerate() {
         let scale =
             if v.dims().len() == 4 { (2.0 / (v.dims()[1] * v.dims()[2] * v.dims()[3]) as f32).sqrt() } else { 0.05 };
@@ -39,25 +43,27 @@ fn random_unet(widths: &[usize]) -> Unet {
 
 #[test]
 fn candle_and_tract_agree_on_the_written_onnx() {
-    let u = random_unet(&[4, 8, 16]);
-    let tract = Enhancer::from_bytes(&u.onnx_bytes().unwrap(), Path::new("test")).unwrap();
-    assert_eq!(tract.multiple(), 4);
-    // A size that is a multiple, and one that needs padding.
-    for (w, h) in [(56, 40), (53, 37)] {
-        let img = test_image(w, h);
-        let a = campro_train::enhancer::enhance(&u, &img, &Device::Cpu).unwrap();
-        let b = tract.enhance(&img).unwrap();
-        let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
-        assert!(worst <= 1, "{w}x{h}: candle and tract differ by {worst} LSB");
-        // The network changes the image (else the comparison above proves nothing).
-        let moved = a.as_raw().iter().zip(img.as_raw()).filter(|(x, y)| x.abs_diff(**y) > 4).count();
-        assert!(moved > a.as_raw().len() / 4, "{w}x{h}: only {moved} samples changed");
+    for stem in [0, 6] {
+        let u = random_unet(&shape(&[4, 8, 16], stem));
+        let tract = Enhancer::from_bytes(&u.onnx_bytes().unwrap(), Path::new("test")).unwrap();
+        assert_eq!(tract.multiple(), 4);
+        // A size that is a multiple, and one that needs padding.
+        for (w, h) in [(56, 40), (53, 37)] {
+            let img = test_image(w, h);
+            let a = campro_train::enhancer::enhance(&u, &img, &Device::Cpu).unwrap();
+            let b = tract.enhance(&img).unwrap();
+            let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+            assert!(worst <= 1, "{w}x{h}: candle and tract differ by {worst} LSB");
+            // The network changes the image (else the comparison above proves nothing).
+            let moved = a.as_raw().iter().zip(img.as_raw()).filter(|(x, y)| x.abs_diff(**y) > 4).count();
+            assert!(moved > a.as_raw().len() / 4, "{w}x{h}: only {moved} samples changed");
+        }
     }
 }
 
 #[test]
 fn a_fresh_enhancer_returns_the_captured_image() {
-    let u = Unet::new(&[4, 8], 1, &Device::Cpu).unwrap();
+    let u = Unet::new(&shape(&[4, 8], 0), 1, &Device::Cpu).unwrap();
     let tract = Enhancer::from_bytes(&u.onnx_bytes().unwrap(), Path::new("test")).unwrap();
     let img = test_image(31, 17);
     assert_eq!(tract.enhance(&img).unwrap(), img);
@@ -67,17 +73,19 @@ fn a_fresh_enhancer_returns_the_captured_image() {
 fn size_formulas_match_hand_counts() {
     // [8, 16]: 3→8 (224), 8→8 (584), 8→16 s2 (1168), 16→16 (2320), decoder 16→8 (1160),
     // 16→8 (1160), output 8→3 1x1 (27).
-    assert_eq!(parameter_count(&[8, 16]), 6643);
-    let u = Unet::new(&[8, 16], 1, &Device::Cpu).unwrap();
+    assert_eq!(parameter_count(&shape(&[8, 16], 0)), 6643);
+    let u = Unet::new(&shape(&[8, 16], 0), 1, &Device::Cpu).unwrap();
     let counted: usize = u.vars().iter().map(|v| v.elem_count()).sum();
     assert_eq!(counted, 6643);
-    assert_eq!(parameter_count(&[16, 32, 64, 128]), {
-        let u = Unet::new(&[16, 32, 64, 128], 1, &Device::Cpu).unwrap();
-        u.vars().iter().map(|v| v.elem_count()).sum::<usize>()
-    });
+    for s in [shape(&[16, 32, 64, 128], 0), shape(&[8, 16, 32], 12)] {
+        let n = Unet::new(&s, 1, &Device::Cpu).unwrap().vars().iter().map(|v| v.elem_count()).sum::<usize>();
+        assert_eq!(parameter_count(&s), n, "{s:?}");
+    }
     // Level 0: 216 + 576 + 24; level 1 at a quarter: (1152 + 2304 + 1152) / 4; the decoder's
     // second convolution at level 0: 1152.
-    assert_eq!(macs_per_pixel(&[8, 16]), 816.0 + 864.0 + 288.0 + 1152.0);
+    assert_eq!(macs_per_pixel(&shape(&[8, 16], 0)), 816.0 + 864.0 + 288.0 + 1152.0);
+    // A stem of 4: 3·4 + 4·4 per pixel, and the first convolution reads 4 channels, not 3.
+    assert_eq!(macs_per_pixel(&shape(&[8, 16], 4)), 3120.0 + 12.0 + 16.0 + (4.0 - 3.0) * 8.0 * 9.0);
     assert_eq!(u.multiple(), 2);
 }
 
@@ -120,7 +128,7 @@ fn face_boxes_grow_and_mask_by_hand() {
 #[test]
 fn training_on_a_fixed_batch_lowers_the_loss() {
     use candle_nn::{AdamW, Optimizer, ParamsAdamW};
-    let u = Unet::new(&[4, 8], 5, &Device::Cpu).unwrap();
+    let u = Unet::new(&shape(&[4, 8], 0), 5, &Device::Cpu).unwrap();
     let raw = (noise(&[2, 3, 16, 16], 7, 0.5) + 0.5).unwrap();
     // A colour map to undo: each channel inverted.
     let cap = (1.0 - &raw).unwrap();
@@ -154,7 +162,7 @@ fn the_enhancer_configuration_names_its_broken_rule() {
 
 #[test]
 fn a_damaged_enhancer_file_is_refused_by_name() {
-    let u = Unet::new(&[4, 8], 1, &Device::Cpu).unwrap();
+    let u = Unet::new(&shape(&[4, 8], 0), 1, &Device::Cpu).unwrap();
     let bytes = u.onnx_bytes().unwrap();
     for cut in [0, 10, bytes.len() / 2] {
         let e = Enhancer::from_bytes(&bytes[..cut], Path::new("bad.onnx")).err().expect("refused");

@@ -185,11 +185,23 @@ pub struct PrivacyArgs {
     /// (default: SHARED/data/coco-person/images, people but not LFW's).
     #[arg(long, value_name = "DIR")]
     restore_prior: Option<PathBuf>,
+    /// Adaptive attacks of the paper's Sec. VII beyond --restore (repeatable):
+    /// `restore-net`, each parameter set's learnt restoration network
+    /// (provenance.restorer, from campro train-enhancer with data.faces = "restore") on its
+    /// captured images: rows "NAME restore-net".
+    #[arg(long = "attack", value_enum)]
+    attacks: Vec<AttackArg>,
     /// How the attacker enrolled its gallery and classifier photos: `raw` (the paper's
     /// protocol) or `camera` (through the same camera as the probes: the re-enrolment
     /// attacker, who matches protected to protected).
     #[arg(long, value_enum, default_value = "raw")]
     enrol: EnrolArg,
+}
+
+/// `--attack`.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum AttackArg {
+    RestoreNet,
 }
 
 /// `--enrol` (campro_eval::privacy::Enrolment).
@@ -239,22 +251,10 @@ impl Common {
             if c.iter().any(|x| x.name == name) {
                 bail!("{}: two parameter sets are named {name:?}", path.display());
             }
-            let enhancer = if self.enhanced { Some(crate::simulate::enhancer_of(path, &p)?) } else { None };
-            let camera = params_condition(name.clone(), p);
-            if let (Some(e), Some(protect)) = (enhancer, camera.protect.clone()) {
-                let f = failures.clone();
-                let shown = path.display().to_string();
-                c.push(camera);
-                c.push(Condition::new(format!("{name} enhanced"), move |img: &RgbImage| {
-                    let captured = protect(img);
-                    e.enhance(&captured).unwrap_or_else(|err| {
-                        f.record(format!("{shown}: the enhancer: {err}"));
-                        captured
-                    })
-                }));
-            } else {
-                c.push(camera);
-            }
+            c.push(params_condition(name, p));
+        }
+        if self.enhanced {
+            c = with_networks(self, &c, crate::simulate::Network::Enhancer, "enhanced", failures)?;
         }
         let mut b = self.baselines.clone();
         if self.paper_baselines {
@@ -353,7 +353,20 @@ fn read_identities(path: &Path) -> Result<Vec<String>> {
     Ok(names)
 }
 
-fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<privacy::PrivacyReport> {
+fn run_privacy(
+    c: &Common,
+    a: &PrivacyArgs,
+    conds: &[Condition],
+    failures: &Failures,
+) -> Result<privacy::PrivacyReport> {
+    // The attackers' networks first: a missing one is named before any data is read.
+    let attacked;
+    let conds = if a.attacks.contains(&AttackArg::RestoreNet) {
+        attacked = with_networks(c, conds, crate::simulate::Network::Restorer, "restore-net", failures)?;
+        &attacked[..]
+    } else {
+        conds
+    };
     let lfw_dir = a.lfw.clone().unwrap_or_else(|| c.shared().join("data/lfw"));
     let lfw = data::Lfw::open(&lfw_dir).with_context(|| "reading LFW (set --lfw or --shared)")?;
     let identities = a.identities.as_deref().map(read_identities).transpose()?;
@@ -387,6 +400,34 @@ fn run_privacy(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<priva
     report::write_privacy(&r, &c.output)?;
     eprintln!("privacy: {} identities, {:.0} s -> {}", r.identities, r.seconds, c.output.join("privacy.md").display());
     Ok(r)
+}
+
+/// `conds` with a "NAME SUFFIX" condition after each parameter set's: its network `which`
+/// on the set's captured images (errors recorded in `failures`).
+fn with_networks(
+    c: &Common,
+    conds: &[Condition],
+    which: crate::simulate::Network,
+    suffix: &str,
+    failures: &Failures,
+) -> Result<Vec<Condition>> {
+    let mut out = Vec::with_capacity(conds.len() * 2);
+    for x in conds {
+        out.push(x.clone());
+        let Some(path) = c.params.iter().find(|p| set_name(p) == x.name) else { continue };
+        let Some(protect) = x.protect.clone() else { continue };
+        let net = crate::simulate::network_of(path, &crate::load_params(path)?, which)?;
+        let (f, shown) = (failures.clone(), path.display().to_string());
+        let key = which.key();
+        out.push(Condition::new(format!("{} {suffix}", x.name), move |img: &RgbImage| {
+            let captured = protect(img);
+            net.enhance(&captured).unwrap_or_else(|err| {
+                f.record(format!("{shown}: the {key}: {err}"));
+                captured
+            })
+        }));
+    }
+    Ok(out)
 }
 
 /// `conds` with a "NAME restored" condition after each parameter set's (`--restore`).
@@ -519,7 +560,7 @@ pub fn run(cmd: EvalCmd) -> Result<()> {
     common.check_output()?;
     let f = Failures::default();
     match cmd {
-        EvalCmd::Privacy { common, p } => run_privacy(&common, &p, &common.conditions(&f)?).and(f.check()),
+        EvalCmd::Privacy { common, p } => run_privacy(&common, &p, &common.conditions(&f)?, &f).and(f.check()),
         EvalCmd::Utility { common, u } => run_utility(&common, &u, &common.conditions(&f)?).and(f.check()),
         EvalCmd::Quality { common, images, held_out } => {
             run_quality(&common, images.as_deref(), held_out, &common.conditions(&f)?).and(f.check())
@@ -528,7 +569,7 @@ pub fn run(cmd: EvalCmd) -> Result<()> {
             let conds = common.conditions(&f)?;
             let q = run_quality(&common, None, u.held_out || u.own_detector, &conds)?;
             let ur = run_utility(&common, &u, &conds)?;
-            let pr = run_privacy(&common, &p, &conds)?;
+            let pr = run_privacy(&common, &p, &conds, &f)?;
             f.check()?;
             report::write_summary(&pr, &ur, &q, &common.output)?;
             eprintln!("report: {}", common.output.join("report.md").display());

@@ -260,7 +260,9 @@ enum Cmd {
     },
     /// Train the image enhancer of a parameter set (paper Sec. IV-D: a U-Net from captured
     /// images back to the scene, faces left unrestored): writes PARAMS.enhancer.onnx and
-    /// PARAMS.enhancer.json beside PARAMS and names them in its provenance.
+    /// PARAMS.enhancer.json beside PARAMS and names them in its provenance. With
+    /// data.faces = "restore" it trains the restoration attacker's network instead
+    /// (PARAMS.restorer.*, for eval privacy --attack restore-net).
     TrainEnhancer(train::TrainEnhancerArgs),
     /// Run the recommended learnt preset (or --params) on a built-in chart: before/after PNGs, Camera2 values, error report.
     Demo {

@@ -59,22 +59,46 @@ impl Capture<'_, '_> {
     }
 }
 
+/// What a parameter set's provenance can name beside it: its enhancer (shown to people) or
+/// the restoration network trained against it (an attacker's, for `eval privacy --attack
+/// restore-net`). Both are written by `campro train-enhancer`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Network {
+    Enhancer,
+    Restorer,
+}
+
+impl Network {
+    /// The provenance key, the file suffix (`PARAMS.KEY.onnx`) and the manifest's kind.
+    pub fn key(self) -> &'static str {
+        match self {
+            Network::Enhancer => "enhancer",
+            Network::Restorer => "restorer",
+        }
+    }
+}
+
 /// The enhancer a parameter set names (`provenance.enhancer.onnx`, beside the file at
 /// `params_path`).
 pub fn enhancer_of(params_path: &Path, p: &Params) -> Result<campro_eval::enhance::Enhancer> {
-    let file = p.provenance.get("enhancer").and_then(|e| e.get("onnx")).and_then(|f| f.as_str()).ok_or_else(|| {
+    network_of(params_path, p, Network::Enhancer)
+}
+
+/// The network `which` a parameter set names (`provenance.KEY.onnx`, a file name beside the
+/// file at `params_path`).
+pub fn network_of(params_path: &Path, p: &Params, which: Network) -> Result<campro_eval::enhance::Enhancer> {
+    let key = which.key();
+    let file = p.provenance.get(key).and_then(|e| e.get("onnx")).and_then(|f| f.as_str()).ok_or_else(|| {
         anyhow!(
-            "{}: provenance.enhancer.onnx: missing (this preset has no enhancer; train one with campro train-enhancer)",
-            params_path.display()
+            "{}: provenance.{key}.onnx: missing (this preset has no {key}; train one with campro train-enhancer{})",
+            params_path.display(),
+            if which == Network::Restorer { " and data.faces = \"restore\"" } else { "" }
         )
     })?;
     // A bare file name beside the preset: never a path taken from the file's contents.
     let name = Path::new(file);
     if name.components().count() != 1 || name.file_name().is_none() {
-        bail!(
-            "{}: provenance.enhancer.onnx: must be a file name beside the preset, got {file:?}",
-            params_path.display()
-        );
+        bail!("{}: provenance.{key}.onnx: must be a file name beside the preset, got {file:?}", params_path.display());
     }
     let dir = params_path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     Ok(campro_eval::enhance::Enhancer::load(&dir.join(name))?)

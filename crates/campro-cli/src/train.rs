@@ -233,8 +233,15 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
             a.params.display()
         ),
     };
-    let onnx = a.params.with_extension("enhancer.onnx");
-    let manifest = a.params.with_extension("enhancer.json");
+    // A network trained to restore faces too is an attacker's, never the preset's enhancer.
+    let which = if cfg.data.faces == campro_train::config::FaceTarget::Restore {
+        crate::simulate::Network::Restorer
+    } else {
+        crate::simulate::Network::Enhancer
+    };
+    let key = which.key();
+    let onnx = a.params.with_extension(format!("{key}.onnx"));
+    let manifest = a.params.with_extension(format!("{key}.json"));
     for p in [Some(&onnx), Some(&manifest), a.log.as_ref()].into_iter().flatten() {
         if p.exists() && !a.force {
             bail!("{} exists (use --force to replace it)", p.display());
@@ -286,8 +293,8 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
     out.unet.save_onnx(&onnx)?;
     let file = |p: &Path| p.file_name().expect("a file name").to_string_lossy().into_owned();
     let m = serde_json::json!({
-        "name": format!("campro enhancer ({})", params.name),
-        "kind": "image_enhancer",
+        "name": format!("campro {key} ({})", params.name),
+        "kind": if which == crate::simulate::Network::Enhancer { "image_enhancer" } else { "restoration_network" },
         "file": file(&onnx),
         "widths": out.unet.widths(),
         "multiple": out.unet.multiple(),
@@ -296,13 +303,13 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
     write_atomic(&manifest, (serde_json::to_string_pretty(&m)? + "\n").as_bytes(), a.force)?;
     let last = out.log.iter().rev().find_map(|r| r.validation.clone());
     params.provenance.insert(
-        "enhancer".into(),
+        key.into(),
         serde_json::json!({ "onnx": file(&onnx), "manifest": file(&manifest), "steps": out.log.last().map_or(0, |r| r.step),
                             "seconds": out.seconds, "validation": last }),
     );
     write_atomic(&a.params, params.to_json().as_bytes(), true)?;
     eprintln!(
-        "trained the enhancer {} steps in {:.0} s -> {}",
+        "trained the {key} {} steps in {:.0} s -> {}",
         out.log.last().map_or(0, |r| r.step),
         out.seconds,
         onnx.display()

@@ -149,6 +149,27 @@ fn train_enhancer_restores_the_scene_but_not_the_faces() {
         .success();
     let report = std::fs::read_to_string(d.join("ev/quality.md")).unwrap();
     assert!(report.contains("| p enhanced"), "{report}");
+    // eval privacy --attack restore-net: the learnt restoration attack on the captured faces.
+    campro()
+        .args(["eval", "privacy"])
+        .arg(&r)
+        .args(["--attack", "restore-net", "--limit", "3", "--runs", "1", "--no-verification", "--shared"])
+        .arg(shared)
+        .arg("-o")
+        .arg(d.join("ev-r"))
+        .assert()
+        .success();
+    let report = std::fs::read_to_string(d.join("ev-r/privacy.md")).unwrap();
+    assert!(report.contains("r restore-net"), "{report}");
+    fails_with(
+        campro()
+            .args(["eval", "privacy"])
+            .arg(&p)
+            .args(["--attack", "restore-net", "--limit", "3"])
+            .arg("-o")
+            .arg(d.join("ev-x")),
+        "provenance.restorer.onnx: missing",
+    );
 }
 
 #[test]

@@ -266,13 +266,14 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
         pb.set_message(format!("L1 {:.4}", r.loss));
         if let Some(v) = &r.validation {
             let line = format!(
-                "step {}: validation PSNR {:.2} dB (captured {:.2}), masked L1 {:.4}, face L1 {} (captured {}) ({:.0} s)",
+                "step {}: validation PSNR {:.2} dB (input {:.2}, captured {:.2}), masked L1 {:.4}, face L1 {} (input {}) ({:.0} s)",
                 r.step,
                 v.psnr,
+                v.psnr_input,
                 v.psnr_captured,
                 v.masked_l1,
                 v.face_l1.map_or("-".into(), |f| format!("{f:.4}")),
-                v.face_l1_captured.map_or("-".into(), |f| format!("{f:.4}")),
+                v.face_l1_input.map_or("-".into(), |f| format!("{f:.4}")),
                 r.seconds
             );
             if pb.is_hidden() {
@@ -290,14 +291,15 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
         write_atomic(&PathBuf::from(format!("{}-losses.svg", stem.display())), losses.as_bytes(), true)?;
         write_atomic(&PathBuf::from(format!("{}-psnr.svg", stem.display())), psnr.as_bytes(), true)?;
     }
-    out.unet.save_onnx(&onnx)?;
+    out.enhancer.save_onnx(&onnx)?;
     let file = |p: &Path| p.file_name().expect("a file name").to_string_lossy().into_owned();
     let m = serde_json::json!({
         "name": format!("campro {key} ({})", params.name),
         "kind": if which == crate::simulate::Network::Enhancer { "image_enhancer" } else { "restoration_network" },
         "file": file(&onnx),
-        "widths": out.unet.widths(),
-        "multiple": out.unet.multiple(),
+        "widths": out.enhancer.unet.widths(),
+        "multiple": out.enhancer.unet.multiple(),
+        "restoration_table": out.enhancer.table.is_some(),
         "provenance": out.provenance,
     });
     write_atomic(&manifest, (serde_json::to_string_pretty(&m)? + "\n").as_bytes(), a.force)?;
@@ -496,13 +498,25 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
     let stems = if a.stems.is_empty() { vec![cfg.model.stem] } else { a.stems.clone() };
     let shapes: Vec<campro_train::config::UnetConfig> = sizes
         .iter()
-        .flat_map(|w| stems.iter().map(|&stem| campro_train::config::UnetConfig { widths: w.clone(), stem }))
+        .flat_map(|w| {
+            stems.iter().map(|&stem| campro_train::config::UnetConfig {
+                widths: w.clone(),
+                stem,
+                restorer: cfg.model.restorer,
+            })
+        })
         .collect();
     let mut rows = Vec::new();
     for shape in &shapes {
         let w = &shape.widths;
         let unet = campro_train::unet::Unet::new(shape, 1, &campro_train::Device::Cpu)?;
-        let onnx = unet.onnx_bytes()?;
+        // A restoration stage costs its lookup whatever the table holds: the identity's.
+        let table = shape.restorer.then(|| {
+            let one = image::RgbImage::new(1, 1);
+            campro_eval::restore::Restorer::fit(|i: &image::RgbImage| i.clone(), [&one]).map(|r| r.table())
+        });
+        let net = campro_train::enhancer::EnhancerNet { unet, table: table.transpose()? };
+        let onnx = net.onnx_bytes()?;
         let bytes = onnx.len();
         let enh = campro_eval::enhance::Enhancer::from_bytes(&onnx, Path::new("the benchmark's U-Net"))?;
         let infer = campro_train::bench::median_secs(a.runs as usize, || {
@@ -512,7 +526,7 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
         let step =
             pool.install(|| campro_train::bench::enhancer_step(shape, cfg.data.batch, cfg.data.crop, a.runs as usize))?;
         rows.push(serde_json::json!({
-            "widths": w, "stem": shape.stem, "parameters": campro_train::unet::parameter_count(shape),
+            "widths": w, "stem": shape.stem, "restorer": shape.restorer, "parameters": campro_train::unet::parameter_count(shape),
             "macs_per_pixel": campro_train::unet::macs_per_pixel(shape), "onnx_bytes": bytes,
             "tract_640x480_ms": infer * 1e3, "tract_fps": 1.0 / infer,
             "train_step_ms": step * 1e3, "batch": cfg.data.batch, "crop": cfg.data.crop, "threads": threads,

@@ -13,7 +13,7 @@
 //! (represented by the mean of the prior's pixels in it), protected colours by theirs. A
 //! protected bin the prior never reaches is left as it is.
 
-use crate::{ProtectFn, Result};
+use crate::Result;
 use image::RgbImage;
 
 /// Bits per channel of the colour bins (2^18 bins).
@@ -21,7 +21,8 @@ pub const BITS: u32 = 6;
 const SIDE: usize = 1 << BITS;
 const SHIFT: u32 = 8 - BITS;
 
-fn bin(p: [u8; 3]) -> usize {
+/// The bin of a colour: `(r >> 2) · 4096 + (g >> 2) · 64 + (b >> 2)`.
+pub fn bin(p: [u8; 3]) -> usize {
     ((p[0] >> SHIFT) as usize * SIDE + (p[1] >> SHIFT) as usize) * SIDE + (p[2] >> SHIFT) as usize
 }
 
@@ -35,7 +36,10 @@ pub struct Restorer {
 impl Restorer {
     /// Fits the inverse of `protect` (a per-pixel map: each output pixel may depend on its
     /// input pixel only) under the colour histogram of `prior` (raw images).
-    pub fn fit(protect: &ProtectFn, prior: &[RgbImage]) -> Result<Self> {
+    pub fn fit<'a>(
+        protect: impl Fn(&RgbImage) -> RgbImage,
+        prior: impl IntoIterator<Item = &'a RgbImage>,
+    ) -> Result<Self> {
         // The prior: per raw bin, pixel count and colour sum.
         let mut count = vec![0u64; SIDE * SIDE * SIDE];
         let mut sum = vec![[0u64; 3]; SIDE * SIDE * SIDE];
@@ -71,6 +75,15 @@ impl Restorer {
         Ok(Self { lut })
     }
 
+    /// The whole lookup table, per protected-colour bin ([`bin`]): the restored colour, or,
+    /// for a bin the prior never reached, the bin's centre (where [`Self::apply`] keeps the
+    /// pixel, within 2 LSB of it). What the enhancer's first stage looks up
+    /// ([`apply_table`]).
+    pub fn table(&self) -> Vec<[u8; 3]> {
+        let centre = |b: usize, k: u32| (((b >> (k * BITS)) & (SIDE - 1)) << SHIFT) as u8 + (1 << (SHIFT - 1));
+        self.lut.iter().enumerate().map(|(b, c)| c.unwrap_or([centre(b, 2), centre(b, 1), centre(b, 0)])).collect()
+    }
+
     /// Restores a protected image pixel by pixel.
     pub fn apply(&self, img: &RgbImage) -> RgbImage {
         let mut out = img.clone();
@@ -83,9 +96,20 @@ impl Restorer {
     }
 }
 
+/// An image through a whole table of [`Restorer::table`]: each pixel replaced by its bin's
+/// entry.
+pub fn apply_table(table: &[[u8; 3]], img: &RgbImage) -> RgbImage {
+    let mut out = img.clone();
+    for p in out.pixels_mut() {
+        p.0 = table[bin(p.0)];
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ProtectFn;
 
     fn prior() -> Vec<RgbImage> {
         // Every colour on a 4-level grid, plus a gradient.
@@ -115,6 +139,24 @@ mod tests {
         let worst =
             img.as_raw().iter().zip(r.apply(img).as_raw()).map(|(a, b)| (*a as i32 - *b as i32).abs()).max().unwrap();
         assert!(worst <= 4, "{worst}");
+    }
+
+    #[test]
+    fn the_whole_table_is_apply_with_bin_centres_where_unreached() {
+        // The prior holds only dark colours: bright protected bins are never reached.
+        let dark = vec![RgbImage::from_fn(64, 64, |x, y| image::Rgb([x as u8, y as u8, 10]))];
+        let same: Box<ProtectFn> = Box::new(|img: &RgbImage| img.clone());
+        let r = Restorer::fit(same.as_ref(), &dark).unwrap();
+        let t = r.table();
+        assert_eq!(t.len(), 1 << 18);
+        // Reached: the prior's mean of the bin [4, 8) x [0, 4) x [8, 12): (5.5, 1.5, 10) rounded.
+        assert_eq!(t[bin([5, 2, 10])], [6, 2, 10]);
+        assert_eq!(apply_table(&t, &dark[0]), r.apply(&dark[0]));
+        // Unreached: the bin's centre (bin 50 of red: 200..204 → 202).
+        assert_eq!(t[bin([201, 130, 255])], [202, 130, 254]);
+        let bright = RgbImage::from_pixel(2, 1, image::Rgb([201, 130, 255]));
+        assert_eq!(apply_table(&t, &bright).get_pixel(0, 0).0, [202, 130, 254]);
+        assert_eq!(r.apply(&bright), bright);
     }
 
     #[test]

@@ -347,6 +347,11 @@ pub struct UnetConfig {
     /// Hidden units of a per-pixel stem (two 1x1 convolutions with ReLU) in front of the
     /// first level, 0..=256; 0: none.
     pub stem: usize,
+    /// Put the camera's per-pixel restoration in front of the U-Net: each captured colour
+    /// replaced by the mean raw colour producing it in the training scenes
+    /// ([`campro_eval::restore`], a 786 KB table in the ONNX file), so the U-Net starts from
+    /// the best per-pixel inverse and learns what context adds.
+    pub restorer: bool,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -381,9 +386,11 @@ pub struct SceneConfig {
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum FaceTarget {
-    /// Keep them as the camera captured them: L1 to the captured image there, to the raw
-    /// image elsewhere. The enhanced face is then exactly as private as the captured one.
-    Captured,
+    /// Keep them as the U-Net's input has them: L1 to that input there, to the raw image
+    /// elsewhere. The input is the captured image or, with `model.restorer`, its per-pixel
+    /// restoration, which anyone who knows the camera can compute; so the enhanced face
+    /// carries no more of the face than that.
+    Input,
     /// The paper's loss as written, `mean(s ⊙ |R(C(x)) − x|)`: nothing asked of faces, so
     /// they come out however the network generalises (partly restored, measured).
     Free,
@@ -413,7 +420,7 @@ pub struct StepBudget {
 
 impl Default for UnetConfig {
     fn default() -> Self {
-        Self { widths: vec![8, 16, 32, 64, 128], stem: 0 }
+        Self { widths: vec![8, 16, 32, 64], stem: 0, restorer: true }
     }
 }
 impl Default for SceneConfig {
@@ -428,7 +435,7 @@ impl Default for SceneConfig {
             crop: 128,
             batch: 8,
             face_margin: 0.3,
-            faces: FaceTarget::Captured,
+            faces: FaceTarget::Input,
             cache: "target/campro-train-cache".into(),
         }
     }

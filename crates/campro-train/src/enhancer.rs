@@ -43,12 +43,14 @@ pub struct Validation {
     /// Mean |R(C(x)) − x| inside the face boxes (0..1); None without faces. Stays high
     /// when faces are not restored.
     pub face_l1: Option<f64>,
-    /// The same for the captured image (the camera's own face error).
-    pub face_l1_captured: Option<f64>,
-    /// PSNR against raw (dB), and the captured image's (infinite for identical images:
-    /// null in a checkpoint, read back as NaN).
+    /// The same for the U-Net's input (the captured image or its per-pixel restoration).
+    pub face_l1_input: Option<f64>,
+    /// PSNR against raw (dB) of the enhanced image, of the U-Net's input and of the captured
+    /// image (infinite for identical images: null in a checkpoint, read back as NaN).
     #[serde(deserialize_with = "crate::log::nan_if_null")]
     pub psnr: f64,
+    #[serde(deserialize_with = "crate::log::nan_if_null")]
+    pub psnr_input: f64,
     #[serde(deserialize_with = "crate::log::nan_if_null")]
     pub psnr_captured: f64,
 }
@@ -69,26 +71,61 @@ pub struct EnhancerOptions {
     pub resume: Option<PathBuf>,
 }
 
+/// An enhancer: the optional per-pixel restoration table, then the U-Net.
+pub struct EnhancerNet {
+    pub unet: Unet,
+    /// [`campro_eval::restore::Restorer::table`] of the camera, fitted on the training scenes.
+    pub table: Option<Vec<[u8; 3]>>,
+}
+
+impl EnhancerNet {
+    /// The enhanced image of a captured 8-bit image (candle; tract runs the ONNX file).
+    pub fn enhance(&self, captured: &image::RgbImage, dev: &Device) -> Result<image::RgbImage, TrainError> {
+        match &self.table {
+            Some(t) => enhance(&self.unet, &campro_eval::restore::apply_table(t, captured), dev),
+            None => enhance(&self.unet, captured, dev),
+        }
+    }
+
+    /// The whole enhancer as an ONNX file (input: the captured image).
+    pub fn onnx_bytes(&self) -> Result<Vec<u8>, TrainError> {
+        Ok(match &self.table {
+            Some(t) => self.unet.onnx_bytes_with_table(t)?,
+            None => self.unet.onnx_bytes()?,
+        })
+    }
+
+    /// Writes [`Self::onnx_bytes`] to `path` (temporary file, then rename; replaces).
+    pub fn save_onnx(&self, path: &std::path::Path) -> Result<(), TrainError> {
+        let bytes = self.onnx_bytes()?;
+        campro_eval::atomic::write(path, &bytes, true).map_err(|e| {
+            TrainError::Checkpoint(crate::error::CheckpointError::Io { path: path.into(), message: e.to_string() })
+        })
+    }
+}
+
 /// The trained enhancer and how it was trained.
 pub struct EnhancerOutcome {
-    pub unet: Unet,
+    pub enhancer: EnhancerNet,
     pub log: Vec<EnhancerRow>,
     pub seconds: f64,
     pub provenance: serde_json::Map<String, serde_json::Value>,
 }
 
-/// One scene's validation terms: masked L1, face L1 of the enhanced and of the captured
-/// image (None without faces), PSNR of both against raw.
-fn validate_scene(unet: &Unet, sc: &Scene, dev: &Device) -> Result<[Option<f64>; 5], TrainError> {
-    let out = enhance(unet, &sc.captured, dev)?;
+/// One scene's validation terms: masked L1, face L1 of the enhanced image and of the
+/// U-Net's input (None without faces), PSNR against raw of the enhanced image, the input and
+/// the captured image.
+fn validate_scene(unet: &Unet, sc: &Scene, dev: &Device) -> Result<[Option<f64>; 6], TrainError> {
+    let out = enhance(unet, &sc.input, dev)?;
     let (w, h) = sc.raw.dimensions();
     let keep = Tensor::from_vec(sc.keep(0, 0, w, h), (1, 1, h as usize, w as usize), dev)?;
-    let (o, c, r) = (chw_tensor(&out, dev)?, chw_tensor(&sc.captured, dev)?, chw_tensor(&sc.raw, dev)?);
+    let (o, i, r) = (chw_tensor(&out, dev)?, chw_tensor(&sc.input, dev)?, chw_tensor(&sc.raw, dev)?);
     Ok([
         Some(masked_l1(&o, &r, &keep)?.to_scalar::<f32>()? as f64),
         face_l1(&o, &r, &keep)?,
-        face_l1(&c, &r, &keep)?,
+        face_l1(&i, &r, &keep)?,
         Some(campro_eval::quality::psnr(&out, &sc.raw)),
+        Some(campro_eval::quality::psnr(&sc.input, &sc.raw)),
         Some(campro_eval::quality::psnr(&sc.captured, &sc.raw)),
     ])
 }
@@ -120,9 +157,10 @@ pub fn validate(unet: &Unet, scenes: &[Scene], dev: &Device) -> Result<Option<Va
     Ok(Some(Validation {
         masked_l1: mean(0).unwrap_or(f64::NAN),
         face_l1: mean(1),
-        face_l1_captured: mean(2),
+        face_l1_input: mean(2),
         psnr: mean(3).unwrap_or(f64::NAN),
-        psnr_captured: mean(4).unwrap_or(f64::NAN),
+        psnr_input: mean(4).unwrap_or(f64::NAN),
+        psnr_captured: mean(5).unwrap_or(f64::NAN),
     }))
 }
 
@@ -137,7 +175,7 @@ pub fn run(
 ) -> Result<EnhancerOutcome, TrainError> {
     let start = std::time::Instant::now();
     let dev = Device::Cpu;
-    let scenes = SceneSet::load(&cfg.data, params, held_out, cfg.seed)?;
+    let scenes = SceneSet::load(&cfg.data, params, held_out, cfg.model.restorer, cfg.seed)?;
     if scenes.train.is_empty() {
         return Err(TrainError::Unsupported(format!(
             "no training scene of at least {0}x{0} pixels (data.crop)",
@@ -193,7 +231,7 @@ pub fn run(
     for step in first..=cfg.budget.steps.max(first - 1) {
         let idx = crate::train::draw(&mut order, &pool, cfg.data.batch, &mut rng);
         let b = scenes.batch(&idx, cfg.data.crop, cfg.data.faces != FaceTarget::Restore, &mut rng, &dev)?;
-        let loss = enhancer_loss(&unet.forward(&b.captured)?, &b.raw, &b.captured, &b.keep, cfg.data.faces)?;
+        let loss = enhancer_loss(&unet.forward(&b.input)?, &b.raw, &b.input, &b.keep, cfg.data.faces)?;
         let v = loss.to_scalar::<f32>()? as f64;
         if !v.is_finite() {
             return Err(TrainError::Diverged(format!("enhancer loss is {v}: lower optimiser.lr")));
@@ -230,26 +268,28 @@ pub fn run(
         "seconds": seconds(),
     });
     let serde_json::Value::Object(provenance) = prov else { unreachable!("a JSON object") };
-    Ok(EnhancerOutcome { unet, log, seconds: seconds(), provenance })
+    Ok(EnhancerOutcome { enhancer: EnhancerNet { unet, table: scenes.table }, log, seconds: seconds(), provenance })
 }
 
 /// The log as CSV: step, seconds, loss, then the validation columns (empty between
 /// checkpoints).
 pub fn log_csv(log: &[EnhancerRow]) -> String {
-    let mut csv =
-        String::from("step,seconds,loss,val_masked_l1,val_face_l1,val_face_l1_captured,val_psnr,val_psnr_captured\n");
+    let mut csv = String::from(
+        "step,seconds,loss,val_masked_l1,val_face_l1,val_face_l1_input,val_psnr,val_psnr_input,val_psnr_captured\n",
+    );
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
     for r in log {
         let v = r.validation.as_ref();
         csv += &format!(
-            "{},{:.3},{:.6},{},{},{},{},{}\n",
+            "{},{:.3},{:.6},{},{},{},{},{},{}\n",
             r.step,
             r.seconds,
             r.loss,
             opt(v.map(|v| v.masked_l1)),
             opt(v.and_then(|v| v.face_l1)),
-            opt(v.and_then(|v| v.face_l1_captured)),
+            opt(v.and_then(|v| v.face_l1_input)),
             opt(v.map(|v| v.psnr)),
+            opt(v.map(|v| v.psnr_input)),
             opt(v.map(|v| v.psnr_captured)),
         );
     }
@@ -283,6 +323,7 @@ pub fn plot_log(log: &[EnhancerRow]) -> (String, String) {
         "dB",
         &[
             series("enhanced", &|r| r.validation.as_ref().map(|v| v.psnr)),
+            series("U-Net input", &|r| r.validation.as_ref().map(|v| v.psnr_input)),
             series("captured", &|r| r.validation.as_ref().map(|v| v.psnr_captured)),
         ],
         Style::Lines,

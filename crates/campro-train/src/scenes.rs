@@ -26,6 +26,8 @@ pub struct Scene {
     pub raw: RgbImage,
     /// The camera's 8-bit output of `raw`.
     pub captured: RgbImage,
+    /// What the U-Net reads: `captured` through the restoration table, or `captured`.
+    pub input: RgbImage,
     /// Enlarged face boxes `[x0, y0, x1, y1]` in pixels (clipped to the image).
     pub faces: Vec<[u32; 4]>,
 }
@@ -50,6 +52,8 @@ impl Scene {
 pub struct SceneSet {
     pub train: Vec<Scene>,
     pub validation: Vec<Scene>,
+    /// The restoration table fitted on the training scenes (with `restorer`).
+    pub table: Option<Vec<[u8; 3]>>,
     /// COCO and LFW images read.
     pub coco: usize,
     pub lfw: usize,
@@ -61,6 +65,8 @@ pub struct SceneSet {
 
 /// One training batch.
 pub struct SceneBatch {
+    /// What the U-Net reads ([`Scene::input`]), (B, 3, S, S) in [0, 1].
+    pub input: Tensor,
     /// Captured crops (B, 3, S, S) in [0, 1].
     pub captured: Tensor,
     /// The raw crops (B, 3, S, S) in [0, 1].
@@ -86,10 +92,13 @@ pub fn chw_tensor(img: &RgbImage, dev: &Device) -> candle_core::Result<Tensor> {
 impl SceneSet {
     /// Reads the scenes `cfg` names, captures them through `params` and finds their faces.
     /// `held_out`: LFW identities never to read (the preset's held-out ones).
+    /// With `restorer`, fits the restoration table on the training scenes and gives every
+    /// scene its restored `input`.
     pub fn load(
         cfg: &SceneConfig,
         params: &campro::Params,
         held_out: &[String],
+        restorer: bool,
         seed: u64,
     ) -> Result<Self, crate::TrainError> {
         let mut paths = Vec::new();
@@ -134,7 +143,7 @@ impl SceneSet {
                 camera.run(raw.as_raw(), &mut captured);
                 // Found in every mode: a restoration network is measured on the faces too.
                 let faces = found.iter().map(|&b| enlarge(b, margin, raw.width(), raw.height())).collect();
-                Ok(Some(Scene { raw, captured, faces }))
+                Ok(Some(Scene { raw, input: captured.clone(), captured, faces }))
             })
             .collect::<campro_eval::Result<_>>()?;
         let too_small = scenes.iter().filter(|s| s.is_none()).count();
@@ -148,7 +157,22 @@ impl SceneSet {
         let mut validation: Vec<Scene> = val_idx.iter().map(|&i| scenes.swap_remove(i)).collect();
         validation.reverse();
         let faces = scenes.iter().chain(&validation).map(|s| s.faces.len()).sum();
-        Ok(Self { train: scenes, validation, coco: n_coco, lfw: n_lfw, too_small, faces })
+        // The per-pixel restoration, fitted on the training scenes only.
+        let table = if restorer {
+            let protect = |img: &RgbImage| {
+                let mut out = RgbImage::new(img.width(), img.height());
+                camera.run(img.as_raw(), &mut out);
+                out
+            };
+            let t = campro_eval::restore::Restorer::fit(protect, scenes.iter().map(|s| &s.raw))?.table();
+            for s in scenes.iter_mut().chain(validation.iter_mut()) {
+                s.input = campro_eval::restore::apply_table(&t, &s.captured);
+            }
+            Some(t)
+        } else {
+            None
+        };
+        Ok(Self { train: scenes, validation, table, coco: n_coco, lfw: n_lfw, too_small, faces })
     }
 
     /// Random `size` x `size` crops of the training scenes `idx`, each flipped left-right
@@ -162,7 +186,7 @@ impl SceneSet {
         dev: &Device,
     ) -> candle_core::Result<SceneBatch> {
         let s = size as u32;
-        let (mut cap, mut raw, mut keep) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut inp, mut cap, mut raw, mut keep) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for &i in idx {
             let sc = &self.train[i];
             let x0 = rng.random_range(0..=sc.raw.width() - s);
@@ -176,6 +200,7 @@ impl SceneSet {
                     c
                 }
             };
+            push_chw(&crop(&sc.input), &mut inp);
             push_chw(&crop(&sc.captured), &mut cap);
             push_chw(&crop(&sc.raw), &mut raw);
             let mut k = if mask_faces { sc.keep(x0, y0, s, s) } else { vec![1.0; size * size] };
@@ -186,6 +211,7 @@ impl SceneSet {
         }
         let b = idx.len();
         Ok(SceneBatch {
+            input: Tensor::from_vec(inp, (b, 3, size, size), dev)?,
             captured: Tensor::from_vec(cap, (b, 3, size, size), dev)?,
             raw: Tensor::from_vec(raw, (b, 3, size, size), dev)?,
             keep: Tensor::from_vec(keep, (b, 1, size, size), dev)?,

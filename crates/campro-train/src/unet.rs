@@ -20,6 +20,9 @@
 use crate::config::{FaceTarget, UnetConfig};
 use crate::onnx_net::{conv_attrs, f32_tensor, node, string_attr, GraphError, OnnxNet};
 pub use campro_eval::enhance::{INPUT, MULTIPLE_KEY, OUTPUT};
+/// The restoration stage's output, the U-Net's input when there is one
+/// ([`Unet::onnx_bytes_with_table`]).
+const RESTORED: &str = "restored";
 use candle_core::{Result, Tensor, Var};
 use rand::SeedableRng;
 use rand_distr::Distribution;
@@ -85,23 +88,6 @@ impl Unet {
         Ok(Self { net: OnnxNet::from_model(model, "unet".into(), dev)?, widths: widths.to_vec() })
     }
 
-    /// Reads an enhancer written by [`Self::save_onnx`].
-    pub fn load(path: &Path, dev: &candle_core::Device) -> std::result::Result<Self, GraphError> {
-        let net = OnnxNet::load(path, dev)?;
-        let p = path.display().to_string();
-        // The widths are the output channels of the encoder's convolutions, in order.
-        let widths: Vec<usize> = net
-            .named_vars()
-            .iter()
-            .filter(|(n, _)| n.starts_with("enc") && n.ends_with(".b") && n.contains("conv1"))
-            .map(|(_, v)| v.dims()[0])
-            .collect();
-        if widths.is_empty() || net.input != INPUT || net.output != OUTPUT {
-            return Err(GraphError::Graph { path: p, message: "not an enhancer written by campro".into() });
-        }
-        Ok(Self { net, widths })
-    }
-
     pub fn widths(&self) -> &[usize] {
         &self.widths
     }
@@ -143,6 +129,60 @@ impl Unet {
     pub fn save_onnx(&self, path: &Path) -> std::result::Result<(), GraphError> {
         self.net.save_onnx(path)
     }
+
+    /// The network with its current weights behind a per-pixel restoration stage: each
+    /// captured pixel replaced by `table[bin]` ([`campro_eval::restore::table`], 2^18
+    /// entries, bins of 6 bits a channel), then the U-Net on that; encoded as an ONNX file
+    /// whose input is still the captured image. The stage is ONNX operators (Round, Floor, a
+    /// 1x1 Conv forming the bin index, Cast, Gather from a uint8 table, Cast, Transpose,
+    /// Squeeze): 786,432 bytes of table.
+    pub fn onnx_bytes_with_table(&self, table: &[[u8; 3]]) -> std::result::Result<Vec<u8>, GraphError> {
+        use prost::Message;
+        let bad = |m: &str| GraphError::Graph { path: "unet".into(), message: m.into() };
+        if table.len() != 1 << 18 {
+            return Err(bad("a restoration table has 2^18 entries"));
+        }
+        let mut model = self.net.current()?;
+        let graph = model.graph.as_mut().ok_or_else(|| bad("no graph"))?;
+        for n in graph.node.iter_mut() {
+            for i in n.input.iter_mut().filter(|i| *i == INPUT) {
+                *i = RESTORED.into();
+            }
+        }
+        let int_attr =
+            |name: &str, i: i64| pb::AttributeProto { name: name.into(), r#type: 2, i, ..Default::default() };
+        let mut lut = f32_tensor("restore.table", vec![1 << 18, 3], &[]);
+        lut.data_type = 2; // uint8
+        lut.raw_data = table.iter().flatten().copied().collect();
+        let mut axes = f32_tensor("restore.axes", vec![1], &[]);
+        axes.data_type = 7; // int64
+        axes.raw_data = 4i64.to_le_bytes().to_vec();
+        graph.initializer.extend([
+            lut,
+            axes,
+            f32_tensor("restore.255", vec![], &[255.0]),
+            f32_tensor("restore.quarter", vec![], &[0.25]),
+            f32_tensor("restore.inv255", vec![], &[1.0 / 255.0]),
+            f32_tensor("restore.index", vec![1, 3, 1, 1], &[4096.0, 64.0, 1.0]),
+        ]);
+        let mut perm = crate::onnx_net::ints_attr("perm", vec![0, 4, 2, 3, 1]);
+        perm.name = "perm".into();
+        let front = vec![
+            node("Mul", &[INPUT, "restore.255"], "restore.levels", vec![]),
+            node("Round", &["restore.levels"], "restore.v", vec![]),
+            node("Mul", &["restore.v", "restore.quarter"], "restore.q", vec![]),
+            node("Floor", &["restore.q"], "restore.b", vec![]),
+            node("Conv", &["restore.b", "restore.index"], "restore.i", conv_attrs(1, 1, 0)),
+            node("Cast", &["restore.i"], "restore.i64", vec![int_attr("to", 7)]),
+            node("Gather", &["restore.table", "restore.i64"], "restore.g", vec![int_attr("axis", 0)]),
+            node("Cast", &["restore.g"], "restore.f", vec![int_attr("to", 1)]),
+            node("Mul", &["restore.f", "restore.inv255"], "restore.nhwc", vec![]),
+            node("Transpose", &["restore.nhwc"], "restore.t", vec![perm]),
+            node("Squeeze", &["restore.t", "restore.axes"], RESTORED, vec![]),
+        ];
+        graph.node.splice(0..0, front);
+        Ok(model.encode_to_vec())
+    }
 }
 
 /// The paper's face-masked L1 loss `mean(s ⊙ |pred − target|)`: `pred` and `target`
@@ -153,18 +193,12 @@ pub fn masked_l1(pred: &Tensor, target: &Tensor, keep: &Tensor) -> Result<Tensor
 }
 
 /// The enhancer's training loss for `faces` ([`FaceTarget`]): the masked L1 to `raw`, plus,
-/// with [`FaceTarget::Captured`], the L1 to `captured` inside the faces.
-pub fn enhancer_loss(
-    pred: &Tensor,
-    raw: &Tensor,
-    captured: &Tensor,
-    keep: &Tensor,
-    faces: FaceTarget,
-) -> Result<Tensor> {
+/// with [`FaceTarget::Input`], the L1 to the network's `input` inside the faces.
+pub fn enhancer_loss(pred: &Tensor, raw: &Tensor, input: &Tensor, keep: &Tensor, faces: FaceTarget) -> Result<Tensor> {
     match faces {
         FaceTarget::Free | FaceTarget::Restore => masked_l1(pred, raw, keep),
-        FaceTarget::Captured => {
-            let target = (raw.broadcast_mul(keep)? + captured.broadcast_mul(&(1.0 - keep)?)?)?;
+        FaceTarget::Input => {
+            let target = (raw.broadcast_mul(keep)? + input.broadcast_mul(&(1.0 - keep)?)?)?;
             (pred - target)?.abs()?.mean_all()
         }
     }

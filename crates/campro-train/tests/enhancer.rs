@@ -28,7 +28,7 @@ fn test_image(w: u32, h: u32) -> RgbImage {
 
 /// A U-Net with every weight drawn at random (the output convolution too, which starts at zero).
 fn shape(widths: &[usize], stem: usize) -> UnetConfig {
-    UnetConfig { widths: widths.to_vec(), stem }
+    UnetConfig { widths: widths.to_vec(), stem, restorer: false }
 }
 
 fn random_unet(shape: &UnetConfig) -> Unet {
@@ -59,6 +59,26 @@ fn candle_and_tract_agree_on_the_written_onnx() {
             assert!(moved > a.as_raw().len() / 4, "{w}x{h}: only {moved} samples changed");
         }
     }
+}
+
+#[test]
+fn the_restoration_stage_in_onnx_is_the_table_lookup() {
+    // A table that scrambles colours: entry = a hash of the bin.
+    let table: Vec<[u8; 3]> =
+        (0..1usize << 18).map(|b| [(b * 7) as u8, (b / 3) as u8, (b >> 10) as u8 ^ 0x5a]).collect();
+    let u = random_unet(&shape(&[4, 8, 16], 0));
+    let tract = Enhancer::from_bytes(&u.onnx_bytes_with_table(&table).unwrap(), Path::new("test")).unwrap();
+    let img = test_image(53, 37);
+    let restored = campro_eval::restore::apply_table(&table, &img);
+    let a = campro_train::enhancer::enhance(&u, &restored, &Device::Cpu).unwrap();
+    let b = tract.enhance(&img).unwrap();
+    let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+    assert!(worst <= 1, "candle on the looked-up image and tract on the captured one differ by {worst} LSB");
+    // A fresh U-Net behind the stage is the lookup itself, bit for bit.
+    let fresh = Unet::new(&shape(&[4, 8], 0), 1, &Device::Cpu).unwrap();
+    let tract = Enhancer::from_bytes(&fresh.onnx_bytes_with_table(&table).unwrap(), Path::new("test")).unwrap();
+    assert_eq!(tract.enhance(&img).unwrap(), restored);
+    assert!(u.onnx_bytes_with_table(&table[1..]).is_err());
 }
 
 #[test]
@@ -103,8 +123,8 @@ fn losses_match_hand_values() {
     assert!((v(masked_l1(&pred, &raw, &keep).unwrap()) - 0.7 / 6.0).abs() < 1e-6);
     // Face L1: the second pixel's channels: (0 + 0 + 0) / 3.
     assert_eq!(face_l1(&pred, &raw, &keep).unwrap(), Some(0.0));
-    // Captured target: the face pixel against cap: |.5−.9| + |.2−.6| + |1−.4| = 1.4.
-    let l = v(enhancer_loss(&pred, &raw, &cap, &keep, FaceTarget::Captured).unwrap());
+    // Input target: the face pixel against the input: |.5−.9| + |.2−.6| + |1−.4| = 1.4.
+    let l = v(enhancer_loss(&pred, &raw, &cap, &keep, FaceTarget::Input).unwrap());
     assert!((l - (0.7 + 1.4) / 6.0).abs() < 1e-6, "{l}");
     assert!((v(enhancer_loss(&pred, &raw, &cap, &keep, FaceTarget::Free).unwrap()) - 0.7 / 6.0).abs() < 1e-6);
     // No face: None.
@@ -117,7 +137,12 @@ fn face_boxes_grow_and_mask_by_hand() {
     assert_eq!(enlarge([20.0, 40.0, 30.0, 60.0], 0.5, 100, 100), [15, 20, 35, 70]);
     // Clipped to the image.
     assert_eq!(enlarge([2.0, 2.0, 12.0, 12.0], 0.5, 14, 14), [0, 0, 14, 14]);
-    let sc = Scene { raw: RgbImage::new(6, 4), captured: RgbImage::new(6, 4), faces: vec![[1, 1, 3, 2]] };
+    let sc = Scene {
+        raw: RgbImage::new(6, 4),
+        captured: RgbImage::new(6, 4),
+        input: RgbImage::new(6, 4),
+        faces: vec![[1, 1, 3, 2]],
+    };
     let k = sc.keep(0, 0, 6, 4);
     let zeros: Vec<usize> = (0..k.len()).filter(|&i| k[i] == 0.0).collect();
     assert_eq!(zeros, vec![7, 8]);

@@ -72,7 +72,11 @@ fn bundled_parameter_sets_are_valid_and_match_their_formulas() {
     let pass = Params::from_file(&dir.join("srgb-passthrough.json")).unwrap();
     assert!(pass.tone_curve.y().iter().zip(pass.tone_curve.x()).all(|(y, x)| (y - x.powf(1.0 / 2.2)).abs() < 1e-15));
     for entry in std::fs::read_dir(&dir).unwrap() {
-        let p = Params::from_file(&entry.unwrap().path()).unwrap();
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|x| x == "onnx") {
+            continue; // an enhancer beside its preset
+        }
+        let p = Params::from_file(&path).unwrap();
         assert!(!p.description.is_empty() && !p.name.is_empty());
     }
 }

@@ -32,12 +32,7 @@ pub fn train(
             bail!("{} exists (use --force to replace it)", p.display());
         }
     }
-    let pb = indicatif::ProgressBar::new(cfg.budget.rounds as u64);
-    pb.set_style(
-        indicatif::ProgressStyle::with_template("train [{bar:30}] round {pos}/{len} {elapsed_precise} eta {eta} {msg}")
-            .unwrap()
-            .progress_chars("=> "),
-    );
+    let pb = training_bar("train", "round", cfg.budget.rounds);
     let out = campro_train::train::run(&cfg, opts, |r| {
         pb.set_position(r.round as u64);
         pb.set_message(format!(
@@ -49,22 +44,13 @@ pub fn train(
                 "round {}: check accuracy {:.3} (attacker CE {:.3}, L_ns {:.4}, L_det {:.3}, {:.0} s)",
                 r.round, c, r.attacker_ce, r.privacy_loss, r.detection_loss, r.seconds
             );
-            // A hidden bar (not a terminal: logs, CI) prints nothing: the line goes to stderr.
-            if pb.is_hidden() {
-                eprintln!("{line}");
-            } else {
-                pb.println(line);
-            }
+            checkpoint_line(&pb, line);
         }
     })?;
     pb.finish_and_clear();
     if let Some(l) = log {
-        let csv = campro_train::log::log_csv(&out.log);
-        write_atomic(l, csv.as_bytes(), force)?;
         let (losses, acc) = campro_train::log::plot_log(&out.log);
-        let stem = l.with_extension("");
-        write_atomic(&PathBuf::from(format!("{}-losses.svg", stem.display())), losses.as_bytes(), true)?;
-        write_atomic(&PathBuf::from(format!("{}-accuracy.svg", stem.display())), acc.as_bytes(), true)?;
+        write_log(l, &campro_train::log::log_csv(&out.log), [("losses", losses), ("accuracy", acc)], force)?;
     }
     let name = output.file_stem().map_or("campro-trained".into(), |s| s.to_string_lossy().into_owned());
     let mut params = out.params(&cfg, &name, &config.display().to_string())?;
@@ -82,6 +68,35 @@ pub fn train(
         out.seconds,
         output.display()
     );
+    Ok(())
+}
+
+/// The progress bar of a training run: `what [bar] UNIT pos/len ...`.
+fn training_bar(what: &str, unit: &str, len: usize) -> indicatif::ProgressBar {
+    let pb = indicatif::ProgressBar::new(len as u64);
+    let template = format!("{what} [{{bar:30}}] {unit} {{pos}}/{{len}} {{elapsed_precise}} eta {{eta}} {{msg}}");
+    pb.set_style(indicatif::ProgressStyle::with_template(&template).expect("a valid template").progress_chars("=> "));
+    pb
+}
+
+/// A checkpoint's line, above the bar; a hidden bar (not a terminal: logs, CI) prints
+/// nothing, so the line goes to stderr.
+fn checkpoint_line(pb: &indicatif::ProgressBar, line: String) {
+    if pb.is_hidden() {
+        eprintln!("{line}");
+    } else {
+        pb.println(line);
+    }
+}
+
+/// Writes a training log `l` (CSV; replaced only with `force`) and its charts beside it as
+/// `LOG-NAME.svg`.
+fn write_log<const N: usize>(l: &Path, csv: &str, charts: [(&str, String); N], force: bool) -> Result<()> {
+    write_atomic(l, csv.as_bytes(), force)?;
+    let stem = l.with_extension("");
+    for (name, svg) in charts {
+        write_atomic(&PathBuf::from(format!("{}-{name}.svg", stem.display())), svg.as_bytes(), true)?;
+    }
     Ok(())
 }
 
@@ -276,20 +291,13 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
                 v.face_l1_input.map_or("-".into(), |f| format!("{f:.4}")),
                 r.seconds
             );
-            if pb.is_hidden() {
-                eprintln!("{line}");
-            } else {
-                pb.println(line);
-            }
+            checkpoint_line(&pb, line);
         }
     })?;
     pb.finish_and_clear();
     if let Some(l) = &a.log {
-        write_atomic(l, campro_train::enhancer::log_csv(&out.log).as_bytes(), a.force)?;
         let (losses, psnr) = campro_train::enhancer::plot_log(&out.log);
-        let stem = l.with_extension("");
-        write_atomic(&PathBuf::from(format!("{}-losses.svg", stem.display())), losses.as_bytes(), true)?;
-        write_atomic(&PathBuf::from(format!("{}-psnr.svg", stem.display())), psnr.as_bytes(), true)?;
+        write_log(l, &campro_train::enhancer::log_csv(&out.log), [("losses", losses), ("psnr", psnr)], a.force)?;
     }
     out.enhancer.save_onnx(&onnx)?;
     let file = |p: &Path| p.file_name().expect("a file name").to_string_lossy().into_owned();

@@ -210,6 +210,14 @@ impl Default for BudgetConfig {
     }
 }
 
+/// The first of `checks` (holds, key, rule) that does not hold, as (key, rule).
+fn first_broken(checks: &[(bool, &'static str, &'static str)]) -> Result<(), (&'static str, &'static str)> {
+    match checks.iter().find(|c| !c.0) {
+        Some(&(_, key, rule)) => Err((key, rule)),
+        None => Ok(()),
+    }
+}
+
 /// A configuration file's rules: the first broken one as (key, rule).
 pub trait Rules {
     fn check(&self) -> Result<(), (&'static str, &'static str)>;
@@ -308,10 +316,7 @@ impl Rules for Config {
             (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
             (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
         ];
-        match checks.iter().find(|c| !c.0) {
-            Some(&(_, key, rule)) => Err((key, rule)),
-            None => Ok(()),
-        }
+        first_broken(&checks)
     }
 }
 
@@ -484,9 +489,6 @@ impl Rules for EnhancerConfig {
             (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
             (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
         ];
-        match checks.iter().find(|c| !c.0) {
-            Some(&(_, key, rule)) => Err((key, rule)),
-            None => Ok(()),
-        }
+        first_broken(&checks)
     }
 }

@@ -526,6 +526,57 @@ pub fn silu(x: &Tensor) -> Result<Tensor> {
     x.contiguous()?.apply_op1(Silu)
 }
 
+/// ReLU, one pass each way: forward `max(x, 0)`; backward `dy` where `y > 0`, read from the
+/// output (candle's generic ReLU takes a comparison, a cast and a product backward).
+struct Relu;
+
+impl candle_core::CustomOp1 for Relu {
+    fn name(&self) -> &'static str {
+        "campro-relu"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
+        let x = slice(s, l, "relu")?;
+        let mut y = vec![0f32; x.len()];
+        y.par_chunks_mut(4096).zip(x.par_chunks(4096)).for_each(|(o, i)| {
+            o.iter_mut().zip(i).for_each(|(o, &v)| *o = v.max(0.0));
+        });
+        Ok((CpuStorage::F32(y), l.shape().clone()))
+    }
+
+    fn bwd(&self, _x: &Tensor, y: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
+        Ok(Some(y.apply_op2_no_bwd(&grad.contiguous()?, &ReluGrad)?))
+    }
+}
+
+/// The input gradient of [`Relu`] from (y, dy), reading both in place.
+struct ReluGrad;
+
+impl CustomOp2 for ReluGrad {
+    fn name(&self) -> &'static str {
+        "campro-relu-grad"
+    }
+
+    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
+        let (y, g) = (slice(s1, l1, "relu")?, slice(s2, l2, "relu")?);
+        if y.len() != g.len() {
+            candle_core::bail!("relu: gradient of {} values for {} outputs", g.len(), y.len());
+        }
+        let mut d = vec![0f32; y.len()];
+        d.par_chunks_mut(4096).zip(y.par_chunks(4096).zip(g.par_chunks(4096))).for_each(|(o, (ys, gs))| {
+            for ((o, &v), &gv) in o.iter_mut().zip(ys).zip(gs) {
+                *o = if v > 0.0 { gv } else { 0.0 };
+            }
+        });
+        Ok((CpuStorage::F32(d), l1.shape().clone()))
+    }
+}
+
+/// ReLU of any tensor; differentiable (the gradient at 0 is 0, as candle's).
+pub fn relu(x: &Tensor) -> Result<Tensor> {
+    x.contiguous()?.apply_op1(Relu)
+}
+
 /// `x + b_c` per channel of (B, C, ...) (`b` of shape (C,)): a convolution's bias, one pass
 /// forward; backward passes the gradient through and sums it per channel for `b`.
 struct ChannelBias;

@@ -317,7 +317,7 @@ impl OnnxNet {
                     }
                 }
                 Op::Sigmoid => candle_nn::ops::sigmoid(arg(0)?)?,
-                Op::Relu => arg(0)?.relu()?,
+                Op::Relu => crate::conv::relu(arg(0)?)?,
                 Op::Silu => crate::conv::silu(arg(0)?)?,
                 Op::Mul => arg(0)?.broadcast_mul(arg(1)?)?,
                 Op::Scale(c) => (arg(0)? * *c as f64)?,

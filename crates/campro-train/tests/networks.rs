@@ -349,6 +349,25 @@ fn prelu_matches_candle_and_finite_differences() {
 }
 
 #[test]
+fn relu_matches_candles_with_its_gradient() {
+    use campro_train::conv::relu;
+    // A transposed (strided) input.
+    let x = Var::from_tensor(&(rng_tensor(&[2, 3, 5, 4], 12) * 3.0).unwrap()).unwrap();
+    let xt = x.as_tensor().transpose(2, 3).unwrap();
+    let r = rng_tensor(&[2, 3, 4, 5], 13);
+    let ours = relu(&xt).unwrap();
+    let want = xt.relu().unwrap();
+    assert_eq!(max_abs(&ours, &want), 0.0);
+    let g1 = ours.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+    let g2 = want.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+    assert_eq!(max_abs(g1.get(x.as_tensor()).unwrap(), g2.get(x.as_tensor()).unwrap()), 0.0);
+    // Zero where the input is negative.
+    let neg = Var::from_tensor(&(rng_tensor(&[7], 14).abs().unwrap() * -1.0).unwrap()).unwrap();
+    let g = relu(neg.as_tensor()).unwrap().sum_all().unwrap().backward().unwrap();
+    assert_eq!(g.get(neg.as_tensor()).unwrap().abs().unwrap().sum_all().unwrap().to_scalar::<f32>().unwrap(), 0.0);
+}
+
+#[test]
 fn silu_and_channel_bias_match_generic_ops() {
     use campro_train::conv::{channel_bias, silu};
     let x = Var::from_tensor(&(rng_tensor(&[2, 3, 4, 5], 9) * 6.0).unwrap()).unwrap();

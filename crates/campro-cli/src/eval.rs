@@ -254,7 +254,7 @@ impl Common {
             c.push(params_condition(name, p));
         }
         if self.enhanced {
-            c = with_networks(self, &c, crate::simulate::Network::Enhancer, "enhanced", failures)?;
+            c = with_networks(self, &c, crate::capture::Network::Enhancer, "enhanced", failures)?;
         }
         let mut b = self.baselines.clone();
         if self.paper_baselines {
@@ -362,7 +362,7 @@ fn run_privacy(
     // The attackers' networks first: a missing one is named before any data is read.
     let attacked;
     let conds = if a.attacks.contains(&AttackArg::RestoreNet) {
-        attacked = with_networks(c, conds, crate::simulate::Network::Restorer, "restore-net", failures)?;
+        attacked = with_networks(c, conds, crate::capture::Network::Restorer, "restore-net", failures)?;
         &attacked[..]
     } else {
         conds
@@ -407,7 +407,7 @@ fn run_privacy(
 fn with_networks(
     c: &Common,
     conds: &[Condition],
-    which: crate::simulate::Network,
+    which: crate::capture::Network,
     suffix: &str,
     failures: &Failures,
 ) -> Result<Vec<Condition>> {
@@ -416,7 +416,7 @@ fn with_networks(
         out.push(x.clone());
         let Some(path) = c.params.iter().find(|p| set_name(p) == x.name) else { continue };
         let Some(protect) = x.protect.clone() else { continue };
-        let net = crate::simulate::network_of(path, &crate::load_params(path)?, which)?;
+        let net = crate::capture::network_of(path, &crate::load_params(path)?, which)?;
         let (f, shown) = (failures.clone(), path.display().to_string());
         let key = which.key();
         out.push(Condition::new(format!("{} {suffix}", x.name), move |img: &RgbImage| {

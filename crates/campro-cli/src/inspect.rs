@@ -166,7 +166,7 @@ fn one(
     fast.run(raw.as_raw(), &mut protected);
     let enhanced = match enhancer {
         Some(e) => {
-            if raw.width() as u64 * raw.height() as u64 > simulate::MAX_ENHANCE_PIXELS {
+            if raw.width() as u64 * raw.height() as u64 > crate::capture::MAX_ENHANCE_PIXELS {
                 bail!(
                     "--enhance: the image is {} x {}; the enhancer runs on at most 3840 x 2160 pixels",
                     raw.width(),

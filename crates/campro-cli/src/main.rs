@@ -2,6 +2,7 @@
 //! files and prints; every computation is a call into the `campro` library.
 
 mod bench;
+mod capture;
 mod eval;
 mod inspect;
 mod simulate;
@@ -628,7 +629,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Simulate { params, inputs, output, bit_depth, force, jobs, codec, crf, bitrate, preset, enhance } => {
             let enc = video::Encoding { codec, crf: Some(crf), bitrate, preset };
             let p = load_params(&params)?;
-            let enhancer = if enhance { Some(simulate::enhancer_of(&params, &p)?) } else { None };
+            let enhancer = if enhance { Some(capture::enhancer_of(&params, &p)?) } else { None };
             simulate::simulate(
                 &p,
                 &inputs,
@@ -658,7 +659,7 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let p = load_params(&params)?;
             check_output_folder(&output, force, "--output")?;
-            let enhancer = if enhance { Some(simulate::enhancer_of(&params, &p)?) } else { None };
+            let enhancer = if enhance { Some(capture::enhancer_of(&params, &p)?) } else { None };
             let models = models.unwrap_or_else(|| eval::shared_dir(shared.as_deref()).join("models"));
             let people = eval::load(&person_detector, &models)?;
             let own = if own_detector {

@@ -7,6 +7,7 @@
 //! decompression bomb is refused by its header and several large images wait for each
 //! other instead of adding up.
 
+use crate::capture::Capture;
 use crate::video::{self, Encoding};
 use crate::write_atomic;
 use anyhow::{anyhow, bail, Result};
@@ -29,80 +30,6 @@ pub const DECODE_BUDGET: u64 = 768 << 20;
 /// image, the RGB input and output buffers and the PNG being written, each at most the
 /// decoded size.
 const BYTES_PER_SAMPLE_PEAK: u64 = 4;
-
-/// Largest image the enhancer runs on (pixels, 3840 x 2160): its activations take about
-/// 200 bytes a pixel at the recommended size.
-pub const MAX_ENHANCE_PIXELS: u64 = 3840 * 2160;
-
-/// What `simulate` does to an 8-bit frame: the camera (exact, on every core), then, with
-/// `--enhance`, the preset's enhancer (tract, one thread a frame).
-pub(crate) struct Capture<'a, 'p> {
-    pub fast8: &'a Exact8<'p>,
-    pub enhancer: Option<&'a campro_eval::enhance::Enhancer>,
-}
-
-impl Capture<'_, '_> {
-    /// `dst` = the capture of the `w` x `h` RGB frame `src`.
-    pub fn run(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32) -> Result<()> {
-        let row = 3 * w as usize;
-        src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| {
-            self.fast8.run(s, d);
-        });
-        if let Some(e) = self.enhancer {
-            if w as u64 * h as u64 > MAX_ENHANCE_PIXELS {
-                bail!("--enhance: the frame is {w} x {h}; the enhancer runs on at most 3840 x 2160 pixels");
-            }
-            let captured = image::RgbImage::from_raw(w, h, dst.to_vec()).expect("a whole frame");
-            dst.copy_from_slice(e.enhance(&captured)?.as_raw());
-        }
-        Ok(())
-    }
-}
-
-/// What a parameter set's provenance can name beside it: its enhancer (shown to people) or
-/// the restoration network trained against it (an attacker's, for `eval privacy --attack
-/// restore-net`). Both are written by `campro train-enhancer`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Network {
-    Enhancer,
-    Restorer,
-}
-
-impl Network {
-    /// The provenance key, the file suffix (`PARAMS.KEY.onnx`) and the manifest's kind.
-    pub fn key(self) -> &'static str {
-        match self {
-            Network::Enhancer => "enhancer",
-            Network::Restorer => "restorer",
-        }
-    }
-}
-
-/// The enhancer a parameter set names (`provenance.enhancer.onnx`, beside the file at
-/// `params_path`).
-pub fn enhancer_of(params_path: &Path, p: &Params) -> Result<campro_eval::enhance::Enhancer> {
-    network_of(params_path, p, Network::Enhancer)
-}
-
-/// The network `which` a parameter set names (`provenance.KEY.onnx`, a file name beside the
-/// file at `params_path`).
-pub fn network_of(params_path: &Path, p: &Params, which: Network) -> Result<campro_eval::enhance::Enhancer> {
-    let key = which.key();
-    let file = p.provenance.get(key).and_then(|e| e.get("onnx")).and_then(|f| f.as_str()).ok_or_else(|| {
-        anyhow!(
-            "{}: provenance.{key}.onnx: missing (this preset has no {key}; train one with campro train-enhancer{})",
-            params_path.display(),
-            if which == Network::Restorer { " and data.faces = \"restore\"" } else { "" }
-        )
-    })?;
-    // A bare file name beside the preset: never a path taken from the file's contents.
-    let name = Path::new(file);
-    if name.components().count() != 1 || name.file_name().is_none() {
-        bail!("{}: provenance.{key}.onnx: must be a file name beside the preset, got {file:?}", params_path.display());
-    }
-    let dir = params_path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    Ok(campro_eval::enhance::Enhancer::load(&dir.join(name))?)
-}
 
 /// A counting semaphore of bytes.
 pub(crate) struct Budget {

@@ -250,9 +250,9 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
     };
     // A network trained to restore faces too is an attacker's, never the preset's enhancer.
     let which = if cfg.data.faces == campro_train::config::FaceTarget::Restore {
-        crate::simulate::Network::Restorer
+        crate::capture::Network::Restorer
     } else {
-        crate::simulate::Network::Enhancer
+        crate::capture::Network::Enhancer
     };
     let key = which.key();
     let onnx = a.params.with_extension(format!("{key}.onnx"));
@@ -303,7 +303,7 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
     let file = |p: &Path| p.file_name().expect("a file name").to_string_lossy().into_owned();
     let m = serde_json::json!({
         "name": format!("campro {key} ({})", params.name),
-        "kind": if which == crate::simulate::Network::Enhancer { "image_enhancer" } else { "restoration_network" },
+        "kind": if which == crate::capture::Network::Enhancer { "image_enhancer" } else { "restoration_network" },
         "file": file(&onnx),
         "widths": out.enhancer.unet.widths(),
         "multiple": out.enhancer.unet.multiple(),

@@ -121,7 +121,7 @@ pub fn probe(input: &Path) -> Result<Probe> {
 
 /// Simulates `params`' camera on `input` into `output` (which the caller checked).
 pub fn simulate(
-    capture: &crate::simulate::Capture,
+    capture: &crate::capture::Capture,
     input: &Path,
     output: &Path,
     enc: &Encoding,

@@ -474,107 +474,103 @@ pub fn prelu(x: &Tensor, a: &Tensor) -> Result<Tensor> {
     x.contiguous()?.apply_op2(&a.contiguous()?, Prelu)
 }
 
-/// SiLU, `y = x · σ(x)`, one pass each way (`dy/dx = σ(x)·(1 + x·(1 − σ(x)))`); from the
-/// ONNX graph's Sigmoid and Mul it was two ops, four passes and two saved tensors.
+/// An element-wise activation with its own backward, one pass each way: forward
+/// `y = f(x)`, backward `dx = dy · d(x)` read from the saved input. Fused here because
+/// candle's generic ops take several passes and saved tensors for each (SiLU from the ONNX
+/// graph's Sigmoid and Mul: two ops, four passes; ReLU: a comparison, a cast and a product
+/// backward). A type per activation, so `f` and `d` inline into the loops.
+trait Pointwise: Copy + Send + Sync + 'static {
+    const NAME: &'static str;
+    fn f(v: f32) -> f32;
+    fn d(v: f32) -> f32;
+}
+
+/// SiLU: `x · σ(x)`, `dy/dx = σ(x)·(1 + x·(1 − σ(x)))`.
+#[derive(Clone, Copy)]
 struct Silu;
 
-impl candle_core::CustomOp1 for Silu {
+impl Pointwise for Silu {
+    const NAME: &'static str = "campro-silu";
+    fn f(v: f32) -> f32 {
+        v / (1.0 + (-v).exp())
+    }
+    fn d(v: f32) -> f32 {
+        let s = 1.0 / (1.0 + (-v).exp());
+        s * (1.0 + v * (1.0 - s))
+    }
+}
+
+/// ReLU: `max(x, 0)`, gradient 1 where `x > 0`, else 0 (as candle's).
+#[derive(Clone, Copy)]
+struct Relu;
+
+impl Pointwise for Relu {
+    const NAME: &'static str = "campro-relu";
+    fn f(v: f32) -> f32 {
+        v.max(0.0)
+    }
+    fn d(v: f32) -> f32 {
+        if v > 0.0 {
+            1.0
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The forward op of a [`Pointwise`] activation.
+struct Activation<A>(A);
+
+impl<A: Pointwise> candle_core::CustomOp1 for Activation<A> {
     fn name(&self) -> &'static str {
-        "campro-silu"
+        A::NAME
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
-        let x = slice(s, l, "silu")?;
+        let x = slice(s, l, A::NAME)?;
         let mut y = vec![0f32; x.len()];
         y.par_chunks_mut(4096).zip(x.par_chunks(4096)).for_each(|(o, i)| {
-            o.iter_mut().zip(i).for_each(|(o, &v)| *o = v / (1.0 + (-v).exp()));
+            o.iter_mut().zip(i).for_each(|(o, &v)| *o = A::f(v));
         });
         Ok((CpuStorage::F32(y), l.shape().clone()))
     }
 
     fn bwd(&self, x: &Tensor, _y: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
-        Ok(Some(x.apply_op2_no_bwd(&grad.contiguous()?, &SiluGrad)?))
+        Ok(Some(x.apply_op2_no_bwd(&grad.contiguous()?, &ActivationGrad(self.0))?))
     }
 }
 
-/// The input gradient of [`Silu`] from (x, dy), reading both in place.
-struct SiluGrad;
+/// The input gradient of a [`Pointwise`] activation from (x, dy), reading both in place.
+struct ActivationGrad<A>(A);
 
-impl CustomOp2 for SiluGrad {
+impl<A: Pointwise> CustomOp2 for ActivationGrad<A> {
     fn name(&self) -> &'static str {
-        "campro-silu-grad"
+        "campro-activation-grad"
     }
 
     fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        let (x, g) = (slice(s1, l1, "silu")?, slice(s2, l2, "silu")?);
+        let (x, g) = (slice(s1, l1, A::NAME)?, slice(s2, l2, A::NAME)?);
         if x.len() != g.len() {
-            candle_core::bail!("silu: gradient of {} values for {} inputs", g.len(), x.len());
+            candle_core::bail!("{}: gradient of {} values for {} inputs", A::NAME, g.len(), x.len());
         }
-        let mut d = vec![0f32; x.len()];
-        d.par_chunks_mut(4096).zip(x.par_chunks(4096).zip(g.par_chunks(4096))).for_each(|(o, (xs, gs))| {
+        let mut dx = vec![0f32; x.len()];
+        dx.par_chunks_mut(4096).zip(x.par_chunks(4096).zip(g.par_chunks(4096))).for_each(|(o, (xs, gs))| {
             for ((o, &v), &gv) in o.iter_mut().zip(xs).zip(gs) {
-                let s = 1.0 / (1.0 + (-v).exp());
-                *o = gv * s * (1.0 + v * (1.0 - s));
+                *o = gv * A::d(v);
             }
         });
-        Ok((CpuStorage::F32(d), l1.shape().clone()))
+        Ok((CpuStorage::F32(dx), l1.shape().clone()))
     }
 }
 
 /// SiLU (`x · σ(x)`) of any tensor; differentiable.
 pub fn silu(x: &Tensor) -> Result<Tensor> {
-    x.contiguous()?.apply_op1(Silu)
-}
-
-/// ReLU, one pass each way: forward `max(x, 0)`; backward `dy` where `y > 0`, read from the
-/// output (candle's generic ReLU takes a comparison, a cast and a product backward).
-struct Relu;
-
-impl candle_core::CustomOp1 for Relu {
-    fn name(&self) -> &'static str {
-        "campro-relu"
-    }
-
-    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
-        let x = slice(s, l, "relu")?;
-        let mut y = vec![0f32; x.len()];
-        y.par_chunks_mut(4096).zip(x.par_chunks(4096)).for_each(|(o, i)| {
-            o.iter_mut().zip(i).for_each(|(o, &v)| *o = v.max(0.0));
-        });
-        Ok((CpuStorage::F32(y), l.shape().clone()))
-    }
-
-    fn bwd(&self, _x: &Tensor, y: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
-        Ok(Some(y.apply_op2_no_bwd(&grad.contiguous()?, &ReluGrad)?))
-    }
-}
-
-/// The input gradient of [`Relu`] from (y, dy), reading both in place.
-struct ReluGrad;
-
-impl CustomOp2 for ReluGrad {
-    fn name(&self) -> &'static str {
-        "campro-relu-grad"
-    }
-
-    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        let (y, g) = (slice(s1, l1, "relu")?, slice(s2, l2, "relu")?);
-        if y.len() != g.len() {
-            candle_core::bail!("relu: gradient of {} values for {} outputs", g.len(), y.len());
-        }
-        let mut d = vec![0f32; y.len()];
-        d.par_chunks_mut(4096).zip(y.par_chunks(4096).zip(g.par_chunks(4096))).for_each(|(o, (ys, gs))| {
-            for ((o, &v), &gv) in o.iter_mut().zip(ys).zip(gs) {
-                *o = if v > 0.0 { gv } else { 0.0 };
-            }
-        });
-        Ok((CpuStorage::F32(d), l1.shape().clone()))
-    }
+    x.contiguous()?.apply_op1(Activation(Silu))
 }
 
 /// ReLU of any tensor; differentiable (the gradient at 0 is 0, as candle's).
 pub fn relu(x: &Tensor) -> Result<Tensor> {
-    x.contiguous()?.apply_op1(Relu)
+    x.contiguous()?.apply_op1(Activation(Relu))
 }
 
 /// `x + b_c` per channel of (B, C, ...) (`b` of shape (C,)): a convolution's bias, one pass

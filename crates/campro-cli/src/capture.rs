@@ -28,14 +28,20 @@ impl Capture<'_, '_> {
             self.fast8.run(s, d);
         });
         if let Some(e) = self.enhancer {
-            if w as u64 * h as u64 > MAX_ENHANCE_PIXELS {
-                bail!("--enhance: the frame is {w} x {h}; the enhancer runs on at most 3840 x 2160 pixels");
-            }
             let captured = image::RgbImage::from_raw(w, h, dst.to_vec()).expect("a whole frame");
-            dst.copy_from_slice(e.enhance(&captured)?.as_raw());
+            dst.copy_from_slice(enhance(e, &captured)?.as_raw());
         }
         Ok(())
     }
+}
+
+/// The enhancer `e` on a captured image, refused over [`MAX_ENHANCE_PIXELS`].
+pub fn enhance(e: &campro_eval::enhance::Enhancer, captured: &image::RgbImage) -> Result<image::RgbImage> {
+    let (w, h) = captured.dimensions();
+    if w as u64 * h as u64 > MAX_ENHANCE_PIXELS {
+        bail!("--enhance: the image is {w} x {h}; the enhancer runs on at most 3840 x 2160 pixels");
+    }
+    Ok(e.enhance(captured)?)
 }
 
 /// What a parameter set's provenance can name beside it: its enhancer (shown to people) or

@@ -164,19 +164,7 @@ fn one(
     };
     let mut protected = RgbImage::new(raw.width(), raw.height());
     fast.run(raw.as_raw(), &mut protected);
-    let enhanced = match enhancer {
-        Some(e) => {
-            if raw.width() as u64 * raw.height() as u64 > crate::capture::MAX_ENHANCE_PIXELS {
-                bail!(
-                    "--enhance: the image is {} x {}; the enhancer runs on at most 3840 x 2160 pixels",
-                    raw.width(),
-                    raw.height()
-                );
-            }
-            Some(e.enhance(&protected)?)
-        }
-        None => None,
-    };
+    let enhanced = enhancer.map(|e| crate::capture::enhance(e, &protected)).transpose()?;
     let mut panels = Vec::with_capacity(3);
     let named = [("raw", raw), ("protected", protected)].into_iter().chain(enhanced.map(|e| ("enhanced", e)));
     for (name, image) in named {

@@ -120,12 +120,18 @@ impl Enhancer {
                 message: format!("output has {} values, expected {}", v.len(), 3 * pw * ph),
             });
         }
-        let q = |f: f32| (f * 255.0).round().clamp(0.0, 255.0) as u8;
-        Ok(RgbImage::from_fn(w as u32, h as u32, |x, y| {
-            let i = y as usize * pw + x as usize;
-            image::Rgb([q(v[i]), q(v[pw * ph + i]), q(v[2 * pw * ph + i])])
-        }))
+        Ok(cropped_rgb8(v, pw, ph, w as u32, h as u32))
     }
+}
+
+/// The top-left `w` x `h` of a (3, `ph`, `pw`) float image in [0, 1] (the enhancer's
+/// output on [`padded_chw`]'s input), rounded to 8 bits and clamped.
+pub fn cropped_rgb8(v: &[f32], pw: usize, ph: usize, w: u32, h: u32) -> RgbImage {
+    let q = |f: f32| (f * 255.0).round().clamp(0.0, 255.0) as u8;
+    RgbImage::from_fn(w, h, |x, y| {
+        let i = y as usize * pw + x as usize;
+        image::Rgb([q(v[i]), q(v[pw * ph + i]), q(v[2 * pw * ph + i])])
+    })
 }
 
 /// `img` as (3, H', W') floats in [0, 1], H' and W' rounded up to multiples of `multiple` by

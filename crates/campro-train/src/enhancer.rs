@@ -116,16 +116,16 @@ pub struct EnhancerOutcome {
 /// U-Net's input (None without faces), PSNR against raw of the enhanced image, the input and
 /// the captured image.
 fn validate_scene(unet: &Unet, sc: &Scene, dev: &Device) -> Result<[Option<f64>; 6], TrainError> {
-    let out = enhance(unet, &sc.input, dev)?;
+    let out = enhance(unet, sc.input(), dev)?;
     let (w, h) = sc.raw.dimensions();
     let keep = Tensor::from_vec(sc.keep(0, 0, w, h), (1, 1, h as usize, w as usize), dev)?;
-    let (o, i, r) = (chw_tensor(&out, dev)?, chw_tensor(&sc.input, dev)?, chw_tensor(&sc.raw, dev)?);
+    let (o, i, r) = (chw_tensor(&out, dev)?, chw_tensor(sc.input(), dev)?, chw_tensor(&sc.raw, dev)?);
     Ok([
         Some(masked_l1(&o, &r, &keep)?.to_scalar::<f32>()? as f64),
         face_l1(&o, &r, &keep)?,
         face_l1(&i, &r, &keep)?,
         Some(campro_eval::quality::psnr(&out, &sc.raw)),
-        Some(campro_eval::quality::psnr(&sc.input, &sc.raw)),
+        Some(campro_eval::quality::psnr(sc.input(), &sc.raw)),
         Some(campro_eval::quality::psnr(&sc.captured, &sc.raw)),
     ])
 }
@@ -136,11 +136,7 @@ pub fn enhance(unet: &Unet, img: &image::RgbImage, dev: &Device) -> Result<image
     let (data, pw, ph) = campro_eval::enhance::padded_chw(img, unet.multiple());
     let y = unet.forward(&Tensor::from_vec(data, (1, 3, ph, pw), dev)?)?;
     let v: Vec<f32> = y.flatten_all()?.to_vec1()?;
-    let q = |f: f32| (f * 255.0).round().clamp(0.0, 255.0) as u8;
-    Ok(image::RgbImage::from_fn(w, h, |x, y| {
-        let i = y as usize * pw + x as usize;
-        image::Rgb([q(v[i]), q(v[pw * ph + i]), q(v[2 * pw * ph + i])])
-    }))
+    Ok(campro_eval::enhance::cropped_rgb8(&v, pw, ph, w, h))
 }
 
 /// Means of the validation terms over `scenes`.

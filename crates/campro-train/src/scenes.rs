@@ -26,13 +26,18 @@ pub struct Scene {
     pub raw: RgbImage,
     /// The camera's 8-bit output of `raw`.
     pub captured: RgbImage,
-    /// What the U-Net reads: `captured` through the restoration table, or `captured`.
-    pub input: RgbImage,
+    /// `captured` through the restoration table, when there is one.
+    pub restored: Option<RgbImage>,
     /// Enlarged face boxes `[x0, y0, x1, y1]` in pixels (clipped to the image).
     pub faces: Vec<[u32; 4]>,
 }
 
 impl Scene {
+    /// What the U-Net reads: the restored image, or the captured one.
+    pub fn input(&self) -> &RgbImage {
+        self.restored.as_ref().unwrap_or(&self.captured)
+    }
+
     /// 1 where the loss restores the image, 0 inside a face box; row-major, `w` x `h` from
     /// (`x0`, `y0`).
     pub fn keep(&self, x0: u32, y0: u32, w: u32, h: u32) -> Vec<f32> {
@@ -67,8 +72,6 @@ pub struct SceneSet {
 pub struct SceneBatch {
     /// What the U-Net reads ([`Scene::input`]), (B, 3, S, S) in [0, 1].
     pub input: Tensor,
-    /// Captured crops (B, 3, S, S) in [0, 1].
-    pub captured: Tensor,
     /// The raw crops (B, 3, S, S) in [0, 1].
     pub raw: Tensor,
     /// (B, 1, S, S): 0 on faces, 1 elsewhere (all ones when faces are restored too).
@@ -143,7 +146,7 @@ impl SceneSet {
                 camera.run(raw.as_raw(), &mut captured);
                 // Found in every mode: a restoration network is measured on the faces too.
                 let faces = found.iter().map(|&b| enlarge(b, margin, raw.width(), raw.height())).collect();
-                Ok(Some(Scene { raw, input: captured.clone(), captured, faces }))
+                Ok(Some(Scene { raw, captured, restored: None, faces }))
             })
             .collect::<campro_eval::Result<_>>()?;
         let too_small = scenes.iter().filter(|s| s.is_none()).count();
@@ -166,7 +169,7 @@ impl SceneSet {
             };
             let t = campro_eval::restore::Restorer::fit(protect, scenes.iter().map(|s| &s.raw))?.table();
             for s in scenes.iter_mut().chain(validation.iter_mut()) {
-                s.input = campro_eval::restore::apply_table(&t, &s.captured);
+                s.restored = Some(campro_eval::restore::apply_table(&t, &s.captured));
             }
             Some(t)
         } else {
@@ -186,7 +189,7 @@ impl SceneSet {
         dev: &Device,
     ) -> candle_core::Result<SceneBatch> {
         let s = size as u32;
-        let (mut inp, mut cap, mut raw, mut keep) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut inp, mut raw, mut keep) = (Vec::new(), Vec::new(), Vec::new());
         for &i in idx {
             let sc = &self.train[i];
             let x0 = rng.random_range(0..=sc.raw.width() - s);
@@ -200,8 +203,7 @@ impl SceneSet {
                     c
                 }
             };
-            push_chw(&crop(&sc.input), &mut inp);
-            push_chw(&crop(&sc.captured), &mut cap);
+            push_chw(&crop(sc.input()), &mut inp);
             push_chw(&crop(&sc.raw), &mut raw);
             let mut k = if mask_faces { sc.keep(x0, y0, s, s) } else { vec![1.0; size * size] };
             if flip {
@@ -212,7 +214,6 @@ impl SceneSet {
         let b = idx.len();
         Ok(SceneBatch {
             input: Tensor::from_vec(inp, (b, 3, size, size), dev)?,
-            captured: Tensor::from_vec(cap, (b, 3, size, size), dev)?,
             raw: Tensor::from_vec(raw, (b, 3, size, size), dev)?,
             keep: Tensor::from_vec(keep, (b, 1, size, size), dev)?,
         })

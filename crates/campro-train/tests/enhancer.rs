@@ -137,12 +137,8 @@ fn face_boxes_grow_and_mask_by_hand() {
     assert_eq!(enlarge([20.0, 40.0, 30.0, 60.0], 0.5, 100, 100), [15, 20, 35, 70]);
     // Clipped to the image.
     assert_eq!(enlarge([2.0, 2.0, 12.0, 12.0], 0.5, 14, 14), [0, 0, 14, 14]);
-    let sc = Scene {
-        raw: RgbImage::new(6, 4),
-        captured: RgbImage::new(6, 4),
-        input: RgbImage::new(6, 4),
-        faces: vec![[1, 1, 3, 2]],
-    };
+    let sc =
+        Scene { raw: RgbImage::new(6, 4), captured: RgbImage::new(6, 4), restored: None, faces: vec![[1, 1, 3, 2]] };
     let k = sc.keep(0, 0, 6, 4);
     let zeros: Vec<usize> = (0..k.len()).filter(|&i| k[i] == 0.0).collect();
     assert_eq!(zeros, vec![7, 8]);

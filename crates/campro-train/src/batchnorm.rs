@@ -82,7 +82,7 @@ impl CustomOp3 for Normalise {
             candle_core::bail!("batch norm: affine and stats must be (2, {c})");
         }
         let k = self.coefs(affine, stats, c);
-        let mut y = vec![0f32; x.len()];
+        let mut y = crate::kernels::zeros(x.len());
         y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(p, (yp, xp))| {
             let [m, r, g, b] = k[p % c];
             crate::kernels::affine(yp, xp, r * g, b - m * r * g);
@@ -153,7 +153,7 @@ impl CustomOp3 for NormaliseGrad {
             })
             .collect();
         // dx = γ r / N · (N dy − Σdy − x̂ Σ(dy x̂)).
-        let mut out = vec![0f32; xv.len() + 2 * c];
+        let mut out = crate::kernels::zeros(xv.len() + 2 * c);
         let (dx, da) = out.split_at_mut(xv.len());
         dx.par_chunks_mut(n).enumerate().for_each(|(p, d)| {
             let ch = p % c;
@@ -223,7 +223,7 @@ impl CustomOp3 for ChannelAffine {
         if scale.len() != c || shift.len() != c {
             candle_core::bail!("channel affine: scale and shift must have {c} entries");
         }
-        let mut y = vec![0f32; x.len()];
+        let mut y = crate::kernels::zeros(x.len());
         y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(p, (yp, xp))| {
             crate::kernels::affine(yp, xp, scale[p % c], shift[p % c]);
         });
@@ -275,7 +275,7 @@ impl CustomOp3 for ChannelAffineGrad {
         if gv.len() != xv.len() || a.len() != c {
             candle_core::bail!("channel affine grad: operands do not match");
         }
-        let mut out = vec![0f32; xv.len() + 2 * c];
+        let mut out = crate::kernels::zeros(xv.len() + 2 * c);
         let (dx, rest) = out.split_at_mut(xv.len());
         dx.par_chunks_mut(n).zip(gv.par_chunks(n)).enumerate().for_each(|(p, (d, g))| {
             crate::kernels::affine(d, g, a[p % c], 0.0);

@@ -214,13 +214,13 @@ impl CustomOp2 for Conv {
         let g = Geo::new(l1.dims(), l2.dims(), self.stride, self.pad)?;
         let (x, w) = (slice(s1, l1, "conv2d")?, slice(s2, l2, "conv2d")?);
         let (k, p, img) = (g.k(), g.p(), g.cin * g.h * g.w);
-        let mut y = vec![0f32; g.b * g.cout * p];
+        let mut y = crate::kernels::zeros(g.b * g.cout * p);
         over_batch_into(&mut y, g.b, |i, yi, threads| {
             let xi = &x[i * img..(i + 1) * img];
             if g.direct() {
                 matmul(yi, false, w, false, xi, false, (g.cout, p, k), threads);
             } else {
-                let mut col = vec![0f32; k * p];
+                let mut col = crate::kernels::zeros(k * p);
                 g.im2col(xi, &mut col);
                 matmul(yi, false, w, false, &col, false, (g.cout, p, k), threads);
             }
@@ -273,18 +273,18 @@ impl CustomOp2 for ConvGradWeight {
         let parts = over_batch(g.b, |i, threads| {
             let dyi = &dy[i * g.cout * p..(i + 1) * g.cout * p];
             let xi = &x[i * img..(i + 1) * img];
-            let mut part = vec![0f32; g.cout * k];
+            let mut part = crate::kernels::zeros(g.cout * k);
             if g.direct() {
                 matmul(&mut part, false, dyi, false, xi, true, (g.cout, k, p), threads);
             } else {
-                let mut col = vec![0f32; k * p];
+                let mut col = crate::kernels::zeros(k * p);
                 g.im2col(xi, &mut col);
                 matmul(&mut part, false, dyi, false, &col, true, (g.cout, k, p), threads);
             }
             part
         });
         let mut parts = parts.into_iter();
-        let mut sum = parts.next().unwrap_or_else(|| vec![0f32; g.cout * k]);
+        let mut sum = parts.next().unwrap_or_else(|| crate::kernels::zeros(g.cout * k));
         for part in parts {
             sum.iter_mut().zip(part).for_each(|(s, v)| *s += v);
         }
@@ -316,13 +316,13 @@ impl CustomOp2 for ConvGradInput {
         }
         let (dy, w) = (slice(s1, l1, "conv2d grad")?, slice(s2, l2, "conv2d grad")?);
         let (k, p, img) = (g.k(), g.p(), g.cin * g.h * g.w);
-        let mut dx = vec![0f32; g.b * img];
+        let mut dx = crate::kernels::zeros(g.b * img);
         over_batch_into(&mut dx, g.b, |i, dxi, threads| {
             let dyi = &dy[i * g.cout * p..(i + 1) * g.cout * p];
             if g.direct() {
                 matmul(dxi, false, w, true, dyi, false, (k, p, g.cout), threads);
             } else {
-                let mut col = vec![0f32; k * p];
+                let mut col = crate::kernels::zeros(k * p);
                 matmul(&mut col, false, w, true, dyi, false, (k, p, g.cout), threads);
                 g.col2im(&col, dxi);
             }
@@ -390,7 +390,7 @@ impl CustomOp2 for Prelu {
     fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
         let (x, a) = (slice(s1, l1, "prelu")?, slice(s2, l2, "prelu")?);
         let (c, n) = plane(l1.dims(), a.len())?;
-        let mut y = vec![0f32; x.len()];
+        let mut y = crate::kernels::zeros(x.len());
         y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(pl, (yp, xp))| {
             crate::kernels::prelu(yp, xp, a[pl % c]);
         });
@@ -432,7 +432,7 @@ impl candle_core::CustomOp3 for PreluGrad {
         if gv.len() != xv.len() {
             candle_core::bail!("prelu: gradient of {} values for {} inputs", gv.len(), xv.len());
         }
-        let mut out = vec![0f32; xv.len() + c];
+        let mut out = crate::kernels::zeros(xv.len() + c);
         let (dx, da) = out.split_at_mut(xv.len());
         let per: Vec<f32> = dx
             .par_chunks_mut(n)
@@ -528,7 +528,7 @@ impl<A: Pointwise> candle_core::CustomOp1 for Activation<A> {
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
         let x = slice(s, l, A::NAME)?;
-        let mut y = vec![0f32; x.len()];
+        let mut y = crate::kernels::zeros(x.len());
         y.par_chunks_mut(4096).zip(x.par_chunks(4096)).for_each(|(o, i)| {
             o.iter_mut().zip(i).for_each(|(o, &v)| *o = A::f(v));
         });
@@ -553,7 +553,7 @@ impl<A: Pointwise> CustomOp2 for ActivationGrad<A> {
         if x.len() != g.len() {
             candle_core::bail!("{}: gradient of {} values for {} inputs", A::NAME, g.len(), x.len());
         }
-        let mut dx = vec![0f32; x.len()];
+        let mut dx = crate::kernels::zeros(x.len());
         dx.par_chunks_mut(4096).zip(x.par_chunks(4096).zip(g.par_chunks(4096))).for_each(|(o, (xs, gs))| {
             for ((o, &v), &gv) in o.iter_mut().zip(xs).zip(gs) {
                 *o = gv * A::d(v);
@@ -585,7 +585,7 @@ impl CustomOp2 for ChannelBias {
     fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
         let (x, b) = (slice(s1, l1, "bias")?, slice(s2, l2, "bias")?);
         let (c, n) = plane(l1.dims(), b.len())?;
-        let mut y = vec![0f32; x.len()];
+        let mut y = crate::kernels::zeros(x.len());
         y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(p, (yp, xp))| {
             crate::kernels::affine(yp, xp, 1.0, b[p % c]);
         });

@@ -2,6 +2,17 @@
 //! candle would run it as one convolution per channel group (hundreds of tiny kernels), and
 //! as shifted broadcast multiplies it spends its time in strided indexing. Planes (b, c)
 //! run in parallel with rayon; f32, contiguous operands.
+//!
+//! Each plane is first split into `stride²` zero-padded phase planes, `P_ab[i][j] =
+//! x_pad[i·s + a][j·s + b]`, all `PW` wide. Then every tap `(ky, kx)` reads one phase plane
+//! at one offset for every output pixel at once, so the output, computed `PW` wide (the
+//! columns past the output's width are discarded), is `kh·kw` multiply-adds over one
+//! contiguous run each: whole vectors, no bounds test per pixel, at any stride. The two
+//! gradients use the same layout: the input gradient adds each tap's run into the phase
+//! planes (then gathers the input pixels back), the weight gradient is one dot product per
+//! tap. The output gradient is laid out `PW` wide with zeros in the extra columns, so
+//! they add nothing. Per output pixel the taps are summed in the same order as a direct
+//! loop (`ky` then `kx`).
 
 use candle_core::{CpuStorage, CustomOp2, Layout, Result, Shape, Tensor};
 use rayon::prelude::*;
@@ -19,6 +30,10 @@ struct Geo {
     pad: usize,
     oh: usize,
     ow: usize,
+    /// Phase-plane rows (one more than any tap reads, so the last run stays inside).
+    ph: usize,
+    /// Phase-plane width, also the row length of the wide output.
+    pw: usize,
 }
 
 impl Geo {
@@ -26,41 +41,84 @@ impl Geo {
         let (&[b, c, h, w], &[kc, 1, kh, kw]) = (x, k) else {
             candle_core::bail!("depthwise: x {x:?} must be (B, C, H, W) and w {k:?} (C, 1, kh, kw)")
         };
-        if kc != c || h + 2 * pad < kh || w + 2 * pad < kw || stride == 0 {
+        if kc != c || h + 2 * pad < kh || w + 2 * pad < kw || stride == 0 || kh == 0 || kw == 0 {
             candle_core::bail!("depthwise: x {x:?}, w {k:?}, stride {stride}, pad {pad} do not fit");
         }
-        Ok(Self {
-            b,
-            c,
-            h,
-            w,
-            kh,
-            kw,
-            stride,
-            pad,
-            oh: (h + 2 * pad - kh) / stride + 1,
-            ow: (w + 2 * pad - kw) / stride + 1,
-        })
+        let (oh, ow) = ((h + 2 * pad - kh) / stride + 1, (w + 2 * pad - kw) / stride + 1);
+        // Tap (ky, kx) of output (y, x) is phase-plane pixel (y + ky/s, x + kx/s):
+        // rows up to oh − 1 + (kh − 1)/s, columns up to ow − 1 + (kw − 1)/s.
+        let (ph, pw) = (oh + (kh - 1) / stride + 1, ow + (kw - 1) / stride);
+        Ok(Self { b, c, h, w, kh, kw, stride, pad, oh, ow, ph, pw })
     }
 
-    /// Input coordinate of output `o` and tap `k`, if inside the image.
-    #[inline]
-    fn src(&self, o: usize, k: usize, n: usize) -> Option<usize> {
-        (o * self.stride + k).checked_sub(self.pad).filter(|&i| i < n)
+    fn phase_len(&self) -> usize {
+        self.ph * self.pw
     }
 
-    /// The outputs `lo..hi` (of `on`) whose tap `k` falls inside an input axis of length `n`:
-    /// `o·stride + k − pad` in `0..n`. Looping over this range needs no bounds test per pixel.
-    #[inline]
-    fn valid(&self, k: usize, n: usize, on: usize) -> (usize, usize) {
-        let lo = self.pad.saturating_sub(k).div_ceil(self.stride);
-        let hi = if n + self.pad > k { ((n - 1 + self.pad - k) / self.stride + 1).min(on) } else { 0 };
-        (lo, hi.max(lo))
+    /// The wide output's length: `oh` rows of `pw`.
+    fn wide_len(&self) -> usize {
+        self.oh * self.pw
+    }
+
+    /// Where tap `(ky, kx)` reads: (phase index, offset in that phase plane).
+    fn tap(&self, ky: usize, kx: usize) -> (usize, usize) {
+        let s = self.stride;
+        ((ky % s) * s + kx % s, (ky / s) * self.pw + kx / s)
+    }
+
+    /// Input pixel `(iy, ix)` as (phase index, offset): the inverse of the split.
+    fn place(&self, iy: usize, ix: usize) -> (usize, usize) {
+        let (s, (py, px)) = (self.stride, (iy + self.pad, ix + self.pad));
+        ((py % s) * s + px % s, (py / s) * self.pw + px / s)
+    }
+
+    /// Splits one input plane (H, W) into the phase planes (`phases`, zeroed first).
+    fn split(&self, x: &[f32], phases: &mut [f32]) {
+        phases.fill(0.0);
+        let n = self.phase_len();
+        for iy in 0..self.h {
+            let row = &x[iy * self.w..(iy + 1) * self.w];
+            if self.stride == 1 {
+                let o = (iy + self.pad) * self.pw + self.pad;
+                phases[o..o + self.w].copy_from_slice(row);
+                continue;
+            }
+            for (ix, &v) in row.iter().enumerate() {
+                let (q, o) = self.place(iy, ix);
+                // Past `pw`: a column no tap reads (the padding beyond the last window).
+                if (ix + self.pad) / self.stride < self.pw && (iy + self.pad) / self.stride < self.ph {
+                    phases[q * n + o] = v;
+                }
+            }
+        }
+    }
+
+    /// One output-gradient plane (OH, OW) laid out `pw` wide, zeros in the extra columns.
+    fn widen(&self, dy: &[f32], wide: &mut [f32]) {
+        wide.fill(0.0);
+        for y in 0..self.oh {
+            wide[y * self.pw..y * self.pw + self.ow].copy_from_slice(&dy[y * self.ow..(y + 1) * self.ow]);
+        }
     }
 }
 
 fn slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
     crate::conv::slice(s, l, "depthwise")
+}
+
+/// Per-thread scratch: phase planes and one wide plane.
+#[derive(Default)]
+struct Scratch {
+    phases: Vec<f32>,
+    wide: Vec<f32>,
+}
+
+impl Scratch {
+    fn sized(&mut self, g: &Geo) -> (&mut [f32], &mut [f32]) {
+        self.phases.resize(g.stride * g.stride * g.phase_len(), 0.0);
+        self.wide.resize(g.wide_len(), 0.0);
+        (&mut self.phases, &mut self.wide)
+    }
 }
 
 /// out = depthwise(x, w).
@@ -77,32 +135,22 @@ impl CustomOp2 for Forward {
     fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
         let g = Geo::new(l1.dims(), l2.dims(), self.stride, self.pad)?;
         let (x, k) = (slice(s1, l1)?, slice(s2, l2)?);
-        let mut out = vec![0f32; g.b * g.c * g.oh * g.ow];
-        out.par_chunks_mut(g.oh * g.ow).enumerate().for_each(|(p, o)| {
+        let (n, m) = (g.phase_len(), g.wide_len());
+        let mut out = crate::kernels::zeros(g.b * g.c * g.oh * g.ow);
+        out.par_chunks_mut(g.oh * g.ow).enumerate().for_each_init(Scratch::default, |scratch, (p, o)| {
             let c = p % g.c;
-            let xp = &x[p * g.h * g.w..(p + 1) * g.h * g.w];
             let kp = &k[c * g.kh * g.kw..(c + 1) * g.kh * g.kw];
-            for oy in 0..g.oh {
-                for ky in 0..g.kh {
-                    let Some(iy) = g.src(oy, ky, g.h) else { continue };
-                    let row = &xp[iy * g.w..(iy + 1) * g.w];
-                    let orow = &mut o[oy * g.ow..(oy + 1) * g.ow];
-                    for kx in 0..g.kw {
-                        let wv = kp[ky * g.kw + kx];
-                        let (lo, hi) = g.valid(kx, g.w, g.ow);
-                        if lo == hi {
-                            continue;
-                        }
-                        let first = lo * g.stride + kx - g.pad;
-                        if g.stride == 1 {
-                            crate::kernels::axpy(&mut orow[lo..hi], wv, &row[first..first + hi - lo]);
-                        } else {
-                            for (ov, &xv) in orow[lo..hi].iter_mut().zip(row[first..].iter().step_by(g.stride)) {
-                                *ov += wv * xv;
-                            }
-                        }
-                    }
+            let (phases, wide) = scratch.sized(&g);
+            g.split(&x[p * g.h * g.w..(p + 1) * g.h * g.w], phases);
+            wide.fill(0.0);
+            for ky in 0..g.kh {
+                for kx in 0..g.kw {
+                    let (q, off) = g.tap(ky, kx);
+                    crate::kernels::axpy(wide, kp[ky * g.kw + kx], &phases[q * n + off..q * n + off + m]);
                 }
+            }
+            for y in 0..g.oh {
+                o[y * g.ow..(y + 1) * g.ow].copy_from_slice(&wide[y * g.pw..y * g.pw + g.ow]);
             }
         });
         Ok((CpuStorage::F32(out), Shape::from((g.b, g.c, g.oh, g.ow))))
@@ -147,35 +195,38 @@ impl CustomOp2 for GradInput {
 
     fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
         let d = l1.dims();
-        let g = Geo::new(&[d[0], d[1], self.h, self.w], l2.dims(), self.stride, self.pad)?;
-        if d[2] != g.oh || d[3] != g.ow {
+        let [b, c, dh, dw] = *d else { candle_core::bail!("depthwise grad: output gradient {d:?} is not 4-d") };
+        let g = Geo::new(&[b, c, self.h, self.w], l2.dims(), self.stride, self.pad)?;
+        if dh != g.oh || dw != g.ow {
             candle_core::bail!("depthwise grad: output gradient {d:?} does not match");
         }
         let (go, k) = (slice(s1, l1)?, slice(s2, l2)?);
-        let mut gx = vec![0f32; g.b * g.c * g.h * g.w];
-        gx.par_chunks_mut(g.h * g.w).enumerate().for_each(|(p, gxp)| {
+        let (n, m) = (g.phase_len(), g.wide_len());
+        let mut gx = crate::kernels::zeros(g.b * g.c * g.h * g.w);
+        gx.par_chunks_mut(g.h * g.w).enumerate().for_each_init(Scratch::default, |scratch, (p, gxp)| {
             let c = p % g.c;
-            let gop = &go[p * g.oh * g.ow..(p + 1) * g.oh * g.ow];
             let kp = &k[c * g.kh * g.kw..(c + 1) * g.kh * g.kw];
-            for oy in 0..g.oh {
-                for ky in 0..g.kh {
-                    let Some(iy) = g.src(oy, ky, g.h) else { continue };
-                    let grow = &gop[oy * g.ow..(oy + 1) * g.ow];
-                    let xrow = &mut gxp[iy * g.w..(iy + 1) * g.w];
-                    for kx in 0..g.kw {
-                        let wv = kp[ky * g.kw + kx];
-                        let (lo, hi) = g.valid(kx, g.w, g.ow);
-                        if lo == hi {
-                            continue;
-                        }
-                        let first = lo * g.stride + kx - g.pad;
-                        if g.stride == 1 {
-                            crate::kernels::axpy(&mut xrow[first..first + hi - lo], wv, &grow[lo..hi]);
-                        } else {
-                            for (xv, &gv) in xrow[first..].iter_mut().step_by(g.stride).zip(&grow[lo..hi]) {
-                                *xv += wv * gv;
-                            }
-                        }
+            let (phases, wide) = scratch.sized(&g);
+            g.widen(&go[p * g.oh * g.ow..(p + 1) * g.oh * g.ow], wide);
+            phases.fill(0.0);
+            for ky in 0..g.kh {
+                for kx in 0..g.kw {
+                    let (q, off) = g.tap(ky, kx);
+                    crate::kernels::axpy(&mut phases[q * n + off..q * n + off + m], kp[ky * g.kw + kx], wide);
+                }
+            }
+            for iy in 0..g.h {
+                let row = &mut gxp[iy * g.w..(iy + 1) * g.w];
+                if g.stride == 1 {
+                    let o = (iy + g.pad) * g.pw + g.pad;
+                    row.copy_from_slice(&phases[o..o + g.w]);
+                    continue;
+                }
+                for (ix, v) in row.iter_mut().enumerate() {
+                    // A pixel outside every window (past `pw` or `ph`) has no gradient.
+                    if (ix + g.pad) / g.stride < g.pw && (iy + g.pad) / g.stride < g.ph {
+                        let (q, o) = g.place(iy, ix);
+                        *v = phases[q * n + o];
                     }
                 }
             }
@@ -199,48 +250,31 @@ impl CustomOp2 for GradWeight {
 
     fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
         let d = l1.dims();
-        let g = Geo::new(d, &[d[1], 1, self.kh, self.kw], self.stride, self.pad)?;
+        let Some(&c) = d.get(1) else { candle_core::bail!("depthwise grad: input {d:?} is not 4-d") };
+        let g = Geo::new(d, &[c, 1, self.kh, self.kw], self.stride, self.pad)?;
         let (x, go) = (slice(s1, l1)?, slice(s2, l2)?);
         if l2.dims() != [g.b, g.c, g.oh, g.ow] {
             candle_core::bail!("depthwise grad: output gradient {:?} does not match", l2.dims());
         }
-        let taps = g.kh * g.kw;
+        let (taps, n, m) = (g.kh * g.kw, g.phase_len(), g.wide_len());
         // Per plane, then summed over the batch.
         let per: Vec<Vec<f32>> = (0..g.b * g.c)
             .into_par_iter()
-            .map(|p| {
-                let xp = &x[p * g.h * g.w..(p + 1) * g.h * g.w];
-                let gop = &go[p * g.oh * g.ow..(p + 1) * g.oh * g.ow];
+            .map_init(Scratch::default, |scratch, p| {
+                let (phases, wide) = scratch.sized(&g);
+                g.split(&x[p * g.h * g.w..(p + 1) * g.h * g.w], phases);
+                g.widen(&go[p * g.oh * g.ow..(p + 1) * g.oh * g.ow], wide);
                 let mut acc = vec![0f32; taps];
                 for ky in 0..g.kh {
                     for kx in 0..g.kw {
-                        let mut s = 0f32;
-                        let (lo, hi) = g.valid(kx, g.w, g.ow);
-                        if lo < hi {
-                            let first = lo * g.stride + kx - g.pad;
-                            for oy in 0..g.oh {
-                                let Some(iy) = g.src(oy, ky, g.h) else { continue };
-                                let (xrow, grow) =
-                                    (&xp[iy * g.w..(iy + 1) * g.w], &gop[oy * g.ow + lo..oy * g.ow + hi]);
-                                if g.stride == 1 {
-                                    s += crate::kernels::dot(&xrow[first..first + hi - lo], grow);
-                                } else {
-                                    s += xrow[first..]
-                                        .iter()
-                                        .step_by(g.stride)
-                                        .zip(grow)
-                                        .map(|(a, b)| a * b)
-                                        .sum::<f32>();
-                                }
-                            }
-                        }
-                        acc[ky * g.kw + kx] = s;
+                        let (q, off) = g.tap(ky, kx);
+                        acc[ky * g.kw + kx] = crate::kernels::dot(wide, &phases[q * n + off..q * n + off + m]);
                     }
                 }
                 acc
             })
             .collect();
-        let mut gw = vec![0f32; g.c * taps];
+        let mut gw = crate::kernels::zeros(g.c * taps);
         for (p, acc) in per.iter().enumerate() {
             let c = p % g.c;
             for t in 0..taps {

@@ -6,6 +6,17 @@
 
 use multiversion::multiversion;
 
+/// `n` zeros, written: for the outputs of campro's ops. `vec![0.0; n]` is `calloc`, whose
+/// fresh pages the kernel maps to its one read-only zero page until they are written; an op
+/// that reads an element before writing it (an accumulation) then takes a copy-on-write
+/// fault per page, and each one's TLB flush interrupts every other core (a fifth of a
+/// two-thread MobileFaceNet step went there). Writing the zeros maps the pages writable.
+pub fn zeros(n: usize) -> Vec<f32> {
+    let mut v = Vec::with_capacity(n);
+    v.resize(n, 0.0);
+    v
+}
+
 /// `y[i] += a · x[i]`.
 #[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
 pub fn axpy(y: &mut [f32], a: f32, x: &[f32]) {

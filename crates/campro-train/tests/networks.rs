@@ -30,10 +30,12 @@ fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
 
 #[test]
 fn depthwise_matches_grouped_convolution() {
-    for (h, w, stride, k) in [(9, 7, 1, 3), (10, 8, 2, 3), (9, 9, 2, 3), (7, 6, 1, 1)] {
+    // Odd and even sizes, strides 1 to 3, padding below and at k/2 (the phase planes).
+    let cases =
+        [(9, 7, 1, 3, 1), (10, 8, 2, 3, 1), (9, 9, 2, 3, 1), (7, 6, 1, 1, 0), (11, 8, 2, 5, 2), (8, 7, 2, 3, 0)];
+    for (h, w, stride, k, pad) in cases.into_iter().chain([(13, 10, 3, 5, 1), (6, 6, 1, 5, 2)]) {
         let x = rng_tensor(&[2, 5, h, w], 1);
         let wt = rng_tensor(&[5, 1, k, k], 2);
-        let pad = k / 2;
         let want = x.conv2d(&wt, pad, stride, 1, 5).unwrap();
         let got = depthwise(&x, &wt, stride, pad).unwrap();
         assert_eq!(got.dims(), want.dims(), "{h}x{w} stride {stride}");
@@ -50,12 +52,14 @@ fn depthwise_matches_grouped_convolution() {
 #[test]
 fn depthwise_gradients_match_grouped_convolution() {
     use candle_core::Var;
-    for (h, w, stride) in [(9, 7, 1), (10, 8, 2), (9, 9, 2)] {
+    for (h, w, stride, k, pad) in
+        [(9, 7, 1, 3, 1), (10, 8, 2, 3, 1), (9, 9, 2, 3, 1), (12, 10, 2, 5, 2), (8, 8, 2, 3, 0)]
+    {
         let x = Var::from_tensor(&rng_tensor(&[2, 4, h, w], 11)).unwrap();
-        let wt = Var::from_tensor(&rng_tensor(&[4, 1, 3, 3], 12)).unwrap();
-        let r = rng_tensor(&[2, 4, (h - 1) / stride + 1, (w - 1) / stride + 1], 13);
-        let ours = depthwise(&x, &wt, stride, 1).unwrap().mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
-        let theirs = x.conv2d(&wt, 1, stride, 1, 4).unwrap().mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+        let wt = Var::from_tensor(&rng_tensor(&[4, 1, k, k], 12)).unwrap();
+        let r = rng_tensor(&[2, 4, (h + 2 * pad - k) / stride + 1, (w + 2 * pad - k) / stride + 1], 13);
+        let ours = depthwise(&x, &wt, stride, pad).unwrap().mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+        let theirs = x.conv2d(&wt, pad, stride, 1, 4).unwrap().mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
         for v in [x.as_tensor(), wt.as_tensor()] {
             let (a, b) = (ours.get(v).unwrap(), theirs.get(v).unwrap());
             assert!(max_abs(a, b) < 1e-4, "{h}x{w} stride {stride}: {}", max_abs(a, b));

@@ -122,6 +122,76 @@ pub fn prelu_grad(dx: &mut [f32], x: &[f32], g: &[f32], s: f32) -> f32 {
     sum
 }
 
+/// Batch norm's affine then PReLU, forward: `z = x·s + t`, `y = z` where `z > 0`, else
+/// `a·z`.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
+pub fn affine_prelu(y: &mut [f32], x: &[f32], s: f32, t: f32, a: f32) {
+    for (o, &v) in y.iter_mut().zip(x) {
+        let z = v * s + t;
+        *o = if z > 0.0 { z } else { a * z };
+    }
+}
+
+/// The PReLU part of [`affine_prelu`]'s backward for one plane: writes `dz = dy` where
+/// `z = x·s + t > 0`, else `a·dy`, and returns `Σ_{z ≤ 0} z · dy` (the slope's gradient),
+/// in 16 lanes.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
+pub fn affine_prelu_grad(dz: &mut [f32], x: &[f32], g: &[f32], [s, t, a]: [f32; 3]) -> f32 {
+    let n = dz.len().min(x.len()).min(g.len());
+    let (dc, dr) = dz[..n].as_chunks_mut::<16>();
+    let ((xc, xr), (gc, gr)) = (x[..n].as_chunks::<16>(), g[..n].as_chunks::<16>());
+    let mut lanes = [0f32; 16];
+    for ((o, xv), gv) in dc.iter_mut().zip(xc).zip(gc) {
+        for k in 0..16 {
+            let z = xv[k] * s + t;
+            let pos = z > 0.0;
+            o[k] = if pos { gv[k] } else { a * gv[k] };
+            lanes[k] += if pos { 0.0 } else { z * gv[k] };
+        }
+    }
+    let mut sum: f32 = lanes.iter().sum();
+    for ((o, &xv), &gv) in dr.iter_mut().zip(xr).zip(gr) {
+        let z = xv * s + t;
+        let pos = z > 0.0;
+        *o = if pos { gv } else { a * gv };
+        sum += if pos { 0.0 } else { z * gv };
+    }
+    sum
+}
+
+/// `(Σ x, Σ x²)` over one plane in f64 (8 lanes each): batch statistics whose variance
+/// `E[x²] − E[x]²` must not cancel in f32.
+pub fn sum_and_squares(x: &[f32]) -> (f64, f64) {
+    (sum_f64(x), squares_f64(x))
+}
+
+/// `Σ x[i]` in f64, 8 lanes.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
+fn sum_f64(x: &[f32]) -> f64 {
+    let (xc, xr) = x.as_chunks::<8>();
+    let mut lanes = [0f64; 8];
+    for a in xc {
+        for k in 0..8 {
+            lanes[k] += a[k] as f64;
+        }
+    }
+    lanes.iter().sum::<f64>() + xr.iter().map(|&v| v as f64).sum::<f64>()
+}
+
+/// `Σ x[i]²` in f64, 8 lanes.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx512dq+avx512bw", "x86_64+avx2+fma"))]
+fn squares_f64(x: &[f32]) -> f64 {
+    let (xc, xr) = x.as_chunks::<8>();
+    let mut lanes = [0f64; 8];
+    for a in xc {
+        for k in 0..8 {
+            let v = a[k] as f64;
+            lanes[k] += v * v;
+        }
+    }
+    lanes.iter().sum::<f64>() + xr.iter().map(|&v| (v as f64) * (v as f64)).sum::<f64>()
+}
+
 /// `(Σ dy, Σ dy · (x − m) · r)` over one plane, in 16 lanes: two passes over `dy` (one
 /// plane fits in the L1 cache), because LLVM vectorises two sums in one loop as pairs of
 /// scalars.
@@ -206,6 +276,15 @@ mod tests {
         assert_eq!((dx[0], dx[36]), (0.125, g[36]));
         let want: f32 = x.iter().zip(&g).filter(|(a, _)| **a <= 0.0).map(|(a, b)| a * b).sum();
         assert!((ds - want).abs() <= 1e-4 * want.abs());
+        affine_prelu(&mut y, &x, 2.0, 1.0, 0.25);
+        assert_eq!((y[0], y[18], y[36]), ((-36.0 + 1.0) * 0.25, 1.0, 37.0));
+        let ds = affine_prelu_grad(&mut dx, &x, &g, [2.0, 1.0, 0.25]);
+        assert_eq!((dx[0], dx[17], dx[36]), (0.125, g[17] * 0.25, g[36]));
+        let want: f32 =
+            x.iter().zip(&g).map(|(a, b)| (a * 2.0 + 1.0, b)).filter(|(z, _)| *z <= 0.0).map(|(z, b)| z * b).sum();
+        assert!((ds - want).abs() <= 1e-4 * want.abs());
+        let (s, q) = sum_and_squares(&x);
+        assert_eq!((s, q), (0.0, (1..=18).map(|i| 2.0 * (i * i) as f64).sum::<f64>()));
         let (s1, s2) = sum_and_centred_dot(&g, &x, 1.0, 0.5);
         assert!((s1 - g.iter().sum::<f32>()).abs() < 1e-4);
         let w2: f32 = g.iter().zip(&x).map(|(a, b)| a * (b - 1.0)).sum::<f32>() * 0.5;

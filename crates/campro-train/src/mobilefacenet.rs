@@ -4,11 +4,12 @@
 //! [`VarMap`] so the attacker can be trained.
 //!
 //! Convolutions and PReLU are campro's own ops with their own backward
-//! ([`crate::conv::conv2d`], [`depthwise`], [`crate::conv::prelu`]): candle runs a grouped
+//! ([`crate::conv::conv2d`], [`depthwise`], batch norm with PReLU fused in
+//! [`crate::batchnorm::batch_norm_train`]): candle runs a grouped
 //! convolution as one convolution per group (hundreds of tiny kernels per layer here), its
 //! CPU convolution backward is a naive loop, and PReLU from generic ops is five passes.
 
-use crate::conv::{conv2d, prelu};
+use crate::conv::conv2d;
 pub use crate::dwconv::depthwise;
 use crate::torch_legacy::{read_state_dict, TorchError};
 use candle_core::{DType, Device, Result, Tensor, Var, D};
@@ -48,16 +49,21 @@ impl BatchNorm {
         })
     }
 
-    fn forward(&self, x: &Tensor, train: bool) -> Result<Tensor> {
+    /// The normalised `x`, then PReLU with slopes `prelu` if given (fused in training).
+    fn forward(&self, x: &Tensor, train: bool, prelu: Option<&Tensor>) -> Result<Tensor> {
         let c = self.weight.dim(0)?;
         if !train {
             // The running statistics are state, not parameters: no gradient reaches them.
             let scale = (self.weight.as_ref() / (self.running_var.as_tensor().detach() + Self::EPS)?.sqrt()?)?;
             let shift = (&self.bias - self.running_mean.as_tensor().detach().mul(&scale)?)?;
-            return crate::batchnorm::channel_affine(x, &scale, &shift);
+            let y = crate::batchnorm::channel_affine(x, &scale, &shift)?;
+            return match prelu {
+                Some(a) => crate::conv::prelu(&y, a),
+                None => Ok(y),
+            };
         }
         let n = (x.elem_count() / c) as f64;
-        let (y, stats) = crate::batchnorm::batch_norm_train(x, &self.weight, &self.bias, Self::EPS)?;
+        let (y, stats) = crate::batchnorm::batch_norm_train(x, &self.weight, &self.bias, Self::EPS, prelu)?;
         let (mean, var) = (stats.get(0)?, stats.get(1)?);
         let m = Self::MOMENTUM;
         self.running_mean.set(&((self.running_mean.as_tensor() * (1.0 - m))? + (mean * m)?)?)?;
@@ -103,11 +109,7 @@ impl ConvBlock {
         } else {
             conv2d(x, &self.w, self.stride, self.pad)?
         };
-        let y = self.bn.forward(&y, train)?;
-        match &self.prelu {
-            Some(a) => prelu(&y, a),
-            None => Ok(y),
-        }
+        self.bn.forward(&y, train, self.prelu.as_ref())
     }
 }
 

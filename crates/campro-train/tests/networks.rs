@@ -83,8 +83,8 @@ fn fused_batch_norm_matches_generic_ops() {
     let x = Var::from_tensor(&rng_tensor(&[3, 4, 5, 6], 21).affine(3.0, 1.0).unwrap()).unwrap();
     let g = Var::from_tensor(&rng_tensor(&[4], 22)).unwrap();
     let b = Var::from_tensor(&rng_tensor(&[4], 23)).unwrap();
+    let a = Var::from_tensor(&rng_tensor(&[4], 25).affine(0.5, 0.1).unwrap()).unwrap();
     let r = rng_tensor(&[3, 4, 5, 6], 24);
-    let (y, stats) = campro_train::batchnorm::batch_norm_train(&x, &g, &b, 1e-5).unwrap();
     // The textbook expression in generic candle ops.
     let mean = x.mean_keepdim((0, 2, 3)).unwrap();
     let c = x.broadcast_sub(&mean).unwrap();
@@ -96,14 +96,22 @@ fn fused_batch_norm_matches_generic_ops() {
         .unwrap()
         .broadcast_add(&b.reshape((1, 4, 1, 1)).unwrap())
         .unwrap();
-    assert!(max_abs(&y, &want) < 1e-5);
-    assert!(max_abs(&stats.get(0).unwrap(), &mean.flatten_all().unwrap()) < 1e-5);
-    assert!(max_abs(&stats.get(1).unwrap(), &var.flatten_all().unwrap()) < 1e-4);
-    let ours = y.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
-    let theirs = want.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
-    for v in [x.as_tensor(), g.as_tensor(), b.as_tensor()] {
-        let (a, e) = (ours.get(v).unwrap(), theirs.get(v).unwrap());
-        assert!(max_abs(a, e) < 1e-4, "{}", max_abs(a, e));
+    // PReLU as max(z, 0) + a·min(z, 0).
+    let slope = a.reshape((1, 4, 1, 1)).unwrap();
+    let want_prelu = (want.relu().unwrap() + want.minimum(0f32).unwrap().broadcast_mul(&slope).unwrap()).unwrap();
+    for (prelu, want) in [(None, &want), (Some(a.as_tensor()), &want_prelu)] {
+        let (y, stats) = campro_train::batchnorm::batch_norm_train(&x, &g, &b, 1e-5, prelu).unwrap();
+        assert!(max_abs(&y, want) < 1e-5);
+        assert!(max_abs(&stats.get(0).unwrap(), &mean.flatten_all().unwrap()) < 1e-5);
+        assert!(max_abs(&stats.get(1).unwrap(), &var.flatten_all().unwrap()) < 1e-4);
+        let ours = y.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+        let theirs = want.mul(&r).unwrap().sum_all().unwrap().backward().unwrap();
+        let vars = [x.as_tensor(), g.as_tensor(), b.as_tensor()].into_iter().chain(prelu);
+        for v in vars {
+            let (a, e) = (ours.get(v).unwrap(), theirs.get(v).unwrap());
+            assert!(max_abs(a, e) < 1e-4, "{}", max_abs(a, e));
+        }
+        assert_eq!(prelu.is_some(), ours.get(a.as_tensor()).is_some());
     }
 }
 

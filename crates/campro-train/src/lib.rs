@@ -23,6 +23,7 @@ pub mod log;
 pub mod mobilefacenet;
 pub mod onnx_net;
 pub mod persons;
+pub mod retrain;
 pub mod scenes;
 pub mod torch_legacy;
 pub mod train;

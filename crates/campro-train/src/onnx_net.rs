@@ -52,6 +52,13 @@ enum Op {
     Upsample(usize),
     /// (B, C, H, W) → (B, C, H·W).
     Flatten,
+    /// (B, ...) → (B, rest): ONNX Flatten on axis 1, or a Reshape to two dimensions (a face
+    /// model's export fixes it to (1, −1); read per image).
+    FlattenBatch,
+    /// PReLU with one trainable slope per channel (initializer `slope`, C values).
+    Prelu {
+        slope: String,
+    },
     /// (B, C, N) → (B, N, C).
     Transpose,
 }
@@ -135,8 +142,8 @@ pub(crate) fn conv_attrs(k: i64, stride: i64, pad: i64) -> Vec<pb::AttributeProt
 }
 
 impl OnnxNet {
-    /// Reads the ONNX file; any operator or attribute outside what YOLOX uses is an error
-    /// naming the node.
+    /// Reads the ONNX file; any operator or attribute outside what YOLOX, the shared face
+    /// models and the enhancer's U-Net use is an error naming the node.
     pub fn load(path: &Path, dev: &candle_core::Device) -> std::result::Result<Self, GraphError> {
         let p = path.display().to_string();
         let bytes = campro::file::read_capped(path, 256 << 20, "an ONNX model")
@@ -244,7 +251,31 @@ impl OnnxNet {
                     }
                     Op::Upsample(f as usize)
                 }
-                "Reshape" => Op::Flatten,
+                "Reshape" => match n.input.get(1).and_then(|s| inits.get(s.as_str())).map(|t| ints(t).len()) {
+                    Some(2) => Op::FlattenBatch,
+                    _ => Op::Flatten,
+                },
+                "Flatten" => {
+                    if attr("axis").map_or(1, |a| a.i) != 1 {
+                        return Err(bad(format!("{what}: only axis 1")));
+                    }
+                    Op::FlattenBatch
+                }
+                "PRelu" => {
+                    let s = n
+                        .input
+                        .get(1)
+                        .and_then(|s| inits.get(s.as_str()))
+                        .ok_or_else(|| bad(format!("{what}: slope is not a constant")))?;
+                    let v = floats(s);
+                    if s.dims.iter().skip(1).any(|&d| d != 1) || v.is_empty() {
+                        return Err(bad(format!("{what}: only one slope per channel, got {:?}", s.dims)));
+                    }
+                    if !params.iter().any(|(name, _)| name == &s.name) {
+                        params.push((s.name.clone(), Var::from_vec(v.clone(), v.len(), dev)?));
+                    }
+                    Op::Prelu { slope: s.name.clone() }
+                }
                 "Transpose" => {
                     if attr_ints("perm") != [0, 2, 1] {
                         return Err(bad(format!("{what}: only perm [0, 2, 1]")));
@@ -276,6 +307,13 @@ impl OnnxNet {
     /// Every trainable tensor with its ONNX initializer name.
     pub fn named_vars(&self) -> Vec<(String, Var)> {
         self.params.clone()
+    }
+
+    /// The graph's output for input `x`.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        self.run(x, None)?
+            .remove(self.output.as_str())
+            .ok_or_else(|| candle_core::Error::Msg(format!("{} not computed", self.output)))
     }
 
     fn param(&self, name: &str) -> &Var {
@@ -328,6 +366,8 @@ impl OnnxNet {
                     arg(0)?.upsample_nearest2d(h * f, w * f)?
                 }
                 Op::Flatten => arg(0)?.flatten_from(2)?,
+                Op::FlattenBatch => arg(0)?.flatten_from(1)?,
+                Op::Prelu { slope } => crate::conv::prelu(arg(0)?, self.param(slope).as_tensor())?,
                 Op::Transpose => arg(0)?.transpose(1, 2)?.contiguous()?,
             };
             values.insert(&n.output, y);

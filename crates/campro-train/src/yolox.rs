@@ -115,10 +115,7 @@ impl Yolox {
         if h % 32 != 0 || w % 32 != 0 {
             candle_core::bail!("YOLOX input {h}x{w}: height and width must be multiples of 32");
         }
-        self.net
-            .run(x, None)?
-            .remove(self.net.output.as_str())
-            .ok_or_else(|| candle_core::Error::Msg("output not computed".into()))
+        self.net.forward(x)
     }
 
     /// The colour adapter's output ([`Self::with_adapter`]) for `x` (B, 3, H, W), BGR

@@ -188,9 +188,13 @@ pub struct PrivacyArgs {
     /// Adaptive attacks of the paper's Sec. VII beyond --restore (repeatable):
     /// `restore-net`, each parameter set's learnt restoration network
     /// (provenance.restorer, from campro train-enhancer with data.faces = "restore") on its
-    /// captured images: rows "NAME restore-net".
+    /// captured images: rows "NAME restore-net"; `retrain`, each face model fine-tuned on
+    /// the set's protected faces of identities never probed (needs --identities; the
+    /// --retrain-* options): rows "NAME retrained".
     #[arg(long = "attack", value_enum)]
     attacks: Vec<AttackArg>,
+    #[command(flatten)]
+    retrain: crate::retrain::RetrainArgs,
     /// How the attacker enrolled its gallery and classifier photos: `raw` (the paper's
     /// protocol) or `camera` (through the same camera as the probes: the re-enrolment
     /// attacker, who matches protected to protected).
@@ -202,6 +206,7 @@ pub struct PrivacyArgs {
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum AttackArg {
     RestoreNet,
+    Retrain,
 }
 
 /// `--enrol` (campro_eval::privacy::Enrolment).
@@ -311,9 +316,13 @@ pub(crate) fn load(name: &str, models: &Path) -> Result<Model> {
     Ok(Model::load(m)?)
 }
 
+fn face_detector(a: &PrivacyArgs, models: &Path) -> Result<FaceDetector> {
+    Ok(FaceDetector::new(load(&a.face_detector, models)?)?)
+}
+
 fn face_models(a: &PrivacyArgs, models: &Path) -> Result<FaceModels> {
     Ok(FaceModels {
-        detector: FaceDetector::new(load(&a.face_detector, models)?)?,
+        detector: face_detector(a, models)?,
         embedders: a.face_models.iter().map(|n| Ok(Embedder::new(load(n, models)?)?)).collect::<Result<_>>()?,
     })
 }
@@ -359,6 +368,11 @@ fn run_privacy(
     conds: &[Condition],
     failures: &Failures,
 ) -> Result<privacy::PrivacyReport> {
+    let start = std::time::Instant::now();
+    let retrain = a.attacks.contains(&AttackArg::Retrain);
+    if retrain && a.identities.is_none() {
+        bail!("--attack retrain needs --identities: the probed identities, which re-training must never see");
+    }
     // The attackers' networks first: a missing one is named before any data is read.
     let attacked;
     let conds = if a.attacks.contains(&AttackArg::RestoreNet) {
@@ -373,6 +387,7 @@ fn run_privacy(
     if let (Some(names), Some(file)) = (&identities, &a.identities) {
         privacy::check_identities(&lfw, names).with_context(|| file.display().to_string())?;
     }
+
     let fm = face_models(a, &c.models_dir())?;
     let restored;
     let conds = if a.restore {
@@ -396,7 +411,16 @@ fn run_privacy(
         },
         ..Default::default()
     };
-    let r = privacy::evaluate(&lfw, &fm, conds, &o)?;
+    let mut r = privacy::evaluate(&lfw, &fm, conds, &o)?;
+    if let (true, Some(probed)) = (retrain, &o.identities) {
+        let models = c.models_dir();
+        let manifests = a.face_models.iter().map(|n| manifest(n, &models)).collect::<Result<Vec<_>>>()?;
+        let sets: Vec<String> = c.params.iter().map(|p| set_name(p)).collect();
+        let detector = || face_detector(a, &models);
+        let rows = crate::retrain::attack(&lfw, probed, conds, &sets, &manifests, detector, &a.retrain, &o, &c.output)?;
+        r.identification.extend(rows);
+        r.seconds = start.elapsed().as_secs_f64();
+    }
     report::write_privacy(&r, &c.output)?;
     eprintln!("privacy: {} identities, {:.0} s -> {}", r.identities, r.seconds, c.output.join("privacy.md").display());
     Ok(r)

@@ -5,6 +5,7 @@ mod bench;
 mod capture;
 mod eval;
 mod inspect;
+mod retrain;
 mod simulate;
 mod train;
 mod video;

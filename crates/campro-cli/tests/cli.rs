@@ -619,6 +619,59 @@ fn privacy_camera_enrolment_matches_protected_to_protected() {
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("sideways"));
 }
 
+/// `--attack retrain` on tiny data: each face model is fine-tuned on colour-inverted faces of
+/// identities the evaluation never probes, written beside its log, and scored on the same
+/// probes as the plain rows.
+#[test]
+fn privacy_retrain_attack_fine_tunes_each_model_on_unprobed_identities() {
+    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let probed = ["Colin_Powell", "George_W_Bush", "Gerhard_Schroeder", "Donald_Rumsfeld", "Ariel_Sharon"];
+    let list = dir.path().join("probed.txt");
+    std::fs::write(&list, probed.join("\n")).unwrap();
+    let out = dir.path().join("ev");
+    campro()
+        .args(["eval", "privacy"])
+        .arg(bundled("color-inversion.json"))
+        .arg("--identities")
+        .arg(&list)
+        .args(["--runs", "1", "--no-verification", "--attack", "retrain", "--retrain-identities", "6"])
+        .args(["--retrain-photos", "3", "--retrain-epochs", "2", "--retrain-batch", "8", "--retrain-lr", "0.01"])
+        .arg("--shared")
+        .arg(&shared)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap();
+    let rows: Vec<&serde_json::Value> = v["identification"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["condition"] == "color-inversion retrained" && r["order"] == "paper")
+        .collect();
+    // Two models, two classifiers, rates in [0, 1].
+    assert_eq!(rows.len(), 4, "{rows:?}");
+    assert!(rows.iter().all(|r| (0.0..=1.0).contains(&r["top1_mean"].as_f64().unwrap())));
+    for model in ["faceplugin", "mobilefacenet-casia"] {
+        let file = |ext: &str| out.join(format!("retrain/color-inversion.{model}.{ext}"));
+        assert!(file("onnx").is_file(), "{model}: no fine-tuned model");
+        let rec: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(file("json")).unwrap()).unwrap();
+        let names: Vec<&str> = rec["identities"].as_array().unwrap().iter().map(|n| n.as_str().unwrap()).collect();
+        assert!(names.len() >= 2 && names.len() <= 6, "{names:?}");
+        assert!(names.iter().all(|n| !probed.contains(n)), "trained on a probed identity: {names:?}");
+        assert_eq!(rec["log"]["classes"].as_u64().unwrap() as usize, names.len());
+        assert_eq!(rec["log"]["epoch_loss"].as_array().unwrap().len(), 2);
+    }
+    fails_with(
+        campro().args(["eval", "privacy", "--attack", "retrain", "--limit", "3"]).arg("-o").arg(dir.path().join("x")),
+        "--attack retrain needs --identities",
+    );
+}
+
 #[test]
 fn eval_refuses_bad_arguments_clearly() {
     let out = campro().args(["eval", "quality", "--baseline", "lowres-0"]).output().unwrap();

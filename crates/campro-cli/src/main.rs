@@ -212,7 +212,7 @@ enum Cmd {
     /// Evaluate privacy (face recognition), utility (person detection) and image quality with real models.
     Eval {
         #[command(subcommand)]
-        what: eval::EvalCmd,
+        what: Box<eval::EvalCmd>,
     },
     /// Learn CamPro parameters against a face-recognition attacker (Algorithm 1; privacy player).
     Train {
@@ -506,7 +506,7 @@ macro_rules! say {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
-        Cmd::Eval { what } => eval::run(what),
+        Cmd::Eval { what } => eval::run(*what),
         Cmd::Train { config, output, log, checkpoints, resume, init, force } => {
             train::train(&config, &output, log.as_deref(), checkpoints, resume, init.as_deref(), force)
         }

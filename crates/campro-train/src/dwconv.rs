@@ -60,10 +60,16 @@ impl Geo {
         self.oh * self.pw
     }
 
-    /// Where tap `(ky, kx)` reads: (phase index, offset in that phase plane).
-    fn tap(&self, ky: usize, kx: usize) -> (usize, usize) {
+    /// Every tap `(ky, kx)` as (its index in the kernel, where its run of `wide_len` starts
+    /// in the phase planes).
+    fn runs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         let s = self.stride;
-        ((ky % s) * s + kx % s, (ky / s) * self.pw + kx / s)
+        (0..self.kh).flat_map(move |ky| {
+            (0..self.kw).map(move |kx| {
+                let (q, off) = ((ky % s) * s + kx % s, (ky / s) * self.pw + kx / s);
+                (ky * self.kw + kx, q * self.phase_len() + off)
+            })
+        })
     }
 
     /// Input pixel `(iy, ix)` as (phase index, offset): the inverse of the split.
@@ -135,7 +141,7 @@ impl CustomOp2 for Forward {
     fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
         let g = Geo::new(l1.dims(), l2.dims(), self.stride, self.pad)?;
         let (x, k) = (slice(s1, l1)?, slice(s2, l2)?);
-        let (n, m) = (g.phase_len(), g.wide_len());
+        let m = g.wide_len();
         let mut out = crate::kernels::zeros(g.b * g.c * g.oh * g.ow);
         out.par_chunks_mut(g.oh * g.ow).enumerate().for_each_init(Scratch::default, |scratch, (p, o)| {
             let c = p % g.c;
@@ -143,11 +149,8 @@ impl CustomOp2 for Forward {
             let (phases, wide) = scratch.sized(&g);
             g.split(&x[p * g.h * g.w..(p + 1) * g.h * g.w], phases);
             wide.fill(0.0);
-            for ky in 0..g.kh {
-                for kx in 0..g.kw {
-                    let (q, off) = g.tap(ky, kx);
-                    crate::kernels::axpy(wide, kp[ky * g.kw + kx], &phases[q * n + off..q * n + off + m]);
-                }
+            for (t, s) in g.runs() {
+                crate::kernels::axpy(wide, kp[t], &phases[s..s + m]);
             }
             for y in 0..g.oh {
                 o[y * g.ow..(y + 1) * g.ow].copy_from_slice(&wide[y * g.pw..y * g.pw + g.ow]);
@@ -209,11 +212,8 @@ impl CustomOp2 for GradInput {
             let (phases, wide) = scratch.sized(&g);
             g.widen(&go[p * g.oh * g.ow..(p + 1) * g.oh * g.ow], wide);
             phases.fill(0.0);
-            for ky in 0..g.kh {
-                for kx in 0..g.kw {
-                    let (q, off) = g.tap(ky, kx);
-                    crate::kernels::axpy(&mut phases[q * n + off..q * n + off + m], kp[ky * g.kw + kx], wide);
-                }
+            for (t, s) in g.runs() {
+                crate::kernels::axpy(&mut phases[s..s + m], kp[t], wide);
             }
             for iy in 0..g.h {
                 let row = &mut gxp[iy * g.w..(iy + 1) * g.w];
@@ -256,7 +256,7 @@ impl CustomOp2 for GradWeight {
         if l2.dims() != [g.b, g.c, g.oh, g.ow] {
             candle_core::bail!("depthwise grad: output gradient {:?} does not match", l2.dims());
         }
-        let (taps, n, m) = (g.kh * g.kw, g.phase_len(), g.wide_len());
+        let (taps, m) = (g.kh * g.kw, g.wide_len());
         // Per plane, then summed over the batch.
         let per: Vec<Vec<f32>> = (0..g.b * g.c)
             .into_par_iter()
@@ -265,11 +265,8 @@ impl CustomOp2 for GradWeight {
                 g.split(&x[p * g.h * g.w..(p + 1) * g.h * g.w], phases);
                 g.widen(&go[p * g.oh * g.ow..(p + 1) * g.oh * g.ow], wide);
                 let mut acc = vec![0f32; taps];
-                for ky in 0..g.kh {
-                    for kx in 0..g.kw {
-                        let (q, off) = g.tap(ky, kx);
-                        acc[ky * g.kw + kx] = crate::kernels::dot(wide, &phases[q * n + off..q * n + off + m]);
-                    }
+                for (t, s) in g.runs() {
+                    acc[t] = crate::kernels::dot(wide, &phases[s..s + m]);
                 }
                 acc
             })

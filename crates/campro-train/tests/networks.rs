@@ -402,3 +402,29 @@ fn silu_and_channel_bias_match_generic_ops() {
         assert!(max_abs(g1.get(v.as_tensor()).unwrap(), g2.get(v.as_tensor()).unwrap()) < 1e-5);
     }
 }
+
+/// The patched backward (vendor/candle-core: a node's first gradient stored as it is, not
+/// added to zeros) still sums every use of a tensor: y = Σ (x·x + x + relu(x)·x) has
+/// dy/dx = 2x + 1 + 2·relu(x), and a broadcast weight's gradient is the sum over the batch.
+#[test]
+fn candle_backward_sums_every_use_of_a_tensor() {
+    let x = Var::from_tensor(&rng_tensor(&[3, 4], 31)).unwrap();
+    let w = Var::from_tensor(&rng_tensor(&[4], 32)).unwrap();
+    let xt = x.as_tensor();
+    let y = ((xt * xt).unwrap() + xt).unwrap();
+    let y = (y + (xt.relu().unwrap() * xt).unwrap()).unwrap();
+    let y = (y.sum_all().unwrap() + xt.broadcast_mul(w.as_tensor()).unwrap().sum_all().unwrap()).unwrap();
+    let g = y.backward().unwrap();
+    let xv: Vec<f32> = xt.flatten_all().unwrap().to_vec1().unwrap();
+    let wv: Vec<f32> = w.as_tensor().to_vec1().unwrap();
+    let gx: Vec<f32> = g.get(xt).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    for (i, (&v, &d)) in xv.iter().zip(&gx).enumerate() {
+        let want = 2.0 * v + 1.0 + 2.0 * v.max(0.0) + wv[i % 4];
+        assert!((d - want).abs() < 1e-5, "x {v}: {d} against {want}");
+    }
+    let gw: Vec<f32> = g.get(w.as_tensor()).unwrap().to_vec1().unwrap();
+    for (j, &d) in gw.iter().enumerate() {
+        let want: f32 = (0..3).map(|r| xv[r * 4 + j]).sum();
+        assert!((d - want).abs() < 1e-5, "w {j}: {d} against {want}");
+    }
+}

@@ -2,10 +2,11 @@
 //! face-recognition model fine-tuned on protected faces of identities the attacker labelled
 //! itself, then used to identify others. The model is read from its ONNX file into an
 //! [`OnnxNet`] (every convolution and PReLU trainable; the shared models have batch norm
-//! folded), a linear Softmax head over the embedding learns the training identities, and
-//! SGD with momentum, weight decay and a clipped gradient norm takes the steps, with the
-//! paper's schedule: rate `lr` for the first three quarters of the epochs, `lr / 10` after. The head is dropped
-//! and the network written back as ONNX, so the evaluation runs the fine-tuned file.
+//! folded). A Softmax head over the embedding, imprinted with the identities' mean
+//! embeddings, learns the training identities; SGD with momentum, weight decay and a
+//! clipped gradient norm takes the steps, with the paper's schedule (rate `lr` for the
+//! first three quarters of the epochs, `lr / 10` after). The head is dropped and the
+//! network written back as ONNX, so the evaluation runs the fine-tuned file.
 
 use crate::error::{Result, TrainError};
 use crate::onnx_net::OnnxNet;
@@ -14,7 +15,6 @@ use candle_core::{DType, Device, Tensor, Var, D};
 use image::RgbImage;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
-use rand_distr::Distribution;
 use std::path::Path;
 
 /// How to fine-tune.
@@ -137,14 +137,8 @@ pub fn fine_tune(
     }
     let start = std::time::Instant::now();
     let net = OnnxNet::load(model, dev)?;
-    let dim = net.forward(&input_tensor(&[&samples[0].crop], input, dev)?)?.flatten_from(1)?.dim(1)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed);
-    // The linear head starts small (N(0, 0.01²)), so the first steps do not wreck the
-    // backbone; ArcFace's is normalised, and a small one would have gradients of 1/|w|.
-    let sd = if cfg.loss == Loss::Softmax { 0.01 } else { 1.0 };
-    let normal = rand_distr::Normal::new(0.0f32, sd).expect("valid");
-    let init: Vec<f32> = (0..classes * dim).map(|_| normal.sample(&mut rng)).collect();
-    let head_w = Var::from_vec(init, (classes, dim), dev)?;
+    let head_w = Var::from_tensor(&imprint(&net, input, samples, classes, cfg, dev)?)?;
     let head_b = Var::zeros(classes, DType::F32, dev)?;
     let mut vars = net.vars();
     vars.push(head_w.clone());
@@ -215,6 +209,46 @@ pub fn fine_tune(
     }
     log.seconds = start.elapsed().as_secs_f64();
     Ok((net, log))
+}
+
+/// The head's starting weights, imprinted (Qi et al. 2018): each class's row is the mean
+/// of its faces' unit embeddings by the unchanged network, normalised, so the head
+/// classifies from the first step and its gradient does not have to drag the backbone
+/// through a random start. For Softmax the rows are scaled so that a face's logit for its
+/// own class is about 10 times its cosine to the class mean (`10 / mean |embedding|`).
+fn imprint(
+    net: &OnnxNet,
+    input: &Input,
+    samples: &[Sample],
+    classes: usize,
+    cfg: &RetrainConfig,
+    dev: &Device,
+) -> Result<Tensor> {
+    let (mut sums, mut norm_sum): (Option<Vec<f32>>, f64) = (None, 0.0);
+    for chunk in samples.chunks(cfg.batch) {
+        let crops: Vec<&RgbImage> = chunk.iter().map(|s| &s.crop).collect();
+        let emb: Vec<Vec<f32>> = net.forward(&input_tensor(&crops, input, dev)?)?.flatten_from(1)?.to_vec2()?;
+        for (e, s) in emb.iter().zip(chunk) {
+            let n = e.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
+            norm_sum += n as f64;
+            let dim = e.len();
+            let acc = sums.get_or_insert_with(|| vec![0f32; classes * dim]);
+            for (a, v) in acc[s.label * dim..(s.label + 1) * dim].iter_mut().zip(e) {
+                *a += v / n;
+            }
+        }
+    }
+    let mut w = sums.unwrap_or_default();
+    let dim = w.len() / classes;
+    let scale = match cfg.loss {
+        Loss::Softmax => (10.0 / (norm_sum / samples.len() as f64)) as f32,
+        Loss::ArcFace { .. } => 1.0,
+    };
+    for row in w.chunks_mut(dim) {
+        let n = row.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
+        row.iter_mut().for_each(|v| *v *= scale / n);
+    }
+    Ok(Tensor::from_vec(w, (classes, dim), dev)?)
 }
 
 /// The head's logits (B, classes) for embeddings `emb` (B, D) under `loss`; ArcFace needs

@@ -474,7 +474,7 @@ fn privacy_distractors_only_enlarge_the_gallery() {
             .arg(&out)
             .assert()
             .success();
-        serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap()
+        privacy_json(&out)
     };
     let (a, b) = (run(&[], "plain"), run(&["--distractors", "6"], "more"));
     assert_eq!(a["identities"], b["identities"]);
@@ -530,8 +530,7 @@ fn privacy_restore_undoes_a_bijective_camera() {
         .arg(&out)
         .assert()
         .success();
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap();
+    let v = privacy_json(&out);
     let top1 = |cond: &str| -> f64 {
         let rows: Vec<f64> = v["identification"]
             .as_array()
@@ -582,7 +581,7 @@ fn privacy_camera_enrolment_matches_protected_to_protected() {
             .success();
         let md = std::fs::read_to_string(out.join("privacy.md")).unwrap();
         assert!(md.contains(if enrol == "camera" { "Enrolled through the camera" } else { "Enrolled raw" }), "{md}");
-        serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap()
+        privacy_json(&out)
     };
     let (raw, cam) = (run("raw"), run("camera"));
     assert_eq!(cam["options"]["enrolment"], "camera");
@@ -645,8 +644,7 @@ fn privacy_retrain_attack_fine_tunes_each_model_on_unprobed_identities() {
         .arg(&out)
         .assert()
         .success();
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap();
+    let v = privacy_json(&out);
     let rows: Vec<&serde_json::Value> = v["identification"]
         .as_array()
         .unwrap()
@@ -966,4 +964,9 @@ fn bench_train_prints_step_medians_as_json() {
             .arg(&shared),
         "--anchor",
     );
+}
+
+/// The privacy report an `eval privacy -o OUT` wrote.
+fn privacy_json(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap()
 }

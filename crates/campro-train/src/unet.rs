@@ -114,10 +114,8 @@ impl Unet {
         if h % m != 0 || w % m != 0 {
             candle_core::bail!("enhancer input {h}x{w}: height and width must be multiples of {m}");
         }
-        self.net
-            .run(x, None)?
-            .remove(OUTPUT)
-            .ok_or_else(|| candle_core::Error::Msg("enhancer output not computed".into()))
+        // The graph's one output is OUTPUT.
+        self.net.forward(x)
     }
 
     /// The network with its current weights, encoded as an ONNX file.

@@ -193,3 +193,49 @@ fn a_damaged_enhancer_file_is_refused_by_name() {
     let e = Enhancer::from_bytes(b"", Path::new("empty.onnx")).err().expect("refused").to_string();
     assert!(e.contains("empty.onnx"), "{e}");
 }
+
+#[test]
+fn every_level_gets_the_gradient_finite_differences_give() {
+    // The deep levels reach the output only through Resize and Concat: their weights'
+    // gradients against central differences (f32, so a loose tolerance). The biases are
+    // moved to [0.05, 0.15]: where a 3x3 patch is all zeros after a ReLU, the next
+    // pre-activation is its bias exactly, and a bias within the step of zero puts a kink of
+    // the loss inside the difference (a seed did: slopes 6.60 left, 6.16 right).
+    let u = random_unet(&shape(&[2, 4, 8], 0));
+    for (i, (_, v)) in u.named_vars().into_iter().enumerate().filter(|(_, (_, v))| v.dims().len() == 1) {
+        v.set(&(noise(v.dims(), 300 + i as u64, 0.05) + 0.1).unwrap()).unwrap();
+    }
+    let x = (noise(&[1, 3, 16, 16], 11, 0.5) + 0.5).unwrap();
+    let g = noise(&[1, 3, 16, 16], 12, 1.0);
+    let loss = |u: &Unet| (u.forward(&x).unwrap() * &g).unwrap().sum_all().unwrap();
+    let grads = loss(&u).backward().unwrap();
+    for name in
+        ["enc2.conv1.w", "enc2.conv1.b", "dec1.conv0.w", "enc1.conv0.b", "dec0.conv1.w", "dec0.conv1.b", "out.w"]
+    {
+        let var = u.named_vars().into_iter().find(|(n, _)| n == name).unwrap().1;
+        let analytic: Vec<f32> = grads.get(var.as_tensor()).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+        let w0: Vec<f32> = var.as_tensor().flatten_all().unwrap().to_vec1().unwrap();
+        let eps = 1e-3f32;
+        let mut checked = 0;
+        for k in 0..w0.len() {
+            let at = |d: f32| {
+                let mut w = w0.clone();
+                w[k] += d;
+                var.set(&Tensor::from_vec(w, var.dims(), &Device::Cpu).unwrap()).unwrap();
+                loss(&u).to_scalar::<f32>().unwrap() as f64
+            };
+            let (l0, lp, lm) = (at(0.0), at(eps), at(-eps));
+            var.set(&Tensor::from_vec(w0.clone(), var.dims(), &Device::Cpu).unwrap()).unwrap();
+            // A ReLU pre-activation within the step of zero is a kink: then the one-sided
+            // difference on the other side is the derivative autograd takes.
+            let differences = [(lp - lm) / (2.0 * eps as f64), (lp - l0) / eps as f64, (l0 - lm) / eps as f64];
+            let a = analytic[k] as f64;
+            assert!(
+                differences.iter().any(|d| (a - d).abs() <= 0.02 * d.abs().max(a.abs()) + 2e-2),
+                "{name}[{k}]: autograd {a}, differences (central, right, left) {differences:?}"
+            );
+            checked += 1;
+        }
+        assert!(checked >= 2 && analytic.iter().any(|v| v.abs() > 1e-3), "{name}: {analytic:?}");
+    }
+}

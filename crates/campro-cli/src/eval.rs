@@ -65,6 +65,19 @@ pub enum EvalCmd {
         #[command(flatten)]
         u: UtilityArgs,
     },
+    /// The privacy-utility frontier across runs (the paper's Figure 10) from measured points:
+    /// frontier.svg and frontier.md.
+    Frontier {
+        /// CSV of points read off the reports: `set,hours,top1,top1_attacked,ap_ratio`
+        /// (campro_eval::frontier), at most 1 MB.
+        points: PathBuf,
+        /// Output folder (a new or empty folder, unless --force).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Write into an output folder that already holds files (replacing its reports).
+        #[arg(long)]
+        force: bool,
+    },
 }
 
 #[derive(Args)]
@@ -577,10 +590,13 @@ fn run_quality(
 }
 
 pub fn run(cmd: EvalCmd) -> Result<()> {
-    let (EvalCmd::Privacy { common, .. }
-    | EvalCmd::Utility { common, .. }
-    | EvalCmd::Quality { common, .. }
-    | EvalCmd::All { common, .. }) = &cmd;
+    let common = match &cmd {
+        EvalCmd::Frontier { points, output, force } => return run_frontier(points, output, *force),
+        EvalCmd::Privacy { common, .. }
+        | EvalCmd::Utility { common, .. }
+        | EvalCmd::Quality { common, .. }
+        | EvalCmd::All { common, .. } => common,
+    };
     common.check_output()?;
     let f = Failures::default();
     match cmd {
@@ -599,5 +615,18 @@ pub fn run(cmd: EvalCmd) -> Result<()> {
             eprintln!("report: {}", common.output.join("report.md").display());
             Ok(())
         }
+        EvalCmd::Frontier { .. } => unreachable!("run_frontier above"),
     }
+}
+
+/// `eval frontier`: the plot and table of measured points.
+fn run_frontier(points: &Path, output: &Path, force: bool) -> Result<()> {
+    crate::check_output_folder(output, force, "--output")?;
+    let bytes = campro::file::read_capped(points, 1 << 20, "the frontier points")?;
+    let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", points.display()))?;
+    let p = campro_eval::frontier::parse(&text).with_context(|| points.display().to_string())?;
+    std::fs::create_dir_all(output).with_context(|| format!("--output {}", output.display()))?;
+    report::write_frontier(&p, output)?;
+    eprintln!("frontier: {} points -> {}", p.len(), output.join("frontier.md").display());
+    Ok(())
 }

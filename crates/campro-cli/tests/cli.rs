@@ -970,3 +970,34 @@ fn bench_train_prints_step_medians_as_json() {
 fn privacy_json(out: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(out.join("privacy.json")).unwrap()).unwrap()
 }
+
+/// `eval frontier`: the plot and table of measured points; a bad CSV, a folder as the CSV
+/// and an earlier run's output are refused in one line.
+#[test]
+fn eval_frontier_plots_the_points_and_refuses_bad_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("p.csv"),
+        "set,hours,top1,top1_attacked,ap_ratio\nslow,2.4,0.48,13.23,34\nfast,1.0,0.48,2.74,59\nfixed,,5,100,74\n",
+    )
+    .unwrap();
+    campro().args(["eval", "frontier"]).arg(d.join("p.csv")).arg("-o").arg(d.join("f")).assert().success();
+    let md = std::fs::read_to_string(d.join("f/frontier.md")).unwrap();
+    // "slow" is beaten on both axes by "fast"; the other two are on the frontier.
+    assert!(md.contains("| slow | 2.4 h | 0.48 | 13.23 | 34 |  |"), "{md}");
+    assert!(
+        md.contains("| fast | 1.0 h | 0.48 | 2.74 | 59 | yes |")
+            && md.contains("| fixed | — | 5.00 | 100.00 | 74 | yes |")
+    );
+    assert!(std::fs::read_to_string(d.join("f/frontier.svg")).unwrap().contains("fast (1.0 h)"));
+    let frontier = |csv: &Path, out: &str| {
+        let mut c = campro();
+        c.args(["eval", "frontier"]).arg(csv).arg("-o").arg(d.join(out));
+        c
+    };
+    fails_with(&mut frontier(&d.join("p.csv"), "f"), "already holds files");
+    std::fs::write(d.join("bad.csv"), "set,hours,top1,top1_attacked,ap_ratio\na,1,0.5,inf,60\n").unwrap();
+    fails_with(&mut frontier(&d.join("bad.csv"), "g"), "line 2: top1_attacked must be a number in [0, 100]");
+    fails_with(&mut frontier(d, "h"), "is a directory; only regular files are read");
+}

@@ -17,6 +17,7 @@ pub mod data;
 pub mod enhance;
 pub mod error;
 pub mod face;
+pub mod frontier;
 pub mod geometry;
 pub mod linear;
 pub mod manifest;

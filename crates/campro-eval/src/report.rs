@@ -295,3 +295,13 @@ fn quality_markdown_from(dir: &Path) -> Result<String> {
     let p = dir.join("quality.md");
     std::fs::read_to_string(&p).map_err(EvalError::io(p))
 }
+
+/// Writes frontier.svg and frontier.md of measured points ([`crate::frontier`]).
+pub fn write_frontier(points: &[crate::frontier::Point], dir: &Path) -> Result<()> {
+    let (svg, table) = crate::frontier::render(points);
+    write_atomic(&dir.join("frontier.svg"), svg.as_bytes())?;
+    let md = format!(
+        "# Privacy vs utility across runs\n\nx: the worst top-1 over the face models, classifiers and attacks measured; y: person AP of the set's own detector, as % of raw.\n\n![frontier](frontier.svg)\n\n{table}"
+    );
+    write_atomic(&dir.join("frontier.md"), md.as_bytes())
+}

@@ -341,6 +341,21 @@ pub struct EnhancerConfig {
     pub data: SceneConfig,
     pub optimiser: AdamWConfig,
     pub budget: StepBudget,
+    /// The per-pixel distance the loss averages ([`PixelLoss`]).
+    pub loss: PixelLoss,
+}
+
+/// The distance between the enhanced and the target pixel that the enhancer's loss averages.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum PixelLoss {
+    /// `|R(C(x)) − x|`, the paper's. Its gradient is a sign: behind the per-pixel
+    /// restoration table, whose per-pixel error is already minimal on average, a fresh U-Net
+    /// found nothing in it to follow (docs/enhancer.md).
+    #[default]
+    L1,
+    /// `(R(C(x)) − x)²`, what PSNR measures.
+    L2,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

@@ -227,7 +227,7 @@ pub fn run(
     for step in first..=cfg.budget.steps.max(first - 1) {
         let idx = crate::train::draw(&mut order, &pool, cfg.data.batch, &mut rng);
         let b = scenes.batch(&idx, cfg.data.crop, cfg.data.faces != FaceTarget::Restore, &mut rng, &dev)?;
-        let loss = enhancer_loss(&unet.forward(&b.input)?, &b.raw, &b.input, &b.keep, cfg.data.faces)?;
+        let loss = enhancer_loss(&unet.forward(&b.input)?, &b.raw, &b.input, &b.keep, cfg.data.faces, cfg.loss)?;
         let v = loss.to_scalar::<f32>()? as f64;
         if !v.is_finite() {
             return Err(TrainError::Diverged(format!("enhancer loss is {v}: lower optimiser.lr")));

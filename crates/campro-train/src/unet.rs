@@ -17,7 +17,7 @@
 //! when they quantise), H and W multiples of [`Unet::multiple`]. No normalisation layers:
 //! inference is one pass with no batch statistics.
 
-use crate::config::{FaceTarget, UnetConfig};
+use crate::config::{FaceTarget, PixelLoss, UnetConfig};
 use crate::onnx_net::{conv_attrs, f32_tensor, node, string_attr, GraphError, OnnxNet};
 pub use campro_eval::enhance::{INPUT, MULTIPLE_KEY, OUTPUT};
 /// The restoration stage's output, the U-Net's input when there is one
@@ -190,15 +190,24 @@ pub fn masked_l1(pred: &Tensor, target: &Tensor, keep: &Tensor) -> Result<Tensor
     (pred - target)?.abs()?.broadcast_mul(keep)?.mean_all()
 }
 
-/// The enhancer's training loss for `faces` ([`FaceTarget`]): the masked L1 to `raw`, plus,
-/// with [`FaceTarget::Input`], the L1 to the network's `input` inside the faces.
-pub fn enhancer_loss(pred: &Tensor, raw: &Tensor, input: &Tensor, keep: &Tensor, faces: FaceTarget) -> Result<Tensor> {
-    match faces {
-        FaceTarget::Free | FaceTarget::Restore => masked_l1(pred, raw, keep),
-        FaceTarget::Input => {
-            let target = (raw.broadcast_mul(keep)? + input.broadcast_mul(&(1.0 - keep)?)?)?;
-            (pred - target)?.abs()?.mean_all()
-        }
+/// The enhancer's training loss for `faces` ([`FaceTarget`]): the mean masked distance
+/// ([`PixelLoss`]) to `raw`, plus, with [`FaceTarget::Input`], the distance to the network's
+/// `input` inside the faces.
+pub fn enhancer_loss(
+    pred: &Tensor,
+    raw: &Tensor,
+    input: &Tensor,
+    keep: &Tensor,
+    faces: FaceTarget,
+    loss: PixelLoss,
+) -> Result<Tensor> {
+    let diff = match faces {
+        FaceTarget::Free | FaceTarget::Restore => (pred - raw)?.broadcast_mul(keep)?,
+        FaceTarget::Input => (pred - (raw.broadcast_mul(keep)? + input.broadcast_mul(&(1.0 - keep)?)?)?)?,
+    };
+    match loss {
+        PixelLoss::L1 => diff.abs()?.mean_all(),
+        PixelLoss::L2 => diff.sqr()?.mean_all(),
     }
 }
 

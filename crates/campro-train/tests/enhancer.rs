@@ -3,7 +3,7 @@
 //! against hand geometry, and learning on a fixed batch.
 
 use campro_eval::enhance::Enhancer;
-use campro_train::config::{EnhancerConfig, FaceTarget, UnetConfig};
+use campro_train::config::{EnhancerConfig, FaceTarget, PixelLoss, UnetConfig};
 use campro_train::scenes::{enlarge, Scene};
 use campro_train::unet::{enhancer_loss, face_l1, macs_per_pixel, masked_l1, parameter_count, Unet};
 use candle_core::{Device, Tensor};
@@ -124,9 +124,15 @@ fn losses_match_hand_values() {
     // Face L1: the second pixel's channels: (0 + 0 + 0) / 3.
     assert_eq!(face_l1(&pred, &raw, &keep).unwrap(), Some(0.0));
     // Input target: the face pixel against the input: |.5−.9| + |.2−.6| + |1−.4| = 1.4.
-    let l = v(enhancer_loss(&pred, &raw, &cap, &keep, FaceTarget::Input).unwrap());
+    let l = v(enhancer_loss(&pred, &raw, &cap, &keep, FaceTarget::Input, PixelLoss::L1).unwrap());
     assert!((l - (0.7 + 1.4) / 6.0).abs() < 1e-6, "{l}");
-    assert!((v(enhancer_loss(&pred, &raw, &cap, &keep, FaceTarget::Free).unwrap()) - 0.7 / 6.0).abs() < 1e-6);
+    let free = v(enhancer_loss(&pred, &raw, &cap, &keep, FaceTarget::Free, PixelLoss::L1).unwrap());
+    assert!((free - 0.7 / 6.0).abs() < 1e-6);
+    // Squared: (.01 + .09 + .09) / 6 masked; the face against the input adds .16 + .16 + .36.
+    let l2 = v(enhancer_loss(&pred, &raw, &cap, &keep, FaceTarget::Free, PixelLoss::L2).unwrap());
+    assert!((l2 - 0.19 / 6.0).abs() < 1e-6, "{l2}");
+    let l2 = v(enhancer_loss(&pred, &raw, &cap, &keep, FaceTarget::Input, PixelLoss::L2).unwrap());
+    assert!((l2 - (0.19 + 0.68) / 6.0).abs() < 1e-6, "{l2}");
     // No face: None.
     assert_eq!(face_l1(&pred, &raw, &t(&[1.0, 1.0], 1)).unwrap(), None);
 }

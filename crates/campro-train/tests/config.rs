@@ -72,10 +72,12 @@ fn shipped_configs_parse() {
     let mut omegas = Vec::new();
     for e in std::fs::read_dir(dir).unwrap() {
         let path = e.unwrap().path();
-        if path.file_stem().is_some_and(|s| s == "enhancer") {
-            // `campro train-enhancer`'s, with its own keys.
+        if path.file_stem().is_some_and(|s| s.to_string_lossy().starts_with("enhancer")) {
+            // `campro train-enhancer`'s, with its own keys; the name says the loss.
             let c: campro_train::config::EnhancerConfig = campro_train::config::load(&path).unwrap();
             assert_eq!((c.model.widths, c.model.restorer), (vec![8, 16, 32, 64], true));
+            let l2 = path.file_stem().is_some_and(|s| s == "enhancer-l2");
+            assert_eq!(c.loss == campro_train::config::PixelLoss::L2, l2, "{}", path.display());
             continue;
         }
         let c = Config::load(&path).unwrap();

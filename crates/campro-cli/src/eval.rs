@@ -625,7 +625,7 @@ fn run_frontier(points: &Path, output: &Path, force: bool) -> Result<()> {
     let bytes = campro::file::read_capped(points, 1 << 20, "the frontier points")?;
     let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", points.display()))?;
     let p = campro_eval::frontier::parse(&text).with_context(|| points.display().to_string())?;
-    std::fs::create_dir_all(output).with_context(|| format!("--output {}", output.display()))?;
+    // The report writers create the folder (campro_eval::atomic).
     report::write_frontier(&p, output)?;
     eprintln!("frontier: {} points -> {}", p.len(), output.join("frontier.md").display());
     Ok(())

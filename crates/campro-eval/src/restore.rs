@@ -34,6 +34,14 @@ pub fn bin(p: [u8; 3]) -> usize {
     ((p[0] >> SHIFT) as usize * SIDE + (p[1] >> SHIFT) as usize) * SIDE + (p[2] >> SHIFT) as usize
 }
 
+/// The bin one bit coarser a channel that holds bin `b` of a level `side` bins a channel wide
+/// (bins indexed as in [`bin`]: red major, blue minor).
+fn parent(b: usize, side: usize) -> usize {
+    let (r, g, bl) = (b / (side * side), b / side % side, b % side);
+    let half = side / 2;
+    ((r / 2) * half + g / 2) * half + bl / 2
+}
+
 /// The per-pixel MMSE inverse of one colour map.
 #[derive(Debug, Clone)]
 pub struct Restorer {
@@ -73,9 +81,7 @@ impl Restorer {
             let mut n = vec![0u64; side * side * side];
             let mut s = vec![[0u64; 3]; side * side * side];
             for (b, (&fn_, fs)) in fine_n.iter().zip(fine_s).enumerate() {
-                let f = 2 * side;
-                let (r, g, bl) = (b / (f * f), b / f % f, b % f);
-                let p = ((r / 2) * side + g / 2) * side + bl / 2;
+                let p = parent(b, 2 * side);
                 n[p] += fn_;
                 (0..3).for_each(|c| s[p][c] += fs[c]);
             }
@@ -85,12 +91,9 @@ impl Restorer {
         let (n0, s0) = &levels[0];
         let mut est: Vec<[f64; 3]> = vec![std::array::from_fn(|c| s0[0][c] as f64 / n0[0] as f64)];
         for (k, (n, s)) in levels.iter().enumerate().skip(1) {
-            let side = 1usize << k;
-            let parent_side = side / 2;
             est = (0..n.len())
                 .map(|b| {
-                    let (r, g, bl) = (b / (side * side), b / side % side, b % side);
-                    let parent = est[((r / 2) * parent_side + g / 2) * parent_side + bl / 2];
+                    let parent = est[parent(b, 1 << k)];
                     std::array::from_fn(|c| (s[b][c] as f64 + SHRINK * parent[c]) / (n[b] as f64 + SHRINK))
                 })
                 .collect();

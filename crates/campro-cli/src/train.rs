@@ -46,8 +46,19 @@ pub fn train(
             );
             checkpoint_line(&pb, line);
         }
+        if let Some(t) = r.validation_top1 {
+            let ap = r.validation_ap.map_or(String::new(), |a| format!(", person AP {a:.3}"));
+            checkpoint_line(&pb, format!("round {}: validation top-1 {t:.3}{ap}", r.round));
+        }
     })?;
     pb.finish_and_clear();
+    if let Some(v) = out.provenance.get("validation").filter(|v| !v.is_null()) {
+        eprintln!(
+            "validation: best camera at round {}{}",
+            v["best_round"],
+            if v["stopped_early"] == true { " (stopped early: no better camera within the patience)" } else { "" }
+        );
+    }
     if let Some(l) = log {
         let (losses, acc) = campro_train::log::plot_log(&out.log);
         write_log(l, &campro_train::log::log_csv(&out.log), [("losses", losses), ("accuracy", acc)], force)?;

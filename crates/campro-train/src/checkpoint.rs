@@ -22,6 +22,10 @@ pub struct State {
     /// The training log up to `round` (empty in checkpoints written before it was kept).
     #[serde(default)]
     pub log: Vec<crate::log::LogRow>,
+    /// The best validated camera so far (`[validation]`; its tensors are `best.NAME` in the
+    /// tensor file); None without validation and in checkpoints written before it.
+    #[serde(default)]
+    pub best: Option<crate::validation::Best>,
 }
 
 const TENSORS: &str = "tensors.safetensors";

@@ -24,6 +24,7 @@ pub struct Config {
     pub data: DataConfig,
     pub detector: DetectorConfig,
     pub budget: BudgetConfig,
+    pub validation: ValidationConfig,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -150,6 +151,33 @@ pub struct BudgetConfig {
     pub checkpoint_every: usize,
 }
 
+/// The validation-driven stop ([`crate::validation`]): every `every` rounds the current
+/// camera is scored on data training never draws (never the evaluation's held-out
+/// identities or images), the best camera so far is kept, and the run stops once `patience`
+/// validations in a row bring no better one; the parameter set written is the best one.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ValidationConfig {
+    /// Validate every this many rounds; 0 (the default) never validates, and the run ends at
+    /// its budget with its last camera.
+    pub every: usize,
+    /// COCO training images set aside for the utility score (the last of the training images
+    /// by id; never drawn for training). Used when `protector.omega > 0`.
+    pub images: usize,
+    /// The privacy bound (0..1): a camera whose validation top-1 is above it is only better
+    /// than another above it by being more private; below it, by person AP.
+    pub max_top1: f64,
+    /// Stop after this many validations in a row without a better camera; 0 runs the whole
+    /// budget (still writing the best camera).
+    pub patience: usize,
+}
+
+impl Default for ValidationConfig {
+    fn default() -> Self {
+        Self { every: 0, images: 64, max_top1: 0.02, patience: 0 }
+    }
+}
+
 impl Default for CameraConfig {
     fn default() -> Self {
         Self { knots: 32, gamma: 2.2, lr: 1e-3 }
@@ -257,7 +285,7 @@ impl Rules for Config {
     /// Every rule, first broken one reported.
     fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let finite_pos = |v: f64| v.is_finite() && v > 0.0;
-        let checks: [(bool, &str, &str); 21] = [
+        let checks: [(bool, &str, &str); 24] = [
             ((2..=1024).contains(&self.camera.knots), "camera.knots", "must be in 2..=1024"),
             (
                 self.camera.gamma.is_finite() && (0.2..=5.0).contains(&self.camera.gamma),
@@ -315,6 +343,21 @@ impl Rules for Config {
             ),
             (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
             (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
+            (
+                self.validation.every == 0 || (1..=100_000).contains(&self.validation.images),
+                "validation.images",
+                "must be in 1..=100000",
+            ),
+            (
+                self.validation.max_top1.is_finite() && (0.0..=1.0).contains(&self.validation.max_top1),
+                "validation.max_top1",
+                "must be in [0, 1]",
+            ),
+            (
+                self.validation.patience == 0 || self.validation.every > 0,
+                "validation.patience",
+                "needs validation.every > 0 (nothing is validated)",
+            ),
         ];
         first_broken(&checks)
     }

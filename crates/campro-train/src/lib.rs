@@ -28,6 +28,7 @@ pub mod scenes;
 pub mod torch_legacy;
 pub mod train;
 pub mod unet;
+pub mod validation;
 pub mod yolox;
 
 pub use candle_core::{Device, Tensor};

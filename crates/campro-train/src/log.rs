@@ -27,6 +27,14 @@ pub struct LogRow {
     pub detection_loss: f64,
     /// Top-1 of the attacker on the held-aside photos through the current camera.
     pub check_accuracy: Option<f64>,
+    /// Validation privacy ([`crate::validation`]): top-1 of the pretrained face model's
+    /// nearest class mean on the held-aside photos through the camera, at validation rounds.
+    #[serde(default)]
+    pub validation_top1: Option<f64>,
+    /// Validation utility: person AP (0..1) of the detector on the set-aside COCO training
+    /// images through the camera, at validation rounds with a utility player.
+    #[serde(default)]
+    pub validation_ap: Option<f64>,
 }
 
 /// JSON has no NaN: serde_json writes it as `null`, read back here as NaN.
@@ -34,46 +42,54 @@ pub(crate) fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Err
     Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
-const LOG_HEADER: &str = "round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy";
+const LOG_HEADER: &str = "round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy,validation_top1,validation_ap";
+/// The header of logs written before the validation columns (read, never written).
+const LOG_HEADER_7: &str = "round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy";
 
 /// The log as CSV (one line per round, a header, `NaN` where not measured, an empty
-/// `check_accuracy` where not checked).
+/// `check_accuracy`, `validation_top1` or `validation_ap` where not measured).
 pub fn log_csv(log: &[LogRow]) -> String {
+    let opt = |v: Option<f64>| v.map_or(String::new(), |c| format!("{c:.4}"));
     let mut csv = format!("{LOG_HEADER}\n");
     for r in log {
         csv += &format!(
-            "{},{:.3},{:.6},{:.4},{:.6},{:.6},{}\n",
+            "{},{:.3},{:.6},{:.4},{:.6},{:.6},{},{},{}\n",
             r.round,
             r.seconds,
             r.attacker_ce,
             r.attacker_accuracy,
             r.privacy_loss,
             r.detection_loss,
-            r.check_accuracy.map_or(String::new(), |c| format!("{c:.4}"))
+            opt(r.check_accuracy),
+            opt(r.validation_top1),
+            opt(r.validation_ap)
         );
     }
     csv
 }
 
-/// Reads a log written by [`log_csv`]; the error names the line and the field.
+/// Reads a log written by [`log_csv`] (or before the validation columns, with seven);
+/// the error names the line and the field.
 pub fn parse_log_csv(text: &str) -> Result<Vec<LogRow>> {
     let err = |line: usize, rule: String| TrainError::Log { line, rule };
     let mut lines = text.lines().enumerate();
-    match lines.next() {
-        Some((_, h)) if h.trim() == LOG_HEADER => {}
+    let fields = match lines.next() {
+        Some((_, h)) if h.trim() == LOG_HEADER => 9,
+        Some((_, h)) if h.trim() == LOG_HEADER_7 => 7,
         _ => return Err(err(1, format!("expected the header {LOG_HEADER}"))),
-    }
+    };
     lines
         .filter(|(_, l)| !l.trim().is_empty())
         .map(|(i, line)| {
             let f: Vec<&str> = line.split(',').map(str::trim).collect();
-            if f.len() != 7 {
-                return Err(err(i + 1, format!("{} fields, expected 7", f.len())));
+            if f.len() != fields {
+                return Err(err(i + 1, format!("{} fields, expected {fields}", f.len())));
             }
             let num = |k: usize| {
                 f[k].parse::<f64>()
                     .map_err(|e| err(i + 1, format!("{}: {e}", LOG_HEADER.split(',').nth(k).unwrap_or("?"))))
             };
+            let opt = |k: usize| if f.get(k).is_none_or(|v| v.is_empty()) { Ok(None) } else { num(k).map(Some) };
             Ok(LogRow {
                 round: f[0].parse().map_err(|e| err(i + 1, format!("round: {e}")))?,
                 seconds: num(1)?,
@@ -81,7 +97,9 @@ pub fn parse_log_csv(text: &str) -> Result<Vec<LogRow>> {
                 attacker_accuracy: num(3)?,
                 privacy_loss: num(4)?,
                 detection_loss: num(5)?,
-                check_accuracy: if f[6].is_empty() { None } else { Some(num(6)?) },
+                check_accuracy: opt(6)?,
+                validation_top1: opt(7)?,
+                validation_ap: opt(8)?,
             })
         })
         .collect()
@@ -109,12 +127,14 @@ pub fn plot_log(log: &[LogRow]) -> (String, String) {
         None,
     );
     let acc = chart(
-        "campro train: attacker accuracy",
+        "campro train: attacker accuracy and validation",
         "round",
-        "top-1",
+        "top-1, AP",
         &[
             series("last batch", &|r| Some(r.attacker_accuracy)),
             series("held-aside, through camera", &|r| r.check_accuracy),
+            series("validation top-1 (pretrained model)", &|r| r.validation_top1),
+            series("validation person AP", &|r| r.validation_ap),
         ],
         Style::Lines,
         None,
@@ -138,6 +158,8 @@ mod tests {
                 privacy_loss: f64::NAN,
                 detection_loss: f64::NAN,
                 check_accuracy: Some(0.875),
+                validation_top1: Some(0.0625),
+                validation_ap: Some(0.25),
             },
             LogRow {
                 round: 1,
@@ -147,13 +169,20 @@ mod tests {
                 privacy_loss: 0.5,
                 detection_loss: 4.0,
                 check_accuracy: None,
+                validation_top1: None,
+                validation_ap: None,
             },
         ];
         let csv = log_csv(&rows);
-        assert_eq!(csv.lines().nth(1), Some("0,1.500,2.250000,0.5000,NaN,NaN,0.8750"));
+        assert_eq!(csv.lines().nth(1), Some("0,1.500,2.250000,0.5000,NaN,NaN,0.8750,0.0625,0.2500"));
+        assert_eq!(csv.lines().nth(2), Some("1,7.125,3.000000,0.2500,0.500000,4.000000,,,"));
         let back = parse_log_csv(&csv).unwrap();
         assert_eq!(back[1], rows[1]);
         assert!(back[0].privacy_loss.is_nan() && back[0].check_accuracy == Some(0.875));
+        assert_eq!((back[0].validation_top1, back[0].validation_ap), (Some(0.0625), Some(0.25)));
+        // A log from before the validation columns still reads, without them.
+        let old = parse_log_csv(&format!("{LOG_HEADER_7}\n3,1.0,2.0,0.5,0.1,NaN,0.25\n")).unwrap();
+        assert_eq!((old[0].round, old[0].check_accuracy, old[0].validation_top1), (3, Some(0.25), None));
         let bad = csv.replace("7.125", "x");
         assert!(
             parse_log_csv(&bad).unwrap_err().to_string().starts_with("line 3: seconds"),

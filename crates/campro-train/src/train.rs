@@ -19,6 +19,7 @@ use candle_core::{DType, Device, Tensor, Var, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW, SGD};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
+use std::collections::HashMap;
 
 /// Where checkpoints go, and which one to resume from.
 #[derive(Debug, Clone, Default)]
@@ -242,6 +243,23 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         None
     };
     let teacher = if utility.is_some() { crate::detection::teacher(&cfg.detector, &dev)? } else { None };
+    // The validation-driven stop (`crate::validation`): the last `validation.images` training
+    // people are set aside from the draw, and the pretrained face model scores privacy.
+    let v = &cfg.validation;
+    let people = utility.as_ref().map_or(0, |(set, _)| set.len());
+    let set_aside = if v.every > 0 && utility.is_some() {
+        if v.images >= people {
+            return Err(TrainError::Unsupported(format!(
+                "validation.images: {} of the {people} person training images would leave none to train on",
+                v.images
+            )));
+        }
+        v.images
+    } else {
+        0
+    };
+    let pretrained =
+        if v.every > 0 { Some(MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?.0) } else { None };
     let embed = |x: &Tensor, train_bn: bool| -> candle_core::Result<Tensor> {
         l2_normalise(&net.forward_t(&normalise_unit(x)?, train_bn)?)
     };
@@ -305,6 +323,19 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         v
     };
     let (mut first_round, mut log, mut earlier_seconds) = (1, Vec::new(), 0.0);
+    // The best validated camera (and detector) so far, by name without the `best.` prefix.
+    let best_names = || -> Vec<String> {
+        named().into_iter().map(|(k, _)| k).filter(|k| k.starts_with("camera.") || k.starts_with("detector.")).collect()
+    };
+    let snapshot = || -> candle_core::Result<HashMap<String, Tensor>> {
+        named()
+            .into_iter()
+            .filter(|(k, _)| k.starts_with("camera.") || k.starts_with("detector."))
+            .map(|(k, v)| Ok((k, v.as_tensor().copy()?)))
+            .collect()
+    };
+    let mut best: Option<crate::validation::Best> = None;
+    let mut best_tensors: Option<HashMap<String, Tensor>> = None;
     if let Some(dir) = &opts.resume {
         let (tensors, state) = crate::checkpoint::load::<crate::checkpoint::State>(dir, &dev)?;
         if state.classes != faces.classes || state.seed != cfg.seed {
@@ -322,15 +353,47 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         first_round = state.round + 1;
         earlier_seconds = state.log.last().map_or(0.0, |r| r.seconds);
         log = state.log;
+        best = state.best;
+        if best.is_some() {
+            best_tensors = Some(
+                best_names()
+                    .into_iter()
+                    .map(|name| {
+                        let t = tensors.get(&format!("best.{name}")).ok_or_else(|| {
+                            TrainError::Unsupported(format!(
+                                "{}: best.{name} missing from the checkpoint",
+                                dir.display()
+                            ))
+                        })?;
+                        Ok((name, t.clone()))
+                    })
+                    .collect::<Result<_, TrainError>>()?,
+            );
+        }
     }
     let seconds = || earlier_seconds + start.elapsed().as_secs_f64();
-    let save = |round: usize, log: &[LogRow]| -> Result<(), TrainError> {
+    // The best validated camera travels in the same tensor file, as `best.NAME`.
+    let save = |round: usize,
+                log: &[LogRow],
+                best: &Option<crate::validation::Best>,
+                best_tensors: &Option<HashMap<String, Tensor>>|
+     -> Result<(), TrainError> {
         let Some(dir) = &opts.checkpoints else { return Ok(()) };
-        let tensors = named().into_iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
+        let mut tensors: HashMap<String, Tensor> =
+            named().into_iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
+        if let Some(b) = best_tensors {
+            tensors.extend(b.iter().map(|(k, t)| (format!("best.{k}"), t.clone())));
+        }
         crate::checkpoint::save(
             dir,
             &tensors,
-            &crate::checkpoint::State { round, seed: cfg.seed, classes: faces.classes.clone(), log: log.to_vec() },
+            &crate::checkpoint::State {
+                round,
+                seed: cfg.seed,
+                classes: faces.classes.clone(),
+                log: log.to_vec(),
+                best: *best,
+            },
         )?;
         Ok(())
     };
@@ -350,8 +413,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         }
         _ => None,
     };
-    let (mut person_order, all_people): (Vec<usize>, Vec<usize>) =
-        (Vec::new(), (0..utility.as_ref().map_or(0, |(set, _)| set.len())).collect());
+    let (mut person_order, all_people): (Vec<usize>, Vec<usize>) = (Vec::new(), (0..people - set_aside).collect());
     // Reseeded from the round on resume (see `checkpoint`).
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ ((first_round as u64 - 1) << 32));
     let mut order: Vec<usize> = Vec::new();
@@ -364,6 +426,35 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             hits += accuracy(&head.logits(&embed(&x, false)?, None)?, &y)? * chunk.len() as f64;
         }
         Ok(hits / check.len().max(1) as f64)
+    };
+    // One validation of the current camera (and detector): see `crate::validation`.
+    let validate = || -> Result<crate::validation::Scores, TrainError> {
+        let net = pretrained.as_ref().expect("validating loads the pretrained model");
+        let (mut emb, mut labels) = (Vec::new(), Vec::new());
+        for chunk in check.chunks(64) {
+            let (x, _) = faces.batch(chunk, &dev)?;
+            let e: Vec<Vec<f32>> = net.forward_t(&normalise_unit(&cam.forward(&x)?.detach())?, false)?.to_vec2()?;
+            emb.extend(e);
+            labels.extend(chunk.iter().map(|&i| faces.labels[i]));
+        }
+        let means: Vec<Vec<f32>> = means.to_vec2()?;
+        let top1 = crate::validation::nearest_top1(&emb, &labels, &means);
+        let ap = match &utility {
+            Some((set, det)) if set_aside > 0 => {
+                let (mut heads, mut boxes) = (Vec::new(), Vec::new());
+                let idx: Vec<usize> = (people - set_aside..people).collect();
+                for chunk in idx.chunks(cfg.detector.batch) {
+                    let pb = set.batch(chunk, &dev)?;
+                    let out = cam.forward(&pb.x)?.detach();
+                    let head = det.forward(&crate::persons::detector_input(&out, &pb.mask)?)?.detach();
+                    heads.extend(head.flatten_from(1)?.to_vec2::<f32>()?);
+                    boxes.extend(pb.boxes);
+                }
+                Some(crate::validation::person_ap(&heads, cfg.detector.size, &boxes)?)
+            }
+            _ => None,
+        };
+        Ok(crate::validation::Scores { top1, ap })
     };
     let attacker_step =
         |x: &Tensor, y: &Tensor, sgd: &mut SGD, sgd_backbone: &mut SGD| -> Result<(f64, f64), TrainError> {
@@ -387,6 +478,17 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         }
     }
     // Round 0, or the resumed camera's check (logged only when the checkpoint had no log).
+    // A fresh run validates the camera it starts from, so a run that never improves on it
+    // keeps it.
+    let first = if v.every > 0 && first_round == 1 {
+        let s = validate()?;
+        if crate::validation::offer(&mut best, 0, s, v.max_top1) {
+            best_tensors = Some(snapshot()?);
+        }
+        Some(s)
+    } else {
+        None
+    };
     let row = LogRow {
         round: first_round - 1,
         seconds: seconds(),
@@ -395,12 +497,15 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         privacy_loss: f64::NAN,
         detection_loss: f64::NAN,
         check_accuracy: Some(check_accuracy(first_round > 1)?),
+        validation_top1: first.map(|s| s.top1),
+        validation_ap: first.and_then(|s| s.ap),
     };
     on_row(&row);
     if log.is_empty() {
         log.push(row);
     }
     let m = if cfg.protector.protector_only { 0 } else { cfg.attacker.steps_per_round };
+    let mut stopped_early = false;
     for round in first_round..=cfg.budget.rounds {
         for _ in 0..m {
             let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
@@ -434,7 +539,18 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             }
             cam.project()?;
         }
-        let last = round == cfg.budget.rounds || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
+        let spent = round == cfg.budget.rounds || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
+        let validated = if v.every > 0 && (round % v.every == 0 || spent) {
+            let s = validate()?;
+            if crate::validation::offer(&mut best, round, s, v.max_top1) {
+                best_tensors = Some(snapshot()?);
+            }
+            Some(s)
+        } else {
+            None
+        };
+        stopped_early = !spent && crate::validation::should_stop(&best, v.patience);
+        let last = spent || stopped_early;
         let checkpoint = round % cfg.budget.checkpoint_every == 0 || last;
         let check_acc = if checkpoint { Some(check_accuracy(true)?) } else { None };
         let row = LogRow {
@@ -445,16 +561,38 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             privacy_loss: lns,
             detection_loss: ldet,
             check_accuracy: check_acc,
+            validation_top1: validated.map(|s| s.top1),
+            validation_ap: validated.and_then(|s| s.ap),
         };
         on_row(&row);
         log.push(row);
         if checkpoint {
-            save(round, &log)?;
+            save(round, &log, &best, &best_tensors)?;
         }
         if last {
             break;
         }
     }
+    // The parameter set (and detector) written is the best validated one.
+    if let Some(b) = &best_tensors {
+        for (name, var) in named() {
+            if let Some(t) = b.get(&name) {
+                var.set(t)?;
+            }
+        }
+    }
+    let validation = (v.every > 0).then(|| {
+        serde_json::json!({
+            "rule": format!(
+                "every {} rounds: the pretrained model's nearest-class-mean top-1 on the held-aside photos of training identities, and person AP on the last {} COCO training images (set aside); the best camera is the most useful within top-1 <= {}, else the most private; stop after {} validations without a better one (0: never)",
+                v.every, set_aside, v.max_top1, v.patience
+            ),
+            "best_round": best.map(|b| b.round),
+            "best": best.map(|b| b.scores),
+            "stopped_early": stopped_early,
+            "person_images_set_aside": set_aside,
+        })
+    });
     let prov = serde_json::json!({
         "optimiser": "campro-train",
         "config": cfg,
@@ -465,6 +603,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         "rounds": log.last().map_or(0, |r| r.round),
         "final": log.last(),
         "seconds": seconds(),
+        "validation": validation,
     });
     let serde_json::Value::Object(provenance) = prov else { unreachable!("a JSON object") };
     Ok(Outcome {

@@ -48,6 +48,10 @@ fn bad_values_name_the_key() {
     assert_eq!(rule("[detector]\nadapter = 100000").0, "detector.adapter");
     assert_eq!(rule("[detector]\nadapter = 16\nadapter_lr = -1e-3").0, "detector.adapter_lr");
     assert_eq!(rule("[detector]\nadapter_fit = 10").0, "detector.adapter_fit");
+    assert_eq!(rule("[validation]\npatience = 3").0, "validation.patience");
+    assert_eq!(rule("[validation]\nevery = 25\nimages = 0").0, "validation.images");
+    assert_eq!(rule("[validation]\nmax_top1 = 1.5").0, "validation.max_top1");
+    assert!(Config::parse("[validation]\nevery = 25\npatience = 4\nmax_top1 = 0.01", "c.toml").is_ok());
 }
 
 #[test]
@@ -72,12 +76,15 @@ fn shipped_configs_parse() {
     let mut omegas = Vec::new();
     for e in std::fs::read_dir(dir).unwrap() {
         let path = e.unwrap().path();
-        if path.file_stem().is_some_and(|s| s.to_string_lossy().starts_with("enhancer")) {
-            // `campro train-enhancer`'s, with its own keys; the name says the loss.
+        let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
+        if stem.starts_with("enhancer") || stem == "restorer" {
+            // `campro train-enhancer`'s, with its own keys; the name says the loss, and
+            // whether faces are restored (the attacker's network) or held to the input.
             let c: campro_train::config::EnhancerConfig = campro_train::config::load(&path).unwrap();
             assert_eq!((c.model.widths, c.model.restorer), (vec![8, 16, 32, 64], true));
-            let l2 = path.file_stem().is_some_and(|s| s == "enhancer-l2");
-            assert_eq!(c.loss == campro_train::config::PixelLoss::L2, l2, "{}", path.display());
+            assert_eq!(c.loss == campro_train::config::PixelLoss::L2, stem == "enhancer-l2", "{stem}");
+            let restore = c.data.faces == campro_train::config::FaceTarget::Restore;
+            assert_eq!(restore, stem == "restorer", "{stem}");
             continue;
         }
         let c = Config::load(&path).unwrap();
@@ -93,8 +100,10 @@ fn shipped_configs_parse() {
         if name.starts_with("finetune") {
             continue; // read for its seed and [detector] only
         }
+        // Only the validated run stops on validation.
+        assert_eq!(c.validation.every > 0, name.ends_with("validated"), "{name}");
         omegas.push(c.protector.omega);
     }
     omegas.sort_by(f64::total_cmp);
-    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
+    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
 }

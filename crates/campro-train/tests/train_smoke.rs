@@ -221,3 +221,103 @@ fn attacker_and_protector_alternate_and_the_attacker_loses_ground() {
     assert!(last > 10.0 * first.max(1e-4), "attacker CE {first} -> {last}");
     assert!(rows[8].privacy_loss < rows[1].privacy_loss);
 }
+
+/// The validation-driven stop on tiny data (privacy player only, so privacy alone ranks
+/// cameras): validated every 2 rounds, patience 3. The camera kept is the first with the
+/// lowest validation top-1 in the log, the run stops at the third validation after it that
+/// is no better, and the parameters written are the kept camera's, not the last one's.
+#[test]
+fn the_run_keeps_its_best_validated_camera_and_stops_when_none_is_better() {
+    let cache = tempfile::tempdir().unwrap();
+    let Some(mut c) = tiny(cache.path()) else { return };
+    c.seed = 1;
+    c.camera.lr = 0.1;
+    c.attacker.pretrain_steps = 3;
+    c.protector.protector_only = true;
+    c.budget.rounds = 100;
+    c.budget.checkpoint_every = 1000;
+    c.validation.every = 2;
+    c.validation.patience = 3;
+    let ckpts = cache.path().join("ckpt");
+    let opts = campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None, init: None };
+    let out = campro_train::train::run(&c, &opts, |_| {}).unwrap();
+    let validated: Vec<(usize, f64)> = out.log.iter().filter_map(|r| r.validation_top1.map(|t| (r.round, t))).collect();
+    // Rounds 0, 2, 4, ...: every validation is in the log, none with an AP (ω = 0).
+    assert!(validated.iter().enumerate().all(|(i, &(r, _))| r == 2 * i), "{validated:?}");
+    assert!(out.log.iter().all(|r| r.validation_ap.is_none()));
+    let min = validated.iter().map(|v| v.1).fold(f64::INFINITY, f64::min);
+    let best_round = validated.iter().find(|v| v.1 == min).unwrap().0;
+    let v = &out.provenance["validation"];
+    assert_eq!(v["best_round"], best_round, "{validated:?}");
+    assert!(min < validated[0].1, "the camera became more private: {validated:?}");
+    // Patience 3: the run ended at the third validation after the best one.
+    let last = out.log.last().unwrap().round;
+    assert_eq!(v["stopped_early"], true, "{validated:?}");
+    assert_eq!(last, best_round + 6, "{validated:?}");
+    // The written camera is the best one, which the checkpoint holds as best.*, beside the
+    // last camera (which differs: the camera moved for six more rounds).
+    let (t, state) =
+        campro_train::checkpoint::load::<campro_train::checkpoint::State>(&ckpts, &campro_train::Device::Cpu).unwrap();
+    assert_eq!(state.round, last);
+    assert_eq!(state.best.map(|b| (b.round, b.stale)), Some((best_round, 3)));
+    let flat = |name: &str| -> Vec<f64> {
+        t[name].flatten_all().unwrap().to_dtype(candle_core::DType::F64).unwrap().to_vec1().unwrap()
+    };
+    let written: Vec<f64> = out.ccm.iter().flatten().copied().collect();
+    let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6);
+    assert!(close(&written, &flat("best.camera.ccm")), "{written:?}");
+    assert!(close(&out.curve, &flat("best.camera.curve")));
+    assert!(!close(&written, &flat("camera.ccm")) || !close(&out.curve, &flat("camera.curve")));
+    // A resumed run reads the best camera back and keeps it unless a later one is better.
+    c.validation.patience = 0;
+    c.budget.rounds = last + 2;
+    let resumed = campro_train::train::run(
+        &c,
+        &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts), init: None },
+        |_| {},
+    )
+    .unwrap();
+    let r = &resumed.provenance["validation"];
+    let after = resumed.log.last().unwrap().validation_top1.unwrap();
+    if after < min {
+        assert_eq!(r["best_round"], last + 2);
+    } else {
+        assert_eq!(r["best_round"], best_round);
+        assert!(close(&resumed.ccm.iter().flatten().copied().collect::<Vec<_>>(), &written));
+    }
+    assert_eq!(r["stopped_early"], false);
+}
+
+/// With a utility player, validation also scores person AP on training images set aside
+/// from the draw: the last `validation.images` of them; asking for all of them is refused
+/// with the key named.
+#[test]
+fn validation_sets_person_images_aside_and_scores_their_ap() {
+    let cache = tempfile::tempdir().unwrap();
+    let Some(mut c) = tiny(cache.path()) else { return };
+    let Some(coco) = shared::shared("data/coco-person/instances_person.json") else { return };
+    c.detector.model = c.data.models.join("yolox_nano.onnx");
+    c.detector.data = coco.parent().unwrap().to_path_buf();
+    c.detector.size = 128;
+    c.detector.batch = 2;
+    c.detector.max_images = Some(4);
+    c.protector.omega = 1.0;
+    c.attacker.pretrain_steps = 2;
+    c.budget.rounds = 4;
+    c.validation.every = 2;
+    c.validation.images = 2;
+    let out = campro_train::train::run(&c, &Default::default(), |_| {}).unwrap();
+    let aps: Vec<(usize, f64)> = out.log.iter().filter_map(|r| r.validation_ap.map(|a| (r.round, a))).collect();
+    assert_eq!(aps.iter().map(|a| a.0).collect::<Vec<_>>(), [0, 2, 4]);
+    assert!(aps.iter().all(|a| (0.0..=1.0).contains(&a.1)), "{aps:?}");
+    // YOLOX-Nano finds people at 128 px on the unprotected start: its AP is not nil.
+    assert!(aps[0].1 > 0.0, "{aps:?}");
+    let v = &out.provenance["validation"];
+    assert_eq!(
+        (v["person_images_set_aside"].as_u64(), out.provenance["data"]["person_images"].as_u64()),
+        (Some(2), Some(4))
+    );
+    c.validation.images = 4;
+    let err = campro_train::train::run(&c, &Default::default(), |_| {}).err().unwrap().to_string();
+    assert!(err.contains("validation.images") && err.contains("none to train on"), "{err}");
+}

@@ -323,16 +323,12 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         v
     };
     let (mut first_round, mut log, mut earlier_seconds) = (1, Vec::new(), 0.0);
-    // The best validated camera (and detector) so far, by name without the `best.` prefix.
-    let best_names = || -> Vec<String> {
-        named().into_iter().map(|(k, _)| k).filter(|k| k.starts_with("camera.") || k.starts_with("detector.")).collect()
-    };
+    // The best validated camera (and detector) so far, by name without the `best.` prefix:
+    // what a parameter set and its detector are written from.
+    let kept = || named().into_iter().filter(|(k, _)| k.starts_with("camera.") || k.starts_with("detector."));
+    let best_names = || -> Vec<String> { kept().map(|(k, _)| k).collect() };
     let snapshot = || -> candle_core::Result<HashMap<String, Tensor>> {
-        named()
-            .into_iter()
-            .filter(|(k, _)| k.starts_with("camera.") || k.starts_with("detector."))
-            .map(|(k, v)| Ok((k, v.as_tensor().copy()?)))
-            .collect()
+        kept().map(|(k, v)| Ok((k, v.as_tensor().copy()?))).collect()
     };
     let mut best: Option<crate::validation::Best> = None;
     let mut best_tensors: Option<HashMap<String, Tensor>> = None;

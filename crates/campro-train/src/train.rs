@@ -349,7 +349,8 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         first_round = state.round + 1;
         earlier_seconds = state.log.last().map_or(0.0, |r| r.seconds);
         log = state.log;
-        best = state.best;
+        // A resume without validation continues to its budget and writes its last camera.
+        best = state.best.filter(|_| v.every > 0);
         if best.is_some() {
             best_tensors = Some(
                 best_names()

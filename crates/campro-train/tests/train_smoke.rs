@@ -23,14 +23,36 @@ fn tiny(cache: &Path) -> Option<Config> {
     Some(c)
 }
 
+/// `tiny` with the privacy player alone (the paper's protector-only ablation), seed 1, the
+/// camera at Adam `lr`.
+fn protector_only(cache: &Path, lr: f64) -> Option<Config> {
+    let mut c = tiny(cache)?;
+    c.seed = 1;
+    c.camera.lr = lr;
+    c.attacker.pretrain_steps = 3;
+    c.protector.protector_only = true;
+    Some(c)
+}
+
+/// `tiny` with the utility player: ω = 1, YOLOX-Nano at 128 px on the first `images` COCO
+/// person training images, two a step; None (skipped) without ../shared.
+fn with_people(cache: &Path, images: usize) -> Option<Config> {
+    let mut c = tiny(cache)?;
+    let coco = shared::shared("data/coco-person/instances_person.json")?;
+    c.detector.model = c.data.models.join("yolox_nano.onnx");
+    c.detector.data = coco.parent().unwrap().to_path_buf();
+    c.detector.size = 128;
+    c.detector.batch = 2;
+    c.detector.max_images = Some(images);
+    c.protector.omega = 1.0;
+    c.attacker.pretrain_steps = 2;
+    Some(c)
+}
+
 #[test]
 fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     let cache = tempfile::tempdir().unwrap();
-    let Some(mut c) = tiny(cache.path()) else { return };
-    c.seed = 1;
-    c.camera.lr = 0.05;
-    c.attacker.pretrain_steps = 3;
-    c.protector.protector_only = true;
+    let Some(mut c) = protector_only(cache.path(), 0.05) else { return };
     c.budget.rounds = 10;
     c.budget.checkpoint_every = 10;
     let ckpts = cache.path().join("ckpt");
@@ -115,16 +137,8 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
 #[test]
 fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     let cache = tempfile::tempdir().unwrap();
-    let Some(mut c) = tiny(cache.path()) else { return };
-    let Some(coco) = shared::shared("data/coco-person/instances_person.json") else { return };
-    c.detector.model = c.data.models.join("yolox_nano.onnx");
-    c.detector.data = coco.parent().unwrap().to_path_buf();
-    c.detector.size = 128;
-    c.detector.batch = 2;
-    c.detector.max_images = Some(2);
+    let Some(mut c) = with_people(cache.path(), 2) else { return };
     c.detector.lr = 1e-3;
-    c.protector.omega = 1.0;
-    c.attacker.pretrain_steps = 2;
     c.budget.rounds = 8;
     c.budget.checkpoint_every = 8;
     let ckpts = cache.path().join("ckpt");
@@ -229,11 +243,7 @@ fn attacker_and_protector_alternate_and_the_attacker_loses_ground() {
 #[test]
 fn the_run_keeps_its_best_validated_camera_and_stops_when_none_is_better() {
     let cache = tempfile::tempdir().unwrap();
-    let Some(mut c) = tiny(cache.path()) else { return };
-    c.seed = 1;
-    c.camera.lr = 0.1;
-    c.attacker.pretrain_steps = 3;
-    c.protector.protector_only = true;
+    let Some(mut c) = protector_only(cache.path(), 0.1) else { return };
     c.budget.rounds = 100;
     c.budget.checkpoint_every = 1000;
     c.validation.every = 2;
@@ -294,15 +304,7 @@ fn the_run_keeps_its_best_validated_camera_and_stops_when_none_is_better() {
 #[test]
 fn validation_sets_person_images_aside_and_scores_their_ap() {
     let cache = tempfile::tempdir().unwrap();
-    let Some(mut c) = tiny(cache.path()) else { return };
-    let Some(coco) = shared::shared("data/coco-person/instances_person.json") else { return };
-    c.detector.model = c.data.models.join("yolox_nano.onnx");
-    c.detector.data = coco.parent().unwrap().to_path_buf();
-    c.detector.size = 128;
-    c.detector.batch = 2;
-    c.detector.max_images = Some(4);
-    c.protector.omega = 1.0;
-    c.attacker.pretrain_steps = 2;
+    let Some(mut c) = with_people(cache.path(), 4) else { return };
     c.budget.rounds = 4;
     c.validation.every = 2;
     c.validation.images = 2;

@@ -724,7 +724,9 @@ fn train_writes_params_and_detector_that_eval_reads() {
     campro().arg("validate").arg(&p).assert().success();
     let log = std::fs::read_to_string(dir.path().join("log.csv")).unwrap();
     assert!(
-        log.starts_with("round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy\n")
+        log.starts_with(
+            "round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy,validation_top1,validation_ap\n"
+        )
             && log.lines().count() == 4,
         "{log}"
     );

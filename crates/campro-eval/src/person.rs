@@ -53,6 +53,26 @@ pub fn decode_yolox(
     Ok(out)
 }
 
+/// What a person detector reports from one YOLOX head on a `width` x `height` input:
+/// [`decode_yolox`], then greedy NMS at `nms_iou`, at most `max` detections, best first, in
+/// input pixels. `PersonDetector::detect` and the optimiser's validation share it.
+#[allow(clippy::too_many_arguments)]
+pub fn detections(
+    head: &[f32],
+    width: usize,
+    height: usize,
+    strides: &[usize],
+    class: usize,
+    threshold: f32,
+    nms_iou: f32,
+    max: usize,
+) -> Result<Vec<Detection>> {
+    let dets = decode_yolox(head, width, height, strides, class, threshold)?;
+    let boxes: Vec<[f32; 4]> = dets.iter().map(|d| d.bbox).collect();
+    let scores: Vec<f32> = dets.iter().map(|d| d.score).collect();
+    Ok(nms(&boxes, &scores, nms_iou).into_iter().take(max).map(|i| dets[i]).collect())
+}
+
 /// A person detector (manifest task `person_detector`).
 pub struct PersonDetector {
     model: Model,
@@ -77,22 +97,20 @@ impl PersonDetector {
         let scale = (iw as f64 / img.width() as f64).min(ih as f64 / img.height() as f64);
         let canvas = letterbox(img, iw as u32, ih as u32, scale, *pad_value);
         let out = self.model.run(&canvas)?;
-        let dets = decode_yolox(out.any(output)?, iw, ih, strides, *class_index, *score_threshold)?;
-        let boxes: Vec<[f32; 4]> = dets.iter().map(|d| d.bbox).collect();
-        let scores: Vec<f32> = dets.iter().map(|d| d.score).collect();
+        let dets =
+            detections(out.any(output)?, iw, ih, strides, *class_index, *score_threshold, *nms_iou, *max_detections)?;
         let (w, h, inv) = (img.width() as f32, img.height() as f32, (1.0 / scale) as f32);
-        Ok(nms(&boxes, &scores, *nms_iou)
+        Ok(dets
             .into_iter()
-            .take(*max_detections)
-            .map(|i| {
-                let b = dets[i].bbox;
+            .map(|d| {
+                let b = d.bbox;
                 let bbox = [
                     (b[0] * inv).clamp(0.0, w),
                     (b[1] * inv).clamp(0.0, h),
                     (b[2] * inv).clamp(0.0, w),
                     (b[3] * inv).clamp(0.0, h),
                 ];
-                Detection { bbox, score: dets[i].score }
+                Detection { bbox, score: d.score }
             })
             .collect())
     }

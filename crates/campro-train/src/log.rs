@@ -42,15 +42,24 @@ pub(crate) fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Err
     Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
-const LOG_HEADER: &str = "round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy,validation_top1,validation_ap";
-/// The header of logs written before the validation columns (read, never written).
-const LOG_HEADER_7: &str = "round,seconds,attacker_ce,attacker_accuracy,privacy_loss,detection_loss,check_accuracy";
+/// The CSV columns; logs written before the validation columns have the first seven.
+const LOG_FIELDS: [&str; 9] = [
+    "round",
+    "seconds",
+    "attacker_ce",
+    "attacker_accuracy",
+    "privacy_loss",
+    "detection_loss",
+    "check_accuracy",
+    "validation_top1",
+    "validation_ap",
+];
 
 /// The log as CSV (one line per round, a header, `NaN` where not measured, an empty
 /// `check_accuracy`, `validation_top1` or `validation_ap` where not measured).
 pub fn log_csv(log: &[LogRow]) -> String {
     let opt = |v: Option<f64>| v.map_or(String::new(), |c| format!("{c:.4}"));
-    let mut csv = format!("{LOG_HEADER}\n");
+    let mut csv = format!("{}\n", LOG_FIELDS.join(","));
     for r in log {
         csv += &format!(
             "{},{:.3},{:.6},{:.4},{:.6},{:.6},{},{},{}\n",
@@ -73,10 +82,10 @@ pub fn log_csv(log: &[LogRow]) -> String {
 pub fn parse_log_csv(text: &str) -> Result<Vec<LogRow>> {
     let err = |line: usize, rule: String| TrainError::Log { line, rule };
     let mut lines = text.lines().enumerate();
-    let fields = match lines.next() {
-        Some((_, h)) if h.trim() == LOG_HEADER => 9,
-        Some((_, h)) if h.trim() == LOG_HEADER_7 => 7,
-        _ => return Err(err(1, format!("expected the header {LOG_HEADER}"))),
+    let fields = match lines.next().map(|(_, h)| h.trim()) {
+        Some(h) if h == LOG_FIELDS.join(",") => 9,
+        Some(h) if h == LOG_FIELDS[..7].join(",") => 7,
+        _ => return Err(err(1, format!("expected the header {}", LOG_FIELDS.join(",")))),
     };
     lines
         .filter(|(_, l)| !l.trim().is_empty())
@@ -85,10 +94,7 @@ pub fn parse_log_csv(text: &str) -> Result<Vec<LogRow>> {
             if f.len() != fields {
                 return Err(err(i + 1, format!("{} fields, expected {fields}", f.len())));
             }
-            let num = |k: usize| {
-                f[k].parse::<f64>()
-                    .map_err(|e| err(i + 1, format!("{}: {e}", LOG_HEADER.split(',').nth(k).unwrap_or("?"))))
-            };
+            let num = |k: usize| f[k].parse::<f64>().map_err(|e| err(i + 1, format!("{}: {e}", LOG_FIELDS[k])));
             let opt = |k: usize| if f.get(k).is_none_or(|v| v.is_empty()) { Ok(None) } else { num(k).map(Some) };
             Ok(LogRow {
                 round: f[0].parse().map_err(|e| err(i + 1, format!("round: {e}")))?,
@@ -181,7 +187,7 @@ mod tests {
         assert!(back[0].privacy_loss.is_nan() && back[0].check_accuracy == Some(0.875));
         assert_eq!((back[0].validation_top1, back[0].validation_ap), (Some(0.0625), Some(0.25)));
         // A log from before the validation columns still reads, without them.
-        let old = parse_log_csv(&format!("{LOG_HEADER_7}\n3,1.0,2.0,0.5,0.1,NaN,0.25\n")).unwrap();
+        let old = parse_log_csv(&format!("{}\n3,1.0,2.0,0.5,0.1,NaN,0.25\n", LOG_FIELDS[..7].join(","))).unwrap();
         assert_eq!((old[0].round, old[0].check_accuracy, old[0].validation_top1), (3, Some(0.25), None));
         let bad = csv.replace("7.125", "x");
         assert!(
@@ -190,6 +196,9 @@ mod tests {
             parse_log_csv(&bad).unwrap_err()
         );
         assert!(parse_log_csv("round,seconds\n").unwrap_err().to_string().contains("line 1: expected the header"));
-        assert!(parse_log_csv(&format!("{LOG_HEADER}\n1,2\n")).unwrap_err().to_string().contains("line 2: 2 fields"));
+        assert!(parse_log_csv(&format!("{}\n1,2\n", LOG_FIELDS.join(",")))
+            .unwrap_err()
+            .to_string()
+            .contains("line 2: 2 fields"));
     }
 }

@@ -424,6 +424,8 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         }
         Ok(hits / check.len().max(1) as f64)
     };
+    // The raw class means as rows, for the validation's nearest classifier (once).
+    let mean_rows: Vec<Vec<f32>> = if v.every > 0 { means.to_vec2()? } else { Vec::new() };
     // One validation of the current camera (and detector): see `crate::validation`.
     let validate = || -> Result<crate::validation::Scores, TrainError> {
         let net = pretrained.as_ref().expect("validating loads the pretrained model");
@@ -434,8 +436,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             emb.extend(e);
             labels.extend(chunk.iter().map(|&i| faces.labels[i]));
         }
-        let means: Vec<Vec<f32>> = means.to_vec2()?;
-        let top1 = crate::validation::nearest_top1(&emb, &labels, &means);
+        let top1 = crate::validation::nearest_top1(&emb, &labels, &mean_rows);
         let ap = match &utility {
             Some((set, det)) if set_aside > 0 => {
                 let (mut heads, mut boxes) = (Vec::new(), Vec::new());
@@ -452,6 +453,17 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             _ => None,
         };
         Ok(crate::validation::Scores { top1, ap })
+    };
+    // Validates the camera of `round` and keeps it (and the detector) if it is the new best.
+    let judge = |round: usize,
+                 best: &mut Option<crate::validation::Best>,
+                 best_tensors: &mut Option<HashMap<String, Tensor>>|
+     -> Result<crate::validation::Scores, TrainError> {
+        let s = validate()?;
+        if crate::validation::offer(best, round, s, v.max_top1) {
+            *best_tensors = Some(snapshot()?);
+        }
+        Ok(s)
     };
     let attacker_step =
         |x: &Tensor, y: &Tensor, sgd: &mut SGD, sgd_backbone: &mut SGD| -> Result<(f64, f64), TrainError> {
@@ -477,15 +489,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     // Round 0, or the resumed camera's check (logged only when the checkpoint had no log).
     // A fresh run validates the camera it starts from, so a run that never improves on it
     // keeps it.
-    let first = if v.every > 0 && first_round == 1 {
-        let s = validate()?;
-        if crate::validation::offer(&mut best, 0, s, v.max_top1) {
-            best_tensors = Some(snapshot()?);
-        }
-        Some(s)
-    } else {
-        None
-    };
+    let first = if v.every > 0 && first_round == 1 { Some(judge(0, &mut best, &mut best_tensors)?) } else { None };
     let row = LogRow {
         round: first_round - 1,
         seconds: seconds(),
@@ -538,11 +542,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         }
         let spent = round == cfg.budget.rounds || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
         let validated = if v.every > 0 && (round % v.every == 0 || spent) {
-            let s = validate()?;
-            if crate::validation::offer(&mut best, round, s, v.max_top1) {
-                best_tensors = Some(snapshot()?);
-            }
-            Some(s)
+            Some(judge(round, &mut best, &mut best_tensors)?)
         } else {
             None
         };

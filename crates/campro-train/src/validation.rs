@@ -114,22 +114,27 @@ const MAX_DETECTIONS: usize = 100;
 
 /// COCO person AP of YOLOX heads: `heads[i]` the detector's output for image i (anchors x
 /// (5 + classes), probabilities, as `Yolox::forward` gives it) on a `size` x `size` canvas,
-/// `boxes[i]` its people (cx, cy, w, h) in canvas pixels. Decoded, NMS'd and scored as
-/// `campro eval utility` does (`campro_eval::person`, `campro_eval::ap`).
+/// `boxes[i]` its people (cx, cy, w, h) in canvas pixels. Detected and scored as
+/// `campro eval utility` does (`campro_eval::person::detections`, `campro_eval::ap`).
 pub fn person_ap(heads: &[Vec<f32>], size: usize, boxes: &[Vec<[f32; 4]>]) -> campro_eval::Result<f64> {
     let mut images = Vec::with_capacity(heads.len());
     for (head, people) in heads.iter().zip(boxes) {
-        let dets = campro_eval::person::decode_yolox(head, size, size, &[8, 16, 32], 0, SCORE_THRESHOLD)?;
-        let b: Vec<[f32; 4]> = dets.iter().map(|d| d.bbox).collect();
-        let s: Vec<f32> = dets.iter().map(|d| d.score).collect();
-        let kept: Vec<Scored> = campro_eval::geometry::nms(&b, &s, NMS_IOU)
-            .into_iter()
-            .take(MAX_DETECTIONS)
-            .map(|i| {
-                let [x0, y0, x1, y1] = dets[i].bbox;
-                Scored { bbox: [x0, y0, x1 - x0, y1 - y0], score: dets[i].score }
-            })
-            .collect();
+        let kept: Vec<Scored> = campro_eval::person::detections(
+            head,
+            size,
+            size,
+            &[8, 16, 32],
+            0,
+            SCORE_THRESHOLD,
+            NMS_IOU,
+            MAX_DETECTIONS,
+        )?
+        .into_iter()
+        .map(|d| {
+            let [x0, y0, x1, y1] = d.bbox;
+            Scored { bbox: [x0, y0, x1 - x0, y1 - y0], score: d.score }
+        })
+        .collect();
         let gts = people
             .iter()
             .map(|&[cx, cy, w, h]| GroundTruth { bbox: [cx - w / 2.0, cy - h / 2.0, w, h], crowd: false })

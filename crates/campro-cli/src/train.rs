@@ -292,7 +292,7 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
         pb.set_message(format!("L1 {:.4}", r.loss));
         if let Some(v) = &r.validation {
             let line = format!(
-                "step {}: validation PSNR {:.2} dB (input {:.2}, captured {:.2}), masked L1 {:.4}, face L1 {} (input {}) ({:.0} s)",
+                "step {}: validation PSNR {:.2} dB (input {:.2}, captured {:.2}), masked L1 {:.4}, face L1 {} (input {}){} ({:.0} s)",
                 r.step,
                 v.psnr,
                 v.psnr_input,
@@ -300,6 +300,10 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
                 v.masked_l1,
                 v.face_l1.map_or("-".into(), |f| format!("{f:.4}")),
                 v.face_l1_input.map_or("-".into(), |f| format!("{f:.4}")),
+                match (v.face_top1, v.face_top1_input) {
+                    (Some(e), Some(i)) => format!(", face top-1 {:.1}% (input {:.1}%)", 100.0 * e, 100.0 * i),
+                    _ => String::new(),
+                },
                 r.seconds
             );
             checkpoint_line(&pb, line);

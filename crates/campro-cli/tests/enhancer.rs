@@ -205,3 +205,60 @@ fn simulate_enhance_refuses_bad_references_with_one_line() {
     fails_with(&mut c, "cannot be used with");
     assert!(!d.join("out").join("a.png").exists());
 }
+
+#[test]
+fn the_face_privacy_term_unlinks_faces_and_never_reads_held_out_identities() {
+    let Some(models) = campro_testkit::shared("models/yunet_s_640_640.onnx") else { return };
+    let Some(ckpt) = campro_testkit::shared("models/mobilefacenet_casia_068.ckpt") else { return };
+    let Some(lfw) = campro_testkit::shared("data/lfw/pairs.txt") else { return };
+    let Some(coco) = campro_testkit::shared("data/coco-person/instances_person.json") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let q = |p: &Path| format!("{:?}", p.to_str().unwrap());
+    // The identity camera: the faces reach the U-Net as they are, so the white-box model
+    // identifies them. Every identity with at least 5 photos but 6 is declared held out; the
+    // term may then only draw from those 6.
+    let people = campro_eval::data::Lfw::open(lfw.parent().unwrap()).unwrap().people;
+    let named: Vec<&String> = people.iter().filter(|(_, v)| v.len() >= 5).map(|(k, _)| k).collect();
+    let (kept, held) = named.split_at(6);
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(bundled("identity.json")).unwrap()).unwrap();
+    v["provenance"] = serde_json::json!({ "data": { "validation_identities": held } });
+    let p = d.join("p.json");
+    std::fs::write(&p, serde_json::to_string(&v).unwrap()).unwrap();
+    std::fs::write(
+        d.join("private.toml"),
+        format!(
+            "[model]\nwidths = [4, 8, 16]\nrestorer = false\n[data]\ncoco = {}\nlfw = {}\nmodels = {}\ncache = {}\nmax_images = 6\nlfw_images = 2\nvalidation_images = 2\ncrop = 64\nbatch = 2\n[optimiser]\nlr = 3e-3\n[privacy]\nweight = 1.0\nfaces = 8\ncheckpoint = {}\nvalidation_faces = 6\n[budget]\nsteps = 40\ncheckpoint_every = 40\n",
+            q(coco.parent().unwrap()),
+            q(lfw.parent().unwrap()),
+            q(models.parent().unwrap()),
+            q(&d.join("cache")),
+            q(&ckpt),
+        ),
+    )
+    .unwrap();
+    campro()
+        .arg("train-enhancer")
+        .arg(&p)
+        .arg("--config")
+        .arg(d.join("private.toml"))
+        .arg("--log")
+        .arg(d.join("log.csv"))
+        .assert()
+        .success();
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("p.enhancer.json")).unwrap()).unwrap();
+    assert_eq!(m["provenance"]["privacy_faces"]["identities"], kept.len(), "{}", m["provenance"]);
+    let log = std::fs::read_to_string(d.join("log.csv")).unwrap();
+    let last = |name: &str| column(&log, name).into_iter().filter_map(|r| r.1).next_back().unwrap();
+    let first = |name: &str| column(&log, name).into_iter().find_map(|r| r.1).unwrap();
+    // A fresh enhancer returns its input, so at step 0 it identifies exactly as many faces.
+    let (before, input) = (first("val_face_top1"), first("val_face_top1_input"));
+    assert_eq!(before, input);
+    assert!(input >= 4.0 / 6.0, "the raw check faces are identified: {input}\n{log}");
+    // After training against the term, the enhanced check faces (never drawn) are not.
+    let after = last("val_face_top1");
+    assert!(after <= input - 3.0 / 6.0, "top-1 {input} -> {after}\n{log}");
+    assert!(last("face_top1") < first("face_top1"), "{log}");
+}

@@ -386,6 +386,49 @@ pub struct EnhancerConfig {
     pub budget: StepBudget,
     /// The per-pixel distance the loss averages ([`PixelLoss`]).
     pub loss: PixelLoss,
+    /// The face-privacy term ([`FacePrivacyConfig`]; off by default).
+    pub privacy: FacePrivacyConfig,
+}
+
+/// The enhancer's face-privacy term ([`crate::face_privacy`]): aligned LFW faces of the
+/// preset's training identities go through the camera and the enhancer, and the term is
+/// `weight · mean(max(0, cos_y − max_{c ≠ y} cos_c + margin))` over the white-box face
+/// model's cosines to the raw class means. It asks what the face mask only leaves unasked:
+/// that the enhanced face does not point back at its identity.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct FacePrivacyConfig {
+    /// Weight beside the pixel loss, 0..=1000; 0: off (no faces read).
+    pub weight: f64,
+    /// Aligned faces per step, 1..=256.
+    pub faces: usize,
+    /// How far (cosine, 0..=2) below the best other identity a face's own must rank before it
+    /// costs nothing.
+    pub margin: f64,
+    /// The white-box face model: MobileFaceNet's PyTorch checkpoint.
+    pub checkpoint: PathBuf,
+    /// LFW identities with at least this many photos (2..=100) give faces; the preset's
+    /// held-out identities never do.
+    pub min_images: usize,
+    /// At most this many of them (a seeded choice); None: all.
+    pub max_identities: Option<usize>,
+    /// Check faces (each training identity's last photo, never drawn for the term) scored
+    /// at every checkpoint.
+    pub validation_faces: usize,
+}
+
+impl Default for FacePrivacyConfig {
+    fn default() -> Self {
+        Self {
+            weight: 0.0,
+            faces: 8,
+            margin: 0.1,
+            checkpoint: "../shared/models/mobilefacenet_casia_068.ckpt".into(),
+            min_images: 5,
+            max_identities: None,
+            validation_faces: 64,
+        }
+    }
 }
 
 /// The distance between the enhanced and the target pixel that the enhancer's loss averages.
@@ -518,7 +561,22 @@ impl Rules for EnhancerConfig {
     fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let w = &self.model.widths;
         let multiple = 1usize << w.len().clamp(1, 6).saturating_sub(1);
-        let checks: [(bool, &str, &str); 11] = [
+        let p = &self.privacy;
+        let checks: [(bool, &str, &str); 17] = [
+            (
+                p.weight.is_finite() && (0.0..=1000.0).contains(&p.weight),
+                "privacy.weight",
+                "must be in [0, 1000] (0: off)",
+            ),
+            ((1..=256).contains(&p.faces), "privacy.faces", "must be in 1..=256"),
+            (p.margin.is_finite() && (0.0..=2.0).contains(&p.margin), "privacy.margin", "must be in [0, 2]"),
+            (p.validation_faces <= 4096, "privacy.validation_faces", "must be at most 4096"),
+            ((2..=100).contains(&p.min_images), "privacy.min_images", "must be in 2..=100"),
+            (
+                p.max_identities.is_none_or(|m| m >= 2),
+                "privacy.max_identities",
+                "must be at least 2 (leave it out for all)",
+            ),
             (
                 (1..=6).contains(&w.len()) && w.iter().all(|c| (1..=512).contains(c)),
                 "model.widths",

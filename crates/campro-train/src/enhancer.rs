@@ -9,6 +9,7 @@
 
 use crate::config::{EnhancerConfig, FaceTarget};
 use crate::error::TrainError;
+use crate::face_privacy::{FacePrivacy, FaceSource};
 use crate::scenes::{chw_tensor, Scene, SceneSet};
 use crate::unet::{enhancer_loss, face_l1, masked_l1, Unet};
 use candle_core::{Device, Tensor};
@@ -26,10 +27,14 @@ pub struct EnhancerRow {
     pub step: usize,
     /// Training time over all resumed parts (s).
     pub seconds: f64,
-    /// The training loss ([`crate::unet::enhancer_loss`]) on the crops, mean of the steps
-    /// since the previous row (0..1; NaN at step 0).
+    /// The pixel loss ([`crate::unet::enhancer_loss`], without the face-privacy term) on the
+    /// crops, mean of the steps since the previous row (0..1; NaN at step 0).
     #[serde(deserialize_with = "crate::log::nan_if_null")]
     pub loss: f64,
+    /// With the face-privacy term: the fraction of the same steps' enhanced faces that the
+    /// nearest class mean identified (0..1).
+    #[serde(default)]
+    pub face_top1: Option<f64>,
     /// At checkpoints: the validation scenes, whole.
     pub validation: Option<Validation>,
 }
@@ -53,6 +58,12 @@ pub struct Validation {
     pub psnr_input: f64,
     #[serde(deserialize_with = "crate::log::nan_if_null")]
     pub psnr_captured: f64,
+    /// With the face-privacy term: the nearest class mean's top-1 (0..1) on the enhanced
+    /// check faces and on the U-Net's input ([`crate::face_privacy::FacePrivacy::validate`]).
+    #[serde(default)]
+    pub face_top1: Option<f64>,
+    #[serde(default)]
+    pub face_top1_input: Option<f64>,
 }
 
 /// A checkpoint's state (beside the network's tensors).
@@ -139,11 +150,21 @@ pub fn enhance(unet: &Unet, img: &image::RgbImage, dev: &Device) -> Result<image
     Ok(campro_eval::enhance::cropped_rgb8(&v, pw, ph, w, h))
 }
 
-/// Means of the validation terms over `scenes`.
-pub fn validate(unet: &Unet, scenes: &[Scene], dev: &Device) -> Result<Option<Validation>, TrainError> {
+/// Means of the validation terms over `scenes`, and the check faces' cosines with the
+/// face-privacy term.
+pub fn validate(
+    unet: &Unet,
+    scenes: &[Scene],
+    privacy: Option<&FacePrivacy>,
+    dev: &Device,
+) -> Result<Option<Validation>, TrainError> {
     if scenes.is_empty() {
         return Ok(None);
     }
+    let top1 = match privacy {
+        Some(p) => p.validate(unet, dev)?,
+        None => None,
+    };
     let rows = scenes.iter().map(|sc| validate_scene(unet, sc, dev)).collect::<Result<Vec<_>, _>>()?;
     // The mean of term k over the scenes that have it.
     let mean = |k: usize| {
@@ -157,6 +178,8 @@ pub fn validate(unet: &Unet, scenes: &[Scene], dev: &Device) -> Result<Option<Va
         psnr: mean(3).unwrap_or(f64::NAN),
         psnr_input: mean(4).unwrap_or(f64::NAN),
         psnr_captured: mean(5).unwrap_or(f64::NAN),
+        face_top1: top1.map(|c| c.0),
+        face_top1_input: top1.map(|c| c.1),
     }))
 }
 
@@ -179,6 +202,19 @@ pub fn run(
         )));
     }
     let unet = Unet::new(&cfg.model, cfg.seed, &dev)?;
+    let privacy = if cfg.privacy.weight > 0.0 {
+        let src = FaceSource {
+            lfw: &cfg.data.lfw,
+            models: &cfg.data.models,
+            cache: &cfg.data.cache,
+            held_out,
+            seed: cfg.seed,
+        };
+        Some(FacePrivacy::load(&cfg.privacy, &src, params, scenes.table.clone(), &dev)?)
+    } else {
+        None
+    };
+    let privacy = privacy.as_ref();
     let (mut first, mut log, mut earlier) = (1, Vec::new(), 0.0);
     if let Some(dir) = &opts.resume {
         let (tensors, state) = crate::checkpoint::load::<EnhancerState>(dir, &dev)?;
@@ -212,14 +248,15 @@ pub fn run(
     // Reseeded from the step on resume (see `checkpoint`).
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ ((first as u64 - 1) << 32) ^ 0xe4a);
     let pool: Vec<usize> = (0..scenes.train.len()).collect();
-    let mut order = Vec::new();
-    let (mut sum, mut count) = (0.0, 0usize);
+    let (mut order, mut face_order) = (Vec::new(), Vec::new());
+    let (mut sum, mut count, mut hit_sum) = (0.0, 0usize, 0.0);
     if first == 1 {
         let row = EnhancerRow {
             step: 0,
             seconds: seconds(),
             loss: f64::NAN,
-            validation: validate(&unet, &scenes.validation, &dev)?,
+            face_top1: None,
+            validation: validate(&unet, &scenes.validation, privacy, &dev)?,
         };
         on_row(&row);
         log.push(row);
@@ -227,19 +264,26 @@ pub fn run(
     for step in first..=cfg.budget.steps.max(first - 1) {
         let idx = crate::train::draw(&mut order, &pool, cfg.data.batch, &mut rng);
         let b = scenes.batch(&idx, cfg.data.crop, cfg.data.faces != FaceTarget::Restore, &mut rng, &dev)?;
-        let loss = enhancer_loss(&unet.forward(&b.input)?, &b.raw, &b.input, &b.keep, cfg.data.faces, cfg.loss)?;
+        let mut loss = enhancer_loss(&unet.forward(&b.input)?, &b.raw, &b.input, &b.keep, cfg.data.faces, cfg.loss)?;
         let v = loss.to_scalar::<f32>()? as f64;
-        if !v.is_finite() {
-            return Err(TrainError::Diverged(format!("enhancer loss is {v}: lower optimiser.lr")));
+        if let Some(p) = privacy {
+            let t = p.term(&unet, &mut face_order, &mut rng, &dev)?;
+            hit_sum += t.top1;
+            loss = (loss + t.loss)?;
+        }
+        let total = loss.to_scalar::<f32>()? as f64;
+        if !total.is_finite() {
+            return Err(TrainError::Diverged(format!("enhancer loss is {total}: lower optimiser.lr")));
         }
         adam.step(&loss.backward()?)?;
         (sum, count) = (sum + v, count + 1);
         let last = step == cfg.budget.steps || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
         let checkpoint = step % cfg.budget.checkpoint_every == 0 || last;
         if step % LOG_EVERY == 0 || checkpoint {
-            let validation = if checkpoint { validate(&unet, &scenes.validation, &dev)? } else { None };
-            let row = EnhancerRow { step, seconds: seconds(), loss: sum / count as f64, validation };
-            (sum, count) = (0.0, 0);
+            let validation = if checkpoint { validate(&unet, &scenes.validation, privacy, &dev)? } else { None };
+            let face_top1 = privacy.map(|_| hit_sum / count as f64);
+            let row = EnhancerRow { step, seconds: seconds(), loss: sum / count as f64, face_top1, validation };
+            (sum, count, hit_sum) = (0.0, 0, 0.0);
             on_row(&row);
             log.push(row);
         }
@@ -255,6 +299,7 @@ pub fn run(
         "config": cfg,
         "camera": params.name,
         "parameters": crate::unet::parameter_count(&cfg.model),
+        "privacy_faces": privacy.map(|p| serde_json::json!({ "identities": p.identities(), "train_faces": p.train_faces() })),
         "data": { "coco_images": scenes.coco, "lfw_images": scenes.lfw, "too_small": scenes.too_small,
                   "face_boxes": scenes.faces, "train_scenes": scenes.train.len(), "validation_scenes": scenes.validation.len(),
                   "coco_held_out": format!("COCO id % {} == 0 (never trained on)", campro_eval::data::HOLDOUT_EVERY),
@@ -271,22 +316,25 @@ pub fn run(
 /// checkpoints).
 pub fn log_csv(log: &[EnhancerRow]) -> String {
     let mut csv = String::from(
-        "step,seconds,loss,val_masked_l1,val_face_l1,val_face_l1_input,val_psnr,val_psnr_input,val_psnr_captured\n",
+        "step,seconds,loss,face_top1,val_masked_l1,val_face_l1,val_face_l1_input,val_psnr,val_psnr_input,val_psnr_captured,val_face_top1,val_face_top1_input\n",
     );
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
     for r in log {
         let v = r.validation.as_ref();
         csv += &format!(
-            "{},{:.3},{:.6},{},{},{},{},{},{}\n",
+            "{},{:.3},{:.6},{},{},{},{},{},{},{},{},{}\n",
             r.step,
             r.seconds,
             r.loss,
+            opt(r.face_top1),
             opt(v.map(|v| v.masked_l1)),
             opt(v.and_then(|v| v.face_l1)),
             opt(v.and_then(|v| v.face_l1_input)),
             opt(v.map(|v| v.psnr)),
             opt(v.map(|v| v.psnr_input)),
             opt(v.map(|v| v.psnr_captured)),
+            opt(v.and_then(|v| v.face_top1)),
+            opt(v.and_then(|v| v.face_top1_input)),
         );
     }
     csv

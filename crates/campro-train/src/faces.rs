@@ -39,6 +39,9 @@ pub struct Selection {
     pub validation_identities: f64,
     pub max_identities: Option<usize>,
     pub seed: u64,
+    /// Identities never read (a preset's held-out ones), left out before anything else.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub exclude: Vec<String>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -89,6 +92,52 @@ impl FaceSet {
         let x = Tensor::from_vec(data, (idx.len(), h, w, 3), device)?.permute((0, 3, 1, 2))?.contiguous()?;
         let y = Tensor::from_vec(idx.iter().map(|&i| self.labels[i]).collect::<Vec<u32>>(), idx.len(), device)?;
         Ok((x, y))
+    }
+
+    /// Sums of the unit embeddings (`embed`: (B, 3, 112, 96) in [0, 1] to (B, d)) of crops
+    /// `idx` by class, (classes, d): the raw class means up to scale. Cached in `cache`, keyed
+    /// by the selection `sel` this set was built for and the face model's `checkpoint` file
+    /// (path and length): one backbone pass over every face otherwise.
+    pub fn class_means(
+        &self,
+        idx: &[usize],
+        sel: &Selection,
+        checkpoint: &Path,
+        cache: &Path,
+        embed: impl Fn(&Tensor) -> candle_core::Result<Tensor>,
+        device: &Device,
+    ) -> candle_core::Result<Tensor> {
+        let classes = self.classes.len();
+        let ckpt_len = std::fs::metadata(checkpoint).map_or(0, |m| m.len());
+        let key = fnv(&format!(
+            "{}|{}|{ckpt_len}",
+            serde_json::to_string(sel).expect("selection serialises"),
+            checkpoint.display()
+        ));
+        let name = format!("means-{key:016x}.safetensors");
+        let cached = candle_core::safetensors::load(cache.join(&name), device)
+            .ok()
+            .and_then(|mut t| t.remove("means"))
+            .filter(|m| m.dim(0).ok() == Some(classes));
+        if let Some(m) = cached {
+            return Ok(m);
+        }
+        let mut sums: Vec<Vec<f32>> = vec![Vec::new(); classes];
+        for chunk in idx.chunks(64) {
+            let (x, _) = self.batch(chunk, device)?;
+            let e: Vec<Vec<f32>> = embed(&x)?.to_vec2()?;
+            for (&i, v) in chunk.iter().zip(e) {
+                let s = &mut sums[self.labels[i] as usize];
+                s.resize(v.len(), 0.0);
+                s.iter_mut().zip(v).for_each(|(s, x)| *s += x);
+            }
+        }
+        let d = sums.iter().map(Vec::len).max().unwrap_or(0);
+        sums.iter_mut().for_each(|s| s.resize(d, 0.0));
+        let m = Tensor::from_vec(sums.concat(), (classes, d), device)?;
+        // A cache that cannot be written only costs the next run this pass.
+        let _ = crate::checkpoint::write_tensors(cache, &name, &[("means".to_string(), m.clone())].into());
+        Ok(m)
     }
 
     /// Loads the set from `cache` if it was built for the same selection, else builds it
@@ -144,8 +193,12 @@ impl FaceSet {
 
     fn build(sel: &Selection, models: &Path) -> Result<Self, FacesError> {
         let lfw = Lfw::open(&sel.lfw)?;
-        let mut names: Vec<&String> =
-            lfw.people.iter().filter(|(_, v)| v.len() >= sel.min_images).map(|(k, _)| k).collect();
+        let mut names: Vec<&String> = lfw
+            .people
+            .iter()
+            .filter(|(k, v)| v.len() >= sel.min_images && !sel.exclude.contains(k))
+            .map(|(k, _)| k)
+            .collect();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(sel.seed);
         names.shuffle(&mut rng);
         if let Some(m) = sel.max_identities {

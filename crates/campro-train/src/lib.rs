@@ -16,6 +16,7 @@ pub mod detection;
 pub mod dwconv;
 pub mod enhancer;
 pub mod error;
+pub mod face_privacy;
 pub mod faces;
 pub mod finetune;
 pub mod kernels;

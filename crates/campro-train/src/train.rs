@@ -12,7 +12,7 @@ use crate::config::{Config, Head};
 use crate::error::TrainError;
 use crate::faces::{FaceSet, Selection};
 use crate::log::LogRow;
-use crate::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet, EMBEDDING};
+use crate::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet};
 use crate::persons::PersonSet;
 use crate::yolox::Yolox;
 use candle_core::{DType, Device, Tensor, Var, D};
@@ -206,6 +206,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         validation_identities: cfg.data.validation_identities,
         max_identities: cfg.data.max_identities,
         seed: cfg.seed,
+        exclude: Vec::new(),
     };
     let faces = FaceSet::load_or_build(&sel, &cfg.data.models, &cfg.data.cache)?;
     let (train, check) = faces.split();
@@ -268,41 +269,9 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let embed_frozen =
         |x: &Tensor| -> candle_core::Result<Tensor> { l2_normalise(&frozen.forward_t(&normalise_unit(x)?, false)?) };
 
-    // H from the class means of the raw training embeddings, cached beside the faces (keyed
-    // by the face selection and the checkpoint file): one backbone pass over every face.
-    let ckpt_len = std::fs::metadata(&cfg.attacker.checkpoint).map_or(0, |m| m.len());
-    let key = crate::faces::fnv(&format!(
-        "{}|{}|{ckpt_len}",
-        serde_json::to_string(&sel).expect("selection serialises"),
-        cfg.attacker.checkpoint.display()
-    ));
-    let means_name = format!("means-{key:016x}.safetensors");
-    let means_file = cfg.data.cache.join(&means_name);
-    let cached = candle_core::safetensors::load(&means_file, &dev)
-        .ok()
-        .and_then(|mut t| t.remove("means"))
-        .filter(|m| m.dims() == [classes, EMBEDDING]);
-    let means = match cached {
-        Some(m) => m,
-        None => {
-            let mut sums = vec![vec![0f32; EMBEDDING]; classes];
-            for chunk in train.chunks(64) {
-                let (x, _) = faces.batch(chunk, &dev)?;
-                let e: Vec<Vec<f32>> = embed(&x, false)?.to_vec2()?;
-                for (&i, v) in chunk.iter().zip(e) {
-                    sums[faces.labels[i] as usize].iter_mut().zip(v).for_each(|(s, x)| *s += x);
-                }
-            }
-            let m = Tensor::from_vec(sums.concat(), (classes, EMBEDDING), &dev)?;
-            // A cache that cannot be written only costs the next run this pass.
-            let _ = crate::checkpoint::write_tensors(
-                &cfg.data.cache,
-                &means_name,
-                &[("means".to_string(), m.clone())].into(),
-            );
-            m
-        }
-    };
+    // H from the class means of the raw training embeddings.
+    let means =
+        faces.class_means(&train, &sel, &cfg.attacker.checkpoint, &cfg.data.cache, |x| embed(x, false), &dev)?;
     let head = ProxyHead::from_means(&means, cfg.attacker.head)?;
     // Everything a checkpoint holds, by name.
     let named = || -> Vec<(String, Var)> {

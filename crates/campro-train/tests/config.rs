@@ -82,7 +82,8 @@ fn shipped_configs_parse() {
             // whether faces are restored (the attacker's network) or held to the input.
             let c: campro_train::config::EnhancerConfig = campro_train::config::load(&path).unwrap();
             assert_eq!((c.model.widths, c.model.restorer), (vec![8, 16, 32, 64], true));
-            assert_eq!(c.loss == campro_train::config::PixelLoss::L2, stem == "enhancer-l2", "{stem}");
+            assert_eq!(c.loss == campro_train::config::PixelLoss::L2, stem.contains("l2"), "{stem}");
+            assert_eq!(c.privacy.weight > 0.0, stem.ends_with("private"), "{stem}");
             let restore = c.data.faces == campro_train::config::FaceTarget::Restore;
             assert_eq!(restore, stem == "restorer", "{stem}");
             continue;

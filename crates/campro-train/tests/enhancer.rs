@@ -182,9 +182,16 @@ fn the_enhancer_configuration_names_its_broken_rule() {
     bad("[data]\nmax_images = 0\n", "data.max_images");
     bad("[optimiser]\nlr = -1.0\n", "optimiser.lr");
     bad("colour = 1\n", "unknown field");
+    bad("[privacy]\nweight = -1.0\n", "privacy.weight");
+    bad("[privacy]\nweight = 1.0\nfaces = 0\n", "privacy.faces");
+    bad("[privacy]\nmin_images = 1\n", "privacy.min_images");
+    bad("[privacy]\nmax_identities = 1\n", "privacy.max_identities");
+    bad("[privacy]\nmargin = -0.1\n", "privacy.margin");
     let ok: EnhancerConfig = campro_train::config::parse("[data]\nfaces = \"restore\"\n", "t.toml").unwrap();
     assert_eq!(ok.data.faces, FaceTarget::Restore);
     assert_eq!((ok.optimiser.lr, ok.optimiser.weight_decay), (3e-4, 1e-2));
+    // The face-privacy term is off unless asked for.
+    assert_eq!(ok.privacy.weight, 0.0);
 }
 
 #[test]

@@ -75,6 +75,7 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
         validation_identities: 0.2,
         max_identities: Some(5),
         seed: 1,
+        exclude: Vec::new(),
     };
     let a = campro_train::faces::FaceSet::load_or_build(&sel, &c.data.models, cache.path()).unwrap();
     // One face file and one class-means file (the means of the raw embeddings, keyed by

@@ -271,7 +271,7 @@ pub fn run(
             hit_sum += t.top1;
             loss = (loss + t.loss)?;
         }
-        let total = loss.to_scalar::<f32>()? as f64;
+        let total = if privacy.is_some() { loss.to_scalar::<f32>()? as f64 } else { v };
         if !total.is_finite() {
             return Err(TrainError::Diverged(format!("enhancer loss is {total}: lower optimiser.lr")));
         }

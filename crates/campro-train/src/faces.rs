@@ -4,6 +4,7 @@
 //! head's classes and held-out validation identities; each class keeps its last photo aside
 //! to measure the attacker's accuracy.
 
+use crate::mobilefacenet::EMBEDDING;
 use campro_eval::data::{read_rgb8, Lfw};
 use campro_eval::face::{central_face, FaceDetector};
 use campro_eval::geometry::{similarity, warp_affine};
@@ -94,8 +95,8 @@ impl FaceSet {
         Ok((x, y))
     }
 
-    /// Sums of the unit embeddings (`embed`: (B, 3, 112, 96) in [0, 1] to (B, d)) of crops
-    /// `idx` by class, (classes, d): the raw class means up to scale. Cached in `cache`, keyed
+    /// Sums of the unit embeddings (`embed`: (B, 3, 112, 96) in [0, 1] to MobileFaceNet's
+    /// (B, 128)) of crops `idx` by class, (classes, 128): the raw class means up to scale. Cached in `cache`, keyed
     /// by the selection `sel` this set was built for and the face model's `checkpoint` file
     /// (path and length): one backbone pass over every face otherwise.
     pub fn class_means(
@@ -118,23 +119,19 @@ impl FaceSet {
         let cached = candle_core::safetensors::load(cache.join(&name), device)
             .ok()
             .and_then(|mut t| t.remove("means"))
-            .filter(|m| m.dim(0).ok() == Some(classes));
+            .filter(|m| m.dims() == [classes, EMBEDDING]);
         if let Some(m) = cached {
             return Ok(m);
         }
-        let mut sums: Vec<Vec<f32>> = vec![Vec::new(); classes];
+        let mut sums = vec![vec![0f32; EMBEDDING]; classes];
         for chunk in idx.chunks(64) {
             let (x, _) = self.batch(chunk, device)?;
             let e: Vec<Vec<f32>> = embed(&x)?.to_vec2()?;
             for (&i, v) in chunk.iter().zip(e) {
-                let s = &mut sums[self.labels[i] as usize];
-                s.resize(v.len(), 0.0);
-                s.iter_mut().zip(v).for_each(|(s, x)| *s += x);
+                sums[self.labels[i] as usize].iter_mut().zip(v).for_each(|(s, x)| *s += x);
             }
         }
-        let d = sums.iter().map(Vec::len).max().unwrap_or(0);
-        sums.iter_mut().for_each(|s| s.resize(d, 0.0));
-        let m = Tensor::from_vec(sums.concat(), (classes, d), device)?;
+        let m = Tensor::from_vec(sums.concat(), (classes, EMBEDDING), device)?;
         // A cache that cannot be written only costs the next run this pass.
         let _ = crate::checkpoint::write_tensors(cache, &name, &[("means".to_string(), m.clone())].into());
         Ok(m)

@@ -7,7 +7,7 @@ pub enum TrainError {
     #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
     #[error(transparent)]
-    Faces(#[from] crate::faces::FacesError),
+    Faces(#[from] FacesError),
     #[error(transparent)]
     Torch(#[from] crate::torch_legacy::TorchError),
     #[error("tensor: {0}")]
@@ -38,4 +38,15 @@ pub enum CheckpointError {
     Io { path: std::path::PathBuf, message: String },
     #[error("{path}: {message}")]
     Format { path: std::path::PathBuf, message: String },
+}
+
+/// Reading or building the face set (`faces`): the evaluation's models, the cache, the data.
+#[derive(Debug, thiserror::Error)]
+pub enum FacesError {
+    #[error(transparent)]
+    Eval(#[from] campro_eval::EvalError),
+    #[error("{path}: {message}")]
+    Cache { path: std::path::PathBuf, message: String },
+    #[error("{0}")]
+    Data(String),
 }

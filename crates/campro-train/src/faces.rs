@@ -4,6 +4,7 @@
 //! head's classes and held-out validation identities; each class keeps its last photo aside
 //! to measure the attacker's accuracy.
 
+pub use crate::error::FacesError;
 use crate::mobilefacenet::EMBEDDING;
 use campro_eval::data::{read_rgb8, Lfw};
 use campro_eval::face::{central_face, FaceDetector};
@@ -21,16 +22,6 @@ use std::path::{Path, PathBuf};
 pub const CROP: (usize, usize) = (112, 96);
 const YUNET: &str = include_str!("../../campro-eval/models/yunet.json");
 const MOBILEFACENET: &str = include_str!("../../campro-eval/models/mobilefacenet_casia.json");
-
-#[derive(Debug, thiserror::Error)]
-pub enum FacesError {
-    #[error(transparent)]
-    Eval(#[from] campro_eval::EvalError),
-    #[error("{path}: {message}")]
-    Cache { path: PathBuf, message: String },
-    #[error("{0}")]
-    Data(String),
-}
 
 /// Which faces to use (the data part of the configuration).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

@@ -234,6 +234,10 @@ pub struct TrainEnhancerArgs {
     /// Resume from this checkpoint folder (same configuration).
     #[arg(long)]
     resume: Option<PathBuf>,
+    /// Start from the weights in this checkpoint folder of another run (a fresh step count
+    /// and log); tensors it lacks, such as a new face gate, start fresh.
+    #[arg(long, conflicts_with = "resume")]
+    init: Option<PathBuf>,
     /// Replace existing enhancer files and log.
     #[arg(long)]
     force: bool,
@@ -278,7 +282,11 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
             crate::check_output_folder(c, a.force, "--checkpoints")?;
         }
     }
-    let opts = campro_train::enhancer::EnhancerOptions { checkpoints: a.checkpoints.clone(), resume: a.resume.clone() };
+    let opts = campro_train::enhancer::EnhancerOptions {
+        checkpoints: a.checkpoints.clone(),
+        resume: a.resume.clone(),
+        init: a.init.clone(),
+    };
     let pb = indicatif::ProgressBar::new(cfg.budget.steps as u64);
     pb.set_style(
         indicatif::ProgressStyle::with_template(
@@ -292,7 +300,7 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
         pb.set_message(format!("L1 {:.4}", r.loss));
         if let Some(v) = &r.validation {
             let line = format!(
-                "step {}: validation PSNR {:.2} dB (input {:.2}, captured {:.2}), masked L1 {:.4}, face L1 {} (input {}){} ({:.0} s)",
+                "step {}: validation PSNR {:.2} dB (input {:.2}, captured {:.2}), masked L1 {:.4}, face L1 {} (input {}){}{} ({:.0} s)",
                 r.step,
                 v.psnr,
                 v.psnr_input,
@@ -302,6 +310,11 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
                 v.face_l1_input.map_or("-".into(), |f| format!("{f:.4}")),
                 match (v.face_top1, v.face_top1_input) {
                     (Some(e), Some(i)) => format!(", face top-1 {:.1}% (input {:.1}%)", 100.0 * e, 100.0 * i),
+                    _ => String::new(),
+                },
+                match (v.gate_faces, v.gate_scene) {
+                    (Some(f), Some(s)) => format!(", face gate {f:.2} on faces, {s:.3} elsewhere"),
+                    (None, Some(s)) => format!(", face gate {s:.3}"),
                     _ => String::new(),
                 },
                 r.seconds
@@ -526,6 +539,7 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
                 widths: w.clone(),
                 stem,
                 restorer: cfg.model.restorer,
+                face_gate: cfg.model.face_gate,
             })
         })
         .collect();

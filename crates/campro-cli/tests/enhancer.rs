@@ -262,3 +262,69 @@ fn the_face_privacy_term_unlinks_faces_and_never_reads_held_out_identities() {
     assert!(after <= input - 3.0 / 6.0, "top-1 {input} -> {after}\n{log}");
     assert!(last("face_top1") < first("face_top1"), "{log}");
 }
+
+#[test]
+fn the_face_gate_learns_where_faces_are_and_leaves_them_as_captured() {
+    let Some(models) = campro_testkit::shared("models/yunet_s_640_640.onnx") else { return };
+    let Some(lfw) = campro_testkit::shared("data/lfw/pairs.txt") else { return };
+    let Some(coco) = campro_testkit::shared("data/coco-person/instances_person.json") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let q = |p: &Path| format!("{:?}", p.to_str().unwrap());
+    let p = d.join("p.json");
+    std::fs::copy(bundled("campro-omega-0.5.json"), &p).unwrap();
+    let config = |steps: usize, gate: bool| {
+        format!(
+            "loss = \"l2\"\n[model]\nwidths = [4, 8, 16]\nrestorer = false\nface_gate = {gate}\n[data]\nfaces = {:?}\ncoco = {}\nlfw = {}\nmodels = {}\ncache = {}\nmax_images = 12\nlfw_images = 12\nvalidation_images = 6\ncrop = 64\nbatch = 4\n[optimiser]\nlr = 3e-3\n[budget]\nsteps = {steps}\ncheckpoint_every = {steps}\n",
+            if gate { "captured" } else { "input" },
+            q(coco.parent().unwrap()),
+            q(lfw.parent().unwrap()),
+            q(models.parent().unwrap()),
+            q(&d.join("cache")),
+        )
+    };
+    std::fs::write(d.join("plain.toml"), config(30, false)).unwrap();
+    std::fs::write(d.join("gate.toml"), config(300, true)).unwrap();
+    let train = |cfg: &str, log: &str| {
+        let mut c = campro();
+        c.arg("train-enhancer").arg(&p).arg("--config").arg(d.join(cfg)).arg("--log").arg(d.join(log));
+        c.arg("--force");
+        c
+    };
+    // An ungated run, then the gated one started from its weights (--init).
+    train("plain.toml", "plain.csv").arg("--checkpoints").arg(d.join("ck")).assert().success();
+    train("gate.toml", "gate.csv").arg("--init").arg(d.join("ck")).assert().success();
+    let plain = std::fs::read_to_string(d.join("plain.csv")).unwrap();
+    let log = std::fs::read_to_string(d.join("gate.csv")).unwrap();
+    let at = |csv: &str, name: &str, k: usize| column(csv, name).into_iter().filter_map(|r| r.1).nth(k).unwrap();
+    let last = |csv: &str, name: &str| column(csv, name).into_iter().filter_map(|r| r.1).next_back().unwrap();
+    // Step 0 is the ungated run's network with the gate nearly off (sigmoid(−4) ≈ 0.018).
+    assert!(at(&log, "val_gate_scene", 0) < 0.03 && at(&log, "val_gate_faces", 0) < 0.03, "{log}");
+    assert!((at(&log, "val_psnr", 0) - last(&plain, "val_psnr")).abs() < 0.3, "{plain}\n{log}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("p.enhancer.json")).unwrap()).unwrap();
+    assert_eq!(m["provenance"]["init"]["step"], 30);
+    assert_eq!(m["provenance"]["init"]["fresh"], serde_json::json!(["gate.w", "gate.b"]));
+    // After training, on the validation scenes (never trained on) the gate is more open on
+    // the faces than elsewhere (6 + 6 training scenes, half of them LFW portraits: a weak
+    // gate, but a gate), and the faces come out nearer the captured image than the
+    // ungated enhancer left them.
+    let (faces, scene) = (last(&log, "val_gate_faces"), last(&log, "val_gate_scene"));
+    assert!(faces > 1.5 * scene && faces > scene + 0.1, "gate {faces} on faces, {scene} elsewhere\n{log}");
+    let captured = last(&log, "val_face_l1_input");
+    assert!(last(&log, "val_face_l1") > last(&plain, "val_face_l1"), "{plain}\n{log}");
+    assert!(last(&log, "val_face_l1") <= captured * 1.05, "{log}");
+    assert!(last(&log, "val_psnr") > last(&log, "val_psnr_captured") + 1.0, "{log}");
+    // The written file (the blend in ONNX) is what simulate --enhance runs.
+    let img = coco.parent().unwrap().join("images/000000000139.jpg");
+    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("cap")).assert().success();
+    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("enh")).arg("--enhance").assert().success();
+    let captured = image::open(d.join("cap/000000000139.png")).unwrap().to_rgb8();
+    let enhanced = image::open(d.join("enh/000000000139.png")).unwrap().to_rgb8();
+    assert_ne!(captured, enhanced);
+    // --init and --resume do not go together.
+    fails_with(
+        train("gate.toml", "x.csv").arg("--init").arg(d.join("ck")).arg("--resume").arg(d.join("ck")),
+        "cannot be used with",
+    );
+}

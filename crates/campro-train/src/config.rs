@@ -375,7 +375,7 @@ fn span(text: &str, span: Option<std::ops::Range<usize>>) -> String {
 
 /// `campro train-enhancer`'s configuration: the enhancer's U-Net (paper Sec. IV-D), its data
 /// and its optimiser. Every key is optional; unknown keys are refused.
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct EnhancerConfig {
     /// Seed of every random choice (initial weights, data order, crops, validation split).
@@ -388,6 +388,9 @@ pub struct EnhancerConfig {
     pub loss: PixelLoss,
     /// The face-privacy term ([`FacePrivacyConfig`]; off by default).
     pub privacy: FacePrivacyConfig,
+    /// Weight of the face gate's cross-entropy against the face boxes beside the pixel loss
+    /// (`model.face_gate`), 0..=100.
+    pub gate_weight: f64,
 }
 
 /// The enhancer's face-privacy term ([`crate::face_privacy`]): aligned LFW faces of the
@@ -458,6 +461,13 @@ pub struct UnetConfig {
     /// ([`campro_eval::restore`], a 786 KB table in the ONNX file), so the U-Net starts from
     /// the best per-pixel inverse and learns what context adds.
     pub restorer: bool,
+    /// A face gate: a second head (a 1x1 convolution and a sigmoid on the last decoder
+    /// level) gives each pixel the probability `g` that it is a face, and the enhanced
+    /// pixel is `g · captured + (1 − g) · restored`, so a face the gate finds leaves the
+    /// enhancer as the camera captured it. Trained on YuNet's (enlarged) boxes of the raw
+    /// scenes with `data.faces = "captured"` and the cross-entropy weighted by
+    /// `gate_weight`. In the ONNX file too (four operators after the U-Net).
+    pub face_gate: bool,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -503,6 +513,9 @@ pub enum FaceTarget {
     /// No mask: restore faces too. The restoration attacker's network (Sec. VII), not an
     /// enhancer to ship.
     Restore,
+    /// Inside the boxes the target is the captured image itself, what the camera already
+    /// gives every app; needs `model.face_gate`, which learns where they are.
+    Captured,
 }
 
 /// AdamW (the paper's enhancer: lr 3e-4, weight decay 1e-2).
@@ -526,7 +539,21 @@ pub struct StepBudget {
 
 impl Default for UnetConfig {
     fn default() -> Self {
-        Self { widths: vec![8, 16, 32, 64], stem: 0, restorer: true }
+        Self { widths: vec![8, 16, 32, 64], stem: 0, restorer: true, face_gate: false }
+    }
+}
+impl Default for EnhancerConfig {
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            model: UnetConfig::default(),
+            data: SceneConfig::default(),
+            optimiser: AdamWConfig::default(),
+            budget: StepBudget::default(),
+            loss: PixelLoss::default(),
+            privacy: FacePrivacyConfig::default(),
+            gate_weight: 1.0,
+        }
     }
 }
 impl Default for SceneConfig {
@@ -562,7 +589,23 @@ impl Rules for EnhancerConfig {
         let w = &self.model.widths;
         let multiple = 1usize << w.len().clamp(1, 6).saturating_sub(1);
         let p = &self.privacy;
-        let checks: [(bool, &str, &str); 17] = [
+        let gate = self.model.face_gate;
+        let checks: [(bool, &str, &str); 20] = [
+            (
+                !gate || self.data.faces == FaceTarget::Captured,
+                "model.face_gate",
+                "needs data.faces = \"captured\" (the gate's target)",
+            ),
+            (
+                gate || self.data.faces != FaceTarget::Captured,
+                "data.faces",
+                "\"captured\" needs model.face_gate = true (a U-Net alone cannot tell faces)",
+            ),
+            (
+                self.gate_weight.is_finite() && (0.0..=100.0).contains(&self.gate_weight),
+                "gate_weight",
+                "must be in [0, 100]",
+            ),
             (
                 p.weight.is_finite() && (0.0..=1000.0).contains(&p.weight),
                 "privacy.weight",

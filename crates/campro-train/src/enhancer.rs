@@ -11,7 +11,7 @@ use crate::config::{EnhancerConfig, FaceTarget};
 use crate::error::TrainError;
 use crate::face_privacy::{FacePrivacy, FaceSource};
 use crate::scenes::{chw_tensor, Scene, SceneSet};
-use crate::unet::{enhancer_loss, face_l1, masked_l1, Unet};
+use crate::unet::{enhancer_loss, face_l1, gate_loss, masked_l1, Unet};
 use candle_core::{Device, Tensor};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use rand::SeedableRng;
@@ -64,6 +64,11 @@ pub struct Validation {
     pub face_top1: Option<f64>,
     #[serde(default)]
     pub face_top1_input: Option<f64>,
+    /// With a face gate: its mean probability (0..1) inside the face boxes and elsewhere.
+    #[serde(default)]
+    pub gate_faces: Option<f64>,
+    #[serde(default)]
+    pub gate_scene: Option<f64>,
 }
 
 /// A checkpoint's state (beside the network's tensors).
@@ -80,6 +85,9 @@ pub struct EnhancerState {
 pub struct EnhancerOptions {
     pub checkpoints: Option<PathBuf>,
     pub resume: Option<PathBuf>,
+    /// Start from another run's checkpoint: every tensor of the same name and shape is
+    /// copied, the rest (a face gate it did not have) start fresh; step 1, a new log.
+    pub init: Option<PathBuf>,
 }
 
 /// An enhancer: the optional per-pixel restoration table, then the U-Net.
@@ -93,8 +101,8 @@ impl EnhancerNet {
     /// The enhanced image of a captured 8-bit image (candle; tract runs the ONNX file).
     pub fn enhance(&self, captured: &image::RgbImage, dev: &Device) -> Result<image::RgbImage, TrainError> {
         match &self.table {
-            Some(t) => enhance(&self.unet, &campro_eval::restore::apply_table(t, captured), dev),
-            None => enhance(&self.unet, captured, dev),
+            Some(t) => enhance(&self.unet, &campro_eval::restore::apply_table(t, captured), captured, dev),
+            None => enhance(&self.unet, captured, captured, dev),
         }
     }
 
@@ -125,11 +133,18 @@ pub struct EnhancerOutcome {
 
 /// One scene's validation terms: masked L1, face L1 of the enhanced image and of the
 /// U-Net's input (None without faces), PSNR against raw of the enhanced image, the input and
-/// the captured image.
-fn validate_scene(unet: &Unet, sc: &Scene, dev: &Device) -> Result<[Option<f64>; 6], TrainError> {
-    let out = enhance(unet, sc.input(), dev)?;
+/// the captured image, the face gate's mean inside the faces and elsewhere.
+fn validate_scene(unet: &Unet, sc: &Scene, dev: &Device) -> Result<[Option<f64>; 8], TrainError> {
+    let (out, gate) = enhance_gated(unet, sc.input(), &sc.captured, dev)?;
     let (w, h) = sc.raw.dimensions();
-    let keep = Tensor::from_vec(sc.keep(0, 0, w, h), (1, 1, h as usize, w as usize), dev)?;
+    let k = sc.keep(0, 0, w, h);
+    let gate_mean = |face: bool| {
+        let v: Vec<f64> =
+            gate.iter().flatten().zip(&k).filter(|(_, &k)| (k == 0.0) == face).map(|(&g, _)| g as f64).collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    let gates = [gate_mean(true), gate_mean(false)];
+    let keep = Tensor::from_vec(k, (1, 1, h as usize, w as usize), dev)?;
     let (o, i, r) = (chw_tensor(&out, dev)?, chw_tensor(sc.input(), dev)?, chw_tensor(&sc.raw, dev)?);
     Ok([
         Some(masked_l1(&o, &r, &keep)?.to_scalar::<f32>()? as f64),
@@ -138,16 +153,55 @@ fn validate_scene(unet: &Unet, sc: &Scene, dev: &Device) -> Result<[Option<f64>;
         Some(campro_eval::quality::psnr(&out, &sc.raw)),
         Some(campro_eval::quality::psnr(sc.input(), &sc.raw)),
         Some(campro_eval::quality::psnr(&sc.captured, &sc.raw)),
+        gates[0],
+        gates[1],
     ])
 }
 
-/// The enhancer on a whole 8-bit image (padded to its multiple, cropped back, rounded).
-pub fn enhance(unet: &Unet, img: &image::RgbImage, dev: &Device) -> Result<image::RgbImage, TrainError> {
-    let (w, h) = img.dimensions();
-    let (data, pw, ph) = campro_eval::enhance::padded_chw(img, unet.multiple());
-    let y = unet.forward(&Tensor::from_vec(data, (1, 3, ph, pw), dev)?)?;
+/// The enhancer on a whole 8-bit image: the U-Net's `input` (the captured image or its
+/// per-pixel restoration) and the `captured` image of the same size (padded to the multiple,
+/// cropped back, rounded).
+pub fn enhance(
+    unet: &Unet,
+    input: &image::RgbImage,
+    captured: &image::RgbImage,
+    dev: &Device,
+) -> Result<image::RgbImage, TrainError> {
+    enhance_gated(unet, input, captured, dev).map(|(img, _)| img)
+}
+
+/// [`enhance`], and the face gate's map (row-major, the image's size) when there is one.
+pub fn enhance_gated(
+    unet: &Unet,
+    input: &image::RgbImage,
+    captured: &image::RgbImage,
+    dev: &Device,
+) -> Result<(image::RgbImage, Option<Vec<f32>>), TrainError> {
+    let (w, h) = input.dimensions();
+    if captured.dimensions() != (w, h) {
+        return Err(TrainError::Unsupported(format!(
+            "enhancer: input {w}x{h}, captured {}x{}",
+            captured.width(),
+            captured.height()
+        )));
+    }
+    let m = unet.multiple();
+    let tensor = |img: &image::RgbImage| -> Result<Tensor, TrainError> {
+        let (data, pw, ph) = campro_eval::enhance::padded_chw(img, m);
+        Ok(Tensor::from_vec(data, (1, 3, ph, pw), dev)?)
+    };
+    let (x, c) = (tensor(input)?, tensor(captured)?);
+    let (_, _, ph, pw) = x.dims4()?;
+    let (y, g) = unet.forward_gated(&x, &c)?;
     let v: Vec<f32> = y.flatten_all()?.to_vec1()?;
-    Ok(campro_eval::enhance::cropped_rgb8(&v, pw, ph, w, h))
+    let gate = match g {
+        Some(g) => {
+            let g: Vec<f32> = g.flatten_all()?.to_vec1()?;
+            Some((0..h as usize).flat_map(|r| g[r * pw..r * pw + w as usize].to_vec()).collect())
+        }
+        None => None,
+    };
+    Ok((campro_eval::enhance::cropped_rgb8(&v, pw, ph, w, h), gate))
 }
 
 /// Means of the validation terms over `scenes`, and the check faces' cosines with the
@@ -180,6 +234,8 @@ pub fn validate(
         psnr_captured: mean(5).unwrap_or(f64::NAN),
         face_top1: top1.map(|c| c.0),
         face_top1_input: top1.map(|c| c.1),
+        gate_faces: mean(6),
+        gate_scene: mean(7),
     }))
 }
 
@@ -216,6 +272,28 @@ pub fn run(
     };
     let privacy = privacy.as_ref();
     let (mut first, mut log, mut earlier) = (1, Vec::new(), 0.0);
+    let mut init = None;
+    if let Some(dir) = &opts.init {
+        let (tensors, state) = crate::checkpoint::load::<EnhancerState>(dir, &dev)?;
+        if state.model.widths != cfg.model.widths || state.model.stem != cfg.model.stem {
+            return Err(TrainError::Unsupported(format!(
+                "--init {}: widths {:?} and stem {}, but model.widths is {:?} and model.stem {}",
+                dir.display(),
+                state.model.widths,
+                state.model.stem,
+                cfg.model.widths,
+                cfg.model.stem
+            )));
+        }
+        let mut fresh = Vec::new();
+        for (name, var) in unet.named_vars() {
+            match tensors.get(&name).filter(|t| t.dims() == var.dims()) {
+                Some(t) => var.set(t)?,
+                None => fresh.push(name),
+            }
+        }
+        init = Some(serde_json::json!({ "checkpoint": dir.display().to_string(), "step": state.step, "fresh": fresh }));
+    }
     if let Some(dir) = &opts.resume {
         let (tensors, state) = crate::checkpoint::load::<EnhancerState>(dir, &dev)?;
         if state.seed != cfg.seed || state.model != cfg.model {
@@ -264,14 +342,19 @@ pub fn run(
     for step in first..=cfg.budget.steps.max(first - 1) {
         let idx = crate::train::draw(&mut order, &pool, cfg.data.batch, &mut rng);
         let b = scenes.batch(&idx, cfg.data.crop, cfg.data.faces != FaceTarget::Restore, &mut rng, &dev)?;
-        let mut loss = enhancer_loss(&unet.forward(&b.input)?, &b.raw, &b.input, &b.keep, cfg.data.faces, cfg.loss)?;
+        let (pred, gate) = unet.forward_gated(&b.input, &b.captured)?;
+        let held = if cfg.data.faces == FaceTarget::Captured { &b.captured } else { &b.input };
+        let mut loss = enhancer_loss(&pred, &b.raw, held, &b.keep, cfg.data.faces, cfg.loss)?;
         let v = loss.to_scalar::<f32>()? as f64;
+        if let Some(g) = &gate {
+            loss = (loss + (gate_loss(g, &b.keep)? * cfg.gate_weight)?)?;
+        }
         if let Some(p) = privacy {
             let t = p.term(&unet, &mut face_order, &mut rng, &dev)?;
             hit_sum += t.top1;
             loss = (loss + t.loss)?;
         }
-        let total = if privacy.is_some() { loss.to_scalar::<f32>()? as f64 } else { v };
+        let total = if privacy.is_some() || gate.is_some() { loss.to_scalar::<f32>()? as f64 } else { v };
         if !total.is_finite() {
             return Err(TrainError::Diverged(format!("enhancer loss is {total}: lower optimiser.lr")));
         }
@@ -299,6 +382,7 @@ pub fn run(
         "config": cfg,
         "camera": params.name,
         "parameters": crate::unet::parameter_count(&cfg.model),
+        "init": init,
         "privacy_faces": privacy.map(|p| serde_json::json!({ "identities": p.identities(), "train_faces": p.train_faces() })),
         "data": { "coco_images": scenes.coco, "lfw_images": scenes.lfw, "too_small": scenes.too_small,
                   "face_boxes": scenes.faces, "train_scenes": scenes.train.len(), "validation_scenes": scenes.validation.len(),
@@ -316,13 +400,13 @@ pub fn run(
 /// checkpoints).
 pub fn log_csv(log: &[EnhancerRow]) -> String {
     let mut csv = String::from(
-        "step,seconds,loss,face_top1,val_masked_l1,val_face_l1,val_face_l1_input,val_psnr,val_psnr_input,val_psnr_captured,val_face_top1,val_face_top1_input\n",
+        "step,seconds,loss,face_top1,val_masked_l1,val_face_l1,val_face_l1_input,val_psnr,val_psnr_input,val_psnr_captured,val_face_top1,val_face_top1_input,val_gate_faces,val_gate_scene\n",
     );
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
     for r in log {
         let v = r.validation.as_ref();
         csv += &format!(
-            "{},{:.3},{:.6},{},{},{},{},{},{},{},{},{}\n",
+            "{},{:.3},{:.6},{},{},{},{},{},{},{},{},{},{},{}\n",
             r.step,
             r.seconds,
             r.loss,
@@ -335,6 +419,8 @@ pub fn log_csv(log: &[EnhancerRow]) -> String {
             opt(v.map(|v| v.psnr_captured)),
             opt(v.and_then(|v| v.face_top1)),
             opt(v.and_then(|v| v.face_top1_input)),
+            opt(v.and_then(|v| v.gate_faces)),
+            opt(v.and_then(|v| v.gate_scene)),
         );
     }
     csv

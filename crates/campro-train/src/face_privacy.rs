@@ -104,10 +104,11 @@ impl<'a> FacePrivacy<'a> {
 
     /// The U-Net's input (camera, then the restoration table) of crops `idx` (flipped
     /// left-right where `flip` says), (B, 3, 112, 96) in [0, 1].
-    fn inputs(&self, idx: &[usize], flip: &[bool], dev: &Device) -> Result<Tensor, TrainError> {
+    /// The U-Net's inputs and the captured faces of crops `idx`, each flipped or not.
+    fn inputs(&self, idx: &[usize], flip: &[bool], dev: &Device) -> Result<(Tensor, Tensor), TrainError> {
         let (h, w) = CROP;
         let n = h * w * 3;
-        let mut inp = Vec::with_capacity(idx.len() * n);
+        let (mut inp, mut cap) = (Vec::with_capacity(idx.len() * n), Vec::with_capacity(idx.len() * n));
         for (&i, &f) in idx.iter().zip(flip) {
             let bytes = self.faces.crops[i * n..(i + 1) * n].to_vec();
             let mut x = RgbImage::from_raw(w as u32, h as u32, bytes).expect("a whole crop");
@@ -116,13 +117,14 @@ impl<'a> FacePrivacy<'a> {
             }
             let mut captured = RgbImage::new(w as u32, h as u32);
             self.camera.run(x.as_raw(), &mut captured);
-            let input = match &self.table {
-                Some(t) => campro_eval::restore::apply_table(t, &captured),
-                None => captured,
-            };
-            crate::scenes::push_chw(&input, &mut inp);
+            if let Some(t) = &self.table {
+                crate::scenes::push_chw(&campro_eval::restore::apply_table(t, &captured), &mut inp);
+            }
+            crate::scenes::push_chw(&captured, &mut cap);
         }
-        Ok(Tensor::from_vec(inp, (idx.len(), 3, h, w), dev)?)
+        let cap = Tensor::from_vec(cap, (idx.len(), 3, h, w), dev)?;
+        let inp = if self.table.is_some() { Tensor::from_vec(inp, (idx.len(), 3, h, w), dev)? } else { cap.clone() };
+        Ok((inp, cap))
     }
 
     /// Cosines (B, classes) to the class means of (B, 3, 112, 96) images in [0, 1] (clamped
@@ -144,8 +146,8 @@ impl<'a> FacePrivacy<'a> {
     ) -> Result<Term, TrainError> {
         let idx = crate::train::draw(order, &self.train, self.cfg.faces, rng);
         let flip: Vec<bool> = idx.iter().map(|_| rng.random_bool(0.5)).collect();
-        let input = self.inputs(&idx, &flip, dev)?;
-        let (logits, y) = self.logits(&unet.forward(&input)?, &idx, dev)?;
+        let (input, captured) = self.inputs(&idx, &flip, dev)?;
+        let (logits, y) = self.logits(&unet.forward_gated(&input, &captured)?.0, &idx, dev)?;
         let top1 = hits(&logits, &y)? as f64 / idx.len() as f64;
         Ok(Term { loss: (rank_hinge(&logits, &y, self.cfg.margin)? * self.cfg.weight)?, top1 })
     }
@@ -159,8 +161,8 @@ impl<'a> FacePrivacy<'a> {
         }
         let (mut enhanced, mut input) = (0, 0);
         for chunk in self.check.chunks(32) {
-            let x = self.inputs(chunk, &vec![false; chunk.len()], dev)?;
-            let (l, y) = self.logits(&unet.forward(&x)?, chunk, dev)?;
+            let (x, c) = self.inputs(chunk, &vec![false; chunk.len()], dev)?;
+            let (l, y) = self.logits(&unet.forward_gated(&x, &c)?.0, chunk, dev)?;
             enhanced += hits(&l, &y)?;
             let (l, y) = self.logits(&x, chunk, dev)?;
             input += hits(&l, &y)?;

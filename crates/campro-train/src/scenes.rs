@@ -72,6 +72,9 @@ pub struct SceneSet {
 pub struct SceneBatch {
     /// What the U-Net reads ([`Scene::input`]), (B, 3, S, S) in [0, 1].
     pub input: Tensor,
+    /// The captured crops (B, 3, S, S) in [0, 1] (the same as `input` without a restoration
+    /// stage).
+    pub captured: Tensor,
     /// The raw crops (B, 3, S, S) in [0, 1].
     pub raw: Tensor,
     /// (B, 1, S, S): 0 on faces, 1 elsewhere (all ones when faces are restored too).
@@ -189,7 +192,7 @@ impl SceneSet {
         dev: &Device,
     ) -> candle_core::Result<SceneBatch> {
         let s = size as u32;
-        let (mut inp, mut raw, mut keep) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut inp, mut cap, mut raw, mut keep) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for &i in idx {
             let sc = &self.train[i];
             let x0 = rng.random_range(0..=sc.raw.width() - s);
@@ -204,6 +207,7 @@ impl SceneSet {
                 }
             };
             push_chw(&crop(sc.input()), &mut inp);
+            push_chw(&crop(&sc.captured), &mut cap);
             push_chw(&crop(&sc.raw), &mut raw);
             let mut k = if mask_faces { sc.keep(x0, y0, s, s) } else { vec![1.0; size * size] };
             if flip {
@@ -214,6 +218,7 @@ impl SceneSet {
         let b = idx.len();
         Ok(SceneBatch {
             input: Tensor::from_vec(inp, (b, 3, size, size), dev)?,
+            captured: Tensor::from_vec(cap, (b, 3, size, size), dev)?,
             raw: Tensor::from_vec(raw, (b, 3, size, size), dev)?,
             keep: Tensor::from_vec(keep, (b, 1, size, size), dev)?,
         })

@@ -11,7 +11,11 @@
 //!   resolution, nearest 2x upsampling, concatenation with the encoder's level l, a 3x3
 //!   convolution (2·w_l → w_l, ReLU);
 //! - output: a 1x1 convolution (w₀ → 3) added to the input (a residual, zero at start, so an
-//!   untrained enhancer returns the captured image unchanged).
+//!   untrained enhancer returns the captured image unchanged);
+//! - with a face gate ([`UnetConfig::face_gate`]), a second 1x1 convolution (w₀ → 1) and a
+//!   sigmoid give each pixel the probability `g` that it is a face (about 0.02 at start),
+//!   and the enhanced pixel is `out + g · (captured − out)`. Trained as [`GATE`] beside the
+//!   output; the ONNX file carries the blend ([`Unet::onnx_bytes`]).
 //!
 //! Input and output: (B, 3, H, W) RGB in [0, 1] (the output is not clamped; callers clamp
 //! when they quantise), H and W multiples of [`Unet::multiple`]. No normalisation layers:
@@ -23,6 +27,12 @@ pub use campro_eval::enhance::{INPUT, MULTIPLE_KEY, OUTPUT};
 /// The restoration stage's output, the U-Net's input when there is one
 /// ([`Unet::onnx_bytes_with_table`]).
 const RESTORED: &str = "restored";
+/// The face gate's probability map (B, 1, H, W), 0..1, when the U-Net has one.
+pub const GATE: &str = "gate";
+/// The U-Net's output before the face gate's blend in a written file.
+const UNGATED: &str = "ungated";
+/// The face gate's bias at start: sigmoid(−4) ≈ 0.018, nearly off.
+const GATE_BIAS: f32 = -4.0;
 use candle_core::{Result, Tensor, Var};
 use rand::SeedableRng;
 use rand_distr::Distribution;
@@ -33,6 +43,7 @@ use tract_onnx::pb;
 pub struct Unet {
     net: OnnxNet,
     widths: Vec<usize>,
+    gate: bool,
 }
 
 /// Parameters of a U-Net of this shape (weights and biases).
@@ -48,7 +59,7 @@ pub fn parameter_count(shape: &UnetConfig) -> usize {
         n += conv(widths[l - 1], widths[l], 3) + conv(widths[l], widths[l], 3);
         n += conv(widths[l], widths[l - 1], 3) + conv(2 * widths[l - 1], widths[l - 1], 3);
     }
-    n + conv(widths[0], 3, 1)
+    n + conv(widths[0], 3, 1) + if shape.face_gate { conv(widths[0], 1, 1) } else { 0 }
 }
 
 /// Multiply-accumulates per input pixel of one forward pass (a level l convolution runs on
@@ -58,7 +69,8 @@ pub fn macs_per_pixel(shape: &UnetConfig) -> f64 {
     let area = |l: usize| 0.25f64.powi(l as i32);
     let conv = |i: usize, o: usize, k: usize, l: usize| (i * o * k * k) as f64 * area(l);
     let first = if stem > 0 { stem } else { 3 };
-    let mut m = conv(first, widths[0], 3, 0) + conv(widths[0], widths[0], 3, 0) + conv(widths[0], 3, 1, 0);
+    let gate = if shape.face_gate { conv(widths[0], 1, 1, 0) } else { 0.0 };
+    let mut m = conv(first, widths[0], 3, 0) + conv(widths[0], widths[0], 3, 0) + conv(widths[0], 3, 1, 0) + gate;
     if stem > 0 {
         m += conv(3, stem, 1, 0) + conv(stem, stem, 1, 0);
     }
@@ -84,8 +96,12 @@ impl Unet {
                 ),
             });
         }
-        let model = graph(widths, shape.stem, seed);
-        Ok(Self { net: OnnxNet::from_model(model, "unet".into(), dev)?, widths: widths.to_vec() })
+        let model = graph(widths, shape.stem, shape.face_gate, seed);
+        Ok(Self {
+            net: OnnxNet::from_model(model, "unet".into(), dev)?,
+            widths: widths.to_vec(),
+            gate: shape.face_gate,
+        })
     }
 
     pub fn widths(&self) -> &[usize] {
@@ -107,25 +123,80 @@ impl Unet {
         self.net.named_vars()
     }
 
-    /// The enhanced image (B, 3, H, W) of captured images `x` (B, 3, H, W) in [0, 1].
+    /// Whether the network has a face gate.
+    pub fn gated(&self) -> bool {
+        self.gate
+    }
+
+    /// The U-Net's output (B, 3, H, W) for inputs `x` (B, 3, H, W) in [0, 1], before any face
+    /// gate.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        self.check(x)?;
+        // The graph's one output is OUTPUT.
+        self.net.forward(x)
+    }
+
+    /// The enhanced image (B, 3, H, W) of inputs `x` whose camera output is `captured` (the
+    /// same tensor without a restoration stage), and the face gate's map (B, 1, H, W) when
+    /// there is one: `out + g · (captured − out)`.
+    pub fn forward_gated(&self, x: &Tensor, captured: &Tensor) -> Result<(Tensor, Option<Tensor>)> {
+        self.check(x)?;
+        if !self.gate {
+            return self.net.forward(x).map(|y| (y, None));
+        }
+        let mut v = self.net.run(x, None)?;
+        let (Some(out), Some(g)) = (v.remove(OUTPUT), v.remove(GATE)) else {
+            candle_core::bail!("the gated U-Net computed no {OUTPUT} or {GATE}");
+        };
+        let y = (&out + (captured - &out)?.broadcast_mul(&g)?)?;
+        Ok((y, Some(g)))
+    }
+
+    fn check(&self, x: &Tensor) -> Result<()> {
         let (_, _, h, w) = x.dims4()?;
         let m = self.multiple();
         if h % m != 0 || w % m != 0 {
             candle_core::bail!("enhancer input {h}x{w}: height and width must be multiples of {m}");
         }
-        // The graph's one output is OUTPUT.
-        self.net.forward(x)
+        Ok(())
     }
 
-    /// The network with its current weights, encoded as an ONNX file.
+    /// The network with its current weights, encoded as an ONNX file (input: the captured
+    /// image; with a face gate, the blend included).
     pub fn onnx_bytes(&self) -> Result<Vec<u8>> {
-        self.net.onnx_bytes()
+        use prost::Message;
+        let mut model = self.net.current()?;
+        self.append_gate(&mut model);
+        Ok(model.encode_to_vec())
     }
 
-    /// Writes the network with its current weights as ONNX (temporary file, then rename).
+    /// Writes [`Self::onnx_bytes`] (temporary file, then rename).
     pub fn save_onnx(&self, path: &Path) -> std::result::Result<(), GraphError> {
-        self.net.save_onnx(path)
+        let p = path.display().to_string();
+        let bytes = self.onnx_bytes().map_err(|e| GraphError::Graph { path: p.clone(), message: e.to_string() })?;
+        campro_eval::atomic::write(path, &bytes, true).map_err(|e| GraphError::Io { path: p, message: e.to_string() })
+    }
+
+    /// With a face gate: the U-Net's output renamed [`UNGATED`] and the blend
+    /// `OUTPUT = ungated + gate · (INPUT − ungated)` appended, INPUT being the graph's input
+    /// (the captured image, also behind a restoration stage, which renames the U-Net's reads
+    /// of it first).
+    fn append_gate(&self, model: &mut pb::ModelProto) {
+        if !self.gate {
+            return;
+        }
+        let graph = model.graph.as_mut().expect("built with a graph");
+        for n in graph.node.iter_mut().filter(|n| n.output.iter().any(|o| o == OUTPUT)) {
+            n.output = vec![UNGATED.into()];
+            n.name = format!("{}_{UNGATED}", n.op_type);
+        }
+        graph.initializer.push(f32_tensor("gate.minus1", vec![], &[-1.0]));
+        graph.node.extend([
+            node("Mul", &[UNGATED, "gate.minus1"], "gate.neg", vec![]),
+            node("Add", &[INPUT, "gate.neg"], "gate.diff", vec![]),
+            node("Mul", &[GATE, "gate.diff"], "gate.move", vec![]),
+            node("Add", &[UNGATED, "gate.move"], OUTPUT, vec![]),
+        ]);
     }
 
     /// The network with its current weights behind a per-pixel restoration stage: each
@@ -179,6 +250,7 @@ impl Unet {
             node("Squeeze", &["restore.t", "restore.axes"], RESTORED, vec![]),
         ];
         graph.node.splice(0..0, front);
+        self.append_gate(&mut model);
         Ok(model.encode_to_vec())
     }
 }
@@ -191,24 +263,37 @@ pub fn masked_l1(pred: &Tensor, target: &Tensor, keep: &Tensor) -> Result<Tensor
 }
 
 /// The enhancer's training loss for `faces` ([`FaceTarget`]): the mean masked distance
-/// ([`PixelLoss`]) to `raw`, plus, with [`FaceTarget::Input`], the distance to the network's
-/// `input` inside the faces.
+/// ([`PixelLoss`]) to `raw`, plus, with [`FaceTarget::Input`] and [`FaceTarget::Captured`],
+/// the distance inside the faces to `held`: the network's input, or the captured image.
 pub fn enhancer_loss(
     pred: &Tensor,
     raw: &Tensor,
-    input: &Tensor,
+    held: &Tensor,
     keep: &Tensor,
     faces: FaceTarget,
     loss: PixelLoss,
 ) -> Result<Tensor> {
     let diff = match faces {
         FaceTarget::Free | FaceTarget::Restore => (pred - raw)?.broadcast_mul(keep)?,
-        FaceTarget::Input => (pred - (raw.broadcast_mul(keep)? + input.broadcast_mul(&(1.0 - keep)?)?)?)?,
+        FaceTarget::Input | FaceTarget::Captured => {
+            (pred - (raw.broadcast_mul(keep)? + held.broadcast_mul(&(1.0 - keep)?)?)?)?
+        }
     };
     match loss {
         PixelLoss::L1 => diff.abs()?.mean_all(),
         PixelLoss::L2 => diff.sqr()?.mean_all(),
     }
+}
+
+/// The face gate's mean binary cross-entropy against the face boxes: `gate` (B, 1, H, W)
+/// probabilities, clamped to [1e-6, 1 − 1e-6] before the logarithm; the target is 1 where
+/// `keep` is 0 (a face) and 0 elsewhere.
+pub fn gate_loss(gate: &Tensor, keep: &Tensor) -> Result<Tensor> {
+    let p = gate.clamp(1e-6f32, 1.0 - 1e-6f32)?;
+    let face = (1.0 - keep)?;
+    let on = (p.log()? * &face)?;
+    let off = ((1.0 - &p)?.log()? * keep)?;
+    (on + off)?.mean_all()?.neg()
 }
 
 /// Mean `|pred − target|` over the pixels where `keep` is 0 (the faces), or None when there
@@ -278,7 +363,7 @@ impl Builder {
 }
 
 /// The U-Net of `widths` as an ONNX model (opset 13), weights drawn from `seed`.
-fn graph(widths: &[usize], stem: usize, seed: u64) -> pb::ModelProto {
+fn graph(widths: &[usize], stem: usize, gate: bool, seed: u64) -> pb::ModelProto {
     let mut b = Builder { inits: Vec::new(), nodes: Vec::new(), rng: rand_chacha::ChaCha8Rng::seed_from_u64(seed) };
     let (mut x, mut first) = (INPUT.to_string(), 3);
     if stem > 0 {
@@ -311,12 +396,21 @@ fn graph(widths: &[usize], stem: usize, seed: u64) -> pb::ModelProto {
     }
     let r = b.conv("out", &x, (widths[0], 3), 1, 1, false);
     b.nodes.push(node("Add", &[INPUT, &r], OUTPUT, vec![]));
+    if gate {
+        let g = b.conv("gate", &x, (widths[0], 1), 1, 1, false);
+        let bias = b.inits.last_mut().expect("the gate's bias");
+        *bias = f32_tensor("gate.b", vec![1], &[GATE_BIAS]);
+        b.nodes.push(node("Sigmoid", &[&g], GATE, vec![]));
+    }
     pb::ModelProto {
         ir_version: 8,
         opset_import: vec![pb::OperatorSetIdProto { domain: String::new(), version: 13 }],
         producer_name: "campro".into(),
         producer_version: env!("CARGO_PKG_VERSION").into(),
-        doc_string: format!("CamPro image enhancer: U-Net, widths {widths:?}, stem {stem}"),
+        doc_string: format!(
+            "CamPro image enhancer: U-Net, widths {widths:?}, stem {stem}{}",
+            if gate { ", face gate" } else { "" }
+        ),
         metadata_props: vec![pb::StringStringEntryProto {
             key: MULTIPLE_KEY.into(),
             value: (1usize << (widths.len() - 1)).to_string(),

@@ -5,7 +5,7 @@
 use campro_eval::enhance::Enhancer;
 use campro_train::config::{EnhancerConfig, FaceTarget, PixelLoss, UnetConfig};
 use campro_train::scenes::{enlarge, Scene};
-use campro_train::unet::{enhancer_loss, face_l1, macs_per_pixel, masked_l1, parameter_count, Unet};
+use campro_train::unet::{enhancer_loss, face_l1, gate_loss, macs_per_pixel, masked_l1, parameter_count, Unet};
 use candle_core::{Device, Tensor};
 use image::RgbImage;
 use std::path::Path;
@@ -28,7 +28,7 @@ fn test_image(w: u32, h: u32) -> RgbImage {
 
 /// A U-Net with every weight drawn at random (the output convolution too, which starts at zero).
 fn shape(widths: &[usize], stem: usize) -> UnetConfig {
-    UnetConfig { widths: widths.to_vec(), stem, restorer: false }
+    UnetConfig { widths: widths.to_vec(), stem, restorer: false, face_gate: false }
 }
 
 fn random_unet(shape: &UnetConfig) -> Unet {
@@ -50,7 +50,7 @@ fn candle_and_tract_agree_on_the_written_onnx() {
         // A size that is a multiple, and one that needs padding.
         for (w, h) in [(56, 40), (53, 37)] {
             let img = test_image(w, h);
-            let a = campro_train::enhancer::enhance(&u, &img, &Device::Cpu).unwrap();
+            let a = campro_train::enhancer::enhance(&u, &img, &img, &Device::Cpu).unwrap();
             let b = tract.enhance(&img).unwrap();
             let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
             assert!(worst <= 1, "{w}x{h}: candle and tract differ by {worst} LSB");
@@ -70,7 +70,7 @@ fn the_restoration_stage_in_onnx_is_the_table_lookup() {
     let tract = Enhancer::from_bytes(&u.onnx_bytes_with_table(&table).unwrap(), Path::new("test")).unwrap();
     let img = test_image(53, 37);
     let restored = campro_eval::restore::apply_table(&table, &img);
-    let a = campro_train::enhancer::enhance(&u, &restored, &Device::Cpu).unwrap();
+    let a = campro_train::enhancer::enhance(&u, &restored, &img, &Device::Cpu).unwrap();
     let b = tract.enhance(&img).unwrap();
     let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
     assert!(worst <= 1, "candle on the looked-up image and tract on the captured one differ by {worst} LSB");
@@ -187,6 +187,12 @@ fn the_enhancer_configuration_names_its_broken_rule() {
     bad("[privacy]\nmin_images = 1\n", "privacy.min_images");
     bad("[privacy]\nmax_identities = 1\n", "privacy.max_identities");
     bad("[privacy]\nmargin = -0.1\n", "privacy.margin");
+    bad("[model]\nface_gate = true\n", "model.face_gate");
+    bad("[data]\nfaces = \"captured\"\n", "data.faces");
+    bad("gate_weight = -1.0\n[model]\nface_gate = true\n[data]\nfaces = \"captured\"\n", "gate_weight");
+    let gated: EnhancerConfig =
+        campro_train::config::parse("[model]\nface_gate = true\n[data]\nfaces = \"captured\"\n", "t.toml").unwrap();
+    assert_eq!((gated.model.face_gate, gated.gate_weight), (true, 1.0));
     let ok: EnhancerConfig = campro_train::config::parse("[data]\nfaces = \"restore\"\n", "t.toml").unwrap();
     assert_eq!(ok.data.faces, FaceTarget::Restore);
     assert_eq!((ok.optimiser.lr, ok.optimiser.weight_decay), (3e-4, 1e-2));
@@ -251,4 +257,81 @@ fn every_level_gets_the_gradient_finite_differences_give() {
         }
         assert!(checked >= 2 && analytic.iter().any(|v| v.abs() > 1e-3), "{name}: {analytic:?}");
     }
+}
+
+/// A gated U-Net of `widths` with random weights, the gate's scaled up so that it spans
+/// (0, 1) on the test image, and the gate's bias set.
+fn random_gated(widths: &[usize], gate_bias: f32) -> Unet {
+    let u = random_unet(&UnetConfig { face_gate: true, ..shape(widths, 0) });
+    let var = |name: &str| u.named_vars().into_iter().find(|(n, _)| n == name).expect(name).1;
+    let w = var("gate.w");
+    w.set(&noise(w.dims(), 77, 40.0)).unwrap();
+    var("gate.b").set(&Tensor::new(&[gate_bias], &Device::Cpu).unwrap()).unwrap();
+    u
+}
+
+#[test]
+fn the_face_gate_blends_in_onnx_as_in_candle() {
+    let table: Vec<[u8; 3]> =
+        (0..1usize << 18).map(|b| [(b * 7) as u8, (b / 3) as u8, (b >> 10) as u8 ^ 0x5a]).collect();
+    let img = test_image(53, 37);
+    let restored = campro_eval::restore::apply_table(&table, &img);
+    let u = random_gated(&[4, 8, 16], -2.0);
+    // The gate is neither off nor on everywhere, so both sides of the blend are in play.
+    let (_, gate) = campro_train::enhancer::enhance_gated(&u, &restored, &img, &Device::Cpu).unwrap();
+    let gate = gate.expect("a gate map");
+    assert_eq!(gate.len(), 53 * 37);
+    let (lo, hi) = gate.iter().fold((1f32, 0f32), |(a, b), &g| (a.min(g), b.max(g)));
+    assert!(lo < 0.3 && hi > 0.7, "gate in [{lo}, {hi}]");
+    for (bytes, input) in [(u.onnx_bytes_with_table(&table).unwrap(), &restored), (u.onnx_bytes().unwrap(), &img)] {
+        let tract = Enhancer::from_bytes(&bytes, Path::new("test")).unwrap();
+        let a = campro_train::enhancer::enhance(&u, input, &img, &Device::Cpu).unwrap();
+        let b = tract.enhance(&img).unwrap();
+        let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+        assert!(worst <= 1, "candle and tract differ by {worst} LSB");
+    }
+    // A gate on everywhere (sigmoid(30) = 1 in f32, the convolution's weights at zero) gives
+    // back the captured image exactly, restoration stage or not; nearly off, the U-Net's own
+    // output.
+    let on = random_gated(&[4, 8], 30.0);
+    let (_, w) = on.named_vars().into_iter().find(|(n, _)| n == "gate.w").unwrap();
+    w.set(&w.as_tensor().zeros_like().unwrap()).unwrap();
+    let tract = Enhancer::from_bytes(&on.onnx_bytes_with_table(&table).unwrap(), Path::new("test")).unwrap();
+    assert_eq!(tract.enhance(&img).unwrap(), img);
+    let off = random_gated(&[4, 8], -30.0);
+    let (_, w) = off.named_vars().into_iter().find(|(n, _)| n == "gate.w").unwrap();
+    w.set(&w.as_tensor().zeros_like().unwrap()).unwrap();
+    let (data, pw, ph) = campro_eval::enhance::padded_chw(&img, off.multiple());
+    let ungated = off.forward(&Tensor::from_vec(data, (1, 3, ph, pw), &Device::Cpu).unwrap()).unwrap();
+    let ungated =
+        campro_eval::enhance::cropped_rgb8(&ungated.flatten_all().unwrap().to_vec1().unwrap(), pw, ph, 53, 37);
+    let tract = Enhancer::from_bytes(&off.onnx_bytes().unwrap(), Path::new("test")).unwrap();
+    assert_eq!(tract.enhance(&img).unwrap(), ungated);
+    assert_ne!(ungated, img);
+    // A fresh gated network starts nearly off: one parameter set more than the ungated one.
+    let fresh = UnetConfig { face_gate: true, ..shape(&[8, 16], 0) };
+    assert_eq!(parameter_count(&fresh), 6643 + 9);
+    assert_eq!(Unet::new(&fresh, 1, &Device::Cpu).unwrap().vars().iter().map(|v| v.elem_count()).sum::<usize>(), 6652);
+}
+
+#[test]
+fn the_gate_loss_is_the_cross_entropy_by_hand() {
+    let dev = Device::Cpu;
+    // Two pixels: a face where the gate says 0.8, a background where it says 0.1.
+    let gate = Tensor::from_vec(vec![0.8f32, 0.1], (1, 1, 1, 2), &dev).unwrap();
+    let keep = Tensor::from_vec(vec![0.0f32, 1.0], (1, 1, 1, 2), &dev).unwrap();
+    let l = gate_loss(&gate, &keep).unwrap().to_scalar::<f32>().unwrap();
+    let want = -((0.8f32).ln() + (0.9f32).ln()) / 2.0;
+    assert!((l - want).abs() < 1e-6, "{l} against {want}");
+    // Certain and right costs (almost) nothing; certain and wrong is capped by the clamp.
+    let sure = Tensor::from_vec(vec![1.0f32, 0.0], (1, 1, 1, 2), &dev).unwrap();
+    assert!(gate_loss(&sure, &keep).unwrap().to_scalar::<f32>().unwrap() < 1e-5);
+    let wrong = gate_loss(&sure, &(1.0 - &keep).unwrap()).unwrap().to_scalar::<f32>().unwrap();
+    assert!((wrong - (1e6f32).ln()).abs() < 0.05, "{wrong}");
+    // The captured target: inside the face the loss measures the distance to `held`.
+    let t = |v: &[f32]| Tensor::from_vec(v.to_vec(), (1, 3, 1, 2), &dev).unwrap();
+    let (pred, raw, held) = (t(&[0.5; 6]), t(&[0.5, 0.0, 0.5, 0.0, 0.5, 0.0]), t(&[0.0, 0.5, 0.0, 0.5, 0.0, 0.5]));
+    let l = enhancer_loss(&pred, &raw, &held, &keep, FaceTarget::Captured, PixelLoss::L1).unwrap();
+    // Pixel 0 is a face held to 0.0 (|0.5| x 3), pixel 1 background at raw 0.0 (|0.5| x 3).
+    assert!((l.to_scalar::<f32>().unwrap() - 0.5).abs() < 1e-6);
 }

@@ -304,7 +304,8 @@ fn the_face_gate_learns_where_faces_are_and_leaves_them_as_captured() {
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("p.enhancer.json")).unwrap()).unwrap();
     assert_eq!(m["provenance"]["init"]["step"], 30);
-    assert_eq!(m["provenance"]["init"]["fresh"], serde_json::json!(["gate.w", "gate.b"]));
+    let fresh = m["provenance"]["init"]["fresh"].as_array().unwrap();
+    assert!(fresh.len() == 8 && fresh.iter().all(|n| n.as_str().unwrap().starts_with("gate.")), "{fresh:?}");
     // After training, on the validation scenes (never trained on) the gate is more open on
     // the faces than elsewhere (6 + 6 training scenes, half of them LFW portraits: a weak
     // gate, but a gate), and the faces come out nearer the captured image than the

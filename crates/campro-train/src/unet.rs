@@ -12,10 +12,13 @@
 //!   convolution (2·w_l → w_l, ReLU);
 //! - output: a 1x1 convolution (w₀ → 3) added to the input (a residual, zero at start, so an
 //!   untrained enhancer returns the captured image unchanged);
-//! - with a face gate ([`UnetConfig::face_gate`]), a second 1x1 convolution (w₀ → 1) and a
-//!   sigmoid give each pixel the probability `g` that it is a face (about 0.02 at start),
-//!   and the enhanced pixel is `out + g · (captured − out)`. Trained as [`GATE`] beside the
-//!   output; the ONNX file carries the blend ([`Unet::onnx_bytes`]).
+//! - with a face gate ([`UnetConfig::face_gate`]), a branch at the deepest level (two 3x3
+//!   convolutions w_L → 16 → 16 with ReLU and a 1x1 convolution to one logit, upsampled
+//!   nearest to full resolution: the widest view the network has) plus a 1x1 convolution of
+//!   the last decoder level (w₀ → 1, the edges), then a sigmoid, give each pixel the
+//!   probability `g` that it is a face (about 0.02 at start), and the enhanced pixel is
+//!   `out + g · (captured − out)`. Trained as [`GATE`] beside the output; the ONNX file
+//!   carries the blend ([`Unet::onnx_bytes`]).
 //!
 //! Input and output: (B, 3, H, W) RGB in [0, 1] (the output is not clamped; callers clamp
 //! when they quantise), H and W multiples of [`Unet::multiple`]. No normalisation layers:
@@ -31,8 +34,10 @@ const RESTORED: &str = "restored";
 pub const GATE: &str = "gate";
 /// The U-Net's output before the face gate's blend in a written file.
 const UNGATED: &str = "ungated";
-/// The face gate's bias at start: sigmoid(−4) ≈ 0.018, nearly off.
+/// The face gate's logit at start: sigmoid(−4) ≈ 0.018, nearly off.
 const GATE_BIAS: f32 = -4.0;
+/// Channels of the face gate's deep branch.
+const GATE_WIDTH: usize = 16;
 use candle_core::{Result, Tensor, Var};
 use rand::SeedableRng;
 use rand_distr::Distribution;
@@ -59,7 +64,14 @@ pub fn parameter_count(shape: &UnetConfig) -> usize {
         n += conv(widths[l - 1], widths[l], 3) + conv(widths[l], widths[l], 3);
         n += conv(widths[l], widths[l - 1], 3) + conv(2 * widths[l - 1], widths[l - 1], 3);
     }
-    n + conv(widths[0], 3, 1) + if shape.face_gate { conv(widths[0], 1, 1) } else { 0 }
+    n + conv(widths[0], 3, 1) + if shape.face_gate { gate_parameters(widths) } else { 0 }
+}
+
+/// The face gate's parameters: the deep branch and the fine 1x1 convolution.
+fn gate_parameters(widths: &[usize]) -> usize {
+    let conv = |i: usize, o: usize, k: usize| i * o * k * k + o;
+    let deep = widths[widths.len() - 1];
+    conv(deep, GATE_WIDTH, 3) + conv(GATE_WIDTH, GATE_WIDTH, 3) + conv(GATE_WIDTH, 1, 1) + conv(widths[0], 1, 1)
 }
 
 /// Multiply-accumulates per input pixel of one forward pass (a level l convolution runs on
@@ -69,7 +81,15 @@ pub fn macs_per_pixel(shape: &UnetConfig) -> f64 {
     let area = |l: usize| 0.25f64.powi(l as i32);
     let conv = |i: usize, o: usize, k: usize, l: usize| (i * o * k * k) as f64 * area(l);
     let first = if stem > 0 { stem } else { 3 };
-    let gate = if shape.face_gate { conv(widths[0], 1, 1, 0) } else { 0.0 };
+    let last = widths.len() - 1;
+    let gate = if shape.face_gate {
+        conv(widths[last], GATE_WIDTH, 3, last)
+            + conv(GATE_WIDTH, GATE_WIDTH, 3, last)
+            + conv(GATE_WIDTH, 1, 1, last)
+            + conv(widths[0], 1, 1, 0)
+    } else {
+        0.0
+    };
     let mut m = conv(first, widths[0], 3, 0) + conv(widths[0], widths[0], 3, 0) + conv(widths[0], 3, 1, 0) + gate;
     if stem > 0 {
         m += conv(3, stem, 1, 0) + conv(stem, stem, 1, 0);
@@ -362,6 +382,15 @@ impl Builder {
     }
 }
 
+/// Nearest-neighbour upsampling's Resize attributes.
+fn nearest() -> Vec<pb::AttributeProto> {
+    vec![
+        string_attr("mode", "nearest"),
+        string_attr("coordinate_transformation_mode", "asymmetric"),
+        string_attr("nearest_mode", "floor"),
+    ]
+}
+
 /// The U-Net of `widths` as an ONNX model (opset 13), weights drawn from `seed`.
 fn graph(widths: &[usize], stem: usize, gate: bool, seed: u64) -> pb::ModelProto {
     let mut b = Builder { inits: Vec::new(), nodes: Vec::new(), rng: rand_chacha::ChaCha8Rng::seed_from_u64(seed) };
@@ -379,16 +408,21 @@ fn graph(widths: &[usize], stem: usize, gate: bool, seed: u64) -> pb::ModelProto
         x = b.conv(&format!("enc{l}.conv1"), &x, (widths[l], widths[l]), 3, 1, true);
         skips.push(x.clone());
     }
+    let deep_gate = gate.then(|| {
+        let g = b.conv("gate.c0", &x, (widths[widths.len() - 1], GATE_WIDTH), 3, 1, true);
+        let g = b.conv("gate.c1", &g, (GATE_WIDTH, GATE_WIDTH), 3, 1, true);
+        let low = b.conv("gate.low", &g, (GATE_WIDTH, 1), 1, 1, false);
+        *b.inits.last_mut().expect("the gate's bias") = f32_tensor("gate.low.b", vec![1], &[GATE_BIAS]);
+        let f = (1usize << (widths.len() - 1)) as f32;
+        b.inits.push(f32_tensor("gate.scales", vec![4], &[1.0, 1.0, f, f]));
+        b.nodes.push(node("Resize", &[&low, "", "gate.scales"], "gate.up", nearest()));
+        "gate.up".to_string()
+    });
     b.inits.push(f32_tensor("up.scales", vec![4], &[1.0, 1.0, 2.0, 2.0]));
     for l in (0..widths.len() - 1).rev() {
         let t = b.conv(&format!("dec{l}.conv0"), &x, (widths[l + 1], widths[l]), 3, 1, true);
         let (up, cat) = (format!("dec{l}.up"), format!("dec{l}.cat"));
-        let resize = vec![
-            string_attr("mode", "nearest"),
-            string_attr("coordinate_transformation_mode", "asymmetric"),
-            string_attr("nearest_mode", "floor"),
-        ];
-        b.nodes.push(node("Resize", &[&t, "", "up.scales"], &up, resize));
+        b.nodes.push(node("Resize", &[&t, "", "up.scales"], &up, nearest()));
         let mut concat = node("Concat", &[&up, &skips[l]], &cat, vec![]);
         concat.attribute.push(pb::AttributeProto { name: "axis".into(), r#type: 2, i: 1, ..Default::default() });
         b.nodes.push(concat);
@@ -396,11 +430,10 @@ fn graph(widths: &[usize], stem: usize, gate: bool, seed: u64) -> pb::ModelProto
     }
     let r = b.conv("out", &x, (widths[0], 3), 1, 1, false);
     b.nodes.push(node("Add", &[INPUT, &r], OUTPUT, vec![]));
-    if gate {
-        let g = b.conv("gate", &x, (widths[0], 1), 1, 1, false);
-        let bias = b.inits.last_mut().expect("the gate's bias");
-        *bias = f32_tensor("gate.b", vec![1], &[GATE_BIAS]);
-        b.nodes.push(node("Sigmoid", &[&g], GATE, vec![]));
+    if let Some(up) = deep_gate {
+        let fine = b.conv("gate.fine", &x, (widths[0], 1), 1, 1, false);
+        b.nodes.push(node("Add", &[&up, &fine], "gate.logit", vec![]));
+        b.nodes.push(node("Sigmoid", &["gate.logit"], GATE, vec![]));
     }
     pb::ModelProto {
         ir_version: 8,

@@ -264,9 +264,11 @@ fn every_level_gets_the_gradient_finite_differences_give() {
 fn random_gated(widths: &[usize], gate_bias: f32) -> Unet {
     let u = random_unet(&UnetConfig { face_gate: true, ..shape(widths, 0) });
     let var = |name: &str| u.named_vars().into_iter().find(|(n, _)| n == name).expect(name).1;
-    let w = var("gate.w");
-    w.set(&noise(w.dims(), 77, 40.0)).unwrap();
-    var("gate.b").set(&Tensor::new(&[gate_bias], &Device::Cpu).unwrap()).unwrap();
+    for (name, seed, scale) in [("gate.fine.w", 77, 40.0), ("gate.low.w", 78, 1.0)] {
+        let w = var(name);
+        w.set(&noise(w.dims(), seed, scale)).unwrap();
+    }
+    var("gate.low.b").set(&Tensor::new(&[gate_bias], &Device::Cpu).unwrap()).unwrap();
     u
 }
 
@@ -290,17 +292,22 @@ fn the_face_gate_blends_in_onnx_as_in_candle() {
         let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
         assert!(worst <= 1, "candle and tract differ by {worst} LSB");
     }
-    // A gate on everywhere (sigmoid(30) = 1 in f32, the convolution's weights at zero) gives
-    // back the captured image exactly, restoration stage or not; nearly off, the U-Net's own
+    // A gate on everywhere (sigmoid(30) = 1 in f32, the last convolutions' weights at zero)
+    // gives back the captured image exactly, restoration stage or not; off, the U-Net's own
     // output.
+    let silence = |u: &Unet| {
+        for (n, w) in u.named_vars() {
+            if n == "gate.fine.w" || n == "gate.low.w" {
+                w.set(&w.as_tensor().zeros_like().unwrap()).unwrap();
+            }
+        }
+    };
     let on = random_gated(&[4, 8], 30.0);
-    let (_, w) = on.named_vars().into_iter().find(|(n, _)| n == "gate.w").unwrap();
-    w.set(&w.as_tensor().zeros_like().unwrap()).unwrap();
+    silence(&on);
     let tract = Enhancer::from_bytes(&on.onnx_bytes_with_table(&table).unwrap(), Path::new("test")).unwrap();
     assert_eq!(tract.enhance(&img).unwrap(), img);
     let off = random_gated(&[4, 8], -30.0);
-    let (_, w) = off.named_vars().into_iter().find(|(n, _)| n == "gate.w").unwrap();
-    w.set(&w.as_tensor().zeros_like().unwrap()).unwrap();
+    silence(&off);
     let (data, pw, ph) = campro_eval::enhance::padded_chw(&img, off.multiple());
     let ungated = off.forward(&Tensor::from_vec(data, (1, 3, ph, pw), &Device::Cpu).unwrap()).unwrap();
     let ungated =
@@ -308,10 +315,14 @@ fn the_face_gate_blends_in_onnx_as_in_candle() {
     let tract = Enhancer::from_bytes(&off.onnx_bytes().unwrap(), Path::new("test")).unwrap();
     assert_eq!(tract.enhance(&img).unwrap(), ungated);
     assert_ne!(ungated, img);
-    // A fresh gated network starts nearly off: one parameter set more than the ungated one.
+    // The gate's parameters by hand for [8, 16]: 16→16 3x3 (2320), 16→16 3x3 (2320), 16→1
+    // 1x1 (17), 8→1 1x1 (9); its extra MACs per pixel: the deep branch at a quarter of the
+    // pixels, (2304 + 2304 + 16) / 4, and 8 at full resolution.
     let fresh = UnetConfig { face_gate: true, ..shape(&[8, 16], 0) };
-    assert_eq!(parameter_count(&fresh), 6643 + 9);
-    assert_eq!(Unet::new(&fresh, 1, &Device::Cpu).unwrap().vars().iter().map(|v| v.elem_count()).sum::<usize>(), 6652);
+    assert_eq!(parameter_count(&fresh), 6643 + 4666);
+    let counted = Unet::new(&fresh, 1, &Device::Cpu).unwrap().vars().iter().map(|v| v.elem_count()).sum::<usize>();
+    assert_eq!(counted, 6643 + 4666);
+    assert_eq!(macs_per_pixel(&fresh) - macs_per_pixel(&shape(&[8, 16], 0)), 4624.0 / 4.0 + 8.0);
 }
 
 #[test]

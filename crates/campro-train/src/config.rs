@@ -391,6 +391,10 @@ pub struct EnhancerConfig {
     /// Weight of the face gate's cross-entropy against the face boxes beside the pixel loss
     /// (`model.face_gate`), 0..=100.
     pub gate_weight: f64,
+    /// Weight of the cross-entropy's background pixels against its face pixels (0.01..=100):
+    /// above 1 the gate opens only where it is sure, which keeps textures that merely look
+    /// like the captured faces restored.
+    pub gate_background: f64,
 }
 
 /// The enhancer's face-privacy term ([`crate::face_privacy`]): aligned LFW faces of the
@@ -553,6 +557,7 @@ impl Default for EnhancerConfig {
             loss: PixelLoss::default(),
             privacy: FacePrivacyConfig::default(),
             gate_weight: 1.0,
+            gate_background: 1.0,
         }
     }
 }
@@ -590,7 +595,12 @@ impl Rules for EnhancerConfig {
         let multiple = 1usize << w.len().clamp(1, 6).saturating_sub(1);
         let p = &self.privacy;
         let gate = self.model.face_gate;
-        let checks: [(bool, &str, &str); 20] = [
+        let checks: [(bool, &str, &str); 21] = [
+            (
+                self.gate_background.is_finite() && (0.01..=100.0).contains(&self.gate_background),
+                "gate_background",
+                "must be in [0.01, 100]",
+            ),
             (
                 !gate || self.data.faces == FaceTarget::Captured,
                 "model.face_gate",

@@ -347,7 +347,7 @@ pub fn run(
         let mut loss = enhancer_loss(&pred, &b.raw, held, &b.keep, cfg.data.faces, cfg.loss)?;
         let v = loss.to_scalar::<f32>()? as f64;
         if let Some(g) = &gate {
-            loss = (loss + (gate_loss(g, &b.keep)? * cfg.gate_weight)?)?;
+            loss = (loss + (gate_loss(g, &b.keep, cfg.gate_background)? * cfg.gate_weight)?)?;
         }
         if let Some(p) = privacy {
             let t = p.term(&unet, &mut face_order, &mut rng, &dev)?;

@@ -307,12 +307,12 @@ pub fn enhancer_loss(
 
 /// The face gate's mean binary cross-entropy against the face boxes: `gate` (B, 1, H, W)
 /// probabilities, clamped to [1e-6, 1 − 1e-6] before the logarithm; the target is 1 where
-/// `keep` is 0 (a face) and 0 elsewhere.
-pub fn gate_loss(gate: &Tensor, keep: &Tensor) -> Result<Tensor> {
+/// `keep` is 0 (a face) and 0 elsewhere, the background's terms weighted by `background`.
+pub fn gate_loss(gate: &Tensor, keep: &Tensor, background: f64) -> Result<Tensor> {
     let p = gate.clamp(1e-6f32, 1.0 - 1e-6f32)?;
     let face = (1.0 - keep)?;
     let on = (p.log()? * &face)?;
-    let off = ((1.0 - &p)?.log()? * keep)?;
+    let off = ((1.0 - &p)?.log()? * (keep * background)?)?;
     (on + off)?.mean_all()?.neg()
 }
 

@@ -190,6 +190,7 @@ fn the_enhancer_configuration_names_its_broken_rule() {
     bad("[model]\nface_gate = true\n", "model.face_gate");
     bad("[data]\nfaces = \"captured\"\n", "data.faces");
     bad("gate_weight = -1.0\n[model]\nface_gate = true\n[data]\nfaces = \"captured\"\n", "gate_weight");
+    bad("gate_background = 0.0\n", "gate_background");
     let gated: EnhancerConfig =
         campro_train::config::parse("[model]\nface_gate = true\n[data]\nfaces = \"captured\"\n", "t.toml").unwrap();
     assert_eq!((gated.model.face_gate, gated.gate_weight), (true, 1.0));
@@ -331,13 +332,17 @@ fn the_gate_loss_is_the_cross_entropy_by_hand() {
     // Two pixels: a face where the gate says 0.8, a background where it says 0.1.
     let gate = Tensor::from_vec(vec![0.8f32, 0.1], (1, 1, 1, 2), &dev).unwrap();
     let keep = Tensor::from_vec(vec![0.0f32, 1.0], (1, 1, 1, 2), &dev).unwrap();
-    let l = gate_loss(&gate, &keep).unwrap().to_scalar::<f32>().unwrap();
+    let l = gate_loss(&gate, &keep, 1.0).unwrap().to_scalar::<f32>().unwrap();
     let want = -((0.8f32).ln() + (0.9f32).ln()) / 2.0;
+    assert!((l - want).abs() < 1e-6, "{l} against {want}");
+    // The background pixel's term weighted 4 times.
+    let l = gate_loss(&gate, &keep, 4.0).unwrap().to_scalar::<f32>().unwrap();
+    let want = -((0.8f32).ln() + 4.0 * (0.9f32).ln()) / 2.0;
     assert!((l - want).abs() < 1e-6, "{l} against {want}");
     // Certain and right costs (almost) nothing; certain and wrong is capped by the clamp.
     let sure = Tensor::from_vec(vec![1.0f32, 0.0], (1, 1, 1, 2), &dev).unwrap();
-    assert!(gate_loss(&sure, &keep).unwrap().to_scalar::<f32>().unwrap() < 1e-5);
-    let wrong = gate_loss(&sure, &(1.0 - &keep).unwrap()).unwrap().to_scalar::<f32>().unwrap();
+    assert!(gate_loss(&sure, &keep, 1.0).unwrap().to_scalar::<f32>().unwrap() < 1e-5);
+    let wrong = gate_loss(&sure, &(1.0 - &keep).unwrap(), 1.0).unwrap().to_scalar::<f32>().unwrap();
     assert!((wrong - (1e6f32).ln()).abs() < 0.05, "{wrong}");
     // The captured target: inside the face the loss measures the distance to `held`.
     let t = |v: &[f32]| Tensor::from_vec(v.to_vec(), (1, 3, 1, 2), &dev).unwrap();

@@ -293,7 +293,13 @@ fn the_face_gate_learns_where_faces_are_and_leaves_them_as_captured() {
     };
     // An ungated run, then the gated one started from its weights (--init).
     train("plain.toml", "plain.csv").arg("--checkpoints").arg(d.join("ck")).assert().success();
-    train("gate.toml", "gate.csv").arg("--init").arg(d.join("ck")).assert().success();
+    train("gate.toml", "gate.csv")
+        .arg("--init")
+        .arg(d.join("ck"))
+        .arg("--checkpoints")
+        .arg(d.join("ck2"))
+        .assert()
+        .success();
     let plain = std::fs::read_to_string(d.join("plain.csv")).unwrap();
     let log = std::fs::read_to_string(d.join("gate.csv")).unwrap();
     let at = |csv: &str, name: &str, k: usize| column(csv, name).into_iter().filter_map(|r| r.1).nth(k).unwrap();
@@ -323,6 +329,12 @@ fn the_face_gate_learns_where_faces_are_and_leaves_them_as_captured() {
     let captured = image::open(d.join("cap/000000000139.png")).unwrap().to_rgb8();
     let enhanced = image::open(d.join("enh/000000000139.png")).unwrap().to_rgb8();
     assert_ne!(captured, enhanced);
+    // A resumed leg keeps where the run started in its provenance.
+    std::fs::write(d.join("longer.toml"), config(310, true)).unwrap();
+    train("longer.toml", "longer.csv").arg("--resume").arg(d.join("ck2")).assert().success();
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("p.enhancer.json")).unwrap()).unwrap();
+    assert_eq!((m["provenance"]["steps"].as_u64(), m["provenance"]["init"]["step"].as_u64()), (Some(310), Some(30)));
     // --init and --resume do not go together.
     fails_with(
         train("gate.toml", "x.csv").arg("--init").arg(d.join("ck")).arg("--resume").arg(d.join("ck")),

@@ -78,6 +78,10 @@ pub struct EnhancerState {
     pub seed: u64,
     pub model: crate::config::UnetConfig,
     pub log: Vec<EnhancerRow>,
+    /// Where the run started (`--init`: checkpoint, its step, the fresh tensors), kept
+    /// through resumes for the provenance.
+    #[serde(default)]
+    pub init: Option<serde_json::Value>,
 }
 
 /// Where checkpoints go, and which one to resume from.
@@ -309,6 +313,7 @@ pub fn run(
             var.set(t)?;
         }
         first = state.step + 1;
+        init = state.init;
         earlier = state.log.last().map_or(0.0, |r| r.seconds);
         log = state.log;
     }
@@ -316,7 +321,8 @@ pub fn run(
     let save = |step: usize, log: &[EnhancerRow]| -> Result<(), TrainError> {
         let Some(dir) = &opts.checkpoints else { return Ok(()) };
         let tensors = unet.named_vars().into_iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
-        let state = EnhancerState { step, seed: cfg.seed, model: cfg.model.clone(), log: log.to_vec() };
+        let state =
+            EnhancerState { step, seed: cfg.seed, model: cfg.model.clone(), log: log.to_vec(), init: init.clone() };
         Ok(crate::checkpoint::save(dir, &tensors, &state)?)
     };
     let mut adam = AdamW::new(

@@ -19,22 +19,33 @@ fn column(csv: &str, name: &str) -> Vec<(usize, Option<f64>)> {
         .collect()
 }
 
+/// The shared models, LFW and COCO files the tests need (their folders hold the data), or
+/// None: the test skips (under CI a missing file fails it).
+fn shared_data() -> Option<(std::path::PathBuf, std::path::PathBuf, std::path::PathBuf)> {
+    Some((
+        campro_testkit::shared("models/yunet_s_640_640.onnx")?,
+        campro_testkit::shared("data/lfw/pairs.txt")?,
+        campro_testkit::shared("data/coco-person/instances_person.json")?,
+    ))
+}
+
+/// The `[data]` keys naming the folders of [`shared_data`]'s files.
+fn data_keys(models: &Path, lfw: &Path, coco: &Path) -> String {
+    let q = |p: &Path| format!("{:?}", p.parent().unwrap().to_str().unwrap());
+    format!("coco = {}\nlfw = {}\nmodels = {}\n", q(coco), q(lfw), q(models))
+}
+
 #[test]
 fn train_enhancer_restores_the_scene_but_not_the_faces() {
-    let Some(models) = campro_testkit::shared("models/yunet_s_640_640.onnx") else { return };
-    let Some(lfw) = campro_testkit::shared("data/lfw/pairs.txt") else { return };
-    let Some(coco) = campro_testkit::shared("data/coco-person/instances_person.json") else { return };
+    let Some((models, lfw, coco)) = shared_data() else { return };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let q = |p: &Path| format!("{:?}", p.to_str().unwrap());
     let p = d.join("p.json");
     std::fs::copy(bundled("campro-omega-0.5.json"), &p).unwrap();
     let config = |steps: usize, faces: &str| {
+        let data = data_keys(&models, &lfw, &coco);
         format!(
-            "[model]\nwidths = [4, 8, 16]\nrestorer = false\n[data]\nfaces = {faces:?}\ncoco = {}\nlfw = {}\nmodels = {}\nmax_images = 12\nlfw_images = 12\nvalidation_images = 6\ncrop = 64\nbatch = 4\n[optimiser]\nlr = 3e-3\n[budget]\nsteps = {steps}\ncheckpoint_every = 30\n",
-            q(coco.parent().unwrap()),
-            q(lfw.parent().unwrap()),
-            q(models.parent().unwrap())
+            "[model]\nwidths = [4, 8, 16]\nrestorer = false\n[data]\nfaces = {faces:?}\n{data}max_images = 12\nlfw_images = 12\nvalidation_images = 6\ncrop = 64\nbatch = 4\n[optimiser]\nlr = 3e-3\n[budget]\nsteps = {steps}\ncheckpoint_every = 30\n",
         )
     };
     std::fs::write(d.join("tiny.toml"), config(60, "input")).unwrap();
@@ -208,10 +219,8 @@ fn simulate_enhance_refuses_bad_references_with_one_line() {
 
 #[test]
 fn the_face_privacy_term_unlinks_faces_and_never_reads_held_out_identities() {
-    let Some(models) = campro_testkit::shared("models/yunet_s_640_640.onnx") else { return };
+    let Some((models, lfw, coco)) = shared_data() else { return };
     let Some(ckpt) = campro_testkit::shared("models/mobilefacenet_casia_068.ckpt") else { return };
-    let Some(lfw) = campro_testkit::shared("data/lfw/pairs.txt") else { return };
-    let Some(coco) = campro_testkit::shared("data/coco-person/instances_person.json") else { return };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let q = |p: &Path| format!("{:?}", p.to_str().unwrap());
@@ -229,10 +238,8 @@ fn the_face_privacy_term_unlinks_faces_and_never_reads_held_out_identities() {
     std::fs::write(
         d.join("private.toml"),
         format!(
-            "[model]\nwidths = [4, 8, 16]\nrestorer = false\n[data]\ncoco = {}\nlfw = {}\nmodels = {}\ncache = {}\nmax_images = 6\nlfw_images = 2\nvalidation_images = 2\ncrop = 64\nbatch = 2\n[optimiser]\nlr = 3e-3\n[privacy]\nweight = 1.0\nfaces = 8\ncheckpoint = {}\nvalidation_faces = 6\n[budget]\nsteps = 40\ncheckpoint_every = 40\n",
-            q(coco.parent().unwrap()),
-            q(lfw.parent().unwrap()),
-            q(models.parent().unwrap()),
+            "[model]\nwidths = [4, 8, 16]\nrestorer = false\n[data]\n{}cache = {}\nmax_images = 6\nlfw_images = 2\nvalidation_images = 2\ncrop = 64\nbatch = 2\n[optimiser]\nlr = 3e-3\n[privacy]\nweight = 1.0\nfaces = 8\ncheckpoint = {}\nvalidation_faces = 6\n[budget]\nsteps = 40\ncheckpoint_every = 40\n",
+            data_keys(&models, &lfw, &coco),
             q(&d.join("cache")),
             q(&ckpt),
         ),
@@ -265,21 +272,17 @@ fn the_face_privacy_term_unlinks_faces_and_never_reads_held_out_identities() {
 
 #[test]
 fn the_face_gate_learns_where_faces_are_and_leaves_them_as_captured() {
-    let Some(models) = campro_testkit::shared("models/yunet_s_640_640.onnx") else { return };
-    let Some(lfw) = campro_testkit::shared("data/lfw/pairs.txt") else { return };
-    let Some(coco) = campro_testkit::shared("data/coco-person/instances_person.json") else { return };
+    let Some((models, lfw, coco)) = shared_data() else { return };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let q = |p: &Path| format!("{:?}", p.to_str().unwrap());
     let p = d.join("p.json");
     std::fs::copy(bundled("campro-omega-0.5.json"), &p).unwrap();
     let config = |steps: usize, gate: bool| {
+        let data = data_keys(&models, &lfw, &coco);
         format!(
-            "loss = \"l2\"\n[model]\nwidths = [4, 8, 16]\nrestorer = false\nface_gate = {gate}\n[data]\nfaces = {:?}\ncoco = {}\nlfw = {}\nmodels = {}\ncache = {}\nmax_images = 12\nlfw_images = 12\nvalidation_images = 6\ncrop = 64\nbatch = 4\n[optimiser]\nlr = 3e-3\n[budget]\nsteps = {steps}\ncheckpoint_every = {steps}\n",
+            "loss = \"l2\"\n[model]\nwidths = [4, 8, 16]\nrestorer = false\nface_gate = {gate}\n[data]\nfaces = {:?}\n{data}cache = {}\nmax_images = 12\nlfw_images = 12\nvalidation_images = 6\ncrop = 64\nbatch = 4\n[optimiser]\nlr = 3e-3\n[budget]\nsteps = {steps}\ncheckpoint_every = {steps}\n",
             if gate { "captured" } else { "input" },
-            q(coco.parent().unwrap()),
-            q(lfw.parent().unwrap()),
-            q(models.parent().unwrap()),
             q(&d.join("cache")),
         )
     };

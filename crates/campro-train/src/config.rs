@@ -465,8 +465,9 @@ pub struct UnetConfig {
     /// ([`campro_eval::restore`], a 786 KB table in the ONNX file), so the U-Net starts from
     /// the best per-pixel inverse and learns what context adds.
     pub restorer: bool,
-    /// A face gate: a second head (a 1x1 convolution and a sigmoid on the last decoder
-    /// level) gives each pixel the probability `g` that it is a face, and the enhanced
+    /// A face gate: a second head (a branch at the deepest level plus a 1x1 convolution of
+    /// the last decoder level, then a sigmoid; [`crate::unet`]) gives each pixel the
+    /// probability `g` that it is a face, and the enhanced
     /// pixel is `g · captured + (1 − g) · restored`, so a face the gate finds leaves the
     /// enhancer as the camera captured it. Trained on YuNet's (enlarged) boxes of the raw
     /// scenes with `data.faces = "captured"` and the cross-entropy weighted by

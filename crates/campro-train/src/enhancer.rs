@@ -194,7 +194,9 @@ pub fn enhance_gated(
         let (data, pw, ph) = campro_eval::enhance::padded_chw(img, m);
         Ok(Tensor::from_vec(data, (1, 3, ph, pw), dev)?)
     };
-    let (x, c) = (tensor(input)?, tensor(captured)?);
+    // Without a restoration stage the U-Net reads the captured image itself: pad it once.
+    let x = tensor(input)?;
+    let c = if std::ptr::eq(input, captured) { x.clone() } else { tensor(captured)? };
     let (_, _, ph, pw) = x.dims4()?;
     let (y, g) = unet.forward_gated(&x, &c)?;
     let v: Vec<f32> = y.flatten_all()?.to_vec1()?;
@@ -289,13 +291,7 @@ pub fn run(
                 cfg.model.stem
             )));
         }
-        let mut fresh = Vec::new();
-        for (name, var) in unet.named_vars() {
-            match tensors.get(&name).filter(|t| t.dims() == var.dims()) {
-                Some(t) => var.set(t)?,
-                None => fresh.push(name),
-            }
-        }
+        let fresh = load_vars(&unet, &tensors)?;
         init = Some(serde_json::json!({ "checkpoint": dir.display().to_string(), "step": state.step, "fresh": fresh }));
     }
     if let Some(dir) = &opts.resume {
@@ -306,11 +302,8 @@ pub fn run(
                 dir.display()
             )));
         }
-        for (name, var) in unet.named_vars() {
-            let t = tensors.get(&name).ok_or_else(|| {
-                TrainError::Unsupported(format!("{}: {name} missing from the checkpoint", dir.display()))
-            })?;
-            var.set(t)?;
+        if let Some(name) = load_vars(&unet, &tensors)?.first() {
+            return Err(TrainError::Unsupported(format!("{}: {name} missing from the checkpoint", dir.display())));
         }
         first = state.step + 1;
         init = state.init;
@@ -400,6 +393,19 @@ pub fn run(
     });
     let serde_json::Value::Object(provenance) = prov else { unreachable!("a JSON object") };
     Ok(EnhancerOutcome { enhancer: EnhancerNet { unet, table: scenes.table }, log, seconds: seconds(), provenance })
+}
+
+/// Sets every tensor of `unet` that `tensors` holds under its name and shape; returns the
+/// names of those it does not (they keep their values).
+fn load_vars(unet: &Unet, tensors: &std::collections::HashMap<String, Tensor>) -> Result<Vec<String>, TrainError> {
+    let mut missing = Vec::new();
+    for (name, var) in unet.named_vars() {
+        match tensors.get(&name).filter(|t| t.dims() == var.dims()) {
+            Some(t) => var.set(t)?,
+            None => missing.push(name),
+        }
+    }
+    Ok(missing)
 }
 
 /// The log as CSV: step, seconds, loss, then the validation columns (empty between

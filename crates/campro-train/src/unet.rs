@@ -41,7 +41,6 @@ const GATE_WIDTH: usize = 16;
 use candle_core::{Result, Tensor, Var};
 use rand::SeedableRng;
 use rand_distr::Distribution;
-use std::path::Path;
 use tract_onnx::pb;
 
 /// The enhancer network.
@@ -143,11 +142,6 @@ impl Unet {
         self.net.named_vars()
     }
 
-    /// Whether the network has a face gate.
-    pub fn gated(&self) -> bool {
-        self.gate
-    }
-
     /// The U-Net's output (B, 3, H, W) for inputs `x` (B, 3, H, W) in [0, 1], before any face
     /// gate.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
@@ -188,13 +182,6 @@ impl Unet {
         let mut model = self.net.current()?;
         self.append_gate(&mut model);
         Ok(model.encode_to_vec())
-    }
-
-    /// Writes [`Self::onnx_bytes`] (temporary file, then rename).
-    pub fn save_onnx(&self, path: &Path) -> std::result::Result<(), GraphError> {
-        let p = path.display().to_string();
-        let bytes = self.onnx_bytes().map_err(|e| GraphError::Graph { path: p.clone(), message: e.to_string() })?;
-        campro_eval::atomic::write(path, &bytes, true).map_err(|e| GraphError::Io { path: p, message: e.to_string() })
     }
 
     /// With a face gate: the U-Net's output renamed [`UNGATED`] and the blend

@@ -234,8 +234,9 @@ pub struct TrainEnhancerArgs {
     /// Resume from this checkpoint folder (same configuration).
     #[arg(long)]
     resume: Option<PathBuf>,
-    /// Start from the weights in this checkpoint folder of another run (a fresh step count
-    /// and log); tensors it lacks, such as a new face gate, start fresh.
+    /// Start from the weights in this checkpoint folder of another run, or in an enhancer
+    /// file (PARAMS.enhancer.onnx): a fresh step count and log; a face gate it lacks starts
+    /// fresh.
     #[arg(long, conflicts_with = "resume")]
     init: Option<PathBuf>,
     /// Replace existing enhancer files and log.
@@ -540,6 +541,7 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
                 stem,
                 restorer: cfg.model.restorer,
                 face_gate: cfg.model.face_gate,
+                gate_blocks: cfg.model.gate_blocks,
             })
         })
         .collect();

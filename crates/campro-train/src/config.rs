@@ -473,6 +473,12 @@ pub struct UnetConfig {
     /// scenes with `data.faces = "captured"` and the cross-entropy weighted by
     /// `gate_weight`. In the ONNX file too (four operators after the U-Net).
     pub face_gate: bool,
+    /// With the face gate: 0 (default), a gated pixel becomes the captured one; N (a power of
+    /// two in 2..=64), it becomes the enhanced image's mean over its N x N block
+    /// (pixelation), trained with `data.faces = "pixelated"`. The picture keeps a face's
+    /// place and colour but not its features, and where the gate opens by mistake on
+    /// scenery the cost is a blur rather than the captured image's contour bands.
+    pub gate_blocks: usize,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -521,6 +527,9 @@ pub enum FaceTarget {
     /// Inside the boxes the target is the captured image itself, what the camera already
     /// gives every app; needs `model.face_gate`, which learns where they are.
     Captured,
+    /// Inside the boxes the target is the raw image pixelated in `model.gate_blocks`
+    /// blocks; needs the face gate with those blocks.
+    Pixelated,
 }
 
 /// AdamW (the paper's enhancer: lr 3e-4, weight decay 1e-2).
@@ -544,7 +553,7 @@ pub struct StepBudget {
 
 impl Default for UnetConfig {
     fn default() -> Self {
-        Self { widths: vec![8, 16, 32, 64], stem: 0, restorer: true, face_gate: false }
+        Self { widths: vec![8, 16, 32, 64], stem: 0, restorer: true, face_gate: false, gate_blocks: 0 }
     }
 }
 impl Default for EnhancerConfig {
@@ -593,24 +602,35 @@ impl Default for StepBudget {
 impl Rules for EnhancerConfig {
     fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let w = &self.model.widths;
-        let multiple = 1usize << w.len().clamp(1, 6).saturating_sub(1);
+        let blocks = self.model.gate_blocks;
+        let multiple = (1usize << w.len().clamp(1, 6).saturating_sub(1)).max(blocks);
         let p = &self.privacy;
         let gate = self.model.face_gate;
-        let checks: [(bool, &str, &str); 21] = [
+        let checks: [(bool, &str, &str); 23] = [
             (
                 self.gate_background.is_finite() && (0.01..=100.0).contains(&self.gate_background),
                 "gate_background",
                 "must be in [0.01, 100]",
             ),
             (
-                !gate || self.data.faces == FaceTarget::Captured,
+                !gate || matches!(self.data.faces, FaceTarget::Captured | FaceTarget::Pixelated),
                 "model.face_gate",
-                "needs data.faces = \"captured\" (the gate's target)",
+                "needs data.faces = \"captured\" or \"pixelated\" (the gate's target)",
             ),
             (
-                gate || self.data.faces != FaceTarget::Captured,
+                gate || !matches!(self.data.faces, FaceTarget::Captured | FaceTarget::Pixelated),
                 "data.faces",
-                "\"captured\" needs model.face_gate = true (a U-Net alone cannot tell faces)",
+                "\"captured\" and \"pixelated\" need model.face_gate = true (a U-Net alone cannot tell faces)",
+            ),
+            (
+                blocks == 0 || (blocks.is_power_of_two() && (2..=64).contains(&blocks)),
+                "model.gate_blocks",
+                "must be 0 or a power of two in 2..=64",
+            ),
+            (
+                (blocks > 0) == (self.data.faces == FaceTarget::Pixelated),
+                "model.gate_blocks",
+                "is set exactly when data.faces = \"pixelated\" (the blocks the faces become)",
             ),
             (
                 self.gate_weight.is_finite() && (0.0..=100.0).contains(&self.gate_weight),
@@ -640,7 +660,7 @@ impl Rules for EnhancerConfig {
             (
                 (16..=1024).contains(&self.data.crop) && self.data.crop.is_multiple_of(multiple),
                 "data.crop",
-                "must be in 16..=1024 and a multiple of 2^(levels - 1)",
+                "must be in 16..=1024 and a multiple of 2^(levels - 1) and of model.gate_blocks",
             ),
             ((1..=256).contains(&self.data.batch), "data.batch", "must be in 1..=256"),
             (

@@ -11,7 +11,7 @@ use crate::config::{EnhancerConfig, FaceTarget};
 use crate::error::TrainError;
 use crate::face_privacy::{FacePrivacy, FaceSource};
 use crate::scenes::{chw_tensor, Scene, SceneSet};
-use crate::unet::{enhancer_loss, face_l1, gate_loss, masked_l1, Unet};
+use crate::unet::{enhancer_loss, face_l1, gate_loss, masked_l1, pixelate, Unet};
 use candle_core::{Device, Tensor};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use rand::SeedableRng;
@@ -89,8 +89,9 @@ pub struct EnhancerState {
 pub struct EnhancerOptions {
     pub checkpoints: Option<PathBuf>,
     pub resume: Option<PathBuf>,
-    /// Start from another run's checkpoint: every tensor of the same name and shape is
-    /// copied, the rest (a face gate it did not have) start fresh; step 1, a new log.
+    /// Start from another run's checkpoint folder or enhancer file (`PARAMS.enhancer.onnx`):
+    /// every tensor of the same name and shape is copied, the face gate's start fresh if it
+    /// has none (any other tensor missing is an error); step 1, a new log.
     pub init: Option<PathBuf>,
 }
 
@@ -279,20 +280,33 @@ pub fn run(
     let privacy = privacy.as_ref();
     let (mut first, mut log, mut earlier) = (1, Vec::new(), 0.0);
     let mut init = None;
-    if let Some(dir) = &opts.init {
-        let (tensors, state) = crate::checkpoint::load::<EnhancerState>(dir, &dev)?;
-        if state.model.widths != cfg.model.widths || state.model.stem != cfg.model.stem {
+    if let Some(from) = &opts.init {
+        let (tensors, step) = if from.is_dir() {
+            let (tensors, state) = crate::checkpoint::load::<EnhancerState>(from, &dev)?;
+            if state.model.widths != cfg.model.widths || state.model.stem != cfg.model.stem {
+                return Err(TrainError::Unsupported(format!(
+                    "--init {}: widths {:?} and stem {}, but model.widths is {:?} and model.stem {}",
+                    from.display(),
+                    state.model.widths,
+                    state.model.stem,
+                    cfg.model.widths,
+                    cfg.model.stem
+                )));
+            }
+            (tensors, Some(state.step))
+        } else {
+            (crate::onnx_net::f32_initializers(from, &dev)?, None)
+        };
+        let fresh = load_vars(&unet, &tensors)?;
+        // Only a head the other run did not have may start fresh: anything else means
+        // another shape (an enhancer file carries no configuration to compare).
+        if let Some(name) = fresh.iter().find(|n| !n.starts_with("gate.")) {
             return Err(TrainError::Unsupported(format!(
-                "--init {}: widths {:?} and stem {}, but model.widths is {:?} and model.stem {}",
-                dir.display(),
-                state.model.widths,
-                state.model.stem,
-                cfg.model.widths,
-                cfg.model.stem
+                "--init {}: {name} missing or of another shape (model.widths and model.stem must match)",
+                from.display()
             )));
         }
-        let fresh = load_vars(&unet, &tensors)?;
-        init = Some(serde_json::json!({ "checkpoint": dir.display().to_string(), "step": state.step, "fresh": fresh }));
+        init = Some(serde_json::json!({ "checkpoint": from.display().to_string(), "step": step, "fresh": fresh }));
     }
     if let Some(dir) = &opts.resume {
         let (tensors, state) = crate::checkpoint::load::<EnhancerState>(dir, &dev)?;
@@ -342,8 +356,12 @@ pub fn run(
         let idx = crate::train::draw(&mut order, &pool, cfg.data.batch, &mut rng);
         let b = scenes.batch(&idx, cfg.data.crop, cfg.data.faces != FaceTarget::Restore, &mut rng, &dev)?;
         let (pred, gate) = unet.forward_gated(&b.input, &b.captured)?;
-        let held = if cfg.data.faces == FaceTarget::Captured { &b.captured } else { &b.input };
-        let mut loss = enhancer_loss(&pred, &b.raw, held, &b.keep, cfg.data.faces, cfg.loss)?;
+        let held = match cfg.data.faces {
+            FaceTarget::Captured => b.captured.clone(),
+            FaceTarget::Pixelated => pixelate(&b.raw, cfg.model.gate_blocks)?,
+            _ => b.input.clone(),
+        };
+        let mut loss = enhancer_loss(&pred, &b.raw, &held, &b.keep, cfg.data.faces, cfg.loss)?;
         let v = loss.to_scalar::<f32>()? as f64;
         if let Some(g) = &gate {
             loss = (loss + (gate_loss(g, &b.keep, cfg.gate_background)? * cfg.gate_weight)?)?;

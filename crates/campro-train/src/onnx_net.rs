@@ -98,6 +98,32 @@ fn floats(t: &pb::TensorProto) -> Vec<f32> {
     t.raw_data.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect()
 }
 
+/// The f32 initializers of the ONNX file at `path` by name (read capped at 256 MiB; a
+/// tensor whose data does not fill its shape is an error naming it). Other types are left
+/// out.
+pub fn f32_initializers(
+    path: &Path,
+    dev: &candle_core::Device,
+) -> std::result::Result<HashMap<String, Tensor>, GraphError> {
+    let p = path.display().to_string();
+    let bytes = campro::file::read_capped(path, 256 << 20, "an ONNX model")
+        .map_err(|e| GraphError::Io { path: p.clone(), message: e.reason() })?;
+    let bad = |m: String| GraphError::Graph { path: p.clone(), message: m };
+    let model = pb::ModelProto::decode(bytes.as_slice()).map_err(|e| bad(format!("not an ONNX model: {e}")))?;
+    let graph = model.graph.ok_or_else(|| bad("no graph".into()))?;
+    let mut out = HashMap::new();
+    for t in graph.initializer.iter().filter(|t| t.data_type == 1) {
+        let dims: Vec<usize> = t.dims.iter().map(|&d| usize::try_from(d).unwrap_or(usize::MAX)).collect();
+        let v = floats(t);
+        if dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d)) != Some(v.len()) {
+            return Err(bad(format!("initializer {}: {} values for shape {:?}", t.name, v.len(), t.dims)));
+        }
+        let tensor = Tensor::from_vec(v, dims, dev).map_err(|e| bad(format!("initializer {}: {e}", t.name)))?;
+        out.insert(t.name.clone(), tensor);
+    }
+    Ok(out)
+}
+
 /// An f32 initializer `name` of shape `dims` (raw little-endian data).
 pub(crate) fn f32_tensor(name: &str, dims: Vec<i64>, v: &[f32]) -> pb::TensorProto {
     pb::TensorProto {

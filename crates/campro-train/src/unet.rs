@@ -17,15 +17,17 @@
 //!   nearest to full resolution: the widest view the network has) plus a 1x1 convolution of
 //!   the last decoder level (w₀ → 1, the edges), then a sigmoid, give each pixel the
 //!   probability `g` that it is a face (about 0.02 at start), and the enhanced pixel is
-//!   `out + g · (captured − out)`. Trained as [`GATE`] beside the output; the ONNX file
-//!   carries the blend ([`Unet::onnx_bytes`]).
+//!   `out + g · (captured − out)`, or with [`UnetConfig::gate_blocks`] = N
+//!   `out + g · (P(out) − out)`, `P` the output pixelated in N x N blocks (each block's
+//!   mean). Trained as [`GATE`] beside the output; the ONNX file carries the blend
+//!   ([`Unet::onnx_bytes`]).
 //!
 //! Input and output: (B, 3, H, W) RGB in [0, 1] (the output is not clamped; callers clamp
 //! when they quantise), H and W multiples of [`Unet::multiple`]. No normalisation layers:
 //! inference is one pass with no batch statistics.
 
 use crate::config::{FaceTarget, PixelLoss, UnetConfig};
-use crate::onnx_net::{conv_attrs, f32_tensor, node, string_attr, GraphError, OnnxNet};
+use crate::onnx_net::{conv_attrs, f32_tensor, ints_attr, node, string_attr, GraphError, OnnxNet};
 pub use campro_eval::enhance::{INPUT, MULTIPLE_KEY, OUTPUT};
 /// The restoration stage's output, the U-Net's input when there is one
 /// ([`Unet::onnx_bytes_with_table`]).
@@ -48,6 +50,8 @@ pub struct Unet {
     net: OnnxNet,
     widths: Vec<usize>,
     gate: bool,
+    /// Side of the pixelation blocks the gate blends toward; 0: toward the captured image.
+    blocks: usize,
 }
 
 /// Parameters of a U-Net of this shape (weights and biases).
@@ -115,11 +119,20 @@ impl Unet {
                 ),
             });
         }
-        let model = graph(widths, shape.stem, shape.face_gate, seed);
+        let blocks = if shape.face_gate { shape.gate_blocks } else { 0 };
+        if blocks != 0 && !(blocks.is_power_of_two() && (2..=64).contains(&blocks)) {
+            return Err(GraphError::Graph {
+                path: "unet".into(),
+                message: format!("gate_blocks {blocks}: a power of two in 2..=64 (0 for the captured image)"),
+            });
+        }
+        let multiple = (1usize << (widths.len() - 1)).max(blocks);
+        let model = graph(widths, shape.stem, shape.face_gate, multiple, seed);
         Ok(Self {
             net: OnnxNet::from_model(model, "unet".into(), dev)?,
             widths: widths.to_vec(),
             gate: shape.face_gate,
+            blocks,
         })
     }
 
@@ -127,9 +140,10 @@ impl Unet {
         &self.widths
     }
 
-    /// Height and width must be multiples of this (2^(levels − 1)).
+    /// Height and width must be multiples of this: 2^(levels − 1), or the gate's
+    /// pixelation blocks when larger.
     pub fn multiple(&self) -> usize {
-        1 << (self.widths.len() - 1)
+        (1 << (self.widths.len() - 1)).max(self.blocks)
     }
 
     /// Every trainable tensor.
@@ -152,7 +166,8 @@ impl Unet {
 
     /// The enhanced image (B, 3, H, W) of inputs `x` whose camera output is `captured` (the
     /// same tensor without a restoration stage), and the face gate's map (B, 1, H, W) when
-    /// there is one: `out + g · (captured − out)`.
+    /// there is one: `out + g · (captured − out)`, or `out + g · (P(out) − out)` with
+    /// pixelation blocks ([`pixelate`]).
     pub fn forward_gated(&self, x: &Tensor, captured: &Tensor) -> Result<(Tensor, Option<Tensor>)> {
         self.check(x)?;
         if !self.gate {
@@ -162,7 +177,8 @@ impl Unet {
         let (Some(out), Some(g)) = (v.remove(OUTPUT), v.remove(GATE)) else {
             candle_core::bail!("the gated U-Net computed no {OUTPUT} or {GATE}");
         };
-        let y = (&out + (captured - &out)?.broadcast_mul(&g)?)?;
+        let toward = if self.blocks > 0 { pixelate(&out, self.blocks)? } else { captured.clone() };
+        let y = (&out + (toward - &out)?.broadcast_mul(&g)?)?;
         Ok((y, Some(g)))
     }
 
@@ -187,7 +203,8 @@ impl Unet {
     /// With a face gate: the U-Net's output renamed [`UNGATED`] and the blend
     /// `OUTPUT = ungated + gate · (INPUT − ungated)` appended, INPUT being the graph's input
     /// (the captured image, also behind a restoration stage, which renames the U-Net's reads
-    /// of it first).
+    /// of it first); with pixelation blocks N, toward `P(ungated)` instead (AveragePool N x N,
+    /// stride N, then nearest Resize by N).
     fn append_gate(&self, model: &mut pb::ModelProto) {
         if !self.gate {
             return;
@@ -198,9 +215,22 @@ impl Unet {
             n.name = format!("{}_{UNGATED}", n.op_type);
         }
         graph.initializer.push(f32_tensor("gate.minus1", vec![], &[-1.0]));
+        let toward = if self.blocks > 0 {
+            let n = self.blocks as i64;
+            let f = self.blocks as f32;
+            graph.initializer.push(f32_tensor("gate.pix.scales", vec![4], &[1.0, 1.0, f, f]));
+            let pool = vec![ints_attr("kernel_shape", vec![n, n]), ints_attr("strides", vec![n, n])];
+            graph.node.extend([
+                node("AveragePool", &[UNGATED], "gate.pix.low", pool),
+                node("Resize", &["gate.pix.low", "", "gate.pix.scales"], "gate.pix", nearest()),
+            ]);
+            "gate.pix"
+        } else {
+            INPUT
+        };
         graph.node.extend([
             node("Mul", &[UNGATED, "gate.minus1"], "gate.neg", vec![]),
-            node("Add", &[INPUT, "gate.neg"], "gate.diff", vec![]),
+            node("Add", &[toward, "gate.neg"], "gate.diff", vec![]),
             node("Mul", &[GATE, "gate.diff"], "gate.move", vec![]),
             node("Add", &[UNGATED, "gate.move"], OUTPUT, vec![]),
         ]);
@@ -241,7 +271,7 @@ impl Unet {
             f32_tensor("restore.inv255", vec![], &[1.0 / 255.0]),
             f32_tensor("restore.index", vec![1, 3, 1, 1], &[4096.0, 64.0, 1.0]),
         ]);
-        let mut perm = crate::onnx_net::ints_attr("perm", vec![0, 4, 2, 3, 1]);
+        let mut perm = ints_attr("perm", vec![0, 4, 2, 3, 1]);
         perm.name = "perm".into();
         let front = vec![
             node("Mul", &[INPUT, "restore.255"], "restore.levels", vec![]),
@@ -270,8 +300,9 @@ pub fn masked_l1(pred: &Tensor, target: &Tensor, keep: &Tensor) -> Result<Tensor
 }
 
 /// The enhancer's training loss for `faces` ([`FaceTarget`]): the mean masked distance
-/// ([`PixelLoss`]) to `raw`, plus, with [`FaceTarget::Input`] and [`FaceTarget::Captured`],
-/// the distance inside the faces to `held`: the network's input, or the captured image.
+/// ([`PixelLoss`]) to `raw`, plus, with [`FaceTarget::Input`], [`FaceTarget::Captured`] and
+/// [`FaceTarget::Pixelated`], the distance inside the faces to `held`: the network's input,
+/// the captured image, or the raw image pixelated.
 pub fn enhancer_loss(
     pred: &Tensor,
     raw: &Tensor,
@@ -282,7 +313,7 @@ pub fn enhancer_loss(
 ) -> Result<Tensor> {
     let diff = match faces {
         FaceTarget::Free | FaceTarget::Restore => (pred - raw)?.broadcast_mul(keep)?,
-        FaceTarget::Input | FaceTarget::Captured => {
+        FaceTarget::Input | FaceTarget::Captured | FaceTarget::Pixelated => {
             (pred - (raw.broadcast_mul(keep)? + held.broadcast_mul(&(1.0 - keep)?)?)?)?
         }
     };
@@ -290,6 +321,14 @@ pub fn enhancer_loss(
         PixelLoss::L1 => diff.abs()?.mean_all(),
         PixelLoss::L2 => diff.sqr()?.mean_all(),
     }
+}
+
+/// `x` (B, C, H, W) pixelated in `n` x `n` blocks: each pixel replaced by its block's
+/// mean (H and W multiples of `n`). What a gated face becomes with
+/// [`UnetConfig::gate_blocks`], and its training target inside the faces (of the raw image).
+pub fn pixelate(x: &Tensor, n: usize) -> Result<Tensor> {
+    let (_, _, h, w) = x.dims4()?;
+    x.avg_pool2d((n, n))?.upsample_nearest2d(h, w)
 }
 
 /// The face gate's mean binary cross-entropy against the face boxes: `gate` (B, 1, H, W)
@@ -379,7 +418,7 @@ fn nearest() -> Vec<pb::AttributeProto> {
 }
 
 /// The U-Net of `widths` as an ONNX model (opset 13), weights drawn from `seed`.
-fn graph(widths: &[usize], stem: usize, gate: bool, seed: u64) -> pb::ModelProto {
+fn graph(widths: &[usize], stem: usize, gate: bool, multiple: usize, seed: u64) -> pb::ModelProto {
     let mut b = Builder { inits: Vec::new(), nodes: Vec::new(), rng: rand_chacha::ChaCha8Rng::seed_from_u64(seed) };
     let (mut x, mut first) = (INPUT.to_string(), 3);
     if stem > 0 {
@@ -431,10 +470,7 @@ fn graph(widths: &[usize], stem: usize, gate: bool, seed: u64) -> pb::ModelProto
             "CamPro image enhancer: U-Net, widths {widths:?}, stem {stem}{}",
             if gate { ", face gate" } else { "" }
         ),
-        metadata_props: vec![pb::StringStringEntryProto {
-            key: MULTIPLE_KEY.into(),
-            value: (1usize << (widths.len() - 1)).to_string(),
-        }],
+        metadata_props: vec![pb::StringStringEntryProto { key: MULTIPLE_KEY.into(), value: multiple.to_string() }],
         graph: Some(pb::GraphProto {
             name: "campro-enhancer".into(),
             node: b.nodes,

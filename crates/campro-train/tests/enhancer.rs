@@ -28,7 +28,7 @@ fn test_image(w: u32, h: u32) -> RgbImage {
 
 /// A U-Net with every weight drawn at random (the output convolution too, which starts at zero).
 fn shape(widths: &[usize], stem: usize) -> UnetConfig {
-    UnetConfig { widths: widths.to_vec(), stem, restorer: false, face_gate: false }
+    UnetConfig { widths: widths.to_vec(), stem, restorer: false, face_gate: false, gate_blocks: 0 }
 }
 
 fn random_unet(shape: &UnetConfig) -> Unet {
@@ -191,6 +191,13 @@ fn the_enhancer_configuration_names_its_broken_rule() {
     bad("[data]\nfaces = \"captured\"\n", "data.faces");
     bad("gate_weight = -1.0\n[model]\nface_gate = true\n[data]\nfaces = \"captured\"\n", "gate_weight");
     bad("gate_background = 0.0\n", "gate_background");
+    let pix = "[model]\nface_gate = true\ngate_blocks = 16\n[data]\nfaces = \"pixelated\"\n";
+    bad(&pix.replace("16", "12"), "model.gate_blocks");
+    bad(&pix.replace("pixelated", "captured"), "model.gate_blocks");
+    bad(&pix.replace("face_gate = true", "face_gate = false"), "data.faces");
+    bad(&format!("{pix}crop = 120\n"), "data.crop");
+    let pixelated: EnhancerConfig = campro_train::config::parse(pix, "t.toml").unwrap();
+    assert_eq!((pixelated.model.gate_blocks, pixelated.data.faces), (16, FaceTarget::Pixelated));
     let gated: EnhancerConfig =
         campro_train::config::parse("[model]\nface_gate = true\n[data]\nfaces = \"captured\"\n", "t.toml").unwrap();
     assert_eq!((gated.model.face_gate, gated.gate_weight), (true, 1.0));
@@ -261,9 +268,9 @@ fn every_level_gets_the_gradient_finite_differences_give() {
 }
 
 /// A gated U-Net of `widths` with random weights, the gate's scaled up so that it spans
-/// (0, 1) on the test image, and the gate's bias set.
-fn random_gated(widths: &[usize], gate_bias: f32) -> Unet {
-    let u = random_unet(&UnetConfig { face_gate: true, ..shape(widths, 0) });
+/// (0, 1) on the test image, and the gate's bias set; `blocks`: its pixelation (0: none).
+fn random_gated(widths: &[usize], gate_bias: f32, blocks: usize) -> Unet {
+    let u = random_unet(&UnetConfig { face_gate: true, gate_blocks: blocks, ..shape(widths, 0) });
     let var = |name: &str| u.named_vars().into_iter().find(|(n, _)| n == name).expect(name).1;
     for (name, seed, scale) in [("gate.fine.w", 77, 40.0), ("gate.low.w", 78, 1.0)] {
         let w = var(name);
@@ -273,13 +280,22 @@ fn random_gated(widths: &[usize], gate_bias: f32) -> Unet {
     u
 }
 
+/// The gate's last convolutions' weights at zero: the gate is sigmoid(bias) everywhere.
+fn silence(u: &Unet) {
+    for (n, w) in u.named_vars() {
+        if n == "gate.fine.w" || n == "gate.low.w" {
+            w.set(&w.as_tensor().zeros_like().unwrap()).unwrap();
+        }
+    }
+}
+
 #[test]
 fn the_face_gate_blends_in_onnx_as_in_candle() {
     let table: Vec<[u8; 3]> =
         (0..1usize << 18).map(|b| [(b * 7) as u8, (b / 3) as u8, (b >> 10) as u8 ^ 0x5a]).collect();
     let img = test_image(53, 37);
     let restored = campro_eval::restore::apply_table(&table, &img);
-    let u = random_gated(&[4, 8, 16], -2.0);
+    let u = random_gated(&[4, 8, 16], -2.0, 0);
     // The gate is neither off nor on everywhere, so both sides of the blend are in play.
     let (_, gate) = campro_train::enhancer::enhance_gated(&u, &restored, &img, &Device::Cpu).unwrap();
     let gate = gate.expect("a gate map");
@@ -296,18 +312,11 @@ fn the_face_gate_blends_in_onnx_as_in_candle() {
     // A gate on everywhere (sigmoid(30) = 1 in f32, the last convolutions' weights at zero)
     // gives back the captured image exactly, restoration stage or not; off, the U-Net's own
     // output.
-    let silence = |u: &Unet| {
-        for (n, w) in u.named_vars() {
-            if n == "gate.fine.w" || n == "gate.low.w" {
-                w.set(&w.as_tensor().zeros_like().unwrap()).unwrap();
-            }
-        }
-    };
-    let on = random_gated(&[4, 8], 30.0);
+    let on = random_gated(&[4, 8], 30.0, 0);
     silence(&on);
     let tract = Enhancer::from_bytes(&on.onnx_bytes_with_table(&table).unwrap(), Path::new("test")).unwrap();
     assert_eq!(tract.enhance(&img).unwrap(), img);
-    let off = random_gated(&[4, 8], -30.0);
+    let off = random_gated(&[4, 8], -30.0, 0);
     silence(&off);
     let (data, pw, ph) = campro_eval::enhance::padded_chw(&img, off.multiple());
     let ungated = off.forward(&Tensor::from_vec(data, (1, 3, ph, pw), &Device::Cpu).unwrap()).unwrap();
@@ -324,6 +333,53 @@ fn the_face_gate_blends_in_onnx_as_in_candle() {
     let counted = Unet::new(&fresh, 1, &Device::Cpu).unwrap().vars().iter().map(|v| v.elem_count()).sum::<usize>();
     assert_eq!(counted, 6643 + 4666);
     assert_eq!(macs_per_pixel(&fresh) - macs_per_pixel(&shape(&[8, 16], 0)), 4624.0 / 4.0 + 8.0);
+}
+
+#[test]
+fn pixelated_faces_are_block_means_in_onnx_as_in_candle() {
+    // By hand: 2 x 2 blocks of a 2 x 4 plane.
+    let x = Tensor::from_vec((1..=8).map(|v| v as f32).collect(), (1, 1, 2, 4), &Device::Cpu).unwrap();
+    let p = campro_train::unet::pixelate(&x, 2).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    assert_eq!(p, [3.5, 3.5, 5.5, 5.5, 3.5, 3.5, 5.5, 5.5]);
+    // Blocks of 8 behind a two-level U-Net (multiple 2): the file's multiple is the blocks.
+    let table: Vec<[u8; 3]> = (0..1usize << 18).map(|b| [(b * 5) as u8, (b / 7) as u8, (b >> 9) as u8]).collect();
+    let img = test_image(53, 37);
+    let restored = campro_eval::restore::apply_table(&table, &img);
+    let u = random_gated(&[4, 8], -2.0, 8);
+    assert_eq!(u.multiple(), 8);
+    for (bytes, input) in [(u.onnx_bytes_with_table(&table).unwrap(), &restored), (u.onnx_bytes().unwrap(), &img)] {
+        let tract = Enhancer::from_bytes(&bytes, Path::new("test")).unwrap();
+        assert_eq!(tract.multiple(), 8);
+        let a = campro_train::enhancer::enhance(&u, input, &img, &Device::Cpu).unwrap();
+        let b = tract.enhance(&img).unwrap();
+        let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+        assert!(worst <= 1, "candle and tract differ by {worst} LSB");
+    }
+    // A gate on everywhere: the U-Net's own output averaged over each 8 x 8 block of the
+    // padded image (56 x 40), summed here in f64, then cropped.
+    let on = random_gated(&[4, 8], 30.0, 8);
+    silence(&on);
+    let (data, pw, ph) = campro_eval::enhance::padded_chw(&img, 8);
+    assert_eq!((pw, ph), (56, 40));
+    let out = on.forward(&Tensor::from_vec(data, (1, 3, ph, pw), &Device::Cpu).unwrap()).unwrap();
+    let out = out.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    let mut hand = vec![0f32; out.len()];
+    for c in 0..3 {
+        for by in (0..ph).step_by(8) {
+            for bx in (0..pw).step_by(8) {
+                let at = |y: usize, x: usize| c * ph * pw + (by + y) * pw + bx + x;
+                let mean = (0..64).map(|i| out[at(i / 8, i % 8)] as f64).sum::<f64>() / 64.0;
+                (0..64).for_each(|i| hand[at(i / 8, i % 8)] = mean as f32);
+            }
+        }
+    }
+    let hand = campro_eval::enhance::cropped_rgb8(&hand, pw, ph, 53, 37);
+    let tract = Enhancer::from_bytes(&on.onnx_bytes().unwrap(), Path::new("test")).unwrap().enhance(&img).unwrap();
+    let worst = hand.as_raw().iter().zip(tract.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+    assert!(worst <= 1, "pixelation differs from the block means by {worst} LSB");
+    // Not the captured image, and flat over a block.
+    assert_ne!(tract, img);
+    assert_eq!(tract.get_pixel(8, 8), tract.get_pixel(15, 15));
 }
 
 #[test]

@@ -343,4 +343,28 @@ fn the_face_gate_learns_where_faces_are_and_leaves_them_as_captured() {
         train("gate.toml", "x.csv").arg("--init").arg(d.join("ck")).arg("--resume").arg(d.join("ck")),
         "cannot be used with",
     );
+    // Pixelated faces, started from the written file's weights: every tensor found there.
+    std::fs::copy(d.join("p.enhancer.onnx"), d.join("gated.onnx")).unwrap();
+    let pix = config(60, true)
+        .replace("face_gate = true", "face_gate = true\ngate_blocks = 8")
+        .replace("\"captured\"", "\"pixelated\"");
+    std::fs::write(d.join("pix.toml"), pix).unwrap();
+    train("pix.toml", "pix.csv").arg("--init").arg(d.join("gated.onnx")).assert().success();
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("p.enhancer.json")).unwrap()).unwrap();
+    assert_eq!(m["provenance"]["init"]["fresh"].as_array().map(Vec::len), Some(0), "{m}");
+    let pix = std::fs::read_to_string(d.join("pix.csv")).unwrap();
+    let longer = std::fs::read_to_string(d.join("longer.csv")).unwrap();
+    // At step 0 the same weights: where the gate opens on scenery by mistake a blur costs
+    // less than the captured image's bands.
+    assert!(at(&pix, "val_psnr", 0) > last(&longer, "val_psnr") + 0.2, "{longer}\n{pix}");
+    // The gate keeps its place (still more open on the faces) and the scene comes back.
+    let (faces, scene) = (last(&pix, "val_gate_faces"), last(&pix, "val_gate_scene"));
+    assert!(faces > scene + 0.1, "gate {faces} on faces, {scene} elsewhere\n{pix}");
+    assert!(last(&pix, "val_psnr") > last(&pix, "val_psnr_captured") + 1.0, "{pix}");
+    // The enhanced file's multiple is the blocks; a file of other widths is refused by name.
+    let e = campro_eval::enhance::Enhancer::load(&d.join("p.enhancer.onnx")).unwrap();
+    assert_eq!(e.multiple(), 8);
+    std::fs::write(d.join("wide.toml"), config(10, true).replace("[4, 8, 16]", "[4, 8, 12]")).unwrap();
+    fails_with(train("wide.toml", "w.csv").arg("--init").arg(d.join("gated.onnx")), "missing or of another shape");
 }

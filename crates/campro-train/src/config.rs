@@ -551,6 +551,14 @@ pub struct StepBudget {
     pub checkpoint_every: usize,
 }
 
+impl UnetConfig {
+    /// Height and width of the network's input must be multiples of this: 2^(levels − 1)
+    /// (levels clamped to 1..=6), or the gate's pixelation blocks when larger.
+    pub fn multiple(&self) -> usize {
+        (1usize << self.widths.len().clamp(1, 6).saturating_sub(1)).max(self.gate_blocks)
+    }
+}
+
 impl Default for UnetConfig {
     fn default() -> Self {
         Self { widths: vec![8, 16, 32, 64], stem: 0, restorer: true, face_gate: false, gate_blocks: 0 }
@@ -603,7 +611,7 @@ impl Rules for EnhancerConfig {
     fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let w = &self.model.widths;
         let blocks = self.model.gate_blocks;
-        let multiple = (1usize << w.len().clamp(1, 6).saturating_sub(1)).max(blocks);
+        let multiple = self.model.multiple();
         let p = &self.privacy;
         let gate = self.model.face_gate;
         let checks: [(bool, &str, &str); 23] = [

@@ -98,18 +98,25 @@ fn floats(t: &pb::TensorProto) -> Vec<f32> {
     t.raw_data.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect()
 }
 
-/// The f32 initializers of the ONNX file at `path` by name (read capped at 256 MiB; a
+/// The ONNX file at `path` (read capped at 256 MiB) and its path as shown in errors.
+fn read_model(path: &Path) -> std::result::Result<(pb::ModelProto, String), GraphError> {
+    let p = path.display().to_string();
+    let bytes = campro::file::read_capped(path, 256 << 20, "an ONNX model")
+        .map_err(|e| GraphError::Io { path: p.clone(), message: e.reason() })?;
+    let model = pb::ModelProto::decode(bytes.as_slice())
+        .map_err(|e| GraphError::Graph { path: p.clone(), message: format!("not an ONNX model: {e}") })?;
+    Ok((model, p))
+}
+
+/// The f32 initializers of the ONNX file at `path` by name (a
 /// tensor whose data does not fill its shape is an error naming it). Other types are left
 /// out.
 pub fn f32_initializers(
     path: &Path,
     dev: &candle_core::Device,
 ) -> std::result::Result<HashMap<String, Tensor>, GraphError> {
-    let p = path.display().to_string();
-    let bytes = campro::file::read_capped(path, 256 << 20, "an ONNX model")
-        .map_err(|e| GraphError::Io { path: p.clone(), message: e.reason() })?;
+    let (model, p) = read_model(path)?;
     let bad = |m: String| GraphError::Graph { path: p.clone(), message: m };
-    let model = pb::ModelProto::decode(bytes.as_slice()).map_err(|e| bad(format!("not an ONNX model: {e}")))?;
     let graph = model.graph.ok_or_else(|| bad("no graph".into()))?;
     let mut out = HashMap::new();
     for t in graph.initializer.iter().filter(|t| t.data_type == 1) {
@@ -171,11 +178,7 @@ impl OnnxNet {
     /// Reads the ONNX file; any operator or attribute outside what YOLOX, the shared face
     /// models and the enhancer's U-Net use is an error naming the node.
     pub fn load(path: &Path, dev: &candle_core::Device) -> std::result::Result<Self, GraphError> {
-        let p = path.display().to_string();
-        let bytes = campro::file::read_capped(path, 256 << 20, "an ONNX model")
-            .map_err(|e| GraphError::Io { path: p.clone(), message: e.reason() })?;
-        let model = pb::ModelProto::decode(bytes.as_slice())
-            .map_err(|e| GraphError::Graph { path: p.clone(), message: format!("not an ONNX model: {e}") })?;
+        let (model, p) = read_model(path)?;
         Self::from_model(model, p, dev)
     }
 

@@ -52,6 +52,8 @@ pub struct Unet {
     gate: bool,
     /// Side of the pixelation blocks the gate blends toward; 0: toward the captured image.
     blocks: usize,
+    /// [`UnetConfig::multiple`] of its shape.
+    multiple: usize,
 }
 
 /// Parameters of a U-Net of this shape (weights and biases).
@@ -126,13 +128,14 @@ impl Unet {
                 message: format!("gate_blocks {blocks}: a power of two in 2..=64 (0 for the captured image)"),
             });
         }
-        let multiple = (1usize << (widths.len() - 1)).max(blocks);
+        let multiple = UnetConfig { gate_blocks: blocks, ..shape.clone() }.multiple();
         let model = graph(widths, shape.stem, shape.face_gate, multiple, seed);
         Ok(Self {
             net: OnnxNet::from_model(model, "unet".into(), dev)?,
             widths: widths.to_vec(),
             gate: shape.face_gate,
             blocks,
+            multiple,
         })
     }
 
@@ -143,7 +146,7 @@ impl Unet {
     /// Height and width must be multiples of this: 2^(levels − 1), or the gate's
     /// pixelation blocks when larger.
     pub fn multiple(&self) -> usize {
-        (1 << (self.widths.len() - 1)).max(self.blocks)
+        self.multiple
     }
 
     /// Every trainable tensor.

@@ -280,6 +280,20 @@ fn random_gated(widths: &[usize], gate_bias: f32, blocks: usize) -> Unet {
     u
 }
 
+/// Both files of `u` (behind `table`, and alone) run by tract on `img` agree with candle on
+/// the same input within 1 LSB, and carry `u`'s multiple.
+fn files_agree_with_candle(u: &Unet, table: &[[u8; 3]], img: &RgbImage) {
+    let restored = campro_eval::restore::apply_table(table, img);
+    for (bytes, input) in [(u.onnx_bytes_with_table(table).unwrap(), &restored), (u.onnx_bytes().unwrap(), img)] {
+        let tract = Enhancer::from_bytes(&bytes, Path::new("test")).unwrap();
+        assert_eq!(tract.multiple(), u.multiple());
+        let a = campro_train::enhancer::enhance(u, input, img, &Device::Cpu).unwrap();
+        let b = tract.enhance(img).unwrap();
+        let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+        assert!(worst <= 1, "candle and tract differ by {worst} LSB");
+    }
+}
+
 /// The gate's last convolutions' weights at zero: the gate is sigmoid(bias) everywhere.
 fn silence(u: &Unet) {
     for (n, w) in u.named_vars() {
@@ -302,13 +316,7 @@ fn the_face_gate_blends_in_onnx_as_in_candle() {
     assert_eq!(gate.len(), 53 * 37);
     let (lo, hi) = gate.iter().fold((1f32, 0f32), |(a, b), &g| (a.min(g), b.max(g)));
     assert!(lo < 0.3 && hi > 0.7, "gate in [{lo}, {hi}]");
-    for (bytes, input) in [(u.onnx_bytes_with_table(&table).unwrap(), &restored), (u.onnx_bytes().unwrap(), &img)] {
-        let tract = Enhancer::from_bytes(&bytes, Path::new("test")).unwrap();
-        let a = campro_train::enhancer::enhance(&u, input, &img, &Device::Cpu).unwrap();
-        let b = tract.enhance(&img).unwrap();
-        let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
-        assert!(worst <= 1, "candle and tract differ by {worst} LSB");
-    }
+    files_agree_with_candle(&u, &table, &img);
     // A gate on everywhere (sigmoid(30) = 1 in f32, the last convolutions' weights at zero)
     // gives back the captured image exactly, restoration stage or not; off, the U-Net's own
     // output.
@@ -344,17 +352,9 @@ fn pixelated_faces_are_block_means_in_onnx_as_in_candle() {
     // Blocks of 8 behind a two-level U-Net (multiple 2): the file's multiple is the blocks.
     let table: Vec<[u8; 3]> = (0..1usize << 18).map(|b| [(b * 5) as u8, (b / 7) as u8, (b >> 9) as u8]).collect();
     let img = test_image(53, 37);
-    let restored = campro_eval::restore::apply_table(&table, &img);
     let u = random_gated(&[4, 8], -2.0, 8);
     assert_eq!(u.multiple(), 8);
-    for (bytes, input) in [(u.onnx_bytes_with_table(&table).unwrap(), &restored), (u.onnx_bytes().unwrap(), &img)] {
-        let tract = Enhancer::from_bytes(&bytes, Path::new("test")).unwrap();
-        assert_eq!(tract.multiple(), 8);
-        let a = campro_train::enhancer::enhance(&u, input, &img, &Device::Cpu).unwrap();
-        let b = tract.enhance(&img).unwrap();
-        let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
-        assert!(worst <= 1, "candle and tract differ by {worst} LSB");
-    }
+    files_agree_with_candle(&u, &table, &img);
     // A gate on everywhere: the U-Net's own output averaged over each 8 x 8 block of the
     // padded image (56 x 40), summed here in f64, then cropped.
     let on = random_gated(&[4, 8], 30.0, 8);

@@ -301,11 +301,12 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
         pb.set_message(format!("L1 {:.4}", r.loss));
         if let Some(v) = &r.validation {
             let line = format!(
-                "step {}: validation PSNR {:.2} dB (input {:.2}, captured {:.2}), masked L1 {:.4}, face L1 {} (input {}){}{} ({:.0} s)",
+                "step {}: validation PSNR {:.2} dB (input {:.2}, captured {:.2}){}, masked L1 {:.4}, face L1 {} (input {}){}{} ({:.0} s)",
                 r.step,
                 v.psnr,
                 v.psnr_input,
                 v.psnr_captured,
+                v.ssim.map_or(String::new(), |s| format!(", SSIM {s:.3}")),
                 v.masked_l1,
                 v.face_l1.map_or("-".into(), |f| format!("{f:.4}")),
                 v.face_l1_input.map_or("-".into(), |f| format!("{f:.4}")),
@@ -562,8 +563,8 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
             enh.enhance(&frame)?;
             Ok(())
         })?;
-        let step =
-            pool.install(|| campro_train::bench::enhancer_step(shape, cfg.data.batch, cfg.data.crop, a.runs as usize))?;
+        let step_cfg = campro_train::config::EnhancerConfig { model: shape.clone(), ..cfg.clone() };
+        let step = pool.install(|| campro_train::bench::enhancer_step(&step_cfg, a.runs as usize))?;
         rows.push(serde_json::json!({
             "widths": w, "stem": shape.stem, "restorer": shape.restorer, "parameters": campro_train::unet::parameter_count(shape),
             "macs_per_pixel": campro_train::unet::macs_per_pixel(shape), "onnx_bytes": bytes,

@@ -365,6 +365,23 @@ fn the_face_gate_learns_where_faces_are_and_leaves_them_as_captured() {
     // The enhanced file's multiple is the blocks; a file of other widths is refused by name.
     let e = campro_eval::enhance::Enhancer::load(&d.join("p.enhancer.onnx")).unwrap();
     assert_eq!(e.multiple(), 8);
+    // The SSIM term from the pixelated file: the validation scenes' SSIM against raw (the
+    // evaluation's) rises; the squared error alone for the same steps leaves it lower.
+    std::fs::copy(d.join("p.enhancer.onnx"), d.join("pix.onnx")).unwrap();
+    let ssim = |weight: f64, log: &str| {
+        let text = std::fs::read_to_string(d.join("pix.toml")).unwrap().replace("steps = 60", "steps = 40");
+        std::fs::write(d.join("ssim.toml"), format!("ssim_weight = {weight}\n{text}")).unwrap();
+        train("ssim.toml", log).arg("--init").arg(d.join("pix.onnx")).assert().success();
+        let csv = std::fs::read_to_string(d.join(log)).unwrap();
+        (at(&csv, "val_ssim", 0), last(&csv, "val_ssim"), csv)
+    };
+    let (start, with, csv) = ssim(1.0, "ssim.csv");
+    let (_, without, plain) = ssim(0.0, "plain-ssim.csv");
+    assert!(start > 0.0 && with < 1.0, "{csv}");
+    assert!(
+        with > start + 0.01 && with > without,
+        "SSIM {start} -> {with}, {without} without the term\n{csv}\n{plain}"
+    );
     std::fs::write(d.join("wide.toml"), config(10, true).replace("[4, 8, 16]", "[4, 8, 12]")).unwrap();
     fails_with(train("wide.toml", "w.csv").arg("--init").arg(d.join("gated.onnx")), "missing or of another shape");
 }

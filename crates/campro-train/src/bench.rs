@@ -159,17 +159,23 @@ fn seeded(shape: &[usize], scale: f32, seed: u64, dev: &Device) -> candle_core::
     Tensor::from_vec(v, shape, dev)
 }
 
-/// Median seconds of one enhancer training step (forward, masked L1, backward, AdamW) on
-/// `batch` seeded `crop` x `crop` crops, for a U-Net of `shape`.
-pub fn enhancer_step(shape: &crate::config::UnetConfig, batch: usize, crop: usize, runs: usize) -> crate::Result<f64> {
+/// Median seconds of one enhancer training step (forward, [`crate::enhancer::step_loss`]
+/// with `cfg`'s loss, gate and SSIM term, backward, AdamW) on `cfg.data.batch` seeded
+/// `cfg.data.crop`-pixel crops, for a U-Net of `cfg.model`.
+pub fn enhancer_step(cfg: &crate::config::EnhancerConfig, runs: usize) -> crate::Result<f64> {
     let dev = Device::Cpu;
-    let unet = crate::unet::Unet::new(shape, 1, &dev)?;
+    let unet = crate::unet::Unet::new(&cfg.model, 1, &dev)?;
     let mut adam = AdamW::new(unet.vars(), ParamsAdamW { lr: 3e-4, weight_decay: 1e-2, ..Default::default() })?;
-    let x = seeded(&[batch, 3, crop, crop], 1.0, 2, &dev)?;
-    let y = seeded(&[batch, 3, crop, crop], 1.0, 3, &dev)?;
-    let keep = seeded(&[batch, 1, crop, crop], 1.0, 4, &dev)?.ge(0.1)?.to_dtype(DType::F32)?;
+    let (batch, crop) = (cfg.data.batch, cfg.data.crop);
+    let input = seeded(&[batch, 3, crop, crop], 1.0, 2, &dev)?;
+    let b = crate::scenes::SceneBatch {
+        captured: input.clone(),
+        input,
+        raw: seeded(&[batch, 3, crop, crop], 1.0, 3, &dev)?,
+        keep: seeded(&[batch, 1, crop, crop], 1.0, 4, &dev)?.ge(0.1)?.to_dtype(DType::F32)?,
+    };
     median_secs(runs, || {
-        let loss = crate::unet::masked_l1(&unet.forward(&x)?, &y, &keep)?;
+        let (loss, _) = crate::enhancer::step_loss(&unet, cfg, &b)?;
         adam.step(&loss.backward()?)?;
         Ok(())
     })

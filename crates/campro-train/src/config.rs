@@ -395,6 +395,10 @@ pub struct EnhancerConfig {
     /// above 1 the gate opens only where it is sure, which keeps textures that merely look
     /// like the captured faces restored.
     pub gate_background: f64,
+    /// Weight of `1 − SSIM` ([`crate::ssim`], the evaluation's SSIM) beside the pixel loss,
+    /// against the same target, 0..=100 (0: off). The squared error alone gives blurred
+    /// structure; SSIM asks for the local contrast and correlation the evaluation scores.
+    pub ssim_weight: f64,
 }
 
 /// The enhancer's face-privacy term ([`crate::face_privacy`]): aligned LFW faces of the
@@ -576,6 +580,7 @@ impl Default for EnhancerConfig {
             privacy: FacePrivacyConfig::default(),
             gate_weight: 1.0,
             gate_background: 1.0,
+            ssim_weight: 0.0,
         }
     }
 }
@@ -614,7 +619,17 @@ impl Rules for EnhancerConfig {
         let multiple = self.model.multiple();
         let p = &self.privacy;
         let gate = self.model.face_gate;
-        let checks: [(bool, &str, &str); 23] = [
+        let checks: [(bool, &str, &str); 25] = [
+            (
+                self.ssim_weight.is_finite() && (0.0..=100.0).contains(&self.ssim_weight),
+                "ssim_weight",
+                "must be in [0, 100] (0: off)",
+            ),
+            (
+                self.ssim_weight == 0.0 || self.data.faces != FaceTarget::Free,
+                "ssim_weight",
+                "needs a target inside the faces (data.faces other than \"free\"): SSIM's windows cannot leave pixels out",
+            ),
             (
                 self.gate_background.is_finite() && (0.01..=100.0).contains(&self.gate_background),
                 "gate_background",

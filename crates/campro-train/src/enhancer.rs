@@ -10,7 +10,7 @@
 use crate::config::{EnhancerConfig, FaceTarget};
 use crate::error::TrainError;
 use crate::face_privacy::{FacePrivacy, FaceSource};
-use crate::scenes::{chw_tensor, Scene, SceneSet};
+use crate::scenes::{chw_tensor, Scene, SceneBatch, SceneSet};
 use crate::unet::{enhancer_loss, face_l1, gate_loss, masked_l1, pixelate, Unet};
 use candle_core::{Device, Tensor};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
@@ -69,6 +69,10 @@ pub struct Validation {
     pub gate_faces: Option<f64>,
     #[serde(default)]
     pub gate_scene: Option<f64>,
+    /// SSIM against raw of the enhanced image ([`campro_eval::quality::ssim`]); None in logs
+    /// written before it was measured.
+    #[serde(default)]
+    pub ssim: Option<f64>,
 }
 
 /// A checkpoint's state (beside the network's tensors).
@@ -138,8 +142,8 @@ pub struct EnhancerOutcome {
 
 /// One scene's validation terms: masked L1, face L1 of the enhanced image and of the
 /// U-Net's input (None without faces), PSNR against raw of the enhanced image, the input and
-/// the captured image, the face gate's mean inside the faces and elsewhere.
-fn validate_scene(unet: &Unet, sc: &Scene, dev: &Device) -> Result<[Option<f64>; 8], TrainError> {
+/// the captured image, the face gate's mean inside the faces and elsewhere, SSIM against raw.
+fn validate_scene(unet: &Unet, sc: &Scene, dev: &Device) -> Result<[Option<f64>; 9], TrainError> {
     let (out, gate) = enhance_gated(unet, sc.input(), &sc.captured, dev)?;
     let (w, h) = sc.raw.dimensions();
     let k = sc.keep(0, 0, w, h);
@@ -160,6 +164,7 @@ fn validate_scene(unet: &Unet, sc: &Scene, dev: &Device) -> Result<[Option<f64>;
         Some(campro_eval::quality::psnr(&sc.captured, &sc.raw)),
         gates[0],
         gates[1],
+        Some(campro_eval::quality::ssim(&out, &sc.raw)),
     ])
 }
 
@@ -243,6 +248,7 @@ pub fn validate(
         face_top1_input: top1.map(|c| c.1),
         gate_faces: mean(6),
         gate_scene: mean(7),
+        ssim: mean(8),
     }))
 }
 
@@ -355,23 +361,13 @@ pub fn run(
     for step in first..=cfg.budget.steps.max(first - 1) {
         let idx = crate::train::draw(&mut order, &pool, cfg.data.batch, &mut rng);
         let b = scenes.batch(&idx, cfg.data.crop, cfg.data.faces != FaceTarget::Restore, &mut rng, &dev)?;
-        let (pred, gate) = unet.forward_gated(&b.input, &b.captured)?;
-        let held = match cfg.data.faces {
-            FaceTarget::Captured => b.captured.clone(),
-            FaceTarget::Pixelated => pixelate(&b.raw, cfg.model.gate_blocks)?,
-            _ => b.input.clone(),
-        };
-        let mut loss = enhancer_loss(&pred, &b.raw, &held, &b.keep, cfg.data.faces, cfg.loss)?;
-        let v = loss.to_scalar::<f32>()? as f64;
-        if let Some(g) = &gate {
-            loss = (loss + (gate_loss(g, &b.keep, cfg.gate_background)? * cfg.gate_weight)?)?;
-        }
+        let (mut loss, v) = step_loss(&unet, cfg, &b)?;
         if let Some(p) = privacy {
             let t = p.term(&unet, &mut face_order, &mut rng, &dev)?;
             hit_sum += t.top1;
             loss = (loss + t.loss)?;
         }
-        let total = if privacy.is_some() || gate.is_some() { loss.to_scalar::<f32>()? as f64 } else { v };
+        let total = loss.to_scalar::<f32>()? as f64;
         if !total.is_finite() {
             return Err(TrainError::Diverged(format!("enhancer loss is {total}: lower optimiser.lr")));
         }
@@ -413,6 +409,35 @@ pub fn run(
     Ok(EnhancerOutcome { enhancer: EnhancerNet { unet, table: scenes.table }, log, seconds: seconds(), provenance })
 }
 
+/// One training step's loss on a batch, without the face-privacy term: the pixel loss
+/// ([`enhancer_loss`], faces held to what `data.faces` says), plus `ssim_weight` ·
+/// (1 − SSIM) against the same target ([`crate::ssim`]), plus the face gate's cross-entropy
+/// (`gate_weight`). Returns the total and the pixel loss alone (what the log's loss column
+/// reports).
+pub fn step_loss(unet: &Unet, cfg: &EnhancerConfig, b: &SceneBatch) -> candle_core::Result<(Tensor, f64)> {
+    let (pred, gate) = unet.forward_gated(&b.input, &b.captured)?;
+    let held = match cfg.data.faces {
+        FaceTarget::Captured => b.captured.clone(),
+        FaceTarget::Pixelated => pixelate(&b.raw, cfg.model.gate_blocks)?,
+        _ => b.input.clone(),
+    };
+    let pixel = enhancer_loss(&pred, &b.raw, &held, &b.keep, cfg.data.faces, cfg.loss)?;
+    let v = pixel.to_scalar::<f32>()? as f64;
+    let mut loss = pixel;
+    if cfg.ssim_weight > 0.0 {
+        // The config refuses "free" faces here: SSIM's windows cannot leave pixels out.
+        let target = match cfg.data.faces {
+            FaceTarget::Restore | FaceTarget::Free => b.raw.clone(),
+            _ => (b.raw.broadcast_mul(&b.keep)? + held.broadcast_mul(&(1.0 - &b.keep)?)?)?,
+        };
+        loss = (loss + ((1.0 - crate::ssim::ssim(&pred, &target)?)? * cfg.ssim_weight)?)?;
+    }
+    if let Some(g) = &gate {
+        loss = (loss + (gate_loss(g, &b.keep, cfg.gate_background)? * cfg.gate_weight)?)?;
+    }
+    Ok((loss, v))
+}
+
 /// Sets every tensor of `unet` that `tensors` holds under its name and shape; returns the
 /// names of those it does not (they keep their values).
 fn load_vars(unet: &Unet, tensors: &std::collections::HashMap<String, Tensor>) -> Result<Vec<String>, TrainError> {
@@ -430,13 +455,13 @@ fn load_vars(unet: &Unet, tensors: &std::collections::HashMap<String, Tensor>) -
 /// checkpoints).
 pub fn log_csv(log: &[EnhancerRow]) -> String {
     let mut csv = String::from(
-        "step,seconds,loss,face_top1,val_masked_l1,val_face_l1,val_face_l1_input,val_psnr,val_psnr_input,val_psnr_captured,val_face_top1,val_face_top1_input,val_gate_faces,val_gate_scene\n",
+        "step,seconds,loss,face_top1,val_masked_l1,val_face_l1,val_face_l1_input,val_psnr,val_psnr_input,val_psnr_captured,val_face_top1,val_face_top1_input,val_gate_faces,val_gate_scene,val_ssim\n",
     );
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
     for r in log {
         let v = r.validation.as_ref();
         csv += &format!(
-            "{},{:.3},{:.6},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{:.3},{:.6},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             r.step,
             r.seconds,
             r.loss,
@@ -451,6 +476,7 @@ pub fn log_csv(log: &[EnhancerRow]) -> String {
             opt(v.and_then(|v| v.face_top1_input)),
             opt(v.and_then(|v| v.gate_faces)),
             opt(v.and_then(|v| v.gate_scene)),
+            opt(v.and_then(|v| v.ssim)),
         );
     }
     csv

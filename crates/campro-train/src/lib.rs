@@ -26,6 +26,7 @@ pub mod onnx_net;
 pub mod persons;
 pub mod retrain;
 pub mod scenes;
+pub mod ssim;
 pub mod torch_legacy;
 pub mod train;
 pub mod unet;

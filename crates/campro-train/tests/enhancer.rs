@@ -191,6 +191,8 @@ fn the_enhancer_configuration_names_its_broken_rule() {
     bad("[data]\nfaces = \"captured\"\n", "data.faces");
     bad("gate_weight = -1.0\n[model]\nface_gate = true\n[data]\nfaces = \"captured\"\n", "gate_weight");
     bad("gate_background = 0.0\n", "gate_background");
+    bad("ssim_weight = -0.5\n", "ssim_weight");
+    bad("ssim_weight = 1.0\n[data]\nfaces = \"free\"\n", "ssim_weight");
     let pix = "[model]\nface_gate = true\ngate_blocks = 16\n[data]\nfaces = \"pixelated\"\n";
     bad(&pix.replace("16", "12"), "model.gate_blocks");
     bad(&pix.replace("pixelated", "captured"), "model.gate_blocks");
@@ -406,4 +408,102 @@ fn the_gate_loss_is_the_cross_entropy_by_hand() {
     let l = enhancer_loss(&pred, &raw, &held, &keep, FaceTarget::Captured, PixelLoss::L1).unwrap();
     // Pixel 0 is a face held to 0.0 (|0.5| x 3), pixel 1 background at raw 0.0 (|0.5| x 3).
     assert!((l.to_scalar::<f32>().unwrap() - 0.5).abs() < 1e-6);
+}
+
+/// `img` as a (1, 3, H, W) tensor in 0..1.
+fn to_tensor(img: &RgbImage) -> Tensor {
+    campro_train::scenes::chw_tensor(img, &Device::Cpu).unwrap()
+}
+
+#[test]
+fn the_ssim_loss_is_the_evaluations_ssim() {
+    use campro_train::ssim::ssim;
+    // Against the f64 evaluation (a second implementation: loops, not matrix products), on
+    // images with structure and noise, square and not, and on a batch (the mean).
+    let pair = |w: u32, h: u32, seed: u64| {
+        let mut s = seed;
+        let a = test_image(w, h);
+        let b = RgbImage::from_fn(w, h, |x, y| {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let p = a.get_pixel(x, y).0;
+            image::Rgb(std::array::from_fn(|c| {
+                p[c].saturating_add(((s >> (40 + 8 * c)) % 61) as u8).saturating_sub(30)
+            }))
+        });
+        (a, b)
+    };
+    for (w, h) in [(11, 11), (40, 29), (64, 64)] {
+        let (a, b) = pair(w, h, w as u64);
+        let ours = ssim(&to_tensor(&a), &to_tensor(&b)).unwrap().to_scalar::<f32>().unwrap() as f64;
+        let eval = campro_eval::quality::ssim(&a, &b);
+        assert!((ours - eval).abs() < 1e-4, "{w}x{h}: candle {ours}, evaluation {eval}");
+        assert!(eval < 0.9, "{w}x{h}: the pair is too alike to test anything ({eval})");
+        let same = ssim(&to_tensor(&a), &to_tensor(&a)).unwrap().to_scalar::<f32>().unwrap();
+        assert!((same - 1.0).abs() < 1e-5, "{same}");
+    }
+    let (p, q) = (pair(32, 24, 1), pair(32, 24, 2));
+    let batch = |x: &RgbImage, y: &RgbImage| Tensor::cat(&[to_tensor(x), to_tensor(y)], 0).unwrap();
+    let ours = ssim(&batch(&p.0, &q.0), &batch(&p.1, &q.1)).unwrap().to_scalar::<f32>().unwrap() as f64;
+    let eval = (campro_eval::quality::ssim(&p.0, &p.1) + campro_eval::quality::ssim(&q.0, &q.1)) / 2.0;
+    assert!((ours - eval).abs() < 1e-4, "batch: candle {ours}, evaluation {eval}");
+    // By hand: flat images a and b have no variance, so SSIM = (2ab + C1) / (a² + b² + C1).
+    // f32's E[x²] − μ² leaves about 3e-8 of variance against C2 = 9e-4: 1e-4 of SSIM here.
+    let flat = |v: f32| Tensor::full(v, (1, 3, 12, 12), &Device::Cpu).unwrap();
+    let by_hand = (2.0 * 0.2 * 0.6 + 1e-4) / (0.04 + 0.36 + 1e-4);
+    let ours = ssim(&flat(0.2), &flat(0.6)).unwrap().to_scalar::<f32>().unwrap() as f64;
+    assert!((ours - by_hand).abs() < 1.5e-4, "{ours} against {by_hand}");
+    assert!(ssim(&flat(0.2), &Tensor::zeros((1, 3, 10, 12), candle_core::DType::F32, &Device::Cpu).unwrap()).is_err());
+}
+
+#[test]
+fn the_ssim_gradient_is_what_finite_differences_give() {
+    let a = (noise(&[1, 2, 14, 13], 21, 0.4) + 0.5).unwrap();
+    let b = (noise(&[1, 2, 14, 13], 22, 0.4) + 0.5).unwrap();
+    let var = candle_core::Var::from_tensor(&a).unwrap();
+    let grads = campro_train::ssim::ssim(var.as_tensor(), &b).unwrap().backward().unwrap();
+    let analytic: Vec<f32> = grads.get(var.as_tensor()).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let a0: Vec<f32> = a.flatten_all().unwrap().to_vec1().unwrap();
+    let at = |k: usize, d: f32| {
+        let mut v = a0.clone();
+        v[k] += d;
+        let t = Tensor::from_vec(v, a.dims(), &Device::Cpu).unwrap();
+        campro_train::ssim::ssim(&t, &b).unwrap().to_scalar::<f32>().unwrap() as f64
+    };
+    let eps = 2e-3f32;
+    // Corners (one window), edges and the middle (many), in both channels.
+    for k in [0, 6, 12, 91, 95, 181, 182, 200, 270, 363] {
+        let d = (at(k, eps) - at(k, -eps)) / (2.0 * eps as f64);
+        let g = analytic[k] as f64;
+        assert!((g - d).abs() <= 0.03 * d.abs().max(g.abs()) + 3e-4, "pixel {k}: autograd {g}, difference {d}");
+    }
+    assert!(analytic.iter().any(|g| g.abs() > 1e-3), "no gradient");
+}
+
+#[test]
+fn an_ssim_term_trains_the_structure_back() {
+    // The same fixed batch trained with and without the SSIM term (equal seeds and steps):
+    // the step loss falls, and the term leaves a higher SSIM against raw.
+    use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+    let raw = (noise(&[2, 3, 32, 32], 7, 0.5) + 0.5).unwrap();
+    let b = campro_train::scenes::SceneBatch {
+        input: (1.0 - &raw).unwrap(),
+        captured: (1.0 - &raw).unwrap(),
+        raw: raw.clone(),
+        keep: Tensor::ones((2, 1, 32, 32), candle_core::DType::F32, &Device::Cpu).unwrap(),
+    };
+    let train = |ssim_weight: f64| {
+        let mut cfg = EnhancerConfig { loss: PixelLoss::L2, ssim_weight, ..Default::default() };
+        cfg.model = shape(&[4, 8], 0);
+        let u = Unet::new(&cfg.model, 5, &Device::Cpu).unwrap();
+        let mut adam = AdamW::new(u.vars(), ParamsAdamW { lr: 1e-2, weight_decay: 0.0, ..Default::default() }).unwrap();
+        let first = campro_train::enhancer::step_loss(&u, &cfg, &b).unwrap().0.to_scalar::<f32>().unwrap();
+        for _ in 0..60 {
+            adam.step(&campro_train::enhancer::step_loss(&u, &cfg, &b).unwrap().0.backward().unwrap()).unwrap();
+        }
+        let last = campro_train::enhancer::step_loss(&u, &cfg, &b).unwrap().0.to_scalar::<f32>().unwrap();
+        assert!(last < 0.5 * first, "ssim_weight {ssim_weight}: loss {first} -> {last}");
+        campro_train::ssim::ssim(&u.forward(&b.input).unwrap(), &raw).unwrap().to_scalar::<f32>().unwrap()
+    };
+    let (plain, with) = (train(0.0), train(1.0));
+    assert!(with > plain, "SSIM after training: {plain} with L2 alone, {with} with the term");
 }

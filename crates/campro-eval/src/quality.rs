@@ -53,7 +53,8 @@ pub fn psnr(a: &RgbImage, b: &RgbImage) -> f64 {
     20.0 * (255.0 / rmse(a, b)).log10()
 }
 
-fn gaussian_window() -> [f64; 11] {
+/// SSIM's window: 11 taps of a Gaussian with σ = 1.5 px, normalised to sum 1.
+pub fn gaussian_window() -> [f64; 11] {
     let mut g: [f64; 11] = std::array::from_fn(|i| (-((i as f64 - 5.0).powi(2)) / (2.0 * 1.5 * 1.5)).exp());
     let s: f64 = g.iter().sum();
     g.iter_mut().for_each(|x| *x /= s);

@@ -11,7 +11,7 @@ use crate::config::{EnhancerConfig, FaceTarget};
 use crate::error::TrainError;
 use crate::face_privacy::{FacePrivacy, FaceSource};
 use crate::scenes::{chw_tensor, Scene, SceneBatch, SceneSet};
-use crate::unet::{enhancer_loss, face_l1, gate_loss, masked_l1, pixelate, Unet};
+use crate::unet::{enhancer_loss, face_l1, gate_loss, loss_target, masked_l1, pixelate, Unet};
 use candle_core::{Device, Tensor};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use rand::SeedableRng;
@@ -426,10 +426,7 @@ pub fn step_loss(unet: &Unet, cfg: &EnhancerConfig, b: &SceneBatch) -> candle_co
     let mut loss = pixel;
     if cfg.ssim_weight > 0.0 {
         // The config refuses "free" faces here: SSIM's windows cannot leave pixels out.
-        let target = match cfg.data.faces {
-            FaceTarget::Restore | FaceTarget::Free => b.raw.clone(),
-            _ => (b.raw.broadcast_mul(&b.keep)? + held.broadcast_mul(&(1.0 - &b.keep)?)?)?,
-        };
+        let target = loss_target(&b.raw, &held, &b.keep, cfg.data.faces)?;
         loss = (loss + ((1.0 - crate::ssim::ssim(&pred, &target)?)? * cfg.ssim_weight)?)?;
     }
     if let Some(g) = &gate {

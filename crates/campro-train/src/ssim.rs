@@ -11,9 +11,8 @@
 
 use candle_core::{DType, Device, Result, Tensor};
 
-/// Window taps (11) and σ (px), as the evaluation's.
+/// Window taps, as the evaluation's ([`campro_eval::quality::gaussian_window`]).
 const TAPS: usize = 11;
-const SIGMA: f64 = 1.5;
 /// Stabilisers for a dynamic range of 1.
 const C1: f64 = 0.01 * 0.01;
 const C2: f64 = 0.03 * 0.03;
@@ -21,13 +20,12 @@ const C2: f64 = 0.03 * 0.03;
 /// `n` x (n − 10) band: column j holds the normalised Gaussian at rows j..j+11, so
 /// `x · band` filters the last dimension of `x` ("valid").
 fn band(n: usize, dev: &Device) -> Result<Tensor> {
-    let g: Vec<f64> = (0..TAPS).map(|i| (-((i as f64 - 5.0).powi(2)) / (2.0 * SIGMA * SIGMA)).exp()).collect();
-    let s: f64 = g.iter().sum();
+    let g = campro_eval::quality::gaussian_window();
     let m = n - (TAPS - 1);
     let mut v = vec![0f32; n * m];
     for j in 0..m {
         for (k, gk) in g.iter().enumerate() {
-            v[(j + k) * m + j] = (gk / s) as f32;
+            v[(j + k) * m + j] = *gk as f32;
         }
     }
     Tensor::from_vec(v, (n, m), dev)

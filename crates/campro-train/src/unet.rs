@@ -317,12 +317,24 @@ pub fn enhancer_loss(
     let diff = match faces {
         FaceTarget::Free | FaceTarget::Restore => (pred - raw)?.broadcast_mul(keep)?,
         FaceTarget::Input | FaceTarget::Captured | FaceTarget::Pixelated => {
-            (pred - (raw.broadcast_mul(keep)? + held.broadcast_mul(&(1.0 - keep)?)?)?)?
+            (pred - loss_target(raw, held, keep, faces)?)?
         }
     };
     match loss {
         PixelLoss::L1 => diff.abs()?.mean_all(),
         PixelLoss::L2 => diff.sqr()?.mean_all(),
+    }
+}
+
+/// What the enhancer is asked to output for `faces` ([`FaceTarget`]): `raw` outside the
+/// faces (`keep` 1) and `held` inside them, or `raw` everywhere with [`FaceTarget::Free`]
+/// (whose face pixels the loss leaves out) and [`FaceTarget::Restore`].
+pub fn loss_target(raw: &Tensor, held: &Tensor, keep: &Tensor, faces: FaceTarget) -> Result<Tensor> {
+    match faces {
+        FaceTarget::Free | FaceTarget::Restore => Ok(raw.clone()),
+        FaceTarget::Input | FaceTarget::Captured | FaceTarget::Pixelated => {
+            raw.broadcast_mul(keep)? + held.broadcast_mul(&(1.0 - keep)?)?
+        }
     }
 }
 

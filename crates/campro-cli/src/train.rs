@@ -553,7 +553,7 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
         // A restoration stage costs its lookup whatever the table holds: the identity's.
         let table = shape.restorer.then(|| {
             let one = image::RgbImage::new(1, 1);
-            campro_eval::restore::Restorer::fit(|i: &image::RgbImage| i.clone(), [&one]).map(|r| r.table())
+            campro_eval::restore::Restorer::fit(|i: &image::RgbImage| i.clone(), [&one]).map(|r| r.table().clone())
         });
         let net = campro_train::enhancer::EnhancerNet { unet, table: table.transpose()? };
         let onnx = net.onnx_bytes()?;

@@ -103,14 +103,14 @@ pub struct EnhancerOptions {
 pub struct EnhancerNet {
     pub unet: Unet,
     /// [`campro_eval::restore::Restorer::table`] of the camera, fitted on the training scenes.
-    pub table: Option<Vec<[u8; 3]>>,
+    pub table: Option<campro_eval::restore::Table>,
 }
 
 impl EnhancerNet {
     /// The enhanced image of a captured 8-bit image (candle; tract runs the ONNX file).
     pub fn enhance(&self, captured: &image::RgbImage, dev: &Device) -> Result<image::RgbImage, TrainError> {
         match &self.table {
-            Some(t) => enhance(&self.unet, &campro_eval::restore::apply_table(t, captured), captured, dev),
+            Some(t) => enhance(&self.unet, &t.apply(captured), captured, dev),
             None => enhance(&self.unet, captured, captured, dev),
         }
     }

@@ -46,7 +46,7 @@ pub struct FacePrivacy<'a> {
     /// Unit class means of the raw training faces' embeddings (classes, 128).
     means: Tensor,
     camera: Exact8<'a>,
-    table: Option<Vec<[u8; 3]>>,
+    table: Option<campro_eval::restore::Table>,
 }
 
 /// One step's term and how many of its faces the nearest class mean identified.
@@ -66,7 +66,7 @@ impl<'a> FacePrivacy<'a> {
         cfg: &FacePrivacyConfig,
         src: &FaceSource,
         params: &'a campro::Params,
-        table: Option<Vec<[u8; 3]>>,
+        table: Option<campro_eval::restore::Table>,
         dev: &Device,
     ) -> Result<Self, TrainError> {
         let sel = Selection {
@@ -118,7 +118,7 @@ impl<'a> FacePrivacy<'a> {
             let mut captured = RgbImage::new(w as u32, h as u32);
             self.camera.run(x.as_raw(), &mut captured);
             if let Some(t) = &self.table {
-                crate::scenes::push_chw(&campro_eval::restore::apply_table(t, &captured), &mut inp);
+                crate::scenes::push_chw(&t.apply(&captured), &mut inp);
             }
             crate::scenes::push_chw(&captured, &mut cap);
         }

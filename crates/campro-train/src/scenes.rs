@@ -58,7 +58,7 @@ pub struct SceneSet {
     pub train: Vec<Scene>,
     pub validation: Vec<Scene>,
     /// The restoration table fitted on the training scenes (with `restorer`).
-    pub table: Option<Vec<[u8; 3]>>,
+    pub table: Option<campro_eval::restore::Table>,
     /// COCO and LFW images read.
     pub coco: usize,
     pub lfw: usize,
@@ -170,9 +170,9 @@ impl SceneSet {
                 camera.run(img.as_raw(), &mut out);
                 out
             };
-            let t = campro_eval::restore::Restorer::fit(protect, scenes.iter().map(|s| &s.raw))?.table();
+            let t = campro_eval::restore::Restorer::fit(protect, scenes.iter().map(|s| &s.raw))?.table().clone();
             for s in scenes.iter_mut().chain(validation.iter_mut()) {
-                s.restored = Some(campro_eval::restore::apply_table(&t, &s.captured));
+                s.restored = Some(t.apply(&s.captured));
             }
             Some(t)
         } else {

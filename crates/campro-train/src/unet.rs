@@ -40,6 +40,7 @@ const UNGATED: &str = "ungated";
 const GATE_BIAS: f32 = -4.0;
 /// Channels of the face gate's deep branch.
 const GATE_WIDTH: usize = 16;
+use campro_eval::restore::{Table, SIDE};
 use candle_core::{Result, Tensor, Var};
 use rand::SeedableRng;
 use rand_distr::Distribution;
@@ -240,15 +241,18 @@ impl Unet {
     }
 
     /// The network with its current weights behind a per-pixel restoration stage: each
-    /// captured pixel replaced by `table[bin]` ([`campro_eval::restore::table`], 2^18
-    /// entries, bins of 6 bits a channel), then the U-Net on that; encoded as an ONNX file
-    /// whose input is still the captured image. The stage is ONNX operators (Round, Floor, a
-    /// 1x1 Conv forming the bin index, Cast, Gather from a uint8 table, Cast, Transpose,
-    /// Squeeze): 786,432 bytes of table.
-    pub fn onnx_bytes_with_table(&self, table: &[[u8; 3]]) -> std::result::Result<Vec<u8>, GraphError> {
+    /// captured pixel replaced by its bin's entry ([`campro_eval::restore::Table`]: 2^18
+    /// entries, [`SIDE`] bins a channel), then the U-Net on that; encoded as an ONNX file
+    /// whose input is still the captured image. The stage is ONNX operators: the 8-bit level
+    /// (Mul, Round, Clip, Cast), each channel's bin already scaled by its place in the index
+    /// (Add of the channel's offset, Gather from a 768-entry float table), the index (a 1x1
+    /// Conv summing the three, Cast), the entry (Gather from a uint8 table), and back to
+    /// (B, 3, H, W) in [0, 1] (Cast, Mul, Transpose, Squeeze): 786,432 bytes of table.
+    /// Exact: the index sums three integers below 2^18 in f32.
+    pub fn onnx_bytes_with_table(&self, table: &Table) -> std::result::Result<Vec<u8>, GraphError> {
         use prost::Message;
         let bad = |m: &str| GraphError::Graph { path: "unet".into(), message: m.into() };
-        if table.len() != 1 << 18 {
+        if table.entries.len() != SIDE * SIDE * SIDE {
             return Err(bad("a restoration table has 2^18 entries"));
         }
         let mut model = self.net.current()?;
@@ -260,28 +264,40 @@ impl Unet {
         }
         let int_attr =
             |name: &str, i: i64| pb::AttributeProto { name: name.into(), r#type: 2, i, ..Default::default() };
-        let mut lut = f32_tensor("restore.table", vec![1 << 18, 3], &[]);
+        let int64 = |name: &str, dims: Vec<i64>, v: &[i64]| {
+            let mut t = f32_tensor(name, dims, &[]);
+            t.data_type = 7; // int64
+            t.raw_data = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+            t
+        };
+        let mut lut = f32_tensor("restore.table", vec![SIDE.pow(3) as i64, 3], &[]);
         lut.data_type = 2; // uint8
-        lut.raw_data = table.iter().flatten().copied().collect();
-        let mut axes = f32_tensor("restore.axes", vec![1], &[]);
-        axes.data_type = 7; // int64
-        axes.raw_data = 4i64.to_le_bytes().to_vec();
+        lut.raw_data = table.entries.iter().flatten().copied().collect();
+        // Channel c's level v at c · 256 + v: its bin times SIDE^(2 − c).
+        let place = [SIDE * SIDE, SIDE, 1];
+        let bins: Vec<f32> = (0..3)
+            .flat_map(|c| table.binning.levels()[c].iter().map(move |&q| (q as usize * place[c]) as f32))
+            .collect();
         graph.initializer.extend([
             lut,
-            axes,
+            int64("restore.axes", vec![1], &[4]),
+            int64("restore.offset", vec![1, 3, 1, 1], &[0, 256, 512]),
+            f32_tensor("restore.bins", vec![768], &bins),
             f32_tensor("restore.255", vec![], &[255.0]),
-            f32_tensor("restore.quarter", vec![], &[0.25]),
+            f32_tensor("restore.0", vec![], &[0.0]),
             f32_tensor("restore.inv255", vec![], &[1.0 / 255.0]),
-            f32_tensor("restore.index", vec![1, 3, 1, 1], &[4096.0, 64.0, 1.0]),
+            f32_tensor("restore.sum", vec![1, 3, 1, 1], &[1.0, 1.0, 1.0]),
         ]);
         let mut perm = ints_attr("perm", vec![0, 4, 2, 3, 1]);
         perm.name = "perm".into();
         let front = vec![
             node("Mul", &[INPUT, "restore.255"], "restore.levels", vec![]),
-            node("Round", &["restore.levels"], "restore.v", vec![]),
-            node("Mul", &["restore.v", "restore.quarter"], "restore.q", vec![]),
-            node("Floor", &["restore.q"], "restore.b", vec![]),
-            node("Conv", &["restore.b", "restore.index"], "restore.i", conv_attrs(1, 1, 0)),
+            node("Round", &["restore.levels"], "restore.r", vec![]),
+            node("Clip", &["restore.r", "restore.0", "restore.255"], "restore.v", vec![]),
+            node("Cast", &["restore.v"], "restore.v64", vec![int_attr("to", 7)]),
+            node("Add", &["restore.v64", "restore.offset"], "restore.at", vec![]),
+            node("Gather", &["restore.bins", "restore.at"], "restore.q", vec![int_attr("axis", 0)]),
+            node("Conv", &["restore.q", "restore.sum"], "restore.i", conv_attrs(1, 1, 0)),
             node("Cast", &["restore.i"], "restore.i64", vec![int_attr("to", 7)]),
             node("Gather", &["restore.table", "restore.i64"], "restore.g", vec![int_attr("axis", 0)]),
             node("Cast", &["restore.g"], "restore.f", vec![int_attr("to", 1)]),

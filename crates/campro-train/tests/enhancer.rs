@@ -3,6 +3,7 @@
 //! against hand geometry, and learning on a fixed batch.
 
 use campro_eval::enhance::Enhancer;
+use campro_eval::restore::{Binning, Table};
 use campro_train::config::{EnhancerConfig, FaceTarget, PixelLoss, UnetConfig};
 use campro_train::scenes::{enlarge, Scene};
 use campro_train::unet::{enhancer_loss, face_l1, gate_loss, macs_per_pixel, masked_l1, parameter_count, Unet};
@@ -63,13 +64,13 @@ fn candle_and_tract_agree_on_the_written_onnx() {
 
 #[test]
 fn the_restoration_stage_in_onnx_is_the_table_lookup() {
-    // A table that scrambles colours: entry = a hash of the bin.
-    let table: Vec<[u8; 3]> =
-        (0..1usize << 18).map(|b| [(b * 7) as u8, (b / 3) as u8, (b >> 10) as u8 ^ 0x5a]).collect();
+    // A table that scrambles colours (entry = a hash of the bin), on uneven bins.
+    let table = scrambled(|b| [(b * 7) as u8, (b / 3) as u8, (b >> 10) as u8 ^ 0x5a]);
+    assert_ne!(table.binning, Binning::uniform());
     let u = random_unet(&shape(&[4, 8, 16], 0));
     let tract = Enhancer::from_bytes(&u.onnx_bytes_with_table(&table).unwrap(), Path::new("test")).unwrap();
     let img = test_image(53, 37);
-    let restored = campro_eval::restore::apply_table(&table, &img);
+    let restored = table.apply(&img);
     let a = campro_train::enhancer::enhance(&u, &restored, &img, &Device::Cpu).unwrap();
     let b = tract.enhance(&img).unwrap();
     let worst = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
@@ -78,7 +79,18 @@ fn the_restoration_stage_in_onnx_is_the_table_lookup() {
     let fresh = Unet::new(&shape(&[4, 8], 0), 1, &Device::Cpu).unwrap();
     let tract = Enhancer::from_bytes(&fresh.onnx_bytes_with_table(&table).unwrap(), Path::new("test")).unwrap();
     assert_eq!(tract.enhance(&img).unwrap(), restored);
-    assert!(u.onnx_bytes_with_table(&table[1..]).is_err());
+    let short = Table { entries: table.entries[1..].to_vec(), ..table };
+    assert!(u.onnx_bytes_with_table(&short).is_err());
+}
+
+/// A restoration table of `entry(bin)` on uneven bins: equal mass under a histogram with a
+/// heavy level on each channel and a dense run on blue.
+fn scrambled(entry: impl Fn(usize) -> [u8; 3]) -> Table {
+    let mut h = [[1u64; 256]; 3];
+    h[0][40] = 5000;
+    h[1][200] = 3000;
+    h[2][..50].fill(100);
+    Table { binning: Binning::equal_mass(&h), entries: (0..1usize << 18).map(entry).collect() }
 }
 
 #[test]
@@ -284,8 +296,8 @@ fn random_gated(widths: &[usize], gate_bias: f32, blocks: usize) -> Unet {
 
 /// Both files of `u` (behind `table`, and alone) run by tract on `img` agree with candle on
 /// the same input within 1 LSB, and carry `u`'s multiple.
-fn files_agree_with_candle(u: &Unet, table: &[[u8; 3]], img: &RgbImage) {
-    let restored = campro_eval::restore::apply_table(table, img);
+fn files_agree_with_candle(u: &Unet, table: &Table, img: &RgbImage) {
+    let restored = table.apply(img);
     for (bytes, input) in [(u.onnx_bytes_with_table(table).unwrap(), &restored), (u.onnx_bytes().unwrap(), img)] {
         let tract = Enhancer::from_bytes(&bytes, Path::new("test")).unwrap();
         assert_eq!(tract.multiple(), u.multiple());
@@ -307,10 +319,9 @@ fn silence(u: &Unet) {
 
 #[test]
 fn the_face_gate_blends_in_onnx_as_in_candle() {
-    let table: Vec<[u8; 3]> =
-        (0..1usize << 18).map(|b| [(b * 7) as u8, (b / 3) as u8, (b >> 10) as u8 ^ 0x5a]).collect();
+    let table = scrambled(|b| [(b * 7) as u8, (b / 3) as u8, (b >> 10) as u8 ^ 0x5a]);
     let img = test_image(53, 37);
-    let restored = campro_eval::restore::apply_table(&table, &img);
+    let restored = table.apply(&img);
     let u = random_gated(&[4, 8, 16], -2.0, 0);
     // The gate is neither off nor on everywhere, so both sides of the blend are in play.
     let (_, gate) = campro_train::enhancer::enhance_gated(&u, &restored, &img, &Device::Cpu).unwrap();
@@ -352,7 +363,7 @@ fn pixelated_faces_are_block_means_in_onnx_as_in_candle() {
     let p = campro_train::unet::pixelate(&x, 2).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
     assert_eq!(p, [3.5, 3.5, 5.5, 5.5, 3.5, 3.5, 5.5, 5.5]);
     // Blocks of 8 behind a two-level U-Net (multiple 2): the file's multiple is the blocks.
-    let table: Vec<[u8; 3]> = (0..1usize << 18).map(|b| [(b * 5) as u8, (b / 7) as u8, (b >> 9) as u8]).collect();
+    let table = scrambled(|b| [(b * 5) as u8, (b / 7) as u8, (b >> 9) as u8]);
     let img = test_image(53, 37);
     let u = random_gated(&[4, 8], -2.0, 8);
     assert_eq!(u.multiple(), 8);

@@ -547,7 +547,8 @@ pub struct AdamWConfig {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct StepBudget {
-    /// Optimiser steps in all (a resumed run continues the count).
+    /// Optimiser steps in all (a resumed run continues the count); 0 writes the untrained
+    /// network (behind the restoration table with no gate: the table alone).
     pub steps: usize,
     /// Stop after this many seconds in this invocation (checkpoint written).
     pub seconds: f64,

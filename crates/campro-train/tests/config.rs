@@ -87,6 +87,8 @@ fn shipped_configs_parse() {
             assert_eq!(c.model.face_gate, stem.contains("gate"), "{stem}");
             assert_eq!(c.model.gate_blocks > 0, stem.contains("pixelate"), "{stem}");
             assert_eq!(c.ssim_weight > 0.0, stem.contains("ssim"), "{stem}");
+            // The table alone: a fresh U-Net trained for no steps.
+            assert_eq!(c.budget.steps == 0, stem == "enhancer-table", "{stem}");
             let restore = c.data.faces == campro_train::config::FaceTarget::Restore;
             assert_eq!(restore, stem == "restorer", "{stem}");
             continue;

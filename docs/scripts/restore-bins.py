@@ -39,7 +39,8 @@ H = [load(f) for f in held]
 print(f"{len(C)} training pixels, {len(H)} held-out images")
 for ch in range(3):
     h = np.bincount(C[:, ch], minlength=256)
-    print(f"channel {ch}: {(h > len(C) * 1e-3).sum()} levels hold more than 0.1% of the pixels each")
+    busy = h > len(C) * 1e-3
+    print(f"channel {ch}: {busy.sum()} levels hold more than 0.1% of the pixels each, {h[busy].sum() / len(C):.1%} together")
 
 
 def score(qs, name):

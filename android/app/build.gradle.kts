@@ -8,7 +8,7 @@ android {
     compileSdk = 35
     defaultConfig {
         applicationId = "org.campro.sample"
-        minSdk = 28
+        minSdk = 29
         targetSdk = 35
         versionCode = 1
         versionName = "0.1.0"
@@ -17,7 +17,6 @@ android {
         sourceCompatibility = JavaVersion.VERSION_17
         targetCompatibility = JavaVersion.VERSION_17
     }
-    kotlinOptions { jvmTarget = "17" }
     // The bundled parameter sets (repository's params/) become assets/params/*.json.
     sourceSets["main"].assets.srcDir(layout.buildDirectory.dir("paramsAssets"))
 }
@@ -30,4 +29,8 @@ tasks.named("preBuild") { dependsOn(copyParams) }
 
 dependencies {
     implementation(project(":campro"))
+}
+
+kotlin {
+    compilerOptions { jvmTarget.set(org.jetbrains.kotlin.gradle.dsl.JvmTarget.JVM_17) }
 }

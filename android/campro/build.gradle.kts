@@ -10,15 +10,17 @@ plugins {
 android {
     namespace = "org.campro"
     compileSdk = 35
+    // NDK r28+ links 16 KB-page-aligned ELF by default (required for new apps on Android 15+
+    // devices with 16 KB pages); .cargo/config.toml also passes -z max-page-size=16384.
+    ndkVersion = "28.0.13004108"
     defaultConfig {
-        minSdk = 28
+        minSdk = 29
         consumerProguardFiles("consumer-rules.pro")
     }
     compileOptions {
         sourceCompatibility = JavaVersion.VERSION_17
         targetCompatibility = JavaVersion.VERSION_17
     }
-    kotlinOptions { jvmTarget = "17" }
     sourceSets["main"].jniLibs.srcDir(layout.buildDirectory.dir("rustJniLibs"))
     publishing {
         singleVariant("release") { withSourcesJar() }
@@ -62,10 +64,16 @@ val cargoNdk by tasks.registering(Exec::class) {
         "cargo", "ndk",
         "-t", "arm64-v8a", "-t", "armeabi-v7a", "-t", "x86_64",
         "-o", out.absolutePath,
-        "build", "--release", "-p", "campro-jni",
+        "build", "--release", "--locked", "-p", "campro-jni",
     )
+    environment("ANDROID_NDK_HOME", android.ndkDirectory.absolutePath)
     inputs.dir(File(repo, "src"))
     inputs.dir(File(repo, "jni-bridge/src"))
+    inputs.files(File(repo, "Cargo.toml"), File(repo, "Cargo.lock"), File(repo, "jni-bridge/Cargo.toml"), File(repo, ".cargo/config.toml"))
     outputs.dir(out)
 }
 tasks.named("preBuild") { dependsOn(cargoNdk) }
+
+kotlin {
+    compilerOptions { jvmTarget.set(org.jetbrains.kotlin.gradle.dsl.JvmTarget.JVM_17) }
+}

@@ -394,7 +394,7 @@ fun failClosed(paramsJson: String) {
             s.updateFromTransform(PHONE)
             val got = mutableListOf<Int>()
             val closed = mutableListOf<Int>()
-            val gate = FrameGate<Int>(ProtectionGuard(s), capacity = 2, deliver = { got += it }, drop = { closed += it })
+            val gate = FrameGate<Int>(ProtectionGuard(s), maxWaitingFrames = 2, maxPendingVerdicts = 2, executor = { it.run() }, deliver = { got += it }, drop = { closed += it })
             gate.onFrame(100, 1)
             expect(got.isEmpty()) { "held until its result" }
             gate.onResult(100, honoured(s))

@@ -20,6 +20,12 @@ sealed class ProtectionState {
 
     /** The camera cannot run CamPro at all (final): [reason] says why. */
     data class Unsupported(val reason: String) : ProtectionState()
+
+    /**
+     * The camera is not running: never opened, closed, disconnected, failed, or the
+     * permission was refused; [reason] says which. Not final: a new start verifies again.
+     */
+    data class Stopped(val reason: String) : ProtectionState()
 }
 
 /**
@@ -37,6 +43,8 @@ class CaptureReport(
     val transform: IntArray?,
     /** `TONEMAP_CURVE` per channel (red, green, blue): flat (Pin, Pout) pairs. */
     val curves: List<FloatArray>?,
+    /** `COLOR_CORRECTION_GAINS` as (R, G_even, G_odd, B); `null` when absent. */
+    val gains: FloatArray? = null,
 )
 
 /**
@@ -45,24 +53,42 @@ class CaptureReport(
  * Feed it the result of every protected request ([onProtectedResult]; metering frames in
  * auto mode never reach consumers and are not fed). A result passes when AWB is off,
  * the colour-correction mode is TRANSFORM_MATRIX, the tone-map mode is CONTRAST_CURVE,
- * and the reported transform and all three curves read back, through the Rust core's
- * [CamProNative.readback], within [maxDeviationLsb] 8-bit LSB of what was requested.
+ * the reported transform and all three curves read back, through the Rust core's
+ * [CamProNative.readback], within [maxDeviationLsb] 8-bit LSB of what was requested, and
+ * the reported white-balance gains match the requested ones within [maxGainRelative].
  *
- * A missing read-back key counts as a violation: a device that does not say what it
- * applied cannot be shown to protect. [trustMissingKeys] lets an app accept such a device
- * anyway; it then trusts that the device applied the request it acknowledged in the
- * modes, which a device that ignores `COLOR_CORRECTION_TRANSFORM` or `TONEMAP_CURVE`
- * silently breaks: unprotected faces would then reach the app. Modes must still read back.
+ * A missing key counts as a violation: a device that does not say what it applied cannot
+ * be shown to protect. [trustMissingKeys] lets an app accept a device that leaves out the
+ * *values* (transform, curve, gains); it then trusts that the device applied the request it
+ * acknowledged in the modes, which a device that ignores `COLOR_CORRECTION_TRANSFORM` or
+ * `TONEMAP_CURVE` silently breaks: unprotected faces would then reach the app. The three
+ * *modes* must always be reported and right, trusted or not.
+ *
+ * A strict guard whose device leaves a value key out of [missingKeyLimit] results in a row
+ * ends in [ProtectionState.Unsupported]: such a device can never be verified, and saying so
+ * beats a preview that stays blank in `Violated` for ever.
+ *
+ * Thread safety: every method is synchronized; [state] may be read from any thread.
  */
 class ProtectionGuard(
     private val session: CamProSession,
     /** Largest output deviation accepted, 8-bit LSB (the conversion's own bound is far below 0.5). */
     val maxDeviationLsb: Double = 0.5,
-    /** Accept results that leave out the transform or the curve (see the class doc: this risks unprotected frames). */
+    /** Accept results that leave out the transform, the curve or the gains (see the class doc: this risks unprotected frames). */
     val trustMissingKeys: Boolean = false,
+    /**
+     * Largest relative difference between a requested and a reported gain. A gain off by a
+     * relative `e` moves a linear value by `e` of itself before the curve: 0.002 is half an
+     * 8-bit LSB at full scale, above the float rounding HALs report gains with.
+     */
+    val maxGainRelative: Double = 0.002,
+    /** Results in a row missing a value key after which a strict guard gives up: Unsupported (>= 1). */
+    val missingKeyLimit: Int = 30,
 ) {
     init {
         require(maxDeviationLsb.isFinite() && maxDeviationLsb >= 0.0) { "maxDeviationLsb must be finite and >= 0, got $maxDeviationLsb" }
+        require(maxGainRelative.isFinite() && maxGainRelative >= 0.0) { "maxGainRelative must be finite and >= 0, got $maxGainRelative" }
+        require(missingKeyLimit >= 1) { "missingKeyLimit must be >= 1, got $missingKeyLimit" }
     }
 
     /** The current state. */
@@ -74,49 +100,92 @@ class ProtectionGuard(
     val framesAllowed: Boolean get() = state == ProtectionState.Protected
 
     /** The largest deviation a checked result showed, 8-bit LSB. */
+    @Volatile
     var worstDeviationLsb = 0.0
         private set
 
     private val out = DoubleArray(CamProNative.READBACK_LEN)
+    private var requestedGains: FloatArray? = null
+    private var missingInARow = 0
 
     /** The camera cannot run CamPro (from [DeviceSupport.check]): final. */
+    @Synchronized
     fun unsupported(reason: String) {
         state = ProtectionState.Unsupported(reason)
     }
 
-    /** The request changed (new values sent): nothing is protected until a result of it verifies. */
-    fun requestChanged() {
+    /** The camera stopped (closed, disconnected, failed, no permission): closed until a new request verifies. */
+    @Synchronized
+    fun stopped(reason: String) {
+        if (state !is ProtectionState.Unsupported) state = ProtectionState.Stopped(reason)
+    }
+
+    /**
+     * New values were sent (with these white-balance [gains], R, G_even, G_odd, B; `null`
+     * when the request sets none): nothing is protected until a result of it verifies.
+     */
+    @Synchronized
+    fun requestChanged(gains: FloatArray? = null) {
+        require(gains == null || gains.size == 4) { "gains must have 4 elements (R, G_even, G_odd, B), got ${gains?.size}" }
+        requestedGains = gains?.copyOf()
+        missingInARow = 0
         if (state !is ProtectionState.Unsupported) state = ProtectionState.Verifying
     }
 
     /** Checks one protected result; returns the new state. */
+    @Synchronized
     fun onProtectedResult(r: CaptureReport): ProtectionState {
-        if (state is ProtectionState.Unsupported) return state
+        // Unsupported is final; Stopped holds until a new request (late results of a stopped camera change nothing).
+        if (state is ProtectionState.Unsupported || state is ProtectionState.Stopped) return state
         val reason = violation(r)
-        state = if (reason == null) ProtectionState.Protected else ProtectionState.Violated(reason)
+        state = when {
+            reason == null -> ProtectionState.Protected
+            missingInARow >= missingKeyLimit -> ProtectionState.Unsupported(
+                "$reason in $missingInARow results in a row: this device cannot be verified",
+            )
+            else -> ProtectionState.Violated(reason)
+        }
         return state
     }
 
     /** Why [r] does not show protection, or null when it does. */
     private fun violation(r: CaptureReport): String? {
         when {
-            r.awbMode == null && !trustMissingKeys -> return "the result does not report CONTROL_AWB_MODE"
-            r.awbMode != null && r.awbMode != DeviceSupport.CONTROL_AWB_MODE_OFF ->
+            r.awbMode == null -> return "the result does not report CONTROL_AWB_MODE"
+            r.awbMode != DeviceSupport.CONTROL_AWB_MODE_OFF ->
                 return "auto white balance is on (mode ${r.awbMode}): the device overrides the colour transform"
-            r.colorCorrectionMode == null && !trustMissingKeys -> return "the result does not report COLOR_CORRECTION_MODE"
-            r.colorCorrectionMode != null && r.colorCorrectionMode != COLOR_CORRECTION_MODE_TRANSFORM_MATRIX ->
+            r.colorCorrectionMode == null -> return "the result does not report COLOR_CORRECTION_MODE"
+            r.colorCorrectionMode != COLOR_CORRECTION_MODE_TRANSFORM_MATRIX ->
                 return "colour correction mode ${r.colorCorrectionMode} instead of TRANSFORM_MATRIX"
-            r.tonemapMode == null && !trustMissingKeys -> return "the result does not report TONEMAP_MODE"
-            r.tonemapMode != null && r.tonemapMode != DeviceSupport.TONEMAP_MODE_CONTRAST_CURVE ->
+            r.tonemapMode == null -> return "the result does not report TONEMAP_MODE"
+            r.tonemapMode != DeviceSupport.TONEMAP_MODE_CONTRAST_CURVE ->
                 return "tone-map mode ${r.tonemapMode} instead of CONTRAST_CURVE"
         }
         val transform = r.transform
         val curves = r.curves
-        if (transform == null || curves == null) {
-            if (trustMissingKeys) return null
-            return "the result does not report " + (if (transform == null) "COLOR_CORRECTION_TRANSFORM" else "TONEMAP_CURVE") +
-                ": what the device applied cannot be verified"
+        val wantGains = requestedGains
+        val missing = when {
+            transform == null -> "COLOR_CORRECTION_TRANSFORM"
+            curves == null -> "TONEMAP_CURVE"
+            wantGains != null && r.gains == null -> "COLOR_CORRECTION_GAINS"
+            else -> null
         }
+        if (missing != null && !trustMissingKeys) {
+            missingInARow++
+            return "the result does not report $missing: what the device applied cannot be verified"
+        }
+        missingInARow = 0
+        val gains = r.gains
+        if (wantGains != null && gains != null) {
+            if (gains.size != 4) return "COLOR_CORRECTION_GAINS has ${gains.size} values, not 4"
+            for (i in 0 until 4) {
+                val rel = kotlin.math.abs(gains[i] - wantGains[i]).toDouble() / kotlin.math.max(kotlin.math.abs(wantGains[i]).toDouble(), 1e-6)
+                if (!(rel <= maxGainRelative)) {
+                    return "the reported gain ${GAIN_NAMES[i]} is ${gains[i]}, not the requested ${wantGains[i]}"
+                }
+            }
+        }
+        if (transform == null || curves == null) return null // trusted: see trustMissingKeys
         if (transform.size != 18) return "COLOR_CORRECTION_TRANSFORM has ${transform.size} values, not 18"
         if (curves.size != 3) return "TONEMAP_CURVE has ${curves.size} channels, not 3"
         var worst = 0.0
@@ -142,80 +211,123 @@ class ProtectionGuard(
     companion object {
         /** `CameraMetadata.COLOR_CORRECTION_MODE_TRANSFORM_MATRIX`. */
         const val COLOR_CORRECTION_MODE_TRANSFORM_MATRIX = 0
+        private val GAIN_NAMES = listOf("R", "G_even", "G_odd", "B")
     }
 }
 
 /**
  * Holds each frame until its own result has been checked, so a frame the device did not
  * protect never reaches a consumer, even when the violation shows up only in that frame's
- * result. Frames and results are matched by sensor timestamp; a frame whose result never
- * arrives is dropped once [capacity] newer frames wait. Free of Android types: `T` is an
- * `android.media.Image` on a phone (closed through [drop]) and anything in tests.
+ * result. Frames and results are matched by sensor timestamp. Free of Android types: `T`
+ * is an `android.media.Image` or `ImageProxy` on a phone (closed through [drop]) and
+ * anything in tests.
+ *
+ * Sizes: a result may arrive up to the camera's pipeline depth
+ * (`REQUEST_PIPELINE_MAX_DEPTH`, at most 8 on current devices) frames before its image, and
+ * an image before its result by as many frames as the image queue holds. [maxWaitingFrames]
+ * frames wait for results (the oldest is dropped beyond it: its result never came) and
+ * [maxPendingVerdicts] verdicts wait for frames (the oldest is forgotten beyond it; its
+ * frame, if it ever comes, then waits for a result that never comes and is dropped: a
+ * verdict store too small drops good frames, never lets a bad one through).
+ *
+ * Threads: [onFrame] and [onResult] may come from any threads. Frames that pass are handed
+ * to [deliver] through [executor] (the app's), after the gate's lock is released, so a slow
+ * consumer never blocks the camera thread or the gate; frames that fail are handed to [drop]
+ * on the calling thread, also outside the lock.
  */
 class FrameGate<T>(
     private val guard: ProtectionGuard,
-    /** Frames waiting for their result, at most. */
-    val capacity: Int = 4,
-    /** Called with each frame that may reach the app. */
+    /** Frames waiting for their result, at most (>= 1): the image queue depth less one. */
+    val maxWaitingFrames: Int = 4,
+    /** Verdicts waiting for their frame, at most (>= 1): at least the pipeline depth. */
+    val maxPendingVerdicts: Int = 8,
+    /** Runs deliveries (the app's executor; a direct executor in tests). */
+    private val executor: java.util.concurrent.Executor,
+    /** Called on [executor] with each frame that may reach the app; it owns (and closes) the frame. */
     private val deliver: (T) -> Unit,
     /** Called with each frame that must not (an Image is closed here). */
     private val drop: (T) -> Unit,
 ) {
     private val waiting = LinkedHashMap<Long, T>()
     private val verdicts = LinkedHashMap<Long, Boolean>()
+    private var stopped = false
 
     init {
-        require(capacity >= 1) { "capacity must be >= 1, got $capacity" }
+        require(maxWaitingFrames >= 1) { "maxWaitingFrames must be >= 1, got $maxWaitingFrames" }
+        require(maxPendingVerdicts >= 1) { "maxPendingVerdicts must be >= 1, got $maxPendingVerdicts" }
     }
 
     /** Frames delivered and dropped so far. */
+    @Volatile
     var delivered = 0L
         private set
+
+    @Volatile
     var dropped = 0L
         private set
 
     /** A frame arrived (sensor timestamp [timestampNs]). */
-    @Synchronized
     fun onFrame(timestampNs: Long, frame: T) {
-        val verdict = verdicts.remove(timestampNs)
-        if (verdict != null) return release(frame, verdict)
-        waiting[timestampNs] = frame
-        while (waiting.size > capacity) {
-            val oldest = waiting.keys.first()
-            release(waiting.remove(oldest)!!, false)
+        val out = ArrayList<Pair<T, Boolean>>(2)
+        synchronized(this) {
+            if (stopped) {
+                out += frame to false
+            } else {
+                val verdict = verdicts.remove(timestampNs)
+                if (verdict != null) {
+                    out += frame to verdict
+                } else {
+                    waiting[timestampNs] = frame
+                    while (waiting.size > maxWaitingFrames) {
+                        val oldest = waiting.keys.first()
+                        out += waiting.remove(oldest)!! to false
+                    }
+                }
+            }
         }
+        release(out)
     }
 
     /** The result of the protected frame at [timestampNs] arrived: checks it and releases that frame. */
-    @Synchronized
     fun onResult(timestampNs: Long, report: CaptureReport): ProtectionState {
-        val state = guard.onProtectedResult(report)
-        val ok = state == ProtectionState.Protected
-        val frame = waiting.remove(timestampNs)
-        if (frame != null) {
-            release(frame, ok)
-        } else {
-            verdicts[timestampNs] = ok
-            while (verdicts.size > capacity) verdicts.remove(verdicts.keys.first())
+        val out = ArrayList<Pair<T, Boolean>>(1)
+        val state: ProtectionState
+        synchronized(this) {
+            state = guard.onProtectedResult(report)
+            val ok = state == ProtectionState.Protected && !stopped
+            val frame = waiting.remove(timestampNs)
+            if (frame != null) {
+                out += frame to ok
+            } else if (!stopped) {
+                verdicts[timestampNs] = ok
+                while (verdicts.size > maxPendingVerdicts) verdicts.remove(verdicts.keys.first())
+            }
         }
+        release(out)
         return state
     }
 
-    /** Drops every waiting frame (the session stopped). */
-    @Synchronized
+    /** Drops every waiting frame and forgets every verdict (the request changed or the camera stopped). */
     fun clear() {
-        for (f in waiting.values) release(f, false)
-        waiting.clear()
-        verdicts.clear()
+        val out: List<Pair<T, Boolean>>
+        synchronized(this) {
+            out = waiting.values.map { it to false }
+            waiting.clear()
+            verdicts.clear()
+        }
+        release(out)
     }
 
-    private fun release(frame: T, ok: Boolean) {
-        if (ok) {
-            delivered++
-            deliver(frame)
-        } else {
-            dropped++
-            drop(frame)
+    /** Drops everything now and every frame from now on: the gate is finished. */
+    fun stop() {
+        synchronized(this) { stopped = true }
+        clear()
+    }
+
+    private fun release(frames: List<Pair<T, Boolean>>) {
+        for ((frame, ok) in frames) {
+            synchronized(this) { if (ok) delivered++ else dropped++ }
+            if (ok) executor.execute { deliver(frame) } else drop(frame)
         }
     }
 }

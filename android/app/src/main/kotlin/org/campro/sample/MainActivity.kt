@@ -1,49 +1,44 @@
 package org.campro.sample
 
-// The sample camera app: Camera2 preview with CamPro on/off, the parameter set chosen
-// from the bundled params/, and a status line. Android-only plumbing; the decisions
-// (support, when to rebuild, readback deviation) live in org.campro.* and the Rust core.
+// The sample camera app: CamPro on a Camera2 camera, fail closed per frame on screen too.
+// The camera writes protected frames only into CamProCamera2's ImageReader; each frame is
+// shown (ImageWriter onto a SurfaceView) only after its own CaptureResult verified. No
+// display surface is ever a capture target. The "CamPro" switch shows the real state: it is
+// on while frames are protected, and turning CamPro off closes the camera (this app never
+// shows unprotected frames). Android-only plumbing: the decisions live in org.campro.* and
+// the Rust core; views are built in code (no resources to compile).
 
 import android.Manifest
 import android.app.Activity
 import android.content.pm.PackageManager
-import android.graphics.ImageFormat
-import android.graphics.SurfaceTexture
-import android.hardware.camera2.CameraCaptureSession
 import android.hardware.camera2.CameraCharacteristics
 import android.hardware.camera2.CameraDevice
 import android.hardware.camera2.CameraManager
-import android.hardware.camera2.CaptureRequest
-import android.hardware.camera2.TotalCaptureResult
-import android.hardware.camera2.params.OutputConfiguration
+import android.hardware.camera2.CameraCaptureSession
 import android.hardware.camera2.params.SessionConfiguration
-import android.media.ImageReader
+import android.media.Image
+import android.media.ImageWriter
 import android.os.Bundle
 import android.os.Handler
 import android.os.HandlerThread
-import android.view.Surface
-import android.view.TextureView
+import android.view.SurfaceHolder
+import android.view.SurfaceView
 import android.view.View
 import android.widget.AdapterView
 import android.widget.ArrayAdapter
+import android.widget.LinearLayout
 import android.widget.Spinner
 import android.widget.Switch
 import android.widget.TextView
-import org.campro.CamProController
 import org.campro.CamProNative
-import org.campro.DeviceSupport
-import org.campro.ProtectionGuard
 import org.campro.ProtectionState
-import org.campro.android.applyCamPro
-import org.campro.android.camproReport
+import org.campro.android.CamProCamera2
 import org.campro.android.camproSupport
-import org.campro.android.colorTransformInto
-import org.campro.android.gainsInto
 import org.campro.android.openCamProAsset
 import java.util.concurrent.Executor
 
 class MainActivity : Activity() {
-    private lateinit var preview: TextureView
+    private lateinit var preview: SurfaceView
     private lateinit var statusView: TextView
     private lateinit var toggle: Switch
     private lateinit var spinner: Spinner
@@ -52,29 +47,38 @@ class MainActivity : Activity() {
     private val camera = Handler(cameraThread.looper)
     private val cameraExecutor = Executor { camera.post(it) }
 
-    // Everything below is touched only on the camera thread.
+    // Touched only on the camera thread.
     private var device: CameraDevice? = null
-    private var captureSession: CameraCaptureSession? = null
-    private var meteringReader: ImageReader? = null
-    private var previewSurface: Surface? = null
-    private var support: DeviceSupport.Result? = null
-    private var controller: CamProController? = null
-    private var guard: ProtectionGuard? = null
-    private var description = ""
-    private var enabled = true
+    private var campro: CamProCamera2? = null
     private var paramFile = ""
-    private var results = 0L
-    private val transformBuf = IntArray(18)
-    private val gainsBuf = FloatArray(4)
+    private var wantCamPro = true
+
+    // Touched only on the main thread.
+    private var writer: ImageWriter? = null
+    private var permissionAsked = false
+    private var updatingSwitch = false
 
     override fun onCreate(savedInstanceState: Bundle?) {
         super.onCreate(savedInstanceState)
-        setContentView(R.layout.activity_main)
         CamProNative.loadLibrary()
-        preview = findViewById(R.id.preview)
-        statusView = findViewById(R.id.status)
-        toggle = findViewById(R.id.campro_switch)
-        spinner = findViewById(R.id.params_spinner)
+        preview = SurfaceView(this)
+        statusView = TextView(this).apply { setPadding(16, 16, 16, 16); textSize = 12f }
+        toggle = Switch(this).apply { text = "CamPro" }
+        spinner = Spinner(this)
+        val bar = LinearLayout(this).apply {
+            orientation = LinearLayout.HORIZONTAL
+            addView(toggle)
+            addView(spinner, LinearLayout.LayoutParams(0, LinearLayout.LayoutParams.WRAP_CONTENT, 1f))
+        }
+        setContentView(
+            LinearLayout(this).apply {
+                orientation = LinearLayout.VERTICAL
+                addView(preview, LinearLayout.LayoutParams(LinearLayout.LayoutParams.MATCH_PARENT, 0, 1f))
+                addView(bar)
+                addView(statusView)
+            },
+        )
+        preview.visibility = View.INVISIBLE
 
         val files = (assets.list("params") ?: emptyArray()).filter { it.endsWith(".json") }.sorted()
         spinner.adapter = ArrayAdapter(this, android.R.layout.simple_spinner_dropdown_item, files)
@@ -84,29 +88,44 @@ class MainActivity : Activity() {
         spinner.onItemSelectedListener = object : AdapterView.OnItemSelectedListener {
             override fun onItemSelected(parent: AdapterView<*>?, view: View?, position: Int, id: Long) {
                 val f = files[position]
-                camera.post { paramFile = f; reconfigure() }
+                camera.post { if (f != paramFile) { paramFile = f; restartCamera() } }
             }
             override fun onNothingSelected(parent: AdapterView<*>?) {}
         }
-        toggle.setOnCheckedChangeListener { _, on -> camera.post { enabled = on; reconfigure() } }
+        toggle.setOnCheckedChangeListener { _, on ->
+            if (updatingSwitch) return@setOnCheckedChangeListener
+            camera.post { wantCamPro = on; restartCamera() }
+        }
+        preview.holder.addCallback(object : SurfaceHolder.Callback {
+            override fun surfaceCreated(holder: SurfaceHolder) {}
+            override fun surfaceChanged(holder: SurfaceHolder, format: Int, width: Int, height: Int) {
+                writer?.close()
+                writer = ImageWriter.newInstance(holder.surface, 2)
+            }
+            override fun surfaceDestroyed(holder: SurfaceHolder) {
+                writer?.close()
+                writer = null
+            }
+        })
     }
 
     override fun onResume() {
         super.onResume()
-        if (checkSelfPermission(Manifest.permission.CAMERA) != PackageManager.PERMISSION_GRANTED) {
-            requestPermissions(arrayOf(Manifest.permission.CAMERA), 1)
-            return
-        }
-        if (preview.isAvailable) camera.post { openCamera() } else preview.surfaceTextureListener = object : TextureView.SurfaceTextureListener {
-            override fun onSurfaceTextureAvailable(s: SurfaceTexture, w: Int, h: Int) { camera.post { openCamera() } }
-            override fun onSurfaceTextureSizeChanged(s: SurfaceTexture, w: Int, h: Int) {}
-            override fun onSurfaceTextureDestroyed(s: SurfaceTexture) = true
-            override fun onSurfaceTextureUpdated(s: SurfaceTexture) {}
+        when {
+            checkSelfPermission(Manifest.permission.CAMERA) == PackageManager.PERMISSION_GRANTED -> camera.post { openCamera() }
+            // Asked once per activity: no request/recreate loop from onResume.
+            !permissionAsked -> { permissionAsked = true; requestPermissions(arrayOf(Manifest.permission.CAMERA), REQUEST_CAMERA) }
+            else -> show(ProtectionState.Stopped("CamPro needs the camera permission (Settings > Apps > CamPro)"))
         }
     }
 
     override fun onRequestPermissionsResult(requestCode: Int, permissions: Array<out String>, grantResults: IntArray) {
-        if (grantResults.firstOrNull() == PackageManager.PERMISSION_GRANTED) recreate() else showStatus("CamPro needs the camera permission")
+        if (requestCode != REQUEST_CAMERA) return
+        if (grantResults.firstOrNull() == PackageManager.PERMISSION_GRANTED) {
+            camera.post { openCamera() }
+        } else {
+            show(ProtectionState.Stopped("the camera permission was refused: nothing is captured"))
+        }
     }
 
     override fun onPause() {
@@ -119,140 +138,97 @@ class MainActivity : Activity() {
         super.onDestroy()
     }
 
-    private fun showStatus(text: String) = runOnUiThread { statusView.text = text }
+    /** The state on screen: frames only while Protected; the switch shows whether CamPro runs. */
+    private fun show(state: ProtectionState) {
+        preview.visibility = if (state == ProtectionState.Protected) View.VISIBLE else View.INVISIBLE
+        updatingSwitch = true
+        toggle.isChecked = state == ProtectionState.Protected || state == ProtectionState.Verifying
+        updatingSwitch = false
+        statusView.text = "$paramFile: $state"
+    }
+
+    /** A verified frame: onto the screen (ImageWriter takes it and closes it), else closed. */
+    private fun render(image: Image) {
+        val w = writer
+        if (w == null) {
+            image.close()
+            return
+        }
+        try {
+            w.queueInputImage(image)
+        } catch (e: RuntimeException) {
+            image.close()
+            show(ProtectionState.Stopped("display failed: ${e.message}"))
+        }
+    }
 
     private fun openCamera() {
         if (device != null) return
-        val manager = getSystemService(CameraManager::class.java)
-        val id = manager.cameraIdList.firstOrNull {
-            manager.getCameraCharacteristics(it).get(CameraCharacteristics.LENS_FACING) == CameraCharacteristics.LENS_FACING_BACK
-        } ?: manager.cameraIdList.firstOrNull() ?: return showStatus("no camera")
-        support = manager.getCameraCharacteristics(id).camproSupport()
+        if (!wantCamPro) return runOnUiThread { show(ProtectionState.Stopped("CamPro is off: the camera is closed")) }
         try {
+            val manager = getSystemService(CameraManager::class.java)
+            val id = manager.cameraIdList.firstOrNull {
+                manager.getCameraCharacteristics(it).get(CameraCharacteristics.LENS_FACING) == CameraCharacteristics.LENS_FACING_BACK
+            } ?: manager.cameraIdList.firstOrNull() ?: return runOnUiThread { show(ProtectionState.Unsupported("no camera")) }
+            val chars = manager.getCameraCharacteristics(id)
+            val support = chars.camproSupport()
+            val maxPoints = (support as? org.campro.DeviceSupport.Result.Supported)?.maxCurvePoints ?: 64
+            val session = openCamProAsset(assets, "params/$paramFile", maxPoints)
+            val c = CamProCamera2(
+                session, chars, camera, mainExecutor, 1280, 720,
+                deliver = ::render,
+                onState = ::show,
+            )
+            campro = c
             manager.openCamera(id, cameraExecutor, object : CameraDevice.StateCallback() {
-                override fun onOpened(d: CameraDevice) { device = d; createSession() }
-                override fun onDisconnected(d: CameraDevice) { d.close(); device = null }
-                override fun onError(d: CameraDevice, error: Int) { d.close(); device = null; showStatus("camera error $error") }
+                override fun onOpened(d: CameraDevice) {
+                    device = d
+                    createSession(d, c)
+                }
+                override fun onDisconnected(d: CameraDevice) {
+                    c.onCameraStopped("the camera was disconnected")
+                    d.close(); device = null
+                }
+                override fun onError(d: CameraDevice, error: Int) {
+                    c.onCameraStopped("camera error $error")
+                    d.close(); device = null
+                }
             })
-        } catch (e: SecurityException) {
-            showStatus("camera permission missing")
+        } catch (e: Exception) {
+            // CameraAccessException, SecurityException, IllegalArgumentException, native errors:
+            // nothing was shown, and nothing will be.
+            closeCamera()
+            runOnUiThread { show(ProtectionState.Stopped("cannot open the camera: ${e.message}")) }
+        }
+    }
+
+    private fun createSession(d: CameraDevice, c: CamProCamera2) {
+        try {
+            d.createCaptureSession(
+                SessionConfiguration(SessionConfiguration.SESSION_REGULAR, c.outputs(), cameraExecutor, object : CameraCaptureSession.StateCallback() {
+                    override fun onConfigured(s: CameraCaptureSession) = c.onConfigured(d, s)
+                    override fun onConfigureFailed(s: CameraCaptureSession) = c.onCameraStopped("the capture session could not be configured")
+                    override fun onClosed(s: CameraCaptureSession) = c.onCameraStopped("the capture session closed")
+                }),
+            )
+        } catch (e: Exception) {
+            c.onCameraStopped("cannot create the capture session: ${e.message}")
         }
     }
 
     private fun closeCamera() {
-        controller?.session?.close()
-        controller = null
-        guard = null
-        showPreview(false)
-        captureSession?.close(); captureSession = null
-        device?.close(); device = null
-        meteringReader?.close(); meteringReader = null
-        previewSurface?.release(); previewSurface = null
+        campro?.let { it.close(); it.session.close() }
+        campro = null
+        device?.close()
+        device = null
     }
 
-    private fun createSession() {
-        val d = device ?: return
-        val texture = preview.surfaceTexture ?: return
-        texture.setDefaultBufferSize(1280, 720)
-        val surface = Surface(texture).also { previewSurface = it }
-        // Metering frames (auto white balance) go only here and are dropped unread.
-        val reader = ImageReader.newInstance(320, 240, ImageFormat.YUV_420_888, 2).also { meteringReader = it }
-        reader.setOnImageAvailableListener({ r -> r.acquireLatestImage()?.close() }, camera)
-        val outputs = listOf(OutputConfiguration(surface), OutputConfiguration(reader.surface))
-        d.createCaptureSession(SessionConfiguration(SessionConfiguration.SESSION_REGULAR, outputs, cameraExecutor, object : CameraCaptureSession.StateCallback() {
-            override fun onConfigured(s: CameraCaptureSession) { captureSession = s; reconfigure() }
-            override fun onConfigureFailed(s: CameraCaptureSession) = showStatus("capture session failed")
-        }))
-    }
-
-    /** The preview is shown only while the guard says Protected (or CamPro is off): blank otherwise. */
-    private fun showPreview(on: Boolean) = runOnUiThread { preview.visibility = if (on) View.VISIBLE else View.INVISIBLE }
-
-    /** CamPro switched, parameter set changed, or the session (re)started. */
-    private fun reconfigure() {
-        val s = captureSession ?: return
-        controller?.session?.close()
-        controller = null
-        guard = null
-        showPreview(false)
-        if (!enabled) {
-            val req = device!!.createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply { addTarget(previewSurface!!) }
-            s.setRepeatingRequest(req.build(), null, camera)
-            showPreview(true)
-            return showStatus("CamPro off: unprotected preview")
-        }
-        description = try {
-            org.json.JSONObject(assets.open("params/$paramFile").bufferedReader().use { it.readText() }).optString("description")
-        } catch (e: Exception) {
-            ""
-        }
-        when (val sup = support) {
-            is DeviceSupport.Result.Unsupported -> {
-                s.stopRepeating() // never show unprotected frames while CamPro is on
-                showStatus("${ProtectionState.Unsupported(sup.reasons.joinToString("; "))}")
-            }
-            is DeviceSupport.Result.Supported -> try {
-                val session = openCamProAsset(assets, "params/$paramFile", sup.maxCurvePoints)
-                controller = CamProController(session)
-                guard = ProtectionGuard(session)
-                // Until the first metering result, only metering frames run: the preview stays dark.
-                s.setRepeatingRequest(meteringRequest(), captureCallback, camera)
-                showStatus("CamPro: metering" + (sup.note?.let { " ($it)" } ?: ""))
-            } catch (e: RuntimeException) {
-                s.stopRepeating()
-                showStatus("CamPro: cannot load $paramFile: ${e.message}")
-            }
-            null -> showStatus("camera characteristics not read yet")
-        }
-    }
-
-    private fun meteringRequest(): CaptureRequest = device!!.createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply {
-        addTarget(meteringReader!!.surface)
-        set(CaptureRequest.CONTROL_AWB_MODE, CaptureRequest.CONTROL_AWB_MODE_AUTO)
-        setTag(METERING)
-    }.build()
-
-    /** The repeating burst: one metering frame, then protected preview frames. */
-    private fun rebuildBurst() {
-        val ctl = controller ?: return
-        val protected = device!!.createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply {
-            addTarget(previewSurface!!)
-            applyCamPro(ctl.session, ctl.gains)
-            setTag(PROTECTED)
-        }.build()
-        val burst = listOf(meteringRequest()) + List(ctl.meteringInterval - 1) { protected }
-        guard?.requestChanged() // new values: closed until a result of them verifies
-        showPreview(false)
-        captureSession?.setRepeatingBurst(burst, captureCallback, camera)
-    }
-
-    private val captureCallback = object : CameraCaptureSession.CaptureCallback() {
-        override fun onCaptureCompleted(session: CameraCaptureSession, request: CaptureRequest, result: TotalCaptureResult) {
-            val ctl = controller ?: return
-            try {
-                when (request.tag) {
-                    METERING -> if (result.colorTransformInto(transformBuf) && result.gainsInto(gainsBuf)) {
-                        if (ctl.onMeteringResult(transformBuf, gainsBuf)) rebuildBurst()
-                    }
-                    PROTECTED -> {
-                        val g = guard ?: return
-                        val before = g.framesAllowed
-                        g.onProtectedResult(result.camproReport())
-                        if (g.framesAllowed != before) showPreview(g.framesAllowed)
-                    }
-                }
-            } catch (e: RuntimeException) {
-                // A device reporting values campro rejects: stop rather than show unprotected frames.
-                session.stopRepeating()
-                showStatus("CamPro stopped: ${e.message}")
-                return
-            }
-            if (++results % 15 == 0L) showStatus("$paramFile: $description\n${guard?.state}; ${ctl.status()}")
-        }
+    private fun restartCamera() {
+        closeCamera()
+        openCamera()
     }
 
     private companion object {
-        const val METERING = "campro-metering"
-        const val PROTECTED = "campro-protected"
+        const val REQUEST_CAMERA = 1
     }
 }

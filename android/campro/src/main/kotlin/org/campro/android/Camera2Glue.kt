@@ -1,19 +1,36 @@
 package org.campro.android
 
-// The only Android-typed code of the library: reading Camera2 metadata into plain arrays
-// and writing CamPro's values into a request. Every decision is made in CamProController,
-// CamProSession, DeviceSupport (host-tested) or in the Rust core.
+// The Android-typed half of the library: Camera2 metadata read into plain values, CamPro's
+// values written into requests, and CamProCamera2, which runs CamProPipeline on a
+// CameraDevice. Every decision is made in org.campro.CamProPipeline, ProtectionGuard,
+// FrameGate, CamProController, DeviceSupport (plain Kotlin, tested on the host JVM) or in
+// the Rust core; android/jvm-test runs this file under Robolectric.
 
 import android.content.res.AssetManager
+import android.graphics.ImageFormat
+import android.hardware.HardwareBuffer
+import android.hardware.camera2.CameraAccessException
+import android.hardware.camera2.CameraCaptureSession
 import android.hardware.camera2.CameraCharacteristics
+import android.hardware.camera2.CameraDevice
 import android.hardware.camera2.CaptureRequest
 import android.hardware.camera2.CaptureResult
+import android.hardware.camera2.TotalCaptureResult
 import android.hardware.camera2.params.ColorSpaceTransform
+import android.hardware.camera2.params.OutputConfiguration
 import android.hardware.camera2.params.RggbChannelVector
 import android.hardware.camera2.params.TonemapCurve
+import android.media.Image
+import android.media.ImageReader
+import android.os.Handler
+import org.campro.CamProPipeline
 import org.campro.CamProSession
+import org.campro.CameraRequests
 import org.campro.CaptureReport
 import org.campro.DeviceSupport
+import org.campro.MeteringReport
+import org.campro.ProtectionState
+import java.util.concurrent.Executor
 
 /** Whether this camera can run CamPro, with the reasons when not. */
 fun CameraCharacteristics.camproSupport(): DeviceSupport.Result = DeviceSupport.check(
@@ -23,53 +40,69 @@ fun CameraCharacteristics.camproSupport(): DeviceSupport.Result = DeviceSupport.
     awbModes = get(CameraCharacteristics.CONTROL_AWB_AVAILABLE_MODES),
 )
 
-/** Copies the result's `COLOR_CORRECTION_TRANSFORM` (18 ints) into [out]; false when absent. */
-fun CaptureResult.colorTransformInto(out: IntArray): Boolean {
-    val t = get(CaptureResult.COLOR_CORRECTION_TRANSFORM) ?: return false
-    t.copyElements(out, 0)
-    return true
-}
+/** Whether settings apply on the very frame that asks for them (`SYNC_MAX_LATENCY_PER_FRAME_CONTROL`). */
+fun CameraCharacteristics.hasPerFrameControl(): Boolean =
+    get(CameraCharacteristics.SYNC_MAX_LATENCY) == CamProPipeline.SYNC_MAX_LATENCY_PER_FRAME_CONTROL
 
-/** Copies `COLOR_CORRECTION_GAINS` as (R, G_even, G_odd, B) into [out]; false when absent. */
-fun CaptureResult.gainsInto(out: FloatArray): Boolean {
-    val g = get(CaptureResult.COLOR_CORRECTION_GAINS) ?: return false
-    out[0] = g.red; out[1] = g.greenEven; out[2] = g.greenOdd; out[3] = g.blue
-    return true
-}
+/** `REQUEST_PIPELINE_MAX_DEPTH` (frames a result may lead its image by); 8 when absent. */
+fun CameraCharacteristics.pipelineDepth(): Int =
+    (get(CameraCharacteristics.REQUEST_PIPELINE_MAX_DEPTH)?.toInt() ?: 8).coerceAtLeast(1)
+
+private fun ColorSpaceTransform.toInts(): IntArray = IntArray(18).also { copyElements(it, 0) }
+
+private fun RggbChannelVector.toFloats(): FloatArray = floatArrayOf(red, greenEven, greenOdd, blue)
 
 /**
  * What this result reports about CamPro's stages, for [org.campro.ProtectionGuard]: the
- * three modes, the transform and the three curves, `null` where a key is absent.
+ * three modes, the transform, the three curves and the gains, `null` where a key is absent.
  */
 fun CaptureResult.camproReport(): CaptureReport = CaptureReport(
     awbMode = get(CaptureResult.CONTROL_AWB_MODE),
     colorCorrectionMode = get(CaptureResult.COLOR_CORRECTION_MODE),
     tonemapMode = get(CaptureResult.TONEMAP_MODE),
-    transform = get(CaptureResult.COLOR_CORRECTION_TRANSFORM)?.let { t -> IntArray(18).also { t.copyElements(it, 0) } },
+    transform = get(CaptureResult.COLOR_CORRECTION_TRANSFORM)?.toInts(),
     curves = get(CaptureResult.TONEMAP_CURVE)?.let { c ->
         listOf(TonemapCurve.CHANNEL_RED, TonemapCurve.CHANNEL_GREEN, TonemapCurve.CHANNEL_BLUE).map { ch ->
             FloatArray(2 * c.getPointCount(ch)).also { c.copyColorCurve(ch, it, 0) }
         }
     },
+    gains = get(CaptureResult.COLOR_CORRECTION_GAINS)?.toFloats(),
+)
+
+/** What this auto-mode result reports for metering: AWB mode and state, transform, gains. */
+fun CaptureResult.meteringReport(): MeteringReport = MeteringReport(
+    awbMode = get(CaptureResult.CONTROL_AWB_MODE),
+    awbState = get(CaptureResult.CONTROL_AWB_STATE),
+    transform = get(CaptureResult.COLOR_CORRECTION_TRANSFORM)?.toInts(),
+    gains = get(CaptureResult.COLOR_CORRECTION_GAINS)?.toFloats(),
 )
 
 /**
- * Sets CamPro on a request: AWB off (Camera2 ignores TRANSFORM_MATRIX otherwise), the
- * gains measured in auto mode, CamPro's transform, and its curve on all three channels.
+ * CamPro's values as request settings: AWB off (Camera2 ignores TRANSFORM_MATRIX otherwise),
+ * the [gains] measured in auto mode, the [transform] (18 ints) and the [curve] (flat
+ * (Pin, Pout) pairs, at least two) on all three channels. One list serves a
+ * `CaptureRequest.Builder` ([applyCamPro]) and CameraX's `CaptureRequestOptions`.
  */
-fun CaptureRequest.Builder.applyCamPro(session: CamProSession, gains: FloatArray) {
-    val curve: FloatArray
-    val transform: IntArray
-    synchronized(session) {
-        curve = session.curveForRequest()
-        transform = session.transform.copyOf()
-    }
-    set(CaptureRequest.CONTROL_AWB_MODE, CaptureRequest.CONTROL_AWB_MODE_OFF)
-    set(CaptureRequest.COLOR_CORRECTION_MODE, CaptureRequest.COLOR_CORRECTION_MODE_TRANSFORM_MATRIX)
-    set(CaptureRequest.COLOR_CORRECTION_GAINS, RggbChannelVector(gains[0], gains[1], gains[2], gains[3]))
-    set(CaptureRequest.COLOR_CORRECTION_TRANSFORM, ColorSpaceTransform(transform))
-    set(CaptureRequest.TONEMAP_MODE, CaptureRequest.TONEMAP_MODE_CONTRAST_CURVE)
-    set(CaptureRequest.TONEMAP_CURVE, TonemapCurve(curve, curve, curve))
+fun camproSettings(transform: IntArray, curve: FloatArray, gains: FloatArray): List<Pair<CaptureRequest.Key<*>, Any>> {
+    require(transform.size == 18) { "transform must have 18 ints, got ${transform.size}" }
+    require(curve.size >= 4 && curve.size % 2 == 0) { "curve must hold at least two (Pin, Pout) pairs, got ${curve.size} floats" }
+    require(gains.size == 4) { "gains must have 4 elements (R, G_even, G_odd, B), got ${gains.size}" }
+    return listOf(
+        CaptureRequest.CONTROL_AWB_MODE to CaptureRequest.CONTROL_AWB_MODE_OFF,
+        CaptureRequest.COLOR_CORRECTION_MODE to CaptureRequest.COLOR_CORRECTION_MODE_TRANSFORM_MATRIX,
+        CaptureRequest.COLOR_CORRECTION_GAINS to RggbChannelVector(gains[0], gains[1], gains[2], gains[3]),
+        CaptureRequest.COLOR_CORRECTION_TRANSFORM to ColorSpaceTransform(transform),
+        CaptureRequest.TONEMAP_MODE to CaptureRequest.TONEMAP_MODE_CONTRAST_CURVE,
+        CaptureRequest.TONEMAP_CURVE to TonemapCurve(curve, curve, curve),
+    )
+}
+
+@Suppress("UNCHECKED_CAST")
+private fun CaptureRequest.Builder.setAny(key: CaptureRequest.Key<*>, value: Any) = set(key as CaptureRequest.Key<Any>, value)
+
+/** Sets CamPro's values ([camproSettings]) on a request. */
+fun CaptureRequest.Builder.applyCamPro(transform: IntArray, curve: FloatArray, gains: FloatArray) {
+    for ((k, v) in camproSettings(transform, curve, gains)) setAny(k, v)
 }
 
 /** A session from a parameter file in the APK's assets, read natively (NDK AAssetManager). */
@@ -79,3 +112,176 @@ fun openCamProAsset(
     maxCurvePoints: Int,
     skipTolerance: Double = CamProSession.DEFAULT_SKIP_TOLERANCE,
 ): CamProSession = CamProSession.fromAsset(assets, path, maxCurvePoints, CamProSession.DEFAULT_MAX_DENOMINATOR, skipTolerance)
+
+/**
+ * CamPro on a Camera2 camera, fail closed per frame, the screen included.
+ *
+ * Protected frames go only to [frames], an `ImageReader` this class owns; each image waits
+ * in the pipeline's [org.campro.FrameGate] until its own `CaptureResult` verified, and only
+ * then reaches [deliver] on [appExecutor] (render it with `ImageWriter.queueInputImage` onto
+ * a `SurfaceView`, or with GL; the consumer closes it). Metering frames (auto mode) go to a
+ * small reader that drops them unread. No display surface is ever a capture target: a
+ * `TextureView`/`SurfaceView` fed straight by the camera would show frames before their
+ * results are checked, and is not fail-closed.
+ *
+ * Use: configure a session with [outputs], then call [onConfigured] from its
+ * `StateCallback.onConfigured`; forward `CameraDevice.StateCallback.onDisconnected` and
+ * `onError` to [onCameraStopped]; [close] when done. All camera calls run on [cameraHandler]'s
+ * thread. States reach [onState] on [appExecutor].
+ */
+class CamProCamera2(
+    val session: CamProSession,
+    characteristics: CameraCharacteristics,
+    /** The camera thread: requests, results and image callbacks run here. */
+    private val cameraHandler: Handler,
+    /** The app's executor: frames and states are delivered there. */
+    appExecutor: Executor,
+    /** Frame size of the protected stream. */
+    width: Int,
+    height: Int,
+    /** Called on [appExecutor] with each verified image; it must close it (ImageWriter.queueInputImage does). */
+    deliver: (Image) -> Unit,
+    /** Called on [appExecutor] with each new state. */
+    onState: (ProtectionState) -> Unit = {},
+    /** See [org.campro.ProtectionGuard.trustMissingKeys]: accepting it risks unprotected frames. */
+    trustMissingKeys: Boolean = false,
+    /** The protected stream's format: PRIVATE for the screen (zero-copy to ImageWriter), YUV_420_888 to read pixels. */
+    format: Int = ImageFormat.PRIVATE,
+    /** Its usage flags (API 29): GPU sampling and composition for the screen. */
+    usage: Long = HardwareBuffer.USAGE_GPU_SAMPLED_IMAGE or HardwareBuffer.USAGE_COMPOSER_OVERLAY,
+) : AutoCloseable {
+    /** Whether and why CamPro can run on this camera. */
+    val support: DeviceSupport.Result = characteristics.camproSupport()
+
+    /** Protected frames, gated before anyone sees them. */
+    val frames: ImageReader = ImageReader.newInstance(width, height, format, QUEUE_DEPTH, usage)
+
+    private val meteringReader: ImageReader = ImageReader.newInstance(METERING_WIDTH, METERING_HEIGHT, ImageFormat.YUV_420_888, 2)
+
+    @Volatile
+    private var device: CameraDevice? = null
+
+    @Volatile
+    private var captureSession: CameraCaptureSession? = null
+
+    private val requests = object : CameraRequests {
+        override fun meter() {
+            val s = captureSession ?: error("no capture session")
+            s.setRepeatingRequest(meteringRequest(), callback, cameraHandler)
+        }
+
+        override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int) {
+            val s = captureSession ?: error("no capture session")
+            val d = device ?: error("no camera device")
+            val protected = d.createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply {
+                addTarget(frames.surface)
+                applyCamPro(transform, curve, gains)
+                setTag(PROTECTED)
+            }.build()
+            if (interleaveMetering) {
+                s.setRepeatingBurst(listOf(meteringRequest()) + List(meteringInterval - 1) { protected }, callback, cameraHandler)
+            } else {
+                s.setRepeatingRequest(protected, callback, cameraHandler)
+            }
+        }
+
+        override fun halt() {
+            try {
+                captureSession?.stopRepeating()
+            } catch (e: CameraAccessException) {
+                // Disconnected: nothing repeats any more.
+            } catch (e: IllegalStateException) {
+                // The session is closed: nothing repeats any more.
+            }
+        }
+    }
+
+    /** The loop: states, gate and metering. */
+    val pipeline = CamProPipeline<Image>(
+        session, requests, appExecutor,
+        perFrameControl = characteristics.hasPerFrameControl(),
+        pipelineDepth = characteristics.pipelineDepth(),
+        imageQueueDepth = QUEUE_DEPTH,
+        trustMissingKeys = trustMissingKeys,
+        deliver = deliver,
+        drop = { it.close() },
+        onState = onState,
+    )
+
+    init {
+        frames.setOnImageAvailableListener({ r -> acquire(r) }, cameraHandler)
+        meteringReader.setOnImageAvailableListener({ r -> drain(r) }, cameraHandler)
+    }
+
+    /** The surfaces to configure the capture session with: protected frames and metering. */
+    fun outputs(): List<OutputConfiguration> = listOf(OutputConfiguration(frames.surface), OutputConfiguration(meteringReader.surface))
+
+    /** The capture session is configured: metering starts (or Unsupported, final). */
+    fun onConfigured(device: CameraDevice, session: CameraCaptureSession) {
+        this.device = device
+        this.captureSession = session
+        pipeline.start(support)
+    }
+
+    /** The camera was disconnected, failed, or its session closed: closed until started again. */
+    fun onCameraStopped(reason: String) {
+        captureSession = null
+        device = null
+        pipeline.onCameraStopped(reason)
+    }
+
+    /** Stops requests and releases the readers; the camera device is the app's to close. */
+    override fun close() {
+        pipeline.stop()
+        captureSession = null
+        device = null
+        frames.close()
+        meteringReader.close()
+    }
+
+    private val callback = object : CameraCaptureSession.CaptureCallback() {
+        override fun onCaptureCompleted(s: CameraCaptureSession, request: CaptureRequest, result: TotalCaptureResult) =
+            onResult(request.tag, result)
+    }
+
+    /** One completed capture, routed by its request's tag (internal: tests feed scripted results). */
+    internal fun onResult(tag: Any?, result: CaptureResult) {
+        when (tag) {
+            METERING -> pipeline.onMeteringResult(result.meteringReport())
+            // A result without a timestamp matches no frame: its frame is dropped.
+            PROTECTED -> pipeline.onProtectedResult(result.get(CaptureResult.SENSOR_TIMESTAMP) ?: Long.MIN_VALUE, result.camproReport())
+        }
+    }
+
+    private fun acquire(r: ImageReader) {
+        val image = try {
+            r.acquireNextImage()
+        } catch (e: IllegalStateException) {
+            null // more images acquired than the queue holds: the gate drops them as results come
+        } ?: return
+        pipeline.onFrame(image.timestamp, image)
+    }
+
+    private fun drain(r: ImageReader) {
+        try {
+            r.acquireLatestImage()?.close()
+        } catch (e: IllegalStateException) {
+            // closed reader
+        }
+    }
+
+    private fun meteringRequest(): CaptureRequest = (device ?: error("no camera device")).createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply {
+        addTarget(meteringReader.surface)
+        set(CaptureRequest.CONTROL_AWB_MODE, CaptureRequest.CONTROL_AWB_MODE_AUTO)
+        setTag(METERING)
+    }.build()
+
+    companion object {
+        /** Images the protected reader holds: frames wait there for their results. */
+        const val QUEUE_DEPTH = 6
+        const val METERING_WIDTH = 320
+        const val METERING_HEIGHT = 240
+        internal const val METERING = "campro-metering"
+        internal const val PROTECTED = "campro-protected"
+    }
+}

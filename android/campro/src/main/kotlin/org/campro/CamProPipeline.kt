@@ -1,0 +1,260 @@
+package org.campro
+
+import java.util.concurrent.Executor
+
+/** What one auto-mode (metering) result reported: `null` where a key is absent. */
+class MeteringReport(
+    /** `CONTROL_AWB_MODE`. */
+    val awbMode: Int?,
+    /** `CONTROL_AWB_STATE`: the device's white balance is usable once CONVERGED (2) or LOCKED (3). */
+    val awbState: Int?,
+    /** `COLOR_CORRECTION_TRANSFORM`: 18 ints (numerator, denominator pairs). */
+    val transform: IntArray?,
+    /** `COLOR_CORRECTION_GAINS` as (R, G_even, G_odd, B). */
+    val gains: FloatArray?,
+)
+
+/**
+ * What [CamProPipeline] asks of the camera. The Android glue implements it on a
+ * `CameraCaptureSession` ([org.campro.android.CamProCamera2]) or on CameraX's
+ * `Camera2CameraControl` ([org.campro.android.CamProCameraX]); tests script it. A call that
+ * fails (the camera was disconnected, the session closed) throws; the pipeline then stops.
+ */
+interface CameraRequests {
+    /** Repeat auto-mode (AWB on) frames that go to no consumer; their results are metering results. */
+    fun meter()
+
+    /**
+     * Repeat protected frames with these values (AWB off, TRANSFORM_MATRIX, CONTRAST_CURVE).
+     * With [interleaveMetering], one frame in every [meteringInterval] of the repeating burst
+     * is an auto-mode metering frame (needs per-frame control: `SYNC_MAX_LATENCY_PER_FRAME_CONTROL`).
+     */
+    fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int)
+
+    /** Stop repeating: nothing more is captured. Must not throw. */
+    fun halt()
+}
+
+/**
+ * CamPro's camera loop, free of Android types: metering, protected requests, the per-frame
+ * gate and the state an app shows. The Android glue turns callbacks into these calls and
+ * [CameraRequests] into requests; every decision is here, tested on the host JVM.
+ *
+ * The loop: [start] meters in auto mode until AWB has CONVERGED (or LOCKED), takes the
+ * device's transform and gains from that result, sends CamPro's values ([CameraRequests.protect])
+ * and is `Verifying` until a protected result reads back. On a device with per-frame control
+ * the repeating burst keeps one metering frame in [CamProController.meteringInterval] and the
+ * values follow the light; otherwise (AUTO/OFF switches may land frames late) metering runs
+ * again only on [remeter], with the preview closed meanwhile.
+ *
+ * Every frame waits in a [FrameGate] for its own result; only frames whose result verified
+ * reach [deliver], on [appExecutor]. State changes reach [onState] on [appExecutor] too, in
+ * order. Any exception from the camera ([CameraRequests]) or from native code stops the loop
+ * closed: `Stopped(reason)`, every waiting frame dropped.
+ */
+class CamProPipeline<T>(
+    val session: CamProSession,
+    private val camera: CameraRequests,
+    /** The app's executor: frames and states are delivered there. */
+    private val appExecutor: Executor,
+    /** Whether the device applies settings per frame (`SYNC_MAX_LATENCY == PER_FRAME_CONTROL`). */
+    val perFrameControl: Boolean,
+    /** Frames a result may lead its image by (`REQUEST_PIPELINE_MAX_DEPTH`, >= 1). */
+    pipelineDepth: Int,
+    /** Frames the image queue holds (>= 2): up to this many less one wait for results. */
+    imageQueueDepth: Int,
+    /** See [ProtectionGuard.trustMissingKeys]: accepting it risks unprotected frames. */
+    trustMissingKeys: Boolean = false,
+    /** Called on [appExecutor] with each verified frame; it owns (and closes) the frame. */
+    deliver: (T) -> Unit,
+    /** Called with each frame that must not reach the app (an Image is closed here). */
+    private val drop: (T) -> Unit,
+    /** Called on [appExecutor] with each new state. */
+    private val onState: (ProtectionState) -> Unit = {},
+    /** Metering results in a row without transform or gains after which the device is Unsupported. */
+    val meteringKeyLimit: Int = 30,
+) {
+    init {
+        require(pipelineDepth >= 1) { "pipelineDepth must be >= 1, got $pipelineDepth" }
+        require(imageQueueDepth >= 2) { "imageQueueDepth must be >= 2, got $imageQueueDepth" }
+        require(meteringKeyLimit >= 1) { "meteringKeyLimit must be >= 1, got $meteringKeyLimit" }
+    }
+
+    /** The fail-closed state. */
+    val guard = ProtectionGuard(session, trustMissingKeys = trustMissingKeys)
+
+    /** When to rebuild and with which gains. */
+    val controller = CamProController(session)
+
+    /** The per-frame gate; verdicts sized for results that lead their images by the pipeline depth (and one more). */
+    val gate = FrameGate(guard, maxWaitingFrames = imageQueueDepth - 1, maxPendingVerdicts = pipelineDepth + 1, executor = appExecutor, deliver = deliver, drop = drop)
+
+    private var metering = false
+    private var running = false
+    private var meteringMissing = 0
+    private var lastState: ProtectionState? = null
+
+    init {
+        guard.stopped("not started")
+    }
+
+    /** Metering results ignored because AWB had not converged yet. */
+    var unconvergedMeteringResults = 0L
+        private set
+
+    /** The current state. */
+    val state: ProtectionState get() = guard.state
+
+    /** Whether the loop is metering in auto mode (CameraX routes results by this: no per-request tags). */
+    val isMetering: Boolean @Synchronized get() = metering && running
+
+    /** Whether frames may reach the app now. */
+    val framesAllowed: Boolean get() = guard.framesAllowed
+
+    /**
+     * Starts with the camera's [support] (from [DeviceSupport.check]): an unsupported camera
+     * is final and nothing is captured; otherwise metering begins. Call once the capture
+     * session is configured.
+     */
+    @Synchronized
+    fun start(support: DeviceSupport.Result) {
+        when (support) {
+            is DeviceSupport.Result.Unsupported -> {
+                guard.unsupported(support.reasons.joinToString("; "))
+                running = false
+                gate.stop()
+                camera.halt()
+            }
+            is DeviceSupport.Result.Supported -> guarded {
+                session.setMaxCurvePoints(support.maxCurvePoints)
+                running = true
+                beginMetering()
+            }
+        }
+        publish()
+    }
+
+    /** Meters again (devices without per-frame control: the light changed); closed meanwhile. */
+    @Synchronized
+    fun remeter() {
+        if (!running) return
+        guarded { beginMetering() }
+        publish()
+    }
+
+    /** An auto-mode result arrived. */
+    @Synchronized
+    fun onMeteringResult(m: MeteringReport) {
+        if (!running || !(metering || perFrameControl)) return
+        val converged = m.awbState == null || m.awbState == AWB_STATE_CONVERGED || m.awbState == AWB_STATE_LOCKED
+        if (!converged) {
+            unconvergedMeteringResults++
+            return
+        }
+        val transform = m.transform
+        val gains = m.gains
+        if (transform == null || gains == null) {
+            if (++meteringMissing >= meteringKeyLimit) {
+                val what = if (transform == null) "COLOR_CORRECTION_TRANSFORM" else "COLOR_CORRECTION_GAINS"
+                guard.unsupported("the device reports no $what in auto mode ($meteringMissing results): CamPro's values cannot follow it")
+                running = false
+                gate.stop()
+                camera.halt()
+                publish()
+            }
+            return
+        }
+        meteringMissing = 0
+        guarded {
+            val rebuild = controller.onMeteringResult(transform, gains)
+            if (rebuild || metering) sendProtected()
+        }
+        publish()
+    }
+
+    /** A protected frame's result arrived ([timestampNs]: its `SENSOR_TIMESTAMP`). */
+    fun onProtectedResult(timestampNs: Long, report: CaptureReport) {
+        guarded { gate.onResult(timestampNs, report) }
+        publish()
+    }
+
+    /** A protected frame arrived (its image's timestamp, equal to the result's `SENSOR_TIMESTAMP`). */
+    fun onFrame(timestampNs: Long, frame: T) {
+        if (!running) return drop(frame)
+        gate.onFrame(timestampNs, frame)
+    }
+
+    /** The camera failed, was disconnected or closed: closed, nothing waiting survives. */
+    @Synchronized
+    fun onCameraStopped(reason: String) {
+        running = false
+        guard.stopped(reason)
+        gate.clear()
+        publish()
+    }
+
+    /** The app stops (pause, close): stops the camera's requests and closes the gate. */
+    @Synchronized
+    fun stop(reason: String = "stopped by the app") {
+        running = false
+        try {
+            camera.halt()
+        } catch (e: RuntimeException) {
+            // halt must not throw; if it does the camera is going away anyway.
+        }
+        guard.stopped(reason)
+        gate.clear()
+        publish()
+    }
+
+    private fun beginMetering() {
+        metering = true
+        guard.requestChanged()
+        gate.clear()
+        camera.meter()
+    }
+
+    private fun sendProtected() {
+        // The values come from a metering result; never send an empty curve.
+        check(session.curvePoints >= 2) { "no CamPro values yet: the session has not been updated from a metering result" }
+        metering = false
+        val gains = controller.gains.copyOf()
+        guard.requestChanged(gains)
+        gate.clear()
+        camera.protect(session.transform.copyOf(), session.curveForRequest(), gains, perFrameControl, controller.meteringInterval)
+    }
+
+    /** Runs [body]; any exception stops the loop closed with its message. */
+    private inline fun guarded(body: () -> Unit) {
+        try {
+            body()
+        } catch (e: Exception) {
+            running = false
+            guard.stopped("stopped: ${e.javaClass.simpleName}: ${e.message}")
+            gate.clear()
+            try {
+                camera.halt()
+            } catch (ignored: RuntimeException) {
+            }
+        }
+    }
+
+    /** Hands the state to the app when it changed (on its executor, in order). */
+    private fun publish() {
+        val s = guard.state
+        synchronized(this) {
+            if (s == lastState) return
+            lastState = s
+        }
+        appExecutor.execute { onState(s) }
+    }
+
+    companion object {
+        /** `CameraMetadata.CONTROL_AWB_STATE_CONVERGED`. */
+        const val AWB_STATE_CONVERGED = 2
+        /** `CameraMetadata.CONTROL_AWB_STATE_LOCKED`. */
+        const val AWB_STATE_LOCKED = 3
+        /** `CameraMetadata.SYNC_MAX_LATENCY_PER_FRAME_CONTROL`. */
+        const val SYNC_MAX_LATENCY_PER_FRAME_CONTROL = 0
+    }
+}

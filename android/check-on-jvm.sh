@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# Compiles every Kotlin file under android/ (the library, its Camera2/CameraX glue and the
+# sample app) against the real Android 14 framework classes (Robolectric's android-all jar
+# from Maven Central) and a small CameraX stub set (android/jvm-test/stubs: Google's Maven is
+# not reachable here), then runs the JVM tests (android/jvm-test/src/test: scripted camera
+# sequences, and the Android glue under Robolectric) against the real libcampro_jni.so.
+#
+# Needs: JDK 17, Maven, cargo. Last line: "kotlin files compiled: N/M" (M = every .kt under
+# android/, tests and stubs included). Exits non-zero when anything fails to compile or a
+# test fails.
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+root="$(dirname "$here")"
+cd "$root"
+
+# The .so the tests load: the JNI crate alone (no desktop features), as an app builds it.
+cargo build --release --locked --lib -p campro-jni
+lib="$root/target/release/libcampro_jni.so"
+test -f "$lib"
+
+# Compile (main: library + app + stubs; test: the tests) and run the tests.
+mvn -B -q -f "$here/jvm-test/pom.xml" -Dcampro.jni.lib="$lib" test
+# Surefire's summary for the log (Maven ran quietly).
+reports="$here/jvm-test/target/surefire-reports"
+python3 - "$reports" <<'PY'
+import sys, glob, xml.etree.ElementTree as ET
+t = f = e = s = 0
+for x in sorted(glob.glob(sys.argv[1] + "/TEST-*.xml")):
+    r = ET.parse(x).getroot()
+    n, fl, er, sk = (int(r.get(k, 0)) for k in ("tests", "failures", "errors", "skipped"))
+    t += n; f += fl; e += er; s += sk
+    print(f"{r.get('name')}: {n} tests, {fl + er} failed")
+print(f"Tests run: {t}, Failures: {f}, Errors: {e}, Skipped: {s}")
+PY
+
+# Every .kt under android/ must have become a class file of this build.
+total=0; compiled=0
+classes="$here/jvm-test/target/classes"; tclasses="$here/jvm-test/target/test-classes"
+while IFS= read -r kt; do
+  total=$((total + 1))
+  # A Kotlin file compiles to FileKt.class and/or the classes it declares: look for any
+  # class whose source attribute names this file.
+  name="$(basename "$kt")"
+  if grep -rlaF --include='*.class' "$name" "$classes" "$tclasses" >/dev/null 2>&1; then
+    compiled=$((compiled + 1))
+  else
+    echo "not compiled: ${kt#$root/}" >&2
+  fi
+done < <(find "$here" -name '*.kt' -not -path '*/target/*' -not -path '*/build/*' | sort)
+echo "kotlin files compiled: $compiled/$total"
+test "$compiled" -eq "$total"

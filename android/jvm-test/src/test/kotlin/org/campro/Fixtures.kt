@@ -1,0 +1,77 @@
+package org.campro
+
+import java.io.File
+import java.util.concurrent.Executor
+
+/** Shared by the JVM tests: the real libcampro_jni.so, a bundled preset, scripted devices. */
+object Fixtures {
+    /** A phone-like auto-mode transform (18 ints: numerator, denominator pairs). */
+    val PHONE = intArrayOf(178, 100, -62, 100, -16, 100, -28, 100, 162, 100, -34, 100, 2, 100, -71, 100, 169, 100)
+    val GAINS = floatArrayOf(2.0f, 1.0f, 1.0f, 1.6f)
+
+    private var loaded = false
+
+    /** Loads the .so named by the `campro.jni.lib` system property (check-on-jvm.sh sets it). */
+    @Synchronized
+    fun load() {
+        if (loaded) return
+        val lib = System.getProperty("campro.jni.lib") ?: error("campro.jni.lib is not set: run android/check-on-jvm.sh")
+        check(File(lib).isFile) { "$lib does not exist: run android/check-on-jvm.sh (it builds it)" }
+        CamProNative.load(lib)
+        loaded = true
+    }
+
+    /** The recommended preset's JSON. */
+    fun params(): String {
+        val dir = System.getProperty("campro.params.dir") ?: error("campro.params.dir is not set")
+        return File(dir, "campro-omega-0.5.json").readText()
+    }
+
+    fun session(maxCurvePoints: Int = 64): CamProSession {
+        load()
+        return CamProSession.fromJson(params(), maxCurvePoints)
+    }
+
+    fun supported(points: Int = 64) = DeviceSupport.check(intArrayOf(0, 2), intArrayOf(0, 1, 2), points, intArrayOf(0, 1))
+
+    /** Runs deliveries when told to: shows what is delivered on the app's executor and when. */
+    class QueueExecutor : Executor {
+        val queue = ArrayDeque<Runnable>()
+        override fun execute(command: Runnable) { synchronized(this) { queue.addLast(command) } }
+        fun runAll() { while (true) { val r = synchronized(this) { queue.removeFirstOrNull() } ?: return; r.run() } }
+    }
+
+    /** A scripted camera: records what the pipeline asked for; can be made to fail. */
+    class FakeCamera : CameraRequests {
+        val calls = mutableListOf<String>()
+        var lastTransform: IntArray? = null
+        var lastCurve: FloatArray? = null
+        var lastGains: FloatArray? = null
+        var failWith: Exception? = null
+
+        override fun meter() { failWith?.let { throw it }; calls += "meter" }
+        override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int) {
+            failWith?.let { throw it }
+            calls += if (interleaveMetering) "protect+meter/$meteringInterval" else "protect"
+            lastTransform = transform; lastCurve = curve; lastGains = gains
+        }
+        override fun halt() { calls += "halt" }
+
+        /** What a device honouring the last request reports. */
+        fun honoured(): CaptureReport {
+            val c = lastCurve!!
+            return CaptureReport(0, 0, 0, lastTransform!!.copyOf(), listOf(c, c.copyOf(), c.copyOf()), lastGains!!.copyOf())
+        }
+    }
+
+    fun CaptureReport.with(
+        awbMode: Int? = this.awbMode,
+        colorCorrectionMode: Int? = this.colorCorrectionMode,
+        tonemapMode: Int? = this.tonemapMode,
+        transform: IntArray? = this.transform,
+        curves: List<FloatArray>? = this.curves,
+        gains: FloatArray? = this.gains,
+    ) = CaptureReport(awbMode, colorCorrectionMode, tonemapMode, transform, curves, gains)
+
+    fun converged(transform: IntArray = PHONE, gains: FloatArray = GAINS) = MeteringReport(1, CamProPipeline.AWB_STATE_CONVERGED, transform, gains)
+}

@@ -1,0 +1,270 @@
+package org.campro
+
+import org.campro.Fixtures.FakeCamera
+import org.campro.Fixtures.QueueExecutor
+import org.campro.Fixtures.with
+import org.junit.After
+import org.junit.Assert.assertEquals
+import org.junit.Assert.assertFalse
+import org.junit.Assert.assertTrue
+import org.junit.Test
+import java.util.concurrent.CountDownLatch
+import java.util.concurrent.Executor
+import java.util.concurrent.Executors
+import java.util.concurrent.TimeUnit
+
+/** CamProPipeline on scripted camera sequences: every path a phone can take, on the host JVM. */
+class PipelineTest {
+    private val session = Fixtures.session()
+    private val cam = FakeCamera()
+    private val app = QueueExecutor()
+    private val shown = mutableListOf<Int>()
+    private val closed = mutableListOf<Int>()
+    private val states = mutableListOf<ProtectionState>()
+
+    private fun pipeline(perFrame: Boolean = true, depth: Int = 4, queue: Int = 4, trust: Boolean = false) =
+        CamProPipeline<Int>(session, cam, app, perFrame, depth, queue, trust, deliver = { shown += it }, drop = { closed += it }, onState = { states += it })
+
+    @After
+    fun close() = session.close()
+
+    private fun names() = states.map { it.javaClass.simpleName }
+
+    @Test
+    fun openMeterProtectViolateRecover() {
+        val p = pipeline()
+        assertTrue(p.state is ProtectionState.Stopped)
+        p.start(Fixtures.supported())
+        assertEquals(listOf("meter"), cam.calls)
+        // AWB still searching: the transform is not taken yet.
+        p.onMeteringResult(MeteringReport(1, 1, intArrayOf(1, 1, 0, 1, 0, 1, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1), Fixtures.GAINS))
+        assertEquals(1L, p.unconvergedMeteringResults)
+        assertEquals(listOf("meter"), cam.calls)
+        p.onMeteringResult(Fixtures.converged())
+        assertEquals(listOf("meter", "protect+meter/15"), cam.calls)
+        assertEquals(ProtectionState.Verifying, p.state)
+        // What was sent is the session's conversion of the device's own transform.
+        CamProSession.fromJson(Fixtures.params()).use { ref ->
+            ref.updateFromTransform(Fixtures.PHONE)
+            assertTrue(ref.transform.contentEquals(cam.lastTransform!!))
+            assertTrue(ref.curveForRequest().contentEquals(cam.lastCurve!!))
+        }
+        assertTrue(Fixtures.GAINS.contentEquals(cam.lastGains!!))
+
+        val ok = cam.honoured()
+        p.onFrame(1000, 1)
+        p.onProtectedResult(1000, ok)
+        p.onFrame(2000, 2)
+        p.onProtectedResult(2000, ok.with(curves = List(3) { floatArrayOf(0f, 0f, 1f, 1f) })) // this frame's curve ignored
+        p.onProtectedResult(3000, ok)
+        p.onFrame(3000, 3)
+        assertTrue("nothing reaches the app before its executor runs", shown.isEmpty())
+        app.runAll()
+        assertEquals(listOf(1, 3), shown)
+        assertEquals(listOf(2), closed)
+        assertEquals(listOf("Stopped", "Verifying", "Protected", "Violated", "Protected"), names())
+    }
+
+    @Test
+    fun withoutPerFrameControlMeteringIsPhased() {
+        val p = pipeline(perFrame = false)
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        assertEquals(listOf("meter", "protect"), cam.calls)
+        // A late auto-mode result changes nothing while protecting.
+        p.onMeteringResult(Fixtures.converged(gains = floatArrayOf(1.5f, 1f, 1f, 2f)))
+        assertEquals(listOf("meter", "protect"), cam.calls)
+        p.onProtectedResult(1, cam.honoured())
+        assertEquals(ProtectionState.Protected, p.state)
+        p.remeter()
+        assertEquals(ProtectionState.Verifying, p.state)
+        p.onFrame(5, 5)
+        p.onMeteringResult(Fixtures.converged(gains = floatArrayOf(1.5f, 1f, 1f, 2f)))
+        assertEquals(listOf("meter", "protect", "meter", "protect"), cam.calls)
+        app.runAll()
+        assertEquals(listOf(5), closed)
+        assertTrue(shown.isEmpty())
+    }
+
+    @Test
+    fun interleavedMeteringRebuildsOnlyWhenTheLightMoves() {
+        val p = pipeline()
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        p.onProtectedResult(1, cam.honoured())
+        p.onMeteringResult(Fixtures.converged()) // same light: no new request, still Protected
+        assertEquals(2, cam.calls.size)
+        assertEquals(ProtectionState.Protected, p.state)
+        p.onMeteringResult(Fixtures.converged(gains = floatArrayOf(1.5f, 1f, 1f, 2f)))
+        assertEquals(3, cam.calls.size)
+        assertEquals("a new request verifies again", ProtectionState.Verifying, p.state)
+    }
+
+    @Test
+    fun disconnectMidStreamDropsEverythingAndLateResultsChangeNothing() {
+        val p = pipeline()
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        val ok = cam.honoured()
+        p.onProtectedResult(1, ok)
+        p.onFrame(2, 2)
+        p.onCameraStopped("the camera was disconnected")
+        p.onProtectedResult(2, ok) // a result that was in flight
+        p.onFrame(3, 3)
+        p.onProtectedResult(3, ok)
+        app.runAll()
+        assertTrue(shown.isEmpty())
+        assertEquals(listOf(2, 3), closed)
+        assertEquals(ProtectionState.Stopped("the camera was disconnected"), p.state)
+    }
+
+    @Test
+    fun aFailingCameraStopsClosed() {
+        val p = pipeline()
+        p.start(Fixtures.supported())
+        cam.failWith = IllegalStateException("CameraDevice was already closed")
+        p.onMeteringResult(Fixtures.converged())
+        val s = p.state
+        assertTrue("$s", s is ProtectionState.Stopped && s.reason.contains("already closed"))
+        assertTrue(cam.calls.contains("halt"))
+        p.onFrame(1, 1)
+        app.runAll()
+        assertEquals(listOf(1), closed)
+    }
+
+    @Test
+    fun neverStartedIsStoppedAndDropsFrames() {
+        // What the app has when the camera permission is refused: the pipeline never starts.
+        val p = pipeline()
+        p.onFrame(1, 1)
+        p.onProtectedResult(1, CaptureReport(0, 0, 0, IntArray(18), null))
+        app.runAll()
+        assertTrue(p.state is ProtectionState.Stopped)
+        assertEquals(listOf(1), closed)
+        assertTrue(cam.calls.isEmpty())
+    }
+
+    @Test
+    fun deviceWithoutManualPostProcessing() {
+        // No CONTRAST_CURVE at all: Unsupported, final, nothing captured.
+        val none = DeviceSupport.check(intArrayOf(0), intArrayOf(1, 2), 64, intArrayOf(0, 1))
+        val p = pipeline()
+        p.start(none)
+        val s = p.state
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("MANUAL_POST_PROCESSING"))
+        assertEquals(listOf("halt"), cam.calls)
+        p.onMeteringResult(Fixtures.converged())
+        assertEquals(listOf("halt"), cam.calls)
+        // CONTRAST_CURVE listed without the capability: runs, with the note, and still verifies every frame.
+        val listed = DeviceSupport.check(intArrayOf(0), intArrayOf(0, 1, 2), 64, intArrayOf(0, 1))
+        assertTrue(listed is DeviceSupport.Result.Supported && listed.note!!.contains("MANUAL_POST_PROCESSING"))
+    }
+
+    @Test
+    fun curveBudgetsOf20_32_64Points() {
+        for (n in listOf(20, 32, 64)) {
+            Fixtures.session(n).use { s ->
+                val c = FakeCamera()
+                val p = CamProPipeline<Int>(s, c, app, true, 4, 4, deliver = {}, drop = {})
+                p.start(Fixtures.supported(n))
+                p.onMeteringResult(Fixtures.converged())
+                val pts = c.lastCurve!!.size / 2
+                assertTrue("$n points allowed, $pts sent", pts in 2..n)
+                assertEquals(ProtectionState.Protected, p.onProtectedResult(1, c.honoured()).let { p.state })
+                assertTrue("bound ${s.boundLsb} LSB at $n points", s.boundLsb < 8.0)
+            }
+        }
+    }
+
+    @Test
+    fun gainsAreReadBack() {
+        val p = pipeline()
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        val ok = cam.honoured()
+        p.onProtectedResult(1, ok.with(gains = floatArrayOf(1f, 1f, 1f, 1f)))
+        val s = p.state
+        assertTrue("$s", s is ProtectionState.Violated && s.reason.contains("gain R"))
+        p.onProtectedResult(2, ok.with(gains = floatArrayOf(2.0f * 1.001f, 1f, 1f, 1.6f))) // within 0.2%
+        assertEquals(ProtectionState.Protected, p.state)
+        p.onProtectedResult(3, ok.with(gains = null))
+        assertTrue(p.state is ProtectionState.Violated)
+    }
+
+    @Test
+    fun aDeviceThatNeverReportsTheTransformEndsUnsupported() {
+        val p = pipeline()
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        val ok = cam.honoured()
+        repeat(p.guard.missingKeyLimit - 1) { p.onProtectedResult(it.toLong(), ok.with(transform = null)) }
+        assertTrue(p.state is ProtectionState.Violated)
+        p.onProtectedResult(99, ok.with(transform = null))
+        val s = p.state
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("COLOR_CORRECTION_TRANSFORM"))
+        p.onProtectedResult(100, ok)
+        assertTrue("final", p.state is ProtectionState.Unsupported)
+        // And in auto mode: no transform in metering results.
+        val q = pipeline()
+        q.start(Fixtures.supported())
+        repeat(q.meteringKeyLimit) { q.onMeteringResult(MeteringReport(1, 2, null, Fixtures.GAINS)) }
+        assertTrue(q.state is ProtectionState.Unsupported)
+    }
+
+    @Test
+    fun trustNeverCoversMissingModes() {
+        val p = pipeline(trust = true)
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        val ok = cam.honoured()
+        assertEquals(ProtectionState.Protected, p.onProtectedResult(1, ok.with(transform = null, curves = null, gains = null)).let { p.state })
+        for (r in listOf(ok.with(awbMode = null), ok.with(colorCorrectionMode = null), ok.with(tonemapMode = null))) {
+            p.onProtectedResult(2, r)
+            assertTrue("${p.state}", p.state is ProtectionState.Violated)
+        }
+    }
+
+    @Test
+    fun resultsLeadingFramesByThePipelineDepthLoseNoGoodFrame() {
+        val depth = 8
+        val p = pipeline(depth = depth, queue = 6)
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        val ok = cam.honoured()
+        for (t in 1L..depth) p.onProtectedResult(t, ok) // results first, as a deep pipeline gives them
+        for (t in 1L..depth) p.onFrame(t, t.toInt())
+        app.runAll()
+        assertEquals((1..depth).toList(), shown)
+        assertTrue(closed.isEmpty())
+        // The previous sizing (queue depth - 1 verdicts) lost the oldest three of these.
+        val g = FrameGate<Int>(p.guard, 5, 5, Executor { it.run() }, deliver = {}, drop = {})
+        for (t in 1L..depth) g.onResult(t, ok)
+        for (t in 1L..depth) g.onFrame(t, t.toInt())
+        assertEquals(5L, g.delivered)
+    }
+
+    @Test
+    fun deliveryRunsOnTheAppExecutorOutsideTheGateLock() {
+        val appThread = Executors.newSingleThreadExecutor()
+        val entered = CountDownLatch(1)
+        val release = CountDownLatch(1)
+        val seen = mutableListOf<Int>()
+        val p = CamProPipeline<Int>(session, cam, appThread, true, 4, 4, deliver = { entered.countDown(); release.await(5, TimeUnit.SECONDS); synchronized(seen) { seen += it } }, drop = {})
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        val ok = cam.honoured()
+        p.onFrame(1, 1)
+        p.onProtectedResult(1, ok)
+        assertTrue(entered.await(5, TimeUnit.SECONDS))
+        // The consumer is still busy with frame 1; the camera thread is not blocked by it.
+        val t0 = System.nanoTime()
+        p.onFrame(2, 2)
+        p.onProtectedResult(2, ok)
+        assertTrue("camera thread waited on the consumer", System.nanoTime() - t0 < 2_000_000_000L)
+        release.countDown()
+        appThread.shutdown()
+        assertTrue(appThread.awaitTermination(5, TimeUnit.SECONDS))
+        assertEquals(listOf(1, 2), seen)
+    }
+}
+

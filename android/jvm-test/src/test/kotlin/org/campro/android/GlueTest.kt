@@ -1,0 +1,250 @@
+package org.campro.android
+
+import android.hardware.camera2.CameraCharacteristics
+import android.hardware.camera2.CaptureRequest
+import android.hardware.camera2.CaptureResult
+import android.hardware.camera2.params.ColorSpaceTransform
+import android.hardware.camera2.params.RggbChannelVector
+import android.hardware.camera2.params.TonemapCurve
+import androidx.camera.camera2.interop.Camera2CameraControl
+import androidx.camera.camera2.interop.CaptureRequestOptions
+import androidx.camera.core.ImageAnalysis
+import androidx.camera.core.ImageInfo
+import androidx.camera.core.ImageProxy
+import com.google.common.util.concurrent.ListenableFuture
+import org.campro.CamProPipeline
+import org.campro.Fixtures
+import org.campro.ProtectionState
+import org.junit.After
+import org.junit.Assert.assertEquals
+import org.junit.Assert.assertFalse
+import org.junit.Assert.assertNull
+import org.junit.Assert.assertTrue
+import org.junit.Test
+import org.junit.runner.RunWith
+import org.robolectric.RobolectricTestRunner
+import org.robolectric.annotation.Config
+import org.robolectric.shadow.api.Shadow
+import org.robolectric.shadows.ShadowCameraCharacteristics
+import org.robolectric.shadows.ShadowCaptureResult
+import org.robolectric.shadows.ShadowTotalCaptureResult
+import java.util.concurrent.Executor
+import java.util.concurrent.TimeUnit
+
+/** The Android-typed glue on Robolectric's real framework classes (android-all, API 34). */
+@RunWith(RobolectricTestRunner::class)
+@Config(sdk = [34])
+class GlueTest {
+    private val session = Fixtures.session()
+
+    @After
+    fun close() = session.close()
+
+    private fun result(vararg values: Pair<CaptureResult.Key<*>, Any>): CaptureResult {
+        val r = ShadowTotalCaptureResult.newTotalCaptureResult()
+        val shadow = Shadow.extract<ShadowCaptureResult>(r)
+        @Suppress("UNCHECKED_CAST")
+        for ((k, v) in values) shadow.set(k as CaptureResult.Key<Any>, v)
+        return r
+    }
+
+    /** The result a device that honours [settings] reports (what CaptureRequest carried, read back). */
+    private fun honouring(settings: List<Pair<CaptureRequest.Key<*>, Any>>, ts: Long): CaptureResult {
+        val byName = settings.associate { (k, v) -> k.name to v }
+        return result(
+            CaptureResult.CONTROL_AWB_MODE to byName.getValue("android.control.awbMode"),
+            CaptureResult.COLOR_CORRECTION_MODE to byName.getValue("android.colorCorrection.mode"),
+            CaptureResult.TONEMAP_MODE to byName.getValue("android.tonemap.mode"),
+            CaptureResult.COLOR_CORRECTION_TRANSFORM to byName.getValue("android.colorCorrection.transform"),
+            CaptureResult.TONEMAP_CURVE to byName.getValue("android.tonemap.curve"),
+            CaptureResult.COLOR_CORRECTION_GAINS to byName.getValue("android.colorCorrection.gains"),
+            CaptureResult.SENSOR_TIMESTAMP to ts,
+        )
+    }
+
+    @Test
+    fun reportsReadEveryKeyAndNullWhereAbsent() {
+        val t = Fixtures.PHONE
+        val curve = floatArrayOf(0f, 0f, 0.25f, 0.5f, 1f, 1f)
+        val r = result(
+            CaptureResult.CONTROL_AWB_MODE to 0,
+            CaptureResult.CONTROL_AWB_STATE to 2,
+            CaptureResult.COLOR_CORRECTION_MODE to 0,
+            CaptureResult.TONEMAP_MODE to 0,
+            CaptureResult.COLOR_CORRECTION_TRANSFORM to ColorSpaceTransform(t),
+            CaptureResult.TONEMAP_CURVE to TonemapCurve(curve, curve, floatArrayOf(0f, 1f, 1f, 0f)),
+            CaptureResult.COLOR_CORRECTION_GAINS to RggbChannelVector(2f, 1f, 1.01f, 1.6f),
+        )
+        val rep = r.camproReport()
+        assertEquals(0, rep.awbMode); assertEquals(0, rep.colorCorrectionMode); assertEquals(0, rep.tonemapMode)
+        assertTrue(t.contentEquals(rep.transform!!))
+        assertTrue(curve.contentEquals(rep.curves!![0]) && curve.contentEquals(rep.curves!![1]))
+        assertTrue(floatArrayOf(0f, 1f, 1f, 0f).contentEquals(rep.curves!![2]))
+        assertTrue(floatArrayOf(2f, 1f, 1.01f, 1.6f).contentEquals(rep.gains!!))
+        val m = r.meteringReport()
+        assertEquals(2, m.awbState)
+        assertTrue(t.contentEquals(m.transform!!))
+        val empty = result().camproReport()
+        assertNull(empty.awbMode); assertNull(empty.transform); assertNull(empty.curves); assertNull(empty.gains)
+    }
+
+    @Test
+    fun characteristicsDecideSupportPerFrameControlAndDepth() {
+        val c = ShadowCameraCharacteristics.newCameraCharacteristics()
+        val s = Shadow.extract<ShadowCameraCharacteristics>(c)
+        s.set(CameraCharacteristics.REQUEST_AVAILABLE_CAPABILITIES, intArrayOf(0, 2))
+        s.set(CameraCharacteristics.TONEMAP_AVAILABLE_TONE_MAP_MODES, intArrayOf(0, 1, 2))
+        s.set(CameraCharacteristics.TONEMAP_MAX_CURVE_POINTS, 32)
+        s.set(CameraCharacteristics.CONTROL_AWB_AVAILABLE_MODES, intArrayOf(0, 1))
+        s.set(CameraCharacteristics.SYNC_MAX_LATENCY, 0)
+        s.set(CameraCharacteristics.REQUEST_PIPELINE_MAX_DEPTH, 6.toByte())
+        val sup = c.camproSupport()
+        assertTrue("$sup", sup is org.campro.DeviceSupport.Result.Supported && sup.maxCurvePoints == 32)
+        assertTrue(c.hasPerFrameControl())
+        assertEquals(6, c.pipelineDepth())
+        val d = ShadowCameraCharacteristics.newCameraCharacteristics()
+        val sd = Shadow.extract<ShadowCameraCharacteristics>(d)
+        sd.set(CameraCharacteristics.SYNC_MAX_LATENCY, 2)
+        assertFalse(d.hasPerFrameControl())
+        assertEquals(8, d.pipelineDepth())
+        assertTrue(d.camproSupport() is org.campro.DeviceSupport.Result.Unsupported)
+    }
+
+    @Test
+    fun settingsCarryTheSessionsValues() {
+        session.updateFromTransform(Fixtures.PHONE)
+        val curve = session.curveForRequest()
+        val s = camproSettings(session.transform, curve, Fixtures.GAINS).toMap()
+        assertEquals(CaptureRequest.CONTROL_AWB_MODE_OFF, s[CaptureRequest.CONTROL_AWB_MODE])
+        val t = IntArray(18).also { (s[CaptureRequest.COLOR_CORRECTION_TRANSFORM] as ColorSpaceTransform).copyElements(it, 0) }
+        assertTrue(session.transform.contentEquals(t))
+        val tc = s[CaptureRequest.TONEMAP_CURVE] as TonemapCurve
+        for (ch in 0..2) {
+            val got = FloatArray(2 * tc.getPointCount(ch)).also { tc.copyColorCurve(ch, it, 0) }
+            assertTrue(curve.contentEquals(got))
+        }
+        // An empty curve (no update yet) is refused by name, never sent.
+        val e = runCatching { camproSettings(session.transform, FloatArray(0), Fixtures.GAINS) }.exceptionOrNull()
+        assertTrue("$e", e is IllegalArgumentException && e.message!!.contains("curve"))
+    }
+
+    private class FakeProxy(val ts: Long) : ImageProxy {
+        var closed = false
+        override val imageInfo = object : ImageInfo { override val timestamp = ts }
+        override val width = 64
+        override val height = 48
+        override fun close() { closed = true }
+    }
+
+    private class RecordingControl : Camera2CameraControl() {
+        val sent = mutableListOf<CaptureRequestOptions>()
+        var failWith: RuntimeException? = null
+        override fun setCaptureRequestOptions(options: CaptureRequestOptions): ListenableFuture<Void?> {
+            failWith?.let { throw it }
+            sent += options
+            return object : ListenableFuture<Void?> {
+                override fun addListener(listener: Runnable, executor: Executor) = executor.execute(listener)
+                override fun cancel(mayInterruptIfRunning: Boolean) = false
+                override fun isCancelled() = false
+                override fun isDone() = true
+                override fun get(): Void? = null
+                override fun get(timeout: Long, unit: TimeUnit): Void? = null
+            }
+        }
+    }
+
+    @Test
+    fun cameraXMetersThenProtectsAndGatesEveryFrame() {
+        val direct = Executor { it.run() }
+        val shown = mutableListOf<Long>()
+        val states = mutableListOf<ProtectionState>()
+        val x = CamProCameraX(session, direct, deliver = { shown += it.imageInfo.timestamp; it.close() }, onState = { states += it })
+        val builder = ImageAnalysis.Builder()
+        x.extend(builder)
+        assertEquals(CamProCameraX.QUEUE_DEPTH, builder.queueDepth)
+        assertEquals(ImageAnalysis.STRATEGY_BLOCK_PRODUCER, builder.backpressure)
+        assertTrue("the result callback is on the analysis use case", builder.sessionCaptureCallback != null)
+        assertTrue("extend twice would check results twice", runCatching { x.extend(ImageAnalysis.Builder()) }.isFailure)
+
+        val control = RecordingControl()
+        // Started before any session update: metering first, never an empty curve.
+        x.start(control, Fixtures.supported())
+        assertEquals(1, control.sent.size)
+        assertEquals(CaptureRequest.CONTROL_AWB_MODE_AUTO, control.sent[0].getCaptureRequestOption(CaptureRequest.CONTROL_AWB_MODE))
+        assertNull(control.sent[0].getCaptureRequestOption(CaptureRequest.TONEMAP_CURVE))
+        assertEquals(ProtectionState.Verifying, x.state)
+
+        // Frames during metering never reach the app.
+        val f1 = FakeProxy(10)
+        x.analyzer.analyze(f1)
+        x.onResult(result(CaptureResult.CONTROL_AWB_MODE to 1, CaptureResult.CONTROL_AWB_STATE to 1, CaptureResult.SENSOR_TIMESTAMP to 10L))
+        x.onResult(
+            result(
+                CaptureResult.CONTROL_AWB_MODE to 1, CaptureResult.CONTROL_AWB_STATE to 2, CaptureResult.SENSOR_TIMESTAMP to 11L,
+                CaptureResult.COLOR_CORRECTION_TRANSFORM to ColorSpaceTransform(Fixtures.PHONE),
+                CaptureResult.COLOR_CORRECTION_GAINS to RggbChannelVector(2f, 1f, 1f, 1.6f),
+            ),
+        )
+        assertEquals(2, control.sent.size)
+        val sent = control.sent[1]
+        assertEquals(CaptureRequest.CONTROL_AWB_MODE_OFF, sent.getCaptureRequestOption(CaptureRequest.CONTROL_AWB_MODE))
+        assertTrue(f1.closed)
+        assertTrue(shown.isEmpty())
+
+        // Protected: each frame shown only after its own result verified.
+        val settings = listOf(
+            CaptureRequest.CONTROL_AWB_MODE, CaptureRequest.COLOR_CORRECTION_MODE, CaptureRequest.TONEMAP_MODE,
+            CaptureRequest.COLOR_CORRECTION_TRANSFORM, CaptureRequest.TONEMAP_CURVE, CaptureRequest.COLOR_CORRECTION_GAINS,
+        ).map { k -> k as CaptureRequest.Key<*> to sent.getCaptureRequestOption(k)!! }
+        val f2 = FakeProxy(20)
+        x.analyzer.analyze(f2)
+        assertTrue(shown.isEmpty())
+        x.onResult(honouring(settings, 20))
+        assertEquals(listOf(20L), shown)
+        assertEquals(ProtectionState.Protected, x.state)
+        // The device ignored the curve on frame 30: that frame is closed unseen.
+        val f3 = FakeProxy(30)
+        x.analyzer.analyze(f3)
+        val line = floatArrayOf(0f, 0f, 1f, 1f)
+        val ignored = settings.map { (k, v) -> k to (if (k == CaptureRequest.TONEMAP_CURVE) TonemapCurve(line, line, line) else v) }
+        x.onResult(honouring(ignored, 30))
+        assertTrue(f3.closed)
+        assertEquals(listOf(20L), shown)
+        assertTrue(x.state is ProtectionState.Violated)
+        // Recovers on the next good frame.
+        x.analyzer.analyze(FakeProxy(40))
+        x.onResult(honouring(settings, 40))
+        assertEquals(listOf(20L, 40L), shown)
+        // White balance re-measured on request (closed meanwhile).
+        x.remeter()
+        assertEquals(ProtectionState.Verifying, x.state)
+        assertEquals(CaptureRequest.CONTROL_AWB_MODE_AUTO, control.sent.last().getCaptureRequestOption(CaptureRequest.CONTROL_AWB_MODE))
+        assertEquals(listOf("Verifying", "Protected", "Violated", "Protected", "Verifying"), states.drop(1).map { it.javaClass.simpleName })
+
+        // The camera going away mid-stream (CameraX throws from interop): closed, frames dropped.
+        control.failWith = IllegalStateException("Camera is closed")
+        x.onResult(
+            result(
+                CaptureResult.CONTROL_AWB_MODE to 1, CaptureResult.CONTROL_AWB_STATE to 3, CaptureResult.SENSOR_TIMESTAMP to 50L,
+                CaptureResult.COLOR_CORRECTION_TRANSFORM to ColorSpaceTransform(Fixtures.PHONE),
+                CaptureResult.COLOR_CORRECTION_GAINS to RggbChannelVector(2f, 1f, 1f, 1.6f),
+            ),
+        )
+        assertTrue("${x.state}", x.state is ProtectionState.Stopped)
+        val f6 = FakeProxy(60)
+        x.analyzer.analyze(f6)
+        assertTrue(f6.closed)
+        assertEquals(listOf(20L, 40L), shown)
+    }
+
+    @Test
+    fun pipelineConstantsMatchTheFramework() {
+        assertEquals(android.hardware.camera2.CameraMetadata.CONTROL_AWB_STATE_CONVERGED, CamProPipeline.AWB_STATE_CONVERGED)
+        assertEquals(android.hardware.camera2.CameraMetadata.CONTROL_AWB_STATE_LOCKED, CamProPipeline.AWB_STATE_LOCKED)
+        assertEquals(android.hardware.camera2.CameraMetadata.SYNC_MAX_LATENCY_PER_FRAME_CONTROL, CamProPipeline.SYNC_MAX_LATENCY_PER_FRAME_CONTROL)
+        assertEquals(android.hardware.camera2.CameraMetadata.CONTROL_AWB_MODE_OFF, org.campro.DeviceSupport.CONTROL_AWB_MODE_OFF)
+        assertEquals(android.hardware.camera2.CameraMetadata.TONEMAP_MODE_CONTRAST_CURVE, org.campro.DeviceSupport.TONEMAP_MODE_CONTRAST_CURVE)
+        assertEquals(android.hardware.camera2.CameraMetadata.REQUEST_AVAILABLE_CAPABILITIES_MANUAL_POST_PROCESSING, org.campro.DeviceSupport.CAPABILITY_MANUAL_POST_PROCESSING)
+        assertEquals(android.hardware.camera2.CameraMetadata.COLOR_CORRECTION_MODE_TRANSFORM_MATRIX, org.campro.ProtectionGuard.COLOR_CORRECTION_MODE_TRANSFORM_MATRIX)
+    }
+}

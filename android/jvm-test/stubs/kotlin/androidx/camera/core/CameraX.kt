@@ -1,0 +1,52 @@
+package androidx.camera.core
+
+import java.util.concurrent.Executor
+
+/** Stub of androidx.camera.core.CameraControl (CameraX 1.4). */
+interface CameraControl
+
+/** Stub of androidx.camera.core.ImageInfo. */
+interface ImageInfo {
+    val timestamp: Long
+}
+
+/** Stub of androidx.camera.core.ImageProxy. */
+interface ImageProxy : AutoCloseable {
+    val imageInfo: ImageInfo
+    val width: Int
+    val height: Int
+    override fun close()
+}
+
+/** Stub of androidx.camera.core.ExtendableBuilder. */
+interface ExtendableBuilder<T> {
+    fun build(): T
+}
+
+/** Stub of androidx.camera.core.ImageAnalysis. */
+class ImageAnalysis private constructor(val builder: Builder) {
+    fun interface Analyzer {
+        fun analyze(image: ImageProxy)
+    }
+
+    fun setAnalyzer(executor: Executor, analyzer: Analyzer) {
+        builder.analyzer = analyzer
+    }
+
+    class Builder : ExtendableBuilder<ImageAnalysis> {
+        var queueDepth = 6
+        var backpressure = STRATEGY_KEEP_ONLY_LATEST
+        var analyzer: Analyzer? = null
+        /** What Camera2Interop.Extender set (the stub's way to reach it). */
+        var sessionCaptureCallback: android.hardware.camera2.CameraCaptureSession.CaptureCallback? = null
+
+        fun setImageQueueDepth(depth: Int): Builder = apply { queueDepth = depth }
+        fun setBackpressureStrategy(strategy: Int): Builder = apply { backpressure = strategy }
+        override fun build(): ImageAnalysis = ImageAnalysis(this)
+    }
+
+    companion object {
+        const val STRATEGY_KEEP_ONLY_LATEST = 0
+        const val STRATEGY_BLOCK_PRODUCER = 1
+    }
+}

@@ -19,7 +19,7 @@ lib="$root/target/release/libcampro_jni.so"
 test -f "$lib"
 
 # Compile (main: library + app + stubs; test: the tests) and run the tests.
-mvn -B -q -f "$here/jvm-test/pom.xml" -Dcampro.jni.lib="$lib" test
+mvn -B -q -f "$here/jvm-test/pom.xml" -Dcampro.jni.dir="$(dirname "$lib")" test
 # Surefire's summary for the log (Maven ran quietly).
 reports="$here/jvm-test/target/surefire-reports"
 python3 - "$reports" <<'PY'

@@ -62,7 +62,7 @@ class PipelineTest {
         app.runAll()
         assertEquals(listOf(1, 3), shown)
         assertEquals(listOf(2), closed)
-        assertEquals(listOf("Stopped", "Verifying", "Protected", "Violated", "Protected"), names())
+        assertEquals(listOf("Verifying", "Protected", "Violated", "Protected"), names())
     }
 
     @Test
@@ -162,6 +162,7 @@ class PipelineTest {
 
     @Test
     fun curveBudgetsOf20_32_64Points() {
+        val bounds = mutableListOf<Double>()
         for (n in listOf(20, 32, 64)) {
             Fixtures.session(n).use { s ->
                 val c = FakeCamera()
@@ -171,9 +172,13 @@ class PipelineTest {
                 val pts = c.lastCurve!!.size / 2
                 assertTrue("$n points allowed, $pts sent", pts in 2..n)
                 assertEquals(ProtectionState.Protected, p.onProtectedResult(1, c.honoured()).let { p.state })
-                assertTrue("bound ${s.boundLsb} LSB at $n points", s.boundLsb < 8.0)
+                bounds += s.boundLsb
             }
         }
+        // Fewer points cannot follow the curve as closely: the stated bound grows, and the
+        // 64-point curve holds the desktop pipeline within a quarter LSB.
+        println("curve bound at 20/32/64 points: $bounds LSB")
+        assertTrue("$bounds", bounds[0] >= bounds[1] && bounds[1] >= bounds[2] && bounds[2] < 0.25)
     }
 
     @Test

@@ -38,9 +38,9 @@ import org.campro.android.openCamProAsset
 import java.util.concurrent.Executor
 
 class MainActivity : Activity() {
-    private lateinit var preview: SurfaceView
-    private lateinit var statusView: TextView
-    private lateinit var toggle: Switch
+    internal lateinit var preview: SurfaceView
+    internal lateinit var statusView: TextView
+    internal lateinit var toggle: Switch
     private lateinit var spinner: Spinner
 
     private val cameraThread = HandlerThread("campro-camera").apply { start() }

@@ -1,0 +1,173 @@
+package org.campro.android
+
+import android.hardware.camera2.CameraAccessException
+import android.hardware.camera2.CameraCaptureSession
+import android.hardware.camera2.CameraCharacteristics
+import android.hardware.camera2.CameraDevice
+import android.hardware.camera2.CameraManager
+import android.hardware.camera2.CaptureRequest
+import android.hardware.camera2.CaptureResult
+import android.hardware.camera2.params.ColorSpaceTransform
+import android.hardware.camera2.params.OutputConfiguration
+import android.hardware.camera2.params.RggbChannelVector
+import android.hardware.camera2.params.TonemapCurve
+import android.graphics.ImageFormat
+import android.os.Handler
+import android.os.Looper
+import android.view.Surface
+import org.robolectric.RuntimeEnvironment
+import org.campro.Fixtures
+import org.campro.ProtectionState
+import org.junit.After
+import org.junit.Assert.assertEquals
+import org.junit.Assert.assertTrue
+import org.junit.Test
+import org.junit.runner.RunWith
+import org.robolectric.RobolectricTestRunner
+import org.robolectric.Shadows.shadowOf
+import org.robolectric.annotation.Config
+import org.robolectric.shadow.api.Shadow
+import org.robolectric.shadows.ShadowCameraCharacteristics
+import org.robolectric.shadows.ShadowCaptureResult
+import org.robolectric.shadows.ShadowTotalCaptureResult
+import java.util.concurrent.Executor
+
+/** CamProCamera2 on a Robolectric camera: tags, bursts, results, failures. */
+@RunWith(RobolectricTestRunner::class)
+@Config(sdk = [34])
+class Camera2Test {
+    private val session = Fixtures.session()
+
+    @After
+    fun close() = session.close()
+
+    /** A capture session that records what it is asked to repeat, and can fail like a disconnected camera. */
+    private class FakeSession(private val dev: CameraDevice) : CameraCaptureSession() {
+        val repeated = mutableListOf<List<CaptureRequest>>()
+        var stops = 0
+        var fail: Exception? = null
+        override fun getDevice() = dev
+        override fun prepare(surface: Surface) {}
+        override fun prepare(maxCount: Int, surface: Surface) {}
+        override fun tearDown(surface: Surface) {}
+        override fun finalizeOutputConfigurations(outputConfigs: List<OutputConfiguration>) {}
+        override fun capture(request: CaptureRequest, listener: CaptureCallback?, handler: Handler?) = 0
+        override fun captureBurst(requests: List<CaptureRequest>, listener: CaptureCallback?, handler: Handler?) = 0
+        override fun setRepeatingRequest(request: CaptureRequest, listener: CaptureCallback?, handler: Handler?): Int {
+            fail?.let { throw it }
+            repeated += listOf(request); return 1
+        }
+        override fun setRepeatingBurst(requests: List<CaptureRequest>, listener: CaptureCallback?, handler: Handler?): Int {
+            fail?.let { throw it }
+            repeated += requests; return 2
+        }
+        override fun stopRepeating() { stops++ }
+        override fun abortCaptures() {}
+        override fun isReprocessable() = false
+        override fun getInputSurface(): Surface? = null
+        override fun close() {}
+    }
+
+    private fun characteristics(syncLatency: Int): CameraCharacteristics {
+        val c = ShadowCameraCharacteristics.newCameraCharacteristics()
+        val s = Shadow.extract<ShadowCameraCharacteristics>(c)
+        s.set(CameraCharacteristics.REQUEST_AVAILABLE_CAPABILITIES, intArrayOf(0, 2))
+        s.set(CameraCharacteristics.TONEMAP_AVAILABLE_TONE_MAP_MODES, intArrayOf(0, 1, 2))
+        s.set(CameraCharacteristics.TONEMAP_MAX_CURVE_POINTS, 64)
+        s.set(CameraCharacteristics.CONTROL_AWB_AVAILABLE_MODES, intArrayOf(0, 1))
+        s.set(CameraCharacteristics.SYNC_MAX_LATENCY, syncLatency)
+        s.set(CameraCharacteristics.REQUEST_PIPELINE_MAX_DEPTH, 4.toByte())
+        s.set(CameraCharacteristics.LENS_FACING, CameraCharacteristics.LENS_FACING_BACK)
+        return c
+    }
+
+    private fun openDevice(chars: CameraCharacteristics): CameraDevice {
+        val manager = RuntimeEnvironment.getApplication().getSystemService(CameraManager::class.java)
+        shadowOf(manager).addCamera("0", chars)
+        var opened: CameraDevice? = null
+        manager.openCamera("0", object : CameraDevice.StateCallback() {
+            override fun onOpened(d: CameraDevice) { opened = d }
+            override fun onDisconnected(d: CameraDevice) {}
+            override fun onError(d: CameraDevice, error: Int) {}
+        }, Handler(Looper.getMainLooper()))
+        shadowOf(Looper.getMainLooper()).idle()
+        return opened ?: error("Robolectric did not open the camera")
+    }
+
+    private fun result(vararg values: Pair<CaptureResult.Key<*>, Any>): CaptureResult {
+        val r = ShadowTotalCaptureResult.newTotalCaptureResult()
+        val shadow = Shadow.extract<ShadowCaptureResult>(r)
+        @Suppress("UNCHECKED_CAST")
+        for ((k, v) in values) shadow.set(k as CaptureResult.Key<Any>, v)
+        return r
+    }
+
+    private fun converged() = result(
+        CaptureResult.CONTROL_AWB_MODE to 1, CaptureResult.CONTROL_AWB_STATE to 2,
+        CaptureResult.COLOR_CORRECTION_TRANSFORM to ColorSpaceTransform(Fixtures.PHONE),
+        CaptureResult.COLOR_CORRECTION_GAINS to RggbChannelVector(2f, 1f, 1f, 1.6f),
+    )
+
+    private fun honoured(ts: Long, curve: FloatArray = session.curveForRequest()) = result(
+        CaptureResult.CONTROL_AWB_MODE to 0, CaptureResult.COLOR_CORRECTION_MODE to 0, CaptureResult.TONEMAP_MODE to 0,
+        CaptureResult.COLOR_CORRECTION_TRANSFORM to ColorSpaceTransform(session.transform.copyOf()),
+        CaptureResult.TONEMAP_CURVE to TonemapCurve(curve, curve, curve),
+        CaptureResult.COLOR_CORRECTION_GAINS to RggbChannelVector(2f, 1f, 1f, 1.6f),
+        CaptureResult.SENSOR_TIMESTAMP to ts,
+    )
+
+    private fun camera(chars: CameraCharacteristics, states: MutableList<ProtectionState>) = CamProCamera2(
+        session, chars, Handler(Looper.getMainLooper()), Executor { it.run() }, 640, 480,
+        deliver = { it.close() }, onState = { states += it }, format = ImageFormat.YUV_420_888, usage = 0L,
+    )
+
+    @Test
+    fun perFrameControlMetersInTheBurstAndVerifiesEveryResult() {
+        val chars = characteristics(syncLatency = 0)
+        val dev = openDevice(chars)
+        val states = mutableListOf<ProtectionState>()
+        val cam = camera(chars, states)
+        assertEquals(2, cam.outputs().size)
+        val fake = FakeSession(dev)
+        cam.onConfigured(dev, fake)
+        assertEquals(listOf(listOf(CamProCamera2.METERING)), fake.repeated.map { r -> r.map { it.tag } })
+        cam.onResult(CamProCamera2.METERING, result(CaptureResult.CONTROL_AWB_MODE to 1, CaptureResult.CONTROL_AWB_STATE to 1))
+        assertEquals("not converged: still metering", 1, fake.repeated.size)
+        cam.onResult(CamProCamera2.METERING, converged())
+        val burst = fake.repeated.last().map { it.tag }
+        assertEquals(15, burst.size)
+        assertEquals(listOf(CamProCamera2.METERING) + List(14) { CamProCamera2.PROTECTED }, burst)
+        cam.onResult(CamProCamera2.PROTECTED, honoured(1))
+        assertEquals(ProtectionState.Protected, cam.pipeline.state)
+        cam.onResult(CamProCamera2.PROTECTED, honoured(2, floatArrayOf(0f, 0f, 1f, 1f)))
+        assertTrue(cam.pipeline.state is ProtectionState.Violated)
+        cam.onResult(CamProCamera2.PROTECTED, honoured(3))
+        assertEquals(ProtectionState.Protected, cam.pipeline.state)
+        // Disconnected mid-stream.
+        cam.onCameraStopped("the camera was disconnected")
+        cam.onResult(CamProCamera2.PROTECTED, honoured(4))
+        assertEquals(ProtectionState.Stopped("the camera was disconnected"), cam.pipeline.state)
+        assertEquals(listOf("Verifying", "Protected", "Violated", "Protected", "Stopped"), states.map { it.javaClass.simpleName })
+        cam.close()
+    }
+
+    @Test
+    fun withoutPerFrameControlNoAutoFramesInterleaveAndAccessErrorsStopClosed() {
+        val chars = characteristics(syncLatency = 2)
+        val dev = openDevice(chars)
+        val states = mutableListOf<ProtectionState>()
+        val cam = camera(chars, states)
+        val fake = FakeSession(dev)
+        cam.onConfigured(dev, fake)
+        cam.onResult(CamProCamera2.METERING, converged())
+        assertEquals(listOf(CamProCamera2.PROTECTED), fake.repeated.last().map { it.tag })
+        cam.onResult(CamProCamera2.PROTECTED, honoured(1))
+        assertEquals(ProtectionState.Protected, cam.pipeline.state)
+        fake.fail = CameraAccessException(CameraAccessException.CAMERA_DISCONNECTED)
+        cam.pipeline.remeter()
+        val s = cam.pipeline.state
+        assertTrue("$s", s is ProtectionState.Stopped && s.reason.contains("CameraAccessException"))
+        assertTrue(fake.stops >= 1)
+        cam.close()
+    }
+}

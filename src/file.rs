@@ -85,10 +85,21 @@ fn kind_of(t: std::fs::FileType) -> Option<&'static str> {
     Some("not a regular file")
 }
 
+/// `text` with control characters escaped (`\n`, `\u{1b}`): for echoing a path or a
+/// value a file gave, which must not move the cursor, retitle the terminal or forge a line.
+pub fn escape(text: &str) -> String {
+    text.chars().flat_map(|c| if c.is_control() { c.escape_default().collect::<Vec<_>>() } else { vec![c] }).collect()
+}
+
+/// A path as one safe line ([`escape`] of its display form).
+pub fn shown(path: &Path) -> String {
+    escape(&path.display().to_string())
+}
+
 /// Reads the regular file at `path`, at most `limit` bytes; `role` names what it is
 /// read as in the error.
 pub fn read_capped(path: &Path, limit: u64, role: &'static str) -> Result<Vec<u8>, FileError> {
-    let shown = || path.display().to_string();
+    let shown = || shown(path);
     let io = |source| FileError::Io { path: shown(), source };
     // Follows links: a link to a regular file is read as that file.
     let meta = std::fs::metadata(path).map_err(io)?;

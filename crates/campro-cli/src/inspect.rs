@@ -275,7 +275,7 @@ pub fn inspect(
         bail!("no PNG, JPEG or TIFF file among the inputs: nothing to inspect");
     }
     let fast = Exact8::new(p);
-    let budget = Budget::new(simulate::DECODE_BUDGET);
+    let budget = Budget::global();
     let bar = indicatif::ProgressBar::new(images.len() as u64);
     bar.set_style(
         indicatif::ProgressStyle::with_template("inspect {bar:40} {pos}/{len} {elapsed_precise} eta {eta}")
@@ -285,7 +285,7 @@ pub fn inspect(
         .par_iter()
         .map(|(i, o)| {
             let warn = |w: &str| bar.suspend(|| eprintln!("warning: {}: {w}", escape(&i.display().to_string())));
-            let r = one(i, o, &fast, enhancer, det, &budget, &warn);
+            let r = one(i, o, &fast, enhancer, det, budget, &warn);
             bar.inc(1);
             r
         })

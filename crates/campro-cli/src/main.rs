@@ -906,11 +906,7 @@ fn stress(seconds: f64, seed: u64, format: Report) -> Result<()> {
     Ok(())
 }
 
-/// `text` with control characters escaped, for echoing what a file says (a name or
-/// description must not move the cursor, retitle the terminal or forge a line).
-pub(crate) fn escape(text: &str) -> String {
-    text.chars().flat_map(|c| if c.is_control() { c.escape_default().collect::<Vec<_>>() } else { vec![c] }).collect()
-}
+pub(crate) use campro::file::escape;
 
 /// Refuses an output folder that already holds files unless `force` (a quick look must
 /// not replace the results of a long run), and a path that is not a folder.

@@ -17,54 +17,11 @@ use campro::Params;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Condvar, Mutex};
+
 
 /// The file endings read as images.
 const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff"];
-/// Largest image file read (bytes).
-const MAX_FILE_BYTES: u64 = 256 << 20;
-/// Memory all decoding jobs together may hold (bytes): each job reserves its image's
-/// decoded size times [`BYTES_PER_SAMPLE_PEAK`] before decoding.
-pub const DECODE_BUDGET: u64 = 768 << 20;
-/// Peak bytes a job holds per decoded byte of its image, counted by buffer: the decoded
-/// image, the RGB input and output buffers and the PNG being written, each at most the
-/// decoded size.
-const BYTES_PER_SAMPLE_PEAK: u64 = 4;
-
-/// A counting semaphore of bytes.
-pub(crate) struct Budget {
-    free: Mutex<u64>,
-    freed: Condvar,
-}
-
-impl Budget {
-    pub(crate) fn new(bytes: u64) -> Self {
-        Self { free: Mutex::new(bytes), freed: Condvar::new() }
-    }
-
-    /// Waits until `n` bytes are free and takes them (`n` at most the whole budget).
-    fn take(&self, n: u64) -> Lease<'_> {
-        let mut free = self.free.lock().unwrap_or_else(|p| p.into_inner());
-        while *free < n {
-            free = self.freed.wait(free).unwrap_or_else(|p| p.into_inner());
-        }
-        *free -= n;
-        Lease { budget: self, n }
-    }
-}
-
-/// Bytes taken from a [`Budget`], given back on drop.
-pub(crate) struct Lease<'a> {
-    budget: &'a Budget,
-    n: u64,
-}
-
-impl Drop for Lease<'_> {
-    fn drop(&mut self) {
-        *self.budget.free.lock().unwrap_or_else(|p| p.into_inner()) += self.n;
-        self.budget.freed.notify_all();
-    }
-}
+pub(crate) use campro_eval::image_file::{Budget, Lease};
 
 /// What a walk over the inputs found.
 pub(crate) struct Inputs {
@@ -195,10 +152,10 @@ pub fn simulate(
     let prepared8 = Prepared::new(p, Depth::Eight);
     let fast8 = Exact8::new(p);
     let prepared16 = std::sync::OnceLock::new();
-    let budget = Budget::new(DECODE_BUDGET);
+    let budget = Budget::global();
     let failed = AtomicUsize::new(0);
     let capture = Capture { fast8: &fast8, enhancer };
-    let paths = Paths { capture: &capture, p8: &prepared8, p16: &prepared16, budget: &budget, depth, force };
+    let paths = Paths { capture: &capture, p8: &prepared8, p16: &prepared16, budget, depth, force };
     pool.install(|| {
         images.par_iter().for_each(|(i, o)| {
             let r = if !force && o.exists() {
@@ -285,73 +242,14 @@ impl Paths<'_, '_> {
     }
 }
 
-/// Reads and decodes one image file: capped read, a warning for extra frames and alpha,
-/// and the decoded size (times [`BYTES_PER_SAMPLE_PEAK`]) taken from `budget` before
-/// decoding, held until the returned lease drops. A decompression bomb is refused by its
-/// header.
+/// Reads and decodes one image file through the one hardened reader
+/// ([`campro_eval::image_file::read`]), its memory held from `budget` until the lease drops.
 pub(crate) fn decode<'b>(
     input: &Path,
     budget: &'b Budget,
     warn: &dyn Fn(&str),
 ) -> Result<(image::DynamicImage, Lease<'b>)> {
-    use image::ImageDecoder;
-    let bytes = campro::file::read_capped(input, MAX_FILE_BYTES, "an image")?;
-    if let Some(n) = extra_frames(&bytes) {
-        warn(&format!("{n}; only the first is simulated"));
-    }
-    let mut decoder = image::ImageReader::new(std::io::Cursor::new(&bytes)).with_guessed_format()?.into_decoder()?;
-    let (w, h) = decoder.dimensions();
-    let need = decoder.total_bytes().saturating_mul(BYTES_PER_SAMPLE_PEAK).max(1);
-    if need > DECODE_BUDGET {
-        bail!(
-            "the image is {w} x {h} ({} decoded bytes); the limit is {} (a decompression bomb, or split it)",
-            decoder.total_bytes(),
-            DECODE_BUDGET / BYTES_PER_SAMPLE_PEAK
-        );
-    }
-    let mut limits = image::Limits::default();
-    limits.max_alloc = Some(need);
-    decoder.set_limits(limits)?;
-    if decoder.color_type().has_alpha() {
-        warn("its alpha channel is dropped (the output is RGB)");
-    }
-    let lease = budget.take(need);
-    Ok((image::DynamicImage::from_decoder(decoder)?, lease))
-}
-
-/// Says how many frames or pages past the first a PNG (APNG) or TIFF holds, if any.
-fn extra_frames(bytes: &[u8]) -> Option<String> {
-    if let Some(chunks) = bytes.strip_prefix(b"\x89PNG\r\n\x1a\n") {
-        // acTL (before the image data) says how many frames an animated PNG has.
-        let mut at = 0usize;
-        while let Some(head) = chunks.get(at..at + 8) {
-            let len = u32::from_be_bytes(head[..4].try_into().expect("4 bytes")) as usize;
-            match &head[4..8] {
-                b"acTL" => {
-                    let n = chunks.get(at + 8..at + 12).map(|b| u32::from_be_bytes(b.try_into().expect("4 bytes")))?;
-                    return (n > 1).then(|| format!("an animated PNG of {n} frames"));
-                }
-                b"IDAT" | b"IEND" => return None,
-                _ => at = at.checked_add(12)?.checked_add(len)?,
-            }
-        }
-        return None;
-    }
-    // TIFF: a first IFD that links to a next one holds more than one page.
-    let le = match bytes.get(..4)? {
-        b"II*\0" => true,
-        b"MM\0*" => false,
-        _ => return None,
-    };
-    let u32_at = |i: usize| -> Option<usize> {
-        let b: [u8; 4] = bytes.get(i..i + 4)?.try_into().ok()?;
-        Some(if le { u32::from_le_bytes(b) } else { u32::from_be_bytes(b) } as usize)
-    };
-    let ifd = u32_at(4)?;
-    let b: [u8; 2] = bytes.get(ifd..ifd + 2)?.try_into().ok()?;
-    let n = if le { u16::from_le_bytes(b) } else { u16::from_be_bytes(b) } as usize;
-    let next = u32_at(ifd + 2 + 12 * n)?;
-    (next != 0).then(|| "a TIFF of several pages".to_string())
+    Ok(campro_eval::image_file::read(input, budget, warn)?)
 }
 
 /// 8-bit RGB samples as a PNG.
@@ -376,44 +274,3 @@ pub fn encode_png(samples: &[u16], w: u32, h: u32, depth: Depth) -> Result<Vec<u
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn extra_frames_by_hand() {
-        // A PNG whose acTL says 3 frames, then one that says 1.
-        let png = |n: u32| {
-            let mut b = b"\x89PNG\r\n\x1a\n".to_vec();
-            b.extend(13u32.to_be_bytes());
-            b.extend(b"IHDR");
-            b.extend([0u8; 13 + 4]);
-            b.extend(8u32.to_be_bytes());
-            b.extend(b"acTL");
-            b.extend(n.to_be_bytes());
-            b.extend([0u8; 4 + 4]);
-            b
-        };
-        assert_eq!(extra_frames(&png(3)).as_deref(), Some("an animated PNG of 3 frames"));
-        assert_eq!(extra_frames(&png(1)), None);
-        // Little-endian TIFF: IFD at 8 with 0 entries, next IFD at 14 (a second page).
-        let mut tiff = b"II*\0".to_vec();
-        tiff.extend(8u32.to_le_bytes());
-        tiff.extend(0u16.to_le_bytes());
-        tiff.extend(14u32.to_le_bytes());
-        assert_eq!(extra_frames(&tiff).as_deref(), Some("a TIFF of several pages"));
-        tiff[10..14].copy_from_slice(&0u32.to_le_bytes());
-        assert_eq!(extra_frames(&tiff), None);
-        assert_eq!(extra_frames(b"\xff\xd8\xff"), None);
-    }
-
-    #[test]
-    fn the_budget_is_shared_and_given_back() {
-        let b = Budget::new(10);
-        let a = b.take(6);
-        assert_eq!(*b.free.lock().unwrap(), 4);
-        drop(a);
-        let _c = b.take(10);
-        assert_eq!(*b.free.lock().unwrap(), 0);
-    }
-}

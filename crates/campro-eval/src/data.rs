@@ -7,14 +7,12 @@ use image::RgbImage;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// Reads an image as 8-bit RGB, naming the file on failure.
+/// Reads an image as 8-bit RGB through the one hardened reader ([`crate::image_file`]):
+/// a regular file, capped, its memory drawn from the process's budget; warnings go to
+/// stderr with the path.
 pub fn read_rgb8(path: &Path) -> Result<RgbImage> {
-    let img = image::ImageReader::open(path)
-        .map_err(EvalError::io(path))?
-        .with_guessed_format()
-        .map_err(EvalError::io(path))?
-        .decode()
-        .map_err(|e| EvalError::Image { path: path.into(), message: e.to_string() })?;
+    let warn = |m: &str| eprintln!("warning: {}: {m}", campro::file::shown(path));
+    let (img, _lease) = crate::image_file::read(path, crate::image_file::Budget::global(), &warn)?;
     Ok(img.to_rgb8())
 }
 

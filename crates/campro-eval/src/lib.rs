@@ -19,6 +19,7 @@ pub mod error;
 pub mod face;
 pub mod frontier;
 pub mod geometry;
+pub mod image_file;
 pub mod linear;
 pub mod manifest;
 pub mod model;

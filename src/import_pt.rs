@@ -245,6 +245,28 @@ fn state_tensor(
         .find(|(k, _)| k.as_str() == Some(key))
         .map(|(_, v)| v)
         .ok_or_else(|| layout(stage, format!("state_dict has no '{key}'")))?;
+    let r = tensor_ref(value, &at, 1 << 20)?;
+    let bytes = read_entry(zip, &format!("{prefix}data/{}", r.key))?;
+    r.gather(&bytes, big_endian, &at)
+}
+
+/// Where a tensor's values are: a storage, an offset, a shape and strides.
+#[derive(Debug, Clone)]
+struct TensorRef {
+    key: String,
+    dtype: &'static str,
+    width: usize,
+    device: String,
+    offset: usize,
+    shape: Vec<usize>,
+    stride: Vec<usize>,
+    numel: usize,
+}
+
+/// Reads a `_rebuild_tensor_v2` call (an `nn.Parameter` around one is unwrapped) whose
+/// storage reference is `('storage', type, key, device, numel)` (zip checkpoints) or the
+/// same with a sixth view field (legacy checkpoints); at most `max_numel` elements.
+fn tensor_ref(value: &Value, at: &str, max_numel: usize) -> Result<TensorRef, CheckpointError> {
     // A call `callable(args...)` as (callable, args).
     let call = |v: &'_ Value| match v {
         Value::Reduce(n) => Some((n.items[0].clone(), n.items[1].as_seq().map(<[Value]>::to_vec))),
@@ -254,73 +276,179 @@ fn state_tensor(
     let value = match call(value) {
         Some((c, args)) if c.is_global("torch._utils", "_rebuild_parameter") => match args {
             Some(a) if !a.is_empty() => a[0].clone(),
-            _ => return Err(layout(&at, "malformed _rebuild_parameter arguments")),
+            _ => return Err(layout(at, "malformed _rebuild_parameter arguments")),
         },
         _ => value.clone(),
     };
     let args = match call(&value) {
         Some((c, args)) if c.is_global("torch._utils", "_rebuild_tensor_v2") => {
-            args.ok_or_else(|| layout(&at, "malformed _rebuild_tensor_v2 arguments"))?
+            args.ok_or_else(|| layout(at, "malformed _rebuild_tensor_v2 arguments"))?
         }
-        _ => return Err(layout(&at, format!("expected a tensor, found {}", value.kind()))),
+        _ => return Err(layout(at, format!("expected a tensor, found {}", value.kind()))),
     };
     if args.len() < 4 {
-        return Err(layout(&at, "tensor rebuild needs storage, offset, shape and stride"));
+        return Err(layout(at, "tensor rebuild needs storage, offset, shape and stride"));
     }
     let storage = match &args[0] {
-        Value::PersistentId(n) => n.items[0].as_seq().ok_or_else(|| layout(&at, "malformed storage reference"))?,
-        _ => return Err(layout(&at, "expected a storage reference")),
+        Value::PersistentId(n) => n.items[0].as_seq().ok_or_else(|| layout(at, "malformed storage reference"))?,
+        _ => return Err(layout(at, "expected a storage reference")),
     };
-    // ('storage', torch.FloatStorage, key, device, numel)
-    if storage.len() != 5 || storage[0].as_str() != Some("storage") {
-        return Err(layout(&at, "storage reference is not ('storage', type, key, device, numel)"));
+    if !(5..=6).contains(&storage.len()) || storage[0].as_str() != Some("storage") {
+        return Err(layout(at, "storage reference is not ('storage', type, key, device, numel)"));
     }
     let (dtype, width) = match &storage[1] {
         v if v.is_global("torch", "FloatStorage") => ("float32", 4usize),
         v if v.is_global("torch", "DoubleStorage") => ("float64", 8),
-        _ => return Err(layout(&at, "storage type must be FloatStorage or DoubleStorage")),
+        v if v.is_global("torch", "LongStorage") => ("int64", 8),
+        _ => return Err(layout(at, "storage type must be FloatStorage, DoubleStorage or LongStorage")),
     };
-    let (skey, device) = match (storage[2].as_str(), storage[3].as_str()) {
+    let (key, device) = match (storage[2].as_str(), storage[3].as_str()) {
         (Some(k), Some(d)) => (k.to_string(), d.to_string()),
-        _ => return Err(layout(&at, "storage key and device must be strings")),
+        _ => return Err(layout(at, "storage key and device must be strings")),
     };
-    if skey.is_empty() || !skey.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-        return Err(layout(&at, format!("storage key {skey:?} is not a plain name")));
+    if key.is_empty() || key.len() > 64 || !key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+        return Err(layout(at, format!("storage key {key:?} is not a plain name")));
     }
-    let offset = int(&args[1]).ok_or_else(|| layout(&at, "storage offset must be a non-negative integer"))?;
-    let shape = ints(&args[2]).ok_or_else(|| layout(&at, "shape must be a tuple of non-negative integers"))?;
-    let stride = ints(&args[3]).ok_or_else(|| layout(&at, "stride must be a tuple of non-negative integers"))?;
+    let offset = int(&args[1]).ok_or_else(|| layout(at, "storage offset must be a non-negative integer"))?;
+    let shape = ints(&args[2]).ok_or_else(|| layout(at, "shape must be a tuple of non-negative integers"))?;
+    let stride = ints(&args[3]).ok_or_else(|| layout(at, "stride must be a tuple of non-negative integers"))?;
     if shape.len() != stride.len() || shape.len() > 4 {
-        return Err(layout(&at, "shape and stride must have the same rank (at most 4)"));
+        return Err(layout(at, "shape and stride must have the same rank (at most 4)"));
     }
     let numel: usize = shape
         .iter()
         .try_fold(1usize, |a, &d| a.checked_mul(d))
-        .filter(|&n| n <= 1 << 20)
-        .ok_or_else(|| layout(&at, "tensor is too large"))?;
-    let bytes = read_entry(zip, &format!("{prefix}data/{skey}"))?;
-    let count = bytes.len() / width;
-    let mut data = Vec::with_capacity(numel);
-    for flat in 0..numel {
-        let mut rem = flat;
-        let mut idx = offset;
-        for d in (0..shape.len()).rev() {
-            idx += (rem % shape[d]) * stride[d];
-            rem /= shape[d];
+        .filter(|&n| n <= max_numel)
+        .ok_or_else(|| layout(at, "tensor is too large"))?;
+    Ok(TensorRef { key, dtype, width, device, offset, shape, stride, numel })
+}
+
+impl TensorRef {
+    /// The tensor's values from its storage's bytes, by strides, as f64.
+    fn gather(&self, bytes: &[u8], big_endian: bool, at: &str) -> Result<Tensor, CheckpointError> {
+        let width = self.width;
+        let count = bytes.len() / width;
+        let mut data = Vec::with_capacity(self.numel);
+        for flat in 0..self.numel {
+            let mut rem = flat;
+            let mut idx = self.offset;
+            for d in (0..self.shape.len()).rev() {
+                idx += (rem % self.shape[d]) * self.stride[d];
+                rem /= self.shape[d];
+            }
+            if idx >= count {
+                return Err(layout(at, format!("element {flat} lies outside its storage ({count} values)")));
+            }
+            let b = &bytes[idx * width..(idx + 1) * width];
+            let v = match (self.dtype, big_endian) {
+                ("float32", false) => f32::from_le_bytes(b.try_into().unwrap()) as f64,
+                ("float32", true) => f32::from_be_bytes(b.try_into().unwrap()) as f64,
+                ("float64", false) => f64::from_le_bytes(b.try_into().unwrap()),
+                ("float64", true) => f64::from_be_bytes(b.try_into().unwrap()),
+                (_, false) => i64::from_le_bytes(b.try_into().unwrap()) as f64,
+                (_, true) => i64::from_be_bytes(b.try_into().unwrap()) as f64,
+            };
+            data.push(v);
         }
-        if idx >= count {
-            return Err(layout(&at, format!("element {flat} lies outside its storage ({count} values)")));
-        }
-        let b = &bytes[idx * width..(idx + 1) * width];
-        let v = match (width, big_endian) {
-            (4, false) => f32::from_le_bytes(b.try_into().unwrap()) as f64,
-            (4, true) => f32::from_be_bytes(b.try_into().unwrap()) as f64,
-            (_, false) => f64::from_le_bytes(b.try_into().unwrap()),
-            (_, true) => f64::from_be_bytes(b.try_into().unwrap()),
-        };
-        data.push(v);
+        Ok(Tensor { shape: self.shape.clone(), data, dtype: self.dtype, device: self.device.clone() })
     }
-    Ok(Tensor { shape, data, dtype, device })
+}
+
+/// The first pickle of a legacy (pre-1.6, non-zip) `torch.save` file, byte for byte:
+/// protocol 2, the magic number 0x1950a86a20f9469cfc6c as a 10-byte LONG1, STOP.
+const LEGACY_MAGIC: [u8; 15] = [0x80, 0x02, 0x8a, 0x0a, 0x6c, 0xfc, 0x9c, 0x46, 0xf9, 0x20, 0x6a, 0xa8, 0x50, 0x19, 0x2e];
+
+/// Globals a legacy state dict may name (checked like a CamPro checkpoint's; nothing runs).
+const LEGACY_GLOBALS: &[(&str, &str)] = &[
+    ("collections", "OrderedDict"),
+    ("torch._utils", "_rebuild_tensor_v2"),
+    ("torch._utils", "_rebuild_parameter"),
+    ("torch", "FloatStorage"),
+    ("torch", "DoubleStorage"),
+    ("torch", "LongStorage"),
+];
+
+/// Reads the state dict of a legacy (pre-1.6, non-zip) `torch.save` file with the same
+/// bounded pickle reader as CamPro checkpoints: the magic pickle, protocol, system info,
+/// the object pickle, the storage keys, then each storage as a little-endian i64 element
+/// count and its bytes. Returns every tensor of `key`'s state dict (or of the top-level
+/// dict when `key` is None), in the dict's order. `bytes` is the whole file (read with
+/// [`crate::file::read_capped`]); every element count is checked against what is left.
+pub fn read_legacy_state_dict(bytes: &[u8], key: Option<&str>) -> Result<Vec<(String, Tensor)>, CheckpointError> {
+    let fmt = |problem: String| layout("<legacy>", problem);
+    let Some(mut rest) = bytes.strip_prefix(&LEGACY_MAGIC[..]) else {
+        return Err(fmt(if bytes.starts_with(b"PK") {
+            "a zip checkpoint, not the legacy format".into()
+        } else {
+            "not a legacy torch checkpoint (magic number missing)".into()
+        }));
+    };
+    // Limits for a network's state dict: hundreds of tensors, each a few dozen values.
+    let limits = pickle::Limits { max_work: 20_000_000, max_nodes: 5_000_000, ..pickle::Limits::default() };
+    let next = |rest: &mut &[u8]| -> Result<Value, CheckpointError> {
+        let (v, used) = pickle::read_prefix(rest, limits)?;
+        *rest = &rest[used..];
+        Ok(v)
+    };
+    let _protocol = next(&mut rest)?;
+    let _sys_info = next(&mut rest)?;
+    let main = next(&mut rest)?;
+    let keys = next(&mut rest)?;
+    for v in [&main, &keys] {
+        for (module, name) in v.globals() {
+            if !LEGACY_GLOBALS.iter().any(|(m, c)| *m == module && *c == name) {
+                return Err(CheckpointError::ForbiddenGlobal { module: module.into(), name: name.into() });
+            }
+        }
+    }
+    let keys: Vec<String> = keys
+        .as_seq()
+        .ok_or_else(|| fmt("the storage key list is missing".into()))?
+        .iter()
+        .map(|k| k.as_str().map(str::to_string).ok_or_else(|| fmt("a storage key is not a string".into())))
+        .collect::<Result<_, _>>()?;
+    let root = dict_of(&main).ok_or_else(|| fmt(format!("expected a dict, found {}", main.kind())))?;
+    let dict = match key {
+        Some(k) => {
+            let v = root
+                .into_iter()
+                .find(|(name, _)| name.as_str() == Some(k))
+                .map(|(_, v)| v)
+                .ok_or_else(|| fmt(format!("no {k:?} in the checkpoint")))?;
+            dict_of(v).ok_or_else(|| layout(k, format!("expected a state dict, found {}", v.kind())))?
+        }
+        None => root,
+    };
+    let mut refs = Vec::with_capacity(dict.len());
+    for (name, v) in dict {
+        let name = name.as_str().ok_or_else(|| fmt("a state dict key is not a string".into()))?;
+        refs.push((name.to_string(), tensor_ref(v, name, 1 << 24)?));
+    }
+    // Storages follow in key order; each must be referenced, with a known width.
+    let mut storages: std::collections::HashMap<&str, &[u8]> = std::collections::HashMap::new();
+    for k in &keys {
+        let width = refs
+            .iter()
+            .find(|(_, r)| &r.key == k)
+            .map(|(_, r)| r.width)
+            .ok_or_else(|| fmt(format!("storage {k} is not used by any tensor")))?;
+        let n = rest.get(..8).ok_or_else(|| fmt(format!("storage {k}: the file ends before its size")))?;
+        let n = i64::from_le_bytes(n.try_into().expect("8 bytes"));
+        rest = &rest[8..];
+        let len = usize::try_from(n)
+            .ok()
+            .and_then(|n| n.checked_mul(width))
+            .filter(|&b| b <= rest.len())
+            .ok_or_else(|| fmt(format!("storage {k}: {n} elements do not fit in the {} bytes left", rest.len())))?;
+        storages.insert(k, &rest[..len]);
+        rest = &rest[len..];
+    }
+    let mut out = Vec::with_capacity(refs.len());
+    for (name, r) in refs {
+        let data = storages.get(r.key.as_str()).ok_or_else(|| layout(&name, format!("storage {} missing", r.key)))?;
+        out.push((name.clone(), r.gather(data, false, &name)?));
+    }
+    Ok(out)
 }
 
 fn int(v: &Value) -> Option<usize> {
@@ -331,5 +459,73 @@ fn ints(v: &Value) -> Option<Vec<usize>> {
     match v {
         Value::Tuple(_) => v.as_seq()?.iter().map(int).collect(),
         _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A legacy `torch.save` of {"net_state_dict": {w: 2x3 floats 1..6, wt: its transpose
+    /// (a view of the same storage), n: a long 7}, "epoch": 68}, written by Python's pickle
+    /// (protocol 2) with torch's persistent ids and storage layout.
+    const LEGACY_HEX: &str = concat!(
+        "80028a0a6cfc9c46f9206aa850192e80024de9032e80027d7100580d0000006c6974746c655f656e6469616e71018873",
+        "2e80027d710028580e0000006e65745f73746174655f64696374710163636f6c6c656374696f6e730a4f726465726564",
+        "446963740a71022952710328580100000077710463746f7263682e5f7574696c730a5f72656275696c645f74656e736f",
+        "725f76320a71052828580700000073746f72616765710663746f7263680a466c6f617453746f726167650a7107580100",
+        "0000307108580300000063707571094b064e74710a514b004b024b0386710b4b034b0186710c8968022952710d74710e",
+        "52710f5802000000777471106805282868066807680868094b064e747111514b004b034b028671124b014b0386711389",
+        "68022952711474711552711658010000006e711768052828680663746f7263680a4c6f6e6753746f726167650a711858",
+        "0100000031711968094b014e74711a514b0029298968022952711b74711c52711d75580500000065706f6368711e4b44",
+        "752e80025d71002858010000003071015801000000317102652e06000000000000000000803f00000040000040400000",
+        "80400000a0400000c04001000000000000000700000000000000",
+    );
+
+    fn legacy() -> Vec<u8> {
+        (0..LEGACY_HEX.len()).step_by(2).map(|i| u8::from_str_radix(&LEGACY_HEX[i..i + 2], 16).unwrap()).collect()
+    }
+
+    #[test]
+    fn legacy_state_dicts_are_read_by_the_bounded_reader() {
+        let b = legacy();
+        let t = read_legacy_state_dict(&b, Some("net_state_dict")).unwrap();
+        let names: Vec<&str> = t.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["w", "wt", "n"]);
+        assert_eq!(t[0].1.shape, [2, 3]);
+        assert_eq!(t[0].1.data, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        // The transpose is gathered by its strides from the same storage.
+        assert_eq!(t[1].1.data, [1.0, 4.0, 2.0, 5.0, 3.0, 6.0]);
+        assert_eq!((t[2].1.dtype, t[2].1.data.as_slice()), ("int64", &[7.0][..]));
+        let e = read_legacy_state_dict(&b, Some("nope")).unwrap_err().to_string();
+        assert!(e.contains("no \"nope\""), "{e}");
+    }
+
+    #[test]
+    fn hostile_legacy_files_are_refused_with_one_line() {
+        let b = legacy();
+        // A storage claiming more elements than the file holds: refused, nothing allocated.
+        let at = b.len() - 8 - 8 - 24 - 8;
+        let mut big = b.clone();
+        big[at..at + 8].copy_from_slice(&(1i64 << 60).to_le_bytes());
+        let e = read_legacy_state_dict(&big, Some("net_state_dict")).unwrap_err().to_string();
+        assert!(e.contains("do not fit"), "{e}");
+        let e = read_legacy_state_dict(&b[..b.len() - 3], Some("net_state_dict")).unwrap_err().to_string();
+        assert!(e.contains("do not fit"), "{e}");
+        // A zip, or anything else.
+        let e = read_legacy_state_dict(b"PK\x03\x04", None).unwrap_err().to_string();
+        assert!(e.contains("a zip checkpoint"), "{e}");
+        // A global that is not a tensor part: refused before anything is built from it.
+        let mut evil = b.clone();
+        let pos = evil.windows(13).position(|w| w == b"FloatStorage\n").unwrap();
+        evil[pos..pos + 12].copy_from_slice(b"FloatStoragX");
+        let e = read_legacy_state_dict(&evil, Some("net_state_dict")).unwrap_err().to_string();
+        assert!(e.contains("torch.FloatStoragX"), "{e}");
+        // A pickle nested deeper than the limit: an error, not a stack overflow.
+        let mut deep = LEGACY_MAGIC.to_vec();
+        deep.extend(b"\x80\x02");
+        deep.extend(std::iter::repeat_n(b']', 100_000));
+        let e = read_legacy_state_dict(&deep, None).unwrap_err().to_string();
+        assert!(e.starts_with("pickle: "), "{e}");
     }
 }

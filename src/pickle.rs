@@ -230,6 +230,12 @@ struct Vm<'a> {
 
 /// Reads one pickle from `data` (up to its STOP) within `limits`.
 pub fn read(data: &[u8], limits: Limits) -> Result<Value, PickleError> {
+    read_prefix(data, limits).map(|(v, _)| v)
+}
+
+/// Reads the pickle at the start of `data` within `limits`; returns it and the bytes it
+/// took (up to and including its STOP), for streams of several pickles.
+pub fn read_prefix(data: &[u8], limits: Limits) -> Result<(Value, usize), PickleError> {
     let mut vm = Vm {
         data,
         pos: 0,
@@ -241,7 +247,8 @@ pub fn read(data: &[u8], limits: Limits) -> Result<Value, PickleError> {
         stack: Vec::new(),
         memo: Default::default(),
     };
-    vm.run()
+    let v = vm.run()?;
+    Ok((v, vm.pos))
 }
 
 impl<'a> Vm<'a> {

@@ -83,7 +83,7 @@ pub fn network_of(params_path: &Path, p: &Params, which: Network) -> Result<camp
     // A bare file name beside the preset: never a path taken from the file's contents.
     let name = Path::new(file);
     if name.components().count() != 1 || name.file_name().is_none() {
-        bail!("{}: provenance.{key}.onnx: must be a file name beside the preset, got {file:?}", params_path.display());
+        bail!("{}: provenance.{key}.onnx: must be a file name beside the preset, got {file:?}", crate::shown(&params_path));
     }
     let dir = params_path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     Ok(campro_eval::enhance::Enhancer::load(&dir.join(name))?)

@@ -267,7 +267,7 @@ impl Common {
             let p = crate::load_params(path)?;
             let name = set_name(path);
             if c.iter().any(|x| x.name == name) {
-                bail!("{}: two parameter sets are named {name:?}", path.display());
+                bail!("{}: two parameter sets are named {name:?}", crate::shown(&path));
             }
             c.push(params_condition(name, p));
         }
@@ -325,7 +325,7 @@ fn manifest(name_or_path: &str, models: &Path) -> Result<Manifest> {
 
 pub(crate) fn load(name: &str, models: &Path) -> Result<Model> {
     let m = manifest(name, models)?;
-    eprintln!("loading {} ({})", m.name, m.file.display());
+    eprintln!("loading {} ({})", m.name, crate::shown(&m.file));
     Ok(Model::load(m)?)
 }
 
@@ -363,14 +363,14 @@ fn read_identities(path: &Path) -> Result<Vec<String>> {
             .map(|n| {
                 n.as_str()
                     .map(str::to_string)
-                    .ok_or_else(|| anyhow!("{}: validation_identities: names must be strings", path.display()))
+                    .ok_or_else(|| anyhow!("{}: validation_identities: names must be strings", crate::shown(&path)))
             })
             .collect::<Result<_>>()?
     } else {
         text.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('#')).map(str::to_string).collect()
     };
     if names.is_empty() {
-        bail!("{}: no identities", path.display());
+        bail!("{}: no identities", crate::shown(&path));
     }
     Ok(names)
 }
@@ -435,7 +435,7 @@ fn run_privacy(
         r.seconds = start.elapsed().as_secs_f64();
     }
     report::write_privacy(&r, &c.output)?;
-    eprintln!("privacy: {} identities, {:.0} s -> {}", r.identities, r.seconds, c.output.join("privacy.md").display());
+    eprintln!("privacy: {} identities, {:.0} s -> {}", r.identities, r.seconds, crate::shown(&c.output.join("privacy.md")));
     Ok(r)
 }
 
@@ -483,7 +483,7 @@ fn with_restorations(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result
             out.push(Condition::new(format!("{} restored", x.name), move |img: &RgbImage| r.apply(&p(img))));
         }
     }
-    eprintln!("restoration prior: {} images from {}", prior.len(), dir.display());
+    eprintln!("restoration prior: {} images from {}", prior.len(), crate::shown(&dir));
     Ok(out)
 }
 
@@ -524,7 +524,7 @@ fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utili
         );
     }
     report::write_utility(&r, &c.output)?;
-    eprintln!("utility: {} images, {:.0} s -> {}", r.images, r.seconds, c.output.join("utility.md").display());
+    eprintln!("utility: {} images, {:.0} s -> {}", r.images, r.seconds, crate::shown(&c.output.join("utility.md")));
     Ok(r)
 }
 
@@ -541,7 +541,7 @@ pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBu
         if let Some(m) = v.pointer("/provenance/detector/manifest").and_then(|m| m.as_str()) {
             let manifest = path.parent().unwrap_or(Path::new(".")).join(m);
             if !manifest.is_file() {
-                bail!("{}: provenance.detector.manifest: {} not found", path.display(), manifest.display());
+                bail!("{}: provenance.detector.manifest: {} not found", crate::shown(&path), crate::shown(&manifest));
             }
             own.insert(set_name(path), manifest);
         }
@@ -552,13 +552,13 @@ pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBu
 /// The JPEG and PNG files of `dir`, sorted by name; none is an error.
 fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("{}: cannot list images", dir.display()))?
+        .with_context(|| format!("{}: cannot list images", crate::shown(&dir)))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| ["jpg", "jpeg", "png"].iter().any(|e| x.eq_ignore_ascii_case(e))))
         .collect();
     paths.sort();
     if paths.is_empty() {
-        bail!("{}: no JPEG or PNG images", dir.display());
+        bail!("{}: no JPEG or PNG images", crate::shown(&dir));
     }
     Ok(paths)
 }
@@ -580,12 +580,12 @@ fn run_quality(
                 .is_some_and(data::detector_held_out)
         });
         if paths.is_empty() {
-            bail!("--held-out: no image of {} is named by a held-out COCO id", dir.display());
+            bail!("--held-out: no image of {} is named by a held-out COCO id", crate::shown(&dir));
         }
     }
     let r = quality::evaluate(&paths, conds, c.limit)?;
     report::write_quality(&r, &c.output)?;
-    eprintln!("quality: {} images, {:.0} s -> {}", r.images, r.seconds, c.output.join("quality.md").display());
+    eprintln!("quality: {} images, {:.0} s -> {}", r.images, r.seconds, crate::shown(&c.output.join("quality.md")));
     Ok(r)
 }
 
@@ -612,7 +612,7 @@ pub fn run(cmd: EvalCmd) -> Result<()> {
             let pr = run_privacy(&common, &p, &conds, &f)?;
             f.check()?;
             report::write_summary(&pr, &ur, &q, &common.output)?;
-            eprintln!("report: {}", common.output.join("report.md").display());
+            eprintln!("report: {}", crate::shown(&common.output.join("report.md")));
             Ok(())
         }
         EvalCmd::Frontier { .. } => unreachable!("run_frontier above"),
@@ -623,10 +623,10 @@ pub fn run(cmd: EvalCmd) -> Result<()> {
 fn run_frontier(points: &Path, output: &Path, force: bool) -> Result<()> {
     crate::check_output_folder(output, force, "--output")?;
     let bytes = campro::file::read_capped(points, 1 << 20, "the frontier points")?;
-    let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", points.display()))?;
+    let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", crate::shown(&points)))?;
     let p = campro_eval::frontier::parse(&text).with_context(|| points.display().to_string())?;
     // The report writers create the folder (campro_eval::atomic).
     report::write_frontier(&p, output)?;
-    eprintln!("frontier: {} points -> {}", p.len(), output.join("frontier.md").display());
+    eprintln!("frontier: {} points -> {}", p.len(), crate::shown(&output.join("frontier.md")));
     Ok(())
 }

@@ -303,7 +303,7 @@ pub fn inspect(
             }
         }
     }
-    let params_name = format!("{} ({})", params_file.display(), p.name);
+    let params_name = format!("{} ({})", crate::shown(&params_file), p.name);
     let panel_names: &[&str] =
         if enhancer.is_some() { &["raw", "protected", "enhanced"] } else { &["raw", "protected"] };
     let index = json!({
@@ -336,7 +336,7 @@ pub fn inspect(
             };
             say!("{}: faces {}; people {}", escape(&href_name(o, out)), n("faces"), n("people"));
         }
-        say!("index: {}", out.join("index.html").display());
+        say!("index: {}", crate::shown(&out.join("index.html")));
     }
     if !failed.is_empty() {
         bail!("{} of {} image(s) failed", failed.len(), failed.len() + done.len());

@@ -363,7 +363,28 @@ struct FileTargetArgs {
     clamp: bool,
 }
 
+impl DeviceArgs {
+    /// The option the device transform came from, as the user typed it.
+    fn flag(&self) -> String {
+        match &self.capture_result {
+            Some(f) => format!("--capture-result {}", escape(&f.display().to_string())),
+            None if self.ct.is_some() => "--ct".into(),
+            None => "--device-ccm".into(),
+        }
+    }
+
+    /// The files these options read.
+    fn paths(&self) -> Vec<&Path> {
+        self.capture_result.iter().map(PathBuf::as_path).collect()
+    }
+}
+
 impl FileTargetArgs {
+    /// The files these options read.
+    fn paths(&self) -> Vec<&Path> {
+        self.base.iter().map(PathBuf::as_path).collect()
+    }
+
     /// The core target called `name` with these options (and `camera2`'s device
     /// settings), refusing the stacks that cannot hold a curve.
     fn target(&self, name: &str, camera2: Camera2) -> Result<Box<dyn campro::targets::Target>> {
@@ -434,6 +455,25 @@ enum Report {
 }
 
 fn main() {
+    // No panic message or backtrace ever reaches the user (RUST_BACKTRACE set or not): a
+    // bug is reported as one line, and the process exits 101 as a panic would.
+    std::panic::set_hook(Box::new(|info| {
+        let what = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown".into());
+        let first = what.lines().next().unwrap_or_default();
+        eprintln!("error: internal error (a bug in campro, please report it): {}", escape(first));
+    }));
+    // Ctrl-C or SIGTERM during a long write: the unfinished hidden `.campro-*` files go.
+    let _ = ctrlc::set_handler(|| {
+        video::kill_children();
+        campro_eval::atomic::remove_partial_files();
+        eprintln!("interrupted");
+        std::process::exit(130);
+    });
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         // --help and --version print as clap writes them.
@@ -559,13 +599,18 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Cmd::ImportPt { checkpoint, output, force } => {
+            not_an_input("--output", &output, &[&checkpoint])?;
             let p = campro::import_pt::read_checkpoint(&checkpoint)
-                .map_err(|e| anyhow!("{}: {e}", checkpoint.display()))?;
+                .map_err(|e| anyhow!("{}: {e}", crate::shown(&checkpoint)))?;
             write_atomic(&output, p.to_json().as_bytes(), force)?;
-            eprintln!("wrote {} ({} knots)", output.display(), p.tone_curve.len());
+            eprintln!("wrote {} ({} knots)", crate::shown(&output), p.tone_curve.len());
             Ok(())
         }
         Cmd::Convert { params, target, files, output, force, .. } if target != "camera2" => {
+            if let Some(o) = &output {
+                not_an_input("--output", o, &[&params])?;
+                not_an_input("--output", o, &files.paths())?;
+            }
             let p = load_params(&params)?;
             let t = files.target(&target, Camera2::default())?;
             let (bytes, _) = files.export(t.as_ref(), &p)?;
@@ -604,9 +649,13 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Cmd::Convert { params, device, format, output, force, .. } => {
+            if let Some(o) = &output {
+                not_an_input("--output", o, &[&params])?;
+                not_an_input("--output", o, &device.paths())?;
+            }
             let p = load_params(&params)?;
             let (m, opts) = device_setup(&p, &device)?;
-            let v = camera2::convert(&p, &m, &opts).map_err(flagged)?;
+            let v = camera2::convert(&p, &m, &opts).map_err(|e| flagged(e, &device))?;
             let r = &v.report;
             if r.curve_simplified && r.curve_max_abs * 255.0 > 0.5 {
                 eprintln!(
@@ -666,7 +715,7 @@ fn run(cli: Cli) -> Result<()> {
             let own = if own_detector {
                 let own = eval::own_detectors(std::slice::from_ref(&params))?;
                 let manifest = own.values().next().ok_or_else(|| {
-                    anyhow!("--own-detector: {} names no fine-tuned detector (provenance.detector)", params.display())
+                    anyhow!("--own-detector: {} names no fine-tuned detector (provenance.detector)", crate::shown(&params))
                 })?;
                 let m = eval::load(&manifest.to_string_lossy(), &models)?;
                 Some((m.manifest.name.clone(), campro_eval::person::PersonDetector::new(m)?))
@@ -704,7 +753,7 @@ pub(crate) fn load_params(path: &Path) -> Result<Params> {
     Params::from_file(path).map_err(|e| match e {
         // The file error names the path already.
         campro::params::ParamsError::File(f) => anyhow!("{f}"),
-        e => anyhow!("{}: {e}", path.display()),
+        e => anyhow!("{}: {e}", crate::shown(&path)),
     })
 }
 
@@ -715,7 +764,7 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
     } else if let Some(f) = &d.capture_result {
         let text = campro::file::read_text_capped(f, 1 << 20, "a capture result")?;
         camera2::device_transform_from_capture_result(&text)
-            .map_err(|e| anyhow!("--capture-result {}: {e}", f.display()))?
+            .map_err(|e| anyhow!("--capture-result {}: {e}", crate::shown(&f)))?
     } else if let Some(ct) = d.ct {
         if p.ct_calibration.is_empty() {
             bail!("--ct needs a parameter file with ct_calibration");
@@ -724,6 +773,11 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
     } else {
         ccm::IDENTITY
     };
+    // A device transform with no inverse maps colours onto a plane: nothing sensible can be
+    // deployed on it, and compare refuses it too.
+    if (d.device_ccm.is_some() || d.capture_result.is_some()) && ccm::inverse(&m).is_none() {
+        bail!("{}: the device transform is singular (determinant {:e}): no camera applies it", d.flag(), ccm::det(&m));
+    }
     let rational = match d.fixed_denominator {
         Some(den) => RationalMode::Fixed { denominator: den },
         None => RationalMode::Best { max_denominator: d.max_denominator },
@@ -741,7 +795,7 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()>
 pub(crate) fn output_result(path: &Path, r: std::io::Result<()>) -> Result<()> {
     match r {
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-            bail!("{} exists (use --force to overwrite)", path.display())
+            bail!("{} exists (use --force to overwrite)", crate::shown(&path))
         }
         r => r.with_context(|| path.display().to_string()),
     }
@@ -834,8 +888,17 @@ fn demo(out: &Path, params: Option<&Path>, force: bool, format: Report) -> Resul
     let before = out.join("chart.png");
     // Fixed names: never built from the file's contents.
     let after = out.join("chart-protected.png");
-    write_atomic(&before, &simulate::encode_png(&src, w, h, Depth::Eight)?, true)?;
-    write_atomic(&after, &simulate::encode_png(&dst, w, h, Depth::Eight)?, true)?;
+    for (path, png) in [
+        (&before, simulate::encode_png(&src, w, h, Depth::Eight)?),
+        (&after, simulate::encode_png(&dst, w, h, Depth::Eight)?),
+    ] {
+        // An earlier demo's identical file is left as it is; any other file of that name
+        // (the user's own, or another preset's output) is replaced only with --force.
+        let same = campro::file::read_capped(path, png.len() as u64, "an earlier demo output").is_ok_and(|b| b == png);
+        if !same {
+            write_atomic(path, &png, force)?;
+        }
+    }
     let v = camera2::convert(&p, &ccm::IDENTITY, &Options::default())?;
     let device = Camera2::default();
     let conditions = campro::targets::Target::emulate(&device, &p, &serde_json::to_vec(&v.to_json())?, None)?;
@@ -856,7 +919,7 @@ fn demo(out: &Path, params: Option<&Path>, force: bool, format: Report) -> Resul
     }
     say!("preset: {file}");
     say!("parameters: {} - {}", escape(&p.name), escape(&p.description));
-    say!("wrote {} (input) and {} (desktop pipeline output)\n", before.display(), after.display());
+    say!("wrote {} (input) and {} (desktop pipeline output)\n", crate::shown(&before), crate::shown(&after));
     say!("Camera2 values (device transform: identity; `campro convert --device-ccm ...` for yours):");
     say!("  COLOR_CORRECTION_TRANSFORM (num/den pairs): {:?}", v.color_correction_transform);
     let c = &v.tonemap_curve.red;
@@ -906,7 +969,32 @@ fn stress(seconds: f64, seed: u64, format: Report) -> Result<()> {
     Ok(())
 }
 
-pub(crate) use campro::file::escape;
+pub(crate) use campro::file::{escape, shown};
+
+/// Whether `a` and `b` name the same existing file (the same inode on Unix, through links).
+fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return x.dev() == y.dev() && x.ino() == y.ino();
+        }
+        false
+    }
+    #[cfg(not(unix))]
+    {
+        matches!((std::fs::canonicalize(a), std::fs::canonicalize(b)), (Ok(x), Ok(y)) if x == y)
+    }
+}
+
+/// Refuses an output that is one of the command's inputs: an output never replaces what
+/// it was made from, `--force` or not.
+pub(crate) fn not_an_input(flag: &str, output: &Path, inputs: &[&Path]) -> Result<()> {
+    if let Some(i) = inputs.iter().find(|i| same_file(output, i)) {
+        bail!("{flag} {}: is an input of this command ({}); outputs never replace their inputs", escape(&output.display().to_string()), escape(&i.display().to_string()));
+    }
+    Ok(())
+}
 
 /// Refuses an output folder that already holds files unless `force` (a quick look must
 /// not replace the results of a long run), and a path that is not a folder.
@@ -923,17 +1011,19 @@ pub(crate) fn check_output_folder(out: &Path, force: bool, flag: &str) -> Result
             Ok(())
         }
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(_) if out.exists() => bail!("{flag} {}: is not a folder", out.display()),
-        Err(e) => Err(e).with_context(|| format!("{flag} {}", out.display())),
+        Err(_) if out.exists() => bail!("{flag} {}: is not a folder", crate::shown(&out)),
+        Err(e) => Err(e).with_context(|| format!("{flag} {}", crate::shown(&out))),
     }
 }
 
 /// A conversion error with the option the user typed in place of the library's field
-/// name (`--device-ccm[1][2]: ...` rather than `device_ccm[1][2]: ...`).
-fn flagged(e: camera2::ConvertError) -> anyhow::Error {
+/// name (`--device-ccm[1][2]: ...` rather than `device_ccm[1][2]: ...`; the transform is
+/// named by where it came from: `--capture-result FILE` or `--ct`).
+fn flagged(e: camera2::ConvertError, device: &DeviceArgs) -> anyhow::Error {
     let text = e.to_string();
+    let transform = device.flag();
     for (field, flag) in [
-        ("device_ccm", "--device-ccm"),
+        ("device_ccm", transform.as_str()),
         ("max_curve_points", "--max-curve-points"),
         ("max_denominator", "--max-denominator"),
         ("denominator", "--fixed-denominator"),

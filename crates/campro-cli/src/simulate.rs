@@ -41,10 +41,10 @@ pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
     let out_abs = resolved(out);
     let mut found = Inputs { jobs: Vec::new(), skipped: Vec::new() };
     for input in inputs {
-        let meta = std::fs::metadata(input).map_err(|e| anyhow!("{}: {e}", input.display()))?;
+        let meta = std::fs::metadata(input).map_err(|e| anyhow!("{}: {e}", crate::shown(&input)))?;
         if meta.is_dir() {
             if resolved(input) == out_abs {
-                bail!("--output {}: is the input folder itself; outputs would replace inputs", out.display());
+                bail!("--output {}: is the input folder itself; outputs would replace inputs", crate::shown(&out));
             }
             // Never descend into the output folder: what this run writes is not an input.
             let walk = walkdir::WalkDir::new(input).sort_by_file_name().into_iter();
@@ -68,20 +68,20 @@ pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
                 found.jobs.push((entry.path().to_path_buf(), output_for(&out.join(rel))));
             }
         } else if meta.is_file() {
-            let name = input.file_name().ok_or_else(|| anyhow!("{}: not a file name", input.display()))?;
+            let name = input.file_name().ok_or_else(|| anyhow!("{}: not a file name", crate::shown(&input)))?;
             found.jobs.push((input.clone(), output_for(&out.join(Path::new(name)))));
         } else {
-            bail!("{}: is not a regular file or folder", input.display());
+            bail!("{}: is not a regular file or folder", crate::shown(&input));
         }
     }
     let mut seen = std::collections::HashSet::new();
     let sources: std::collections::HashSet<PathBuf> = found.jobs.iter().map(|(i, _)| resolved(i)).collect();
     for (i, o) in &found.jobs {
         if !seen.insert(o.clone()) {
-            bail!("two inputs would both be written to {} (the second is {})", o.display(), i.display());
+            bail!("two inputs would both be written to {} (the second is {})", crate::shown(&o), crate::shown(&i));
         }
         if sources.contains(&resolved(o)) {
-            bail!("--output: writing {} would replace an input; choose another output folder", o.display());
+            bail!("--output: writing {} would replace an input; choose another output folder", crate::shown(&o));
         }
     }
     Ok(found)
@@ -139,6 +139,21 @@ pub fn simulate(
     if images.is_empty() && videos.is_empty() {
         bail!("no PNG, JPEG, TIFF or video file among the inputs: nothing to do");
     }
+    // A lossless codec moves outputs into Matroska: two inputs must not meet there
+    // (a.mp4 and a.mkv would both become a.mkv, and one would be lost).
+    let mut targets: std::collections::HashMap<PathBuf, &PathBuf> =
+        images.iter().map(|(i, o)| (o.clone(), i)).collect();
+    for (i, wanted) in &videos {
+        if let Some(other) = targets.insert(enc.output_path(wanted), i) {
+            bail!(
+                "{} and {} would both be written to {} (--codec {} writes Matroska); simulate them into different folders",
+                crate::escape(&other.display().to_string()),
+                crate::escape(&i.display().to_string()),
+                crate::escape(&enc.output_path(wanted).display().to_string()),
+                enc.codec
+            );
+        }
+    }
     let bar = if images.len() > 4 {
         indicatif::ProgressBar::new(images.len() as u64)
     } else {
@@ -159,12 +174,12 @@ pub fn simulate(
     pool.install(|| {
         images.par_iter().for_each(|(i, o)| {
             let r = if !force && o.exists() {
-                Err(anyhow!("{} exists (use --force to overwrite)", o.display()))
+                Err(anyhow!("{} exists (use --force to overwrite)", crate::shown(&o)))
             } else {
-                paths.one(i, o, &|w| bar.suspend(|| eprintln!("warning: {}: {w}", i.display())))
+                paths.one(i, o, &|w| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(&i))))
             };
             if let Err(e) = r {
-                bar.suspend(|| eprintln!("error: {}: {}", i.display(), crate::one_line(&e)));
+                bar.suspend(|| eprintln!("error: {}: {}", crate::shown(&i), crate::one_line(&e)));
                 failed.fetch_add(1, Ordering::Relaxed);
             }
             bar.inc(1);
@@ -173,24 +188,24 @@ pub fn simulate(
     bar.finish_and_clear();
     let mut failed = failed.into_inner();
     if !images.is_empty() {
-        eprintln!("simulated {} of {} images into {}", images.len() - failed, images.len(), out.display());
+        eprintln!("simulated {} of {} images into {}", images.len() - failed, images.len(), crate::shown(&out));
     }
     // Videos one after another, each frame on every core.
     for (i, wanted) in &videos {
         let o = enc.output_path(wanted);
         if &o != wanted {
-            eprintln!("note: {} is written as {} ({} needs Matroska)", wanted.display(), o.display(), enc.codec);
+            eprintln!("note: {} is written as {} ({} needs Matroska)", crate::shown(&wanted), crate::shown(&o), enc.codec);
         }
-        let warn = |w: &str| eprintln!("warning: {}: {w}", i.display());
+        let warn = |w: &str| eprintln!("warning: {}: {w}", crate::shown(&i));
         let r = if !force && o.exists() {
-            Err(anyhow!("{} exists (use --force to overwrite)", o.display()))
+            Err(anyhow!("{} exists (use --force to overwrite)", crate::shown(&o)))
         } else {
             pool.install(|| video::simulate(&capture, i, &o, enc, force, &warn))
         };
         match r {
-            Ok(n) => eprintln!("simulated {n} frames of {} into {}", i.display(), o.display()),
+            Ok(n) => eprintln!("simulated {n} frames of {} into {}", crate::shown(&i), crate::shown(&o)),
             Err(e) => {
-                eprintln!("error: {}: {}", i.display(), crate::one_line(&e));
+                eprintln!("error: {}: {}", crate::shown(&i), crate::one_line(&e));
                 failed += 1;
             }
         }

@@ -13,6 +13,77 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
+/// Frames in flight between the decoder, the camera and the encoder.
+const IN_FLIGHT: usize = 4;
+/// Bytes of an ffmpeg's error output kept (the rest is read and dropped).
+const STDERR_KEPT: usize = 64 << 10;
+
+/// `path` as ffmpeg's `file:` URL of its absolute form: a name such as `-report:x.mp4`
+/// or `pipe:0.mp4` is then never read as an option or a protocol.
+pub(crate) fn file_url(path: &Path) -> Result<std::ffi::OsString> {
+    let abs = std::path::absolute(path).with_context(|| campro::file::shown(path))?;
+    let mut url = std::ffi::OsString::from("file:");
+    url.push(abs.as_os_str());
+    Ok(url)
+}
+
+/// Reads a child's stderr on its own thread to the end, keeping the first [`STDERR_KEPT`]
+/// bytes: a child that prints more than a pipe holds never blocks on it.
+fn drain(stderr: Option<std::process::ChildStderr>) -> std::thread::JoinHandle<Vec<u8>> {
+    std::thread::spawn(move || {
+        let mut kept = Vec::new();
+        if let Some(mut e) = stderr {
+            let mut buf = [0u8; 8192];
+            loop {
+                match e.read(&mut buf) {
+                    Ok(0) => break,
+                    Ok(n) => {
+                        let room = STDERR_KEPT.saturating_sub(kept.len());
+                        kept.extend_from_slice(&buf[..n.min(room)]);
+                    }
+                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                    Err(_) => break,
+                }
+            }
+        }
+        kept
+    })
+}
+
+/// The ffmpeg processes running now, for [`kill_children`].
+static CHILDREN: std::sync::Mutex<Vec<u32>> = std::sync::Mutex::new(Vec::new());
+
+/// Ends every ffmpeg this process started and has not waited for (SIGINT/SIGTERM
+/// handler: an orphaned encoder would go on writing its output after we are gone).
+pub fn kill_children() {
+    let pids = std::mem::take(&mut *CHILDREN.lock().unwrap_or_else(|p| p.into_inner()));
+    #[cfg(unix)]
+    for pid in pids {
+        if let Ok(pid) = i32::try_from(pid) {
+            // SAFETY: kill(2) with a pid we spawned and a valid signal has no memory effects.
+            unsafe {
+                libc::kill(pid, libc::SIGKILL);
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    drop(pids);
+}
+
+/// Spawns `cmd`, registering it for [`kill_children`].
+fn spawn(cmd: &mut Command, what: &str) -> Result<std::process::Child> {
+    let child = cmd.spawn().with_context(|| format!("starting ffmpeg to {what}"))?;
+    CHILDREN.lock().unwrap_or_else(|p| p.into_inner()).push(child.id());
+    Ok(child)
+}
+
+/// Waits for `child` and forgets it.
+fn wait(child: &mut std::process::Child) -> Result<std::process::ExitStatus> {
+    let status = child.wait()?;
+    CHILDREN.lock().unwrap_or_else(|p| p.into_inner()).retain(|&p| p != child.id());
+    Ok(status)
+}
+
 /// File endings read as video.
 pub const VIDEO_EXTENSIONS: &[&str] = &["mp4", "m4v", "mov", "mkv", "webm", "avi"];
 
@@ -93,7 +164,7 @@ pub fn probe(input: &Path) -> Result<Probe> {
     let out = Command::new("ffprobe")
         .args(["-hide_banner", "-v", "error", "-select_streams", "v:0", "-of", "json", "-show_entries"])
         .arg("stream=width,height,r_frame_rate,nb_frames:stream_side_data=rotation")
-        .arg(input)
+        .arg(file_url(input)?)
         .stdin(Stdio::null())
         .output()?;
     if !out.status.success() {
@@ -130,21 +201,34 @@ pub fn simulate(
 ) -> Result<u64> {
     let p = probe(input)?;
     let frame_bytes = 3 * p.width as usize * p.height as usize;
-    let mut decode = ffmpeg()?
+    // The frames in flight (the pool, the output frame) come from the process's budget.
+    let held = (frame_bytes as u64).saturating_mul(IN_FLIGHT as u64 + 1);
+    let budget = campro_eval::image_file::Budget::global();
+    let Some(_lease) = budget.take(held) else {
+        bail!(
+            "the video is {} x {} pixels; its {} frames in flight need {} MiB, over the {} MiB limit",
+            p.width,
+            p.height,
+            IN_FLIGHT + 1,
+            held >> 20,
+            budget.total() >> 20
+        );
+    };
+    let mut decode = ffmpeg()?;
+    let decode = decode
         .args(["-autorotate", "0", "-i"])
-        .arg(input)
+        .arg(file_url(input)?)
         .args(["-map", "0:v:0", "-fps_mode", "passthrough", "-f", "rawvideo", "-pix_fmt", "rgb24", "-"])
         .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .context("starting ffmpeg to decode")?;
+        .stderr(Stdio::piped());
+    let mut decode = spawn(decode, "decode")?;
     let ext = output.extension().and_then(|e| e.to_str()).unwrap_or("mkv");
     let tmp = campro_eval::atomic::temporary_beside(output, &format!(".{ext}"))
         .with_context(|| output.display().to_string())?;
     let mut cmd = ffmpeg()?;
     cmd.args(["-y", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", &format!("{}x{}", p.width, p.height)])
         .args(["-framerate", &p.rate, "-i", "-", "-i"])
-        .arg(input)
+        .arg(file_url(input)?)
         .args(["-map", "0:v", "-map", "1:a?", "-map", "1:s?", "-map", "1:d?", "-map_metadata", "1"])
         .args(["-fps_mode", "passthrough", "-c:a", "copy", "-c:s", "copy", "-c:d", "copy", "-c:v", &enc.codec]);
     if enc.lossless() {
@@ -167,12 +251,8 @@ pub fn simulate(
     if let Some(pr) = &enc.preset {
         cmd.args(["-preset", pr]);
     }
-    let mut encode = cmd
-        .arg(tmp.path())
-        .stdin(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .context("starting ffmpeg to encode")?;
+    cmd.arg(file_url(tmp.path())?).stdin(Stdio::piped()).stderr(Stdio::piped());
+    let mut encode = spawn(&mut cmd, "encode")?;
     let bar = match p.frames {
         Some(n) => indicatif::ProgressBar::new(n),
         None => indicatif::ProgressBar::no_length(),
@@ -185,10 +265,11 @@ pub fn simulate(
     // Three stages overlap: a reader thread fills frames from the decoder, this thread runs
     // the camera on every core, a writer thread feeds the encoder. Frames circulate through
     // a fixed pool of IN_FLIGHT buffers, so memory stays bounded whatever the length.
-    const IN_FLIGHT: usize = 4;
     let mut frames = 0u64;
     let mut from = decode.stdout.take().expect("piped");
     let mut to = encode.stdin.take().expect("piped");
+    let dec_err = drain(decode.stderr.take());
+    let enc_err = drain(encode.stderr.take());
     let (free_tx, free_rx) = std::sync::mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
     let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
     let (done_tx, done_rx) = std::sync::mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
@@ -242,14 +323,20 @@ pub fn simulate(
         }
     });
     bar.finish_and_clear();
-    let dec = decode.wait_with_output()?;
-    let enc_out = encode.wait_with_output()?;
-    result?;
-    if !dec.status.success() {
-        bail!("ffmpeg could not decode it: {}", first_line(&dec.stderr));
+    // A failed run leaves the decoder blocked on a full pipe: stop it.
+    if result.is_err() {
+        let _ = decode.kill();
     }
-    if !enc_out.status.success() {
-        bail!("ffmpeg could not encode it: {}", first_line(&enc_out.stderr));
+    let dec = wait(&mut decode)?;
+    let enc_status = wait(&mut encode)?;
+    let dec_stderr = dec_err.join().unwrap_or_default();
+    let enc_stderr = enc_err.join().unwrap_or_default();
+    result?;
+    if !dec.success() {
+        bail!("ffmpeg could not decode it: {}", first_line(&dec_stderr));
+    }
+    if !enc_status.success() {
+        bail!("ffmpeg could not encode it: {}", first_line(&enc_stderr));
     }
     if let Some(n) = p.frames.filter(|&n| n != frames) {
         warn(&format!("the container says {n} frames; {frames} were decoded and written"));
@@ -262,10 +349,10 @@ pub fn simulate(
             let rotated = campro_eval::atomic::temporary_beside(output, &format!(".{ext}"))?;
             let out = ffmpeg()?
                 .args(["-y", "-i"])
-                .arg(tmp.path())
+                .arg(file_url(tmp.path())?)
                 .args(["-map", "0", "-c", "copy", "-map_metadata", "0", "-metadata:s:v:0"])
                 .arg(format!("rotate={}", r.rem_euclid(360)))
-                .arg(rotated.path())
+                .arg(file_url(rotated.path())?)
                 .output()?;
             if !out.status.success() {
                 bail!("ffmpeg could not set the rotation: {}", first_line(&out.stderr));

@@ -5,7 +5,20 @@
 //! not the temporary file's private 0600.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// Temporary files made by [`temporary_beside`] and not yet renamed into place: what
+/// [`remove_partial_files`] deletes when the process is interrupted.
+static PARTIAL: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Deletes every temporary output file of this process that was not finished (for a
+/// SIGINT/SIGTERM handler: destructors do not run when a signal ends the process).
+/// Returns how many were deleted.
+pub fn remove_partial_files() -> usize {
+    let list = std::mem::take(&mut *PARTIAL.lock().unwrap_or_else(|p| p.into_inner()));
+    list.iter().filter(|p| std::fs::remove_file(p).is_ok()).count()
+}
 
 /// Writes `bytes` to `path` atomically, creating missing parent folders. With `replace`
 /// false an existing `path` is left alone and the call fails with
@@ -42,7 +55,9 @@ pub fn temporary_beside(path: &Path, suffix: &str) -> std::io::Result<tempfile::
         // The mode given to open(2), which the umask then reduces, as for any new file.
         builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
-    builder.tempfile_in(dir)
+    let tmp = builder.tempfile_in(dir)?;
+    PARTIAL.lock().unwrap_or_else(|p| p.into_inner()).push(tmp.path().to_path_buf());
+    Ok(tmp)
 }
 
 /// Refuses a `path` that exists and is not a regular file (a symbolic link, folder,
@@ -70,6 +85,7 @@ pub fn persist(tmp: tempfile::NamedTempFile, path: &Path, replace: bool) -> std:
     if replace {
         check_replaceable(path)?;
     }
+    PARTIAL.lock().unwrap_or_else(|p| p.into_inner()).retain(|p| p != tmp.path());
     let done = if replace { tmp.persist(path) } else { tmp.persist_noclobber(path) };
     done.map(|_| ()).map_err(|e| e.error)
 }
@@ -105,6 +121,24 @@ mod tests {
         write(&ours, b"x", false).unwrap();
         let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
         assert_eq!(mode(&ours), mode(&ordinary));
+    }
+
+    #[test]
+    fn unfinished_temporary_files_are_removed_on_request() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("v.mkv");
+        let tmp = temporary_beside(&out, ".mkv").unwrap();
+        let path = tmp.path().to_path_buf();
+        // What a signal does: the process ends without running destructors.
+        std::mem::forget(tmp);
+        assert!(path.exists());
+        assert!(remove_partial_files() >= 1);
+        assert!(!path.exists());
+        // A finished one is not touched.
+        let done = temporary_beside(&out, ".mkv").unwrap();
+        persist(done, &out, false).unwrap();
+        remove_partial_files();
+        assert!(out.exists());
     }
 
     #[test]

@@ -77,10 +77,20 @@ impl Enhancer {
             return Ok(p.clone());
         }
         let model = self.model.clone();
-        // The model is a fresh copy, dropped on a panic.
+        let limit = tensor_limit(w, h);
+        // The model is a fresh copy, dropped on a panic. Its shapes are checked before
+        // tract optimises it (constant folding would compute every constant tensor).
         let built = std::panic::catch_unwind(std::panic::AssertUnwindSafe(
             || -> TractResult<std::sync::Arc<TypedSimplePlan>> {
-                model.with_input_fact(0, f32::fact([1, 3, h, w]).into())?.into_optimized()?.into_runnable()
+                let typed = model.with_input_fact(0, f32::fact([1, 3, h, w]).into())?.into_typed()?;
+                if let Some((name, bytes)) = largest_tensor(&typed).filter(|&(_, b)| b > limit) {
+                    bail!(
+                        "its tensor {name:?} would take {} MiB at input 1x3x{h}x{w}; an enhancer may use {} MiB a tensor",
+                        bytes >> 20,
+                        limit >> 20
+                    );
+                }
+                typed.into_optimized()?.into_runnable()
             },
         ));
         let plan = match built {
@@ -106,9 +116,9 @@ impl Enhancer {
         let (w, h) = (img.width() as usize, img.height() as usize);
         let (data, pw, ph) = padded_chw(img, self.multiple);
         let input = Tensor::from_shape(&[1, 3, ph, pw], &data).expect("shape matches data");
-        let out = self
-            .plan(pw, ph)?
-            .run(tvec!(input.into()))
+        let plan = self.plan(pw, ph)?;
+        let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| plan.run(tvec!(input.into()))))
+            .map_err(|_| EvalError::Model { path: self.path.clone(), message: "tract failed while running it".into() })?
             .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") })?;
         let v = out[0]
             .try_as_plain_ram()
@@ -122,6 +132,30 @@ impl Enhancer {
         }
         Ok(cropped_rgb8(v, pw, ph, w as u32, h as u32))
     }
+}
+
+/// Widest activation an enhancer may hold at full resolution, channels: a campro U-Net's
+/// largest is its first decoder's concatenation (twice the first width, at most 64).
+pub const MAX_FULL_RES_CHANNELS: usize = 128;
+
+/// Largest tensor an enhancer may hold for a padded `w` x `h` input, bytes
+/// ([`MAX_FULL_RES_CHANNELS`] f32 channels at full resolution, at least 64 MiB).
+pub fn tensor_limit(w: usize, h: usize) -> usize {
+    (MAX_FULL_RES_CHANNELS * 4).saturating_mul(w).saturating_mul(h).max(64 << 20)
+}
+
+/// The node output (name, bytes) with the most bytes, among those of known shape.
+fn largest_tensor(model: &TypedModel) -> Option<(String, usize)> {
+    model
+        .nodes
+        .iter()
+        .flat_map(|n| n.outputs.iter().map(move |o| (n, o)))
+        .filter_map(|(n, o)| {
+            let dims = o.fact.shape.as_concrete()?;
+            let count = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).unwrap_or(usize::MAX);
+            Some((n.name.clone(), count.saturating_mul(o.fact.datum_type.size_of())))
+        })
+        .max_by_key(|&(_, b)| b)
 }
 
 /// The top-left `w` x `h` of a (3, `ph`, `pw`) float image in [0, 1] (the enhancer's
@@ -149,4 +183,87 @@ pub fn padded_chw(img: &RgbImage, multiple: usize) -> (Vec<f32>, usize, usize) {
         }
     }
     (data, pw, ph)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use prost::Message;
+    use tract_onnx::pb;
+
+    fn node(op: &str, inputs: &[&str], output: &str) -> pb::NodeProto {
+        pb::NodeProto {
+            op_type: op.into(),
+            input: inputs.iter().map(|s| s.to_string()).collect(),
+            output: vec![output.into()],
+            name: output.into(),
+            ..Default::default()
+        }
+    }
+
+    fn value_info(name: &str) -> pb::ValueInfoProto {
+        let dim = |v: i64| pb::tensor_shape_proto::Dimension {
+            value: Some(pb::tensor_shape_proto::dimension::Value::DimValue(v)),
+            ..Default::default()
+        };
+        pb::ValueInfoProto {
+            name: name.into(),
+            r#type: Some(pb::TypeProto {
+                value: Some(pb::type_proto::Value::TensorType(pb::type_proto::Tensor {
+                    elem_type: 1,
+                    shape: Some(pb::TensorShapeProto { dim: vec![dim(1), dim(3), dim(8), dim(8)] }),
+                })),
+                ..Default::default()
+            }),
+            ..Default::default()
+        }
+    }
+
+    /// An "enhancer" that adds to its input the sum of a constant tiled `repeats` times:
+    /// a few hundred bytes that ask for `4 * product(repeats)` bytes.
+    fn tile_bomb(repeats: [i64; 4]) -> Vec<u8> {
+        let inits = vec![
+            pb::TensorProto { name: "c".into(), dims: vec![1, 1, 1, 1], data_type: 1, float_data: vec![1.0], ..Default::default() },
+            pb::TensorProto { name: "r".into(), dims: vec![4], data_type: 7, int64_data: repeats.to_vec(), ..Default::default() },
+        ];
+        let model = pb::ModelProto {
+            ir_version: 8,
+            opset_import: vec![pb::OperatorSetIdProto { domain: String::new(), version: 13 }],
+            metadata_props: vec![pb::StringStringEntryProto { key: MULTIPLE_KEY.into(), value: "8".into() }],
+            graph: Some(pb::GraphProto {
+                node: vec![
+                    node("Tile", &["c", "r"], "t"),
+                    node("ReduceSum", &["t"], "s"),
+                    node("Add", &[INPUT, "s"], OUTPUT),
+                ],
+                initializer: inits,
+                input: vec![value_info(INPUT)],
+                output: vec![value_info(OUTPUT)],
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        model.encode_to_vec()
+    }
+
+    #[test]
+    fn a_small_graph_that_asks_for_gigabytes_is_refused_before_it_runs() {
+        // 60000 x 60000 floats: 13 GiB from a file of a few hundred bytes.
+        let bytes = tile_bomb([1, 1, 60000, 60000]);
+        assert!(bytes.len() < 400, "{}", bytes.len());
+        let e = Enhancer::from_bytes(&bytes, Path::new("bomb.onnx")).err().expect("refused").to_string();
+        assert!(e.starts_with("model bomb.onnx: ") && e.contains("MiB"), "{e}");
+        // The same graph asking for little runs (the check does not refuse honest files).
+        let ok = Enhancer::from_bytes(&tile_bomb([1, 1, 2, 2]), Path::new("ok.onnx")).unwrap();
+        let img = image::RgbImage::from_pixel(8, 8, image::Rgb([10, 20, 30]));
+        let out = ok.enhance(&img).unwrap();
+        // Each channel plus the sum of four ones (4.0 in [0, 1] units): clamped to 255.
+        assert_eq!(out.get_pixel(0, 0).0, [255, 255, 255]);
+    }
+
+    #[test]
+    fn the_tensor_limit_follows_the_image() {
+        assert_eq!(tensor_limit(8, 8), 64 << 20);
+        assert_eq!(tensor_limit(1280, 720), 512 * 1280 * 720);
+    }
 }

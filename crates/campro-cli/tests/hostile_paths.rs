@@ -1,0 +1,209 @@
+//! Hostile input, second pass: the paths the first pass missed (issue 44). Each test
+//! crafts its input here and fails on the code before the fix.
+
+mod common;
+
+use common::{bundled, campro, fails_with};
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+const LIMIT: Duration = Duration::from_secs(120);
+
+fn ffmpeg_present() -> bool {
+    let ok = Command::new("ffmpeg").arg("-version").output().is_ok_and(|o| o.status.success());
+    if !ok {
+        assert!(std::env::var("CI").as_deref() != Ok("true"), "CI=true but ffmpeg is missing (.ci/run installs it)");
+        eprintln!("SKIP: ffmpeg not on PATH (apt-get install ffmpeg)");
+    }
+    ok
+}
+
+fn ffmpeg(args: &[&str]) {
+    let out = Command::new("ffmpeg").args(["-hide_banner", "-v", "error", "-nostdin", "-y"]).args(args).output().unwrap();
+    assert!(out.status.success(), "ffmpeg {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn the_demo_never_replaces_a_users_own_file_without_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("d");
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(out.join("chart.png"), b"my own picture").unwrap();
+    fails_with(campro().arg("demo").arg("-o").arg(&out), "exists (use --force");
+    assert_eq!(std::fs::read(out.join("chart.png")).unwrap(), b"my own picture");
+    // Its own earlier output is identical and stays; another preset's is not replaced silently.
+    let own = dir.path().join("own");
+    campro().arg("demo").arg("-o").arg(&own).assert().success();
+    campro().arg("demo").arg("-o").arg(&own).assert().success();
+    fails_with(
+        campro().arg("demo").arg("-o").arg(&own).arg("--params").arg(bundled("color-inversion.json")),
+        "chart-protected.png exists (use --force",
+    );
+    campro().arg("demo").arg("-o").arg(&out).arg("--force").assert().success();
+}
+
+#[test]
+fn outputs_never_replace_their_own_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let x = dir.path().join("x.json");
+    std::fs::copy(bundled("identity.json"), &x).unwrap();
+    let before = std::fs::read(&x).unwrap();
+    fails_with(
+        campro().arg("convert").arg(&x).arg("--target").arg("cube").arg("-o").arg(&x).arg("--force"),
+        "is an input of this command",
+    );
+    fails_with(campro().arg("convert").arg(&x).arg("-o").arg(&x).arg("--force"), "outputs never replace their inputs");
+    // Through a second name (a hard link) too.
+    let alias = dir.path().join("alias.json");
+    std::fs::hard_link(&x, &alias).unwrap();
+    fails_with(campro().arg("convert").arg(&x).arg("-o").arg(&alias).arg("--force"), "is an input");
+    assert_eq!(std::fs::read(&x).unwrap(), before);
+    let pt = dir.path().join("c.pt");
+    std::fs::write(&pt, b"PK not really").unwrap();
+    fails_with(campro().arg("import-pt").arg(&pt).arg("-o").arg(&pt).arg("--force"), "is an input");
+    assert_eq!(std::fs::read(&pt).unwrap(), b"PK not really");
+}
+
+#[test]
+fn two_videos_that_meet_in_one_matroska_file_are_refused_before_anything_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let inp = dir.path().join("in");
+    std::fs::create_dir(&inp).unwrap();
+    std::fs::write(inp.join("a.mp4"), b"x").unwrap();
+    std::fs::write(inp.join("a.mkv"), b"y").unwrap();
+    let out = dir.path().join("out");
+    fails_with(
+        campro()
+            .arg("simulate")
+            .arg(bundled("identity.json"))
+            .arg(&inp)
+            .arg("-o")
+            .arg(&out)
+            .args(["--codec", "ffv1", "--force"]),
+        "would both be written to",
+    );
+    assert!(!out.exists() || std::fs::read_dir(&out).unwrap().next().is_none());
+}
+
+#[test]
+fn the_device_transform_is_blamed_on_the_flag_it_came_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let singular = dir.path().join("result.json");
+    std::fs::write(&singular, r#"{"colorCorrectionTransform": [1,1, 2,1, 3,1, 2,1, 4,1, 6,1, 1,1, 1,1, 1,1]}"#).unwrap();
+    fails_with(
+        campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&singular),
+        "--capture-result",
+    );
+    let out = campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&singular).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("singular") && !err.contains("--device-ccm"), "{err}");
+    fails_with(
+        campro().arg("convert").arg(bundled("identity.json")).args(["--device-ccm", "1", "2", "3", "2", "4", "6", "1", "1", "1"]),
+        "--device-ccm: the device transform is singular",
+    );
+}
+
+#[test]
+fn echoed_paths_cannot_drive_the_terminal() {
+    let dir = tempfile::tempdir().unwrap();
+    let inp = dir.path().join("in");
+    std::fs::create_dir(&inp).unwrap();
+    // A file whose name clears the screen and retitles the terminal.
+    std::fs::write(inp.join("x\u{1b}[2J\u{1b}]0;pwned\u{7}.txt"), b"not an image").unwrap();
+    let png = inp.join("ok\u{1b}[31m.png");
+    image::RgbImage::from_pixel(4, 4, image::Rgb([1, 2, 3])).save_with_format(&png, image::ImageFormat::Png).unwrap();
+    let out = campro().arg("simulate").arg(bundled("identity.json")).arg(&inp).arg("-o").arg(dir.path().join("o")).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(!err.contains('\u{1b}') && !err.contains('\u{7}'), "{err:?}");
+    assert!(err.contains("\\u{1b}[2J"), "{err}");
+}
+
+#[test]
+fn ffmpeg_never_reads_a_file_name_as_an_option_or_a_protocol() {
+    if !ffmpeg_present() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let inp = dir.path().join("in");
+    std::fs::create_dir(&inp).unwrap();
+    // "-report" would make ffmpeg write a report log into its working folder.
+    ffmpeg(&["-f", "lavfi", "-i", "testsrc=size=64x48:rate=5:duration=0.4", "-c:v", "ffv1", inp.join("clip.mkv").to_str().unwrap()]);
+    std::fs::rename(inp.join("clip.mkv"), inp.join("-report:x.mkv")).unwrap();
+    let out = dir.path().join("out");
+    campro()
+        .current_dir(&inp)
+        .arg("simulate")
+        .arg(bundled("identity.json"))
+        .arg("-o")
+        .arg(&out)
+        .args(["--codec", "ffv1", "--"])
+        .arg("-report:x.mkv")
+        .timeout(LIMIT)
+        .assert()
+        .success();
+    assert!(out.join("-report:x.mkv").is_file());
+    let logs: Vec<_> = std::fs::read_dir(&inp)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".log"))
+        .collect();
+    assert!(logs.is_empty(), "ffmpeg wrote {logs:?}");
+}
+
+#[test]
+fn a_video_whose_frames_would_overrun_the_budget_is_refused_by_its_size() {
+    if !ffmpeg_present() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let big = dir.path().join("big.mkv");
+    // 12000 x 12000: one black ffv1 frame of a few KB; 432 MB a frame in flight.
+    ffmpeg(&["-f", "lavfi", "-i", "color=c=black:size=12000x12000:rate=1:duration=1", "-frames:v", "1", "-c:v", "ffv1", big.to_str().unwrap()]);
+    fails_with(
+        campro().arg("simulate").arg(bundled("identity.json")).arg(&big).arg("-o").arg(dir.path().join("o")).timeout(LIMIT),
+        "frames in flight need",
+    );
+}
+
+#[cfg(unix)]
+#[test]
+fn an_interrupted_video_leaves_no_partial_files() {
+    if !ffmpeg_present() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let clip = dir.path().join("long.mkv");
+    ffmpeg(&["-f", "lavfi", "-i", "testsrc=size=640x480:rate=30:duration=20", "-c:v", "ffv1", clip.to_str().unwrap()]);
+    let out = dir.path().join("out");
+    let bin = assert_cmd::cargo::cargo_bin("campro");
+    let mut child = Command::new(bin)
+        .arg("simulate")
+        .arg(bundled("identity.json"))
+        .arg(&clip)
+        .arg("-o")
+        .arg(&out)
+        .args(["--codec", "ffv1", "--jobs", "1"])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Wait until the hidden temporary file exists, then interrupt.
+    let partial = |d: &Path| -> Vec<String> {
+        std::fs::read_dir(d)
+            .map(|r| r.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).filter(|n| n.starts_with(".campro-")).collect())
+            .unwrap_or_default()
+    };
+    let start = std::time::Instant::now();
+    while partial(&out).is_empty() && start.elapsed() < LIMIT {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(!partial(&out).is_empty(), "no temporary file appeared");
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(Command::new("kill").arg("-TERM").arg(child.id().to_string()).status().unwrap().success());
+    let status = child.wait().unwrap();
+    assert!(!status.success());
+    std::thread::sleep(Duration::from_millis(200));
+    assert!(partial(&out).is_empty(), "left behind: {:?}", partial(&out));
+    assert!(!out.join("long.mkv").exists());
+}

@@ -73,6 +73,12 @@ pub fn enhancer_of(params_path: &Path, p: &Params) -> Result<campro_eval::enhanc
 /// file at `params_path`).
 pub fn network_of(params_path: &Path, p: &Params, which: Network) -> Result<campro_eval::enhance::Enhancer> {
     let key = which.key();
+    if let (Some(preset), Network::Enhancer) = (crate::presets::named(params_path), which) {
+        let bytes = preset.enhancer.ok_or_else(|| {
+            anyhow!("{}: this bundled preset has no enhancer (campro presets says which do)", preset.name)
+        })?;
+        return Ok(campro_eval::enhance::Enhancer::from_bytes(bytes, params_path)?);
+    }
     let file = p.provenance.get(key).and_then(|e| e.get("onnx")).and_then(|f| f.as_str()).ok_or_else(|| {
         anyhow!(
             "{}: provenance.{key}.onnx: missing (this preset has no {key}; train one with campro train-enhancer{})",
@@ -80,11 +86,20 @@ pub fn network_of(params_path: &Path, p: &Params, which: Network) -> Result<camp
             if which == Network::Restorer { " and data.faces = \"restore\"" } else { "" }
         )
     })?;
-    // A bare file name beside the preset: never a path taken from the file's contents.
+    Ok(campro_eval::enhance::Enhancer::load(&beside(params_path, &format!("provenance.{key}.onnx"), file)?)?)
+}
+
+/// The file a preset's provenance names (`field`): a bare file name beside the preset,
+/// never a path taken from the file's contents (no folder, no `..`, no absolute path).
+pub(crate) fn beside(params_path: &Path, field: &str, file: &str) -> Result<std::path::PathBuf> {
     let name = Path::new(file);
-    if name.components().count() != 1 || name.file_name().is_none() {
-        bail!("{}: provenance.{key}.onnx: must be a file name beside the preset, got {file:?}", crate::shown(&params_path));
+    if name.components().count() != 1 || !matches!(name.components().next(), Some(std::path::Component::Normal(_))) {
+        bail!(
+            "{}: {field}: must be a file name beside the preset, got {:?}",
+            crate::shown(params_path),
+            crate::short(file, 120)
+        );
     }
     let dir = params_path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    Ok(campro_eval::enhance::Enhancer::load(&dir.join(name))?)
+    Ok(dir.join(name))
 }

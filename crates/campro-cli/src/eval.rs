@@ -435,7 +435,12 @@ fn run_privacy(
         r.seconds = start.elapsed().as_secs_f64();
     }
     report::write_privacy(&r, &c.output)?;
-    eprintln!("privacy: {} identities, {:.0} s -> {}", r.identities, r.seconds, crate::shown(&c.output.join("privacy.md")));
+    eprintln!(
+        "privacy: {} identities, {:.0} s -> {}",
+        r.identities,
+        r.seconds,
+        crate::shown(&c.output.join("privacy.md"))
+    );
     Ok(r)
 }
 
@@ -539,7 +544,7 @@ pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBu
             "a parameter file",
         )?)?;
         if let Some(m) = v.pointer("/provenance/detector/manifest").and_then(|m| m.as_str()) {
-            let manifest = path.parent().unwrap_or(Path::new(".")).join(m);
+            let manifest = crate::capture::beside(path, "provenance.detector.manifest", m)?;
             if !manifest.is_file() {
                 bail!("{}: provenance.detector.manifest: {} not found", crate::shown(&path), crate::shown(&manifest));
             }

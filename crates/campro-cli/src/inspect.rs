@@ -297,8 +297,8 @@ pub fn inspect(
         match r {
             Ok(v) => done.push((o, v)),
             Err(e) => {
-                let line = crate::one_line(&e);
-                eprintln!("error: {}: {line}", escape(&i.display().to_string()));
+                let line = crate::about(&i, &e);
+                eprintln!("error: {line}");
                 failed.push((i, line));
             }
         }

@@ -5,6 +5,7 @@ mod bench;
 mod capture;
 mod eval;
 mod inspect;
+mod presets;
 mod retrain;
 mod simulate;
 mod train;
@@ -33,6 +34,7 @@ const DEFAULT_PARAMS_FILE: &str = "params/campro-omega-0.5.json";
 #[command(
     name = "campro",
     version,
+    arg_required_else_help = true,
     about = "CamPro anti-facial-recognition ISP parameters: simulate, convert to Camera2, compare"
 )]
 struct Cli {
@@ -266,6 +268,12 @@ enum Cmd {
     /// data.faces = "restore" it trains the restoration attacker's network instead
     /// (PARAMS.restorer.*, for eval privacy --attack restore-net).
     TrainEnhancer(train::TrainEnhancerArgs),
+    /// List the bundled presets (usable by name anywhere: `campro simulate campro-omega-0.5 ...`).
+    Presets {
+        /// Readable text, or one JSON array.
+        #[arg(long, value_enum, default_value_t = Report::Text)]
+        format: Report,
+    },
     /// Run the recommended learnt preset (or --params) on a built-in chart: before/after PNGs, Camera2 values, error report.
     Demo {
         /// Output folder.
@@ -479,10 +487,12 @@ fn main() {
         // --help and --version print as clap writes them.
         Err(e) if !e.use_stderr() => e.exit(),
         Err(e) => {
-            // Clap's first line names the flag and the rule; the rest is usage advice.
+            // A usage error is printed whole, as clap words it: the flag and the rule, a
+            // "did you mean", the valid values, the usage line. Every line escaped and cut.
             let text = e.render().to_string();
-            let first = text.lines().next().unwrap_or("invalid arguments");
-            eprintln!("error: {}", escape(first.trim_start_matches("error: ")));
+            for line in text.lines().filter(|l| !l.trim().is_empty()) {
+                eprintln!("{}", short(&escape(line), MAX_ERROR_CHARS));
+            }
             std::process::exit(2);
         }
     };
@@ -510,8 +520,23 @@ pub(crate) fn one_line(e: &anyhow::Error) -> String {
         }
         out.push_str(first);
     }
-    escape(&out)
+    short(&escape(&out), MAX_ERROR_CHARS)
 }
+
+/// An error about the input `path` as one line, the path said once (an error that names
+/// it already is not prefixed with it again).
+pub(crate) fn about(path: &Path, e: &anyhow::Error) -> String {
+    let line = one_line(e);
+    let p = shown(path);
+    if line.contains(&p) {
+        line
+    } else {
+        format!("{p}: {line}")
+    }
+}
+
+/// Longest error line printed, characters.
+const MAX_ERROR_CHARS: usize = 1000;
 
 /// Writes one line to stdout; a closed stdout (`| head`) ends the command quietly.
 pub(crate) fn say(args: std::fmt::Arguments) {
@@ -715,7 +740,10 @@ fn run(cli: Cli) -> Result<()> {
             let own = if own_detector {
                 let own = eval::own_detectors(std::slice::from_ref(&params))?;
                 let manifest = own.values().next().ok_or_else(|| {
-                    anyhow!("--own-detector: {} names no fine-tuned detector (provenance.detector)", crate::shown(&params))
+                    anyhow!(
+                        "--own-detector: {} names no fine-tuned detector (provenance.detector)",
+                        crate::shown(&params)
+                    )
                 })?;
                 let m = eval::load(&manifest.to_string_lossy(), &models)?;
                 Some((m.manifest.name.clone(), campro_eval::person::PersonDetector::new(m)?))
@@ -730,6 +758,7 @@ fn run(cli: Cli) -> Result<()> {
             };
             inspect::inspect(&params, &p, &inputs, &output, &det, enhancer.as_ref(), matches!(format, Report::Json))
         }
+        Cmd::Presets { format } => presets::list(matches!(format, Report::Json)),
         Cmd::Demo { output, params, force, format } => demo(&output, params.as_deref(), force, format),
         Cmd::Bench { what: Some(BenchWhat::Train(a)), .. } => train::bench_train(&a),
         Cmd::Bench { what: Some(BenchWhat::Enhancer(a)), .. } => train::bench_enhancer(&a),
@@ -750,6 +779,12 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 pub(crate) fn load_params(path: &Path) -> Result<Params> {
+    if let Some(preset) = presets::named(path) {
+        return Ok(Params::from_json(preset.json)?);
+    }
+    if !path.exists() && path.components().count() == 1 && path.extension().is_none() {
+        return Err(presets::not_found(path));
+    }
     Params::from_file(path).map_err(|e| match e {
         // The file error names the path already.
         campro::params::ParamsError::File(f) => anyhow!("{f}"),
@@ -775,7 +810,9 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
     };
     // A device transform with no inverse maps colours onto a plane: nothing sensible can be
     // deployed on it, and compare refuses it too.
-    if (d.device_ccm.is_some() || d.capture_result.is_some()) && ccm::inverse(&m).is_none() {
+    // (Non-finite entries are named entry by entry by the conversion itself.)
+    let finite = m.iter().flatten().all(|v| v.is_finite());
+    if (d.device_ccm.is_some() || d.capture_result.is_some()) && finite && ccm::inverse(&m).is_none() {
         bail!("{}: the device transform is singular (determinant {:e}): no camera applies it", d.flag(), ccm::det(&m));
     }
     let rational = match d.fixed_denominator {
@@ -971,6 +1008,17 @@ fn stress(seconds: f64, seed: u64, format: Report) -> Result<()> {
 
 pub(crate) use campro::file::{escape, shown};
 
+/// `text` cut to `max` characters, saying how much was left out (a value echoed from a
+/// file or an argument must not flood the terminal).
+pub(crate) fn short(text: &str, max: usize) -> String {
+    let n = text.chars().count();
+    if n <= max {
+        return text.to_string();
+    }
+    let head: String = text.chars().take(max).collect();
+    format!("{head}... ({} more characters)", n - max)
+}
+
 /// Whether `a` and `b` name the same existing file (the same inode on Unix, through links).
 fn same_file(a: &Path, b: &Path) -> bool {
     #[cfg(unix)]
@@ -991,7 +1039,11 @@ fn same_file(a: &Path, b: &Path) -> bool {
 /// it was made from, `--force` or not.
 pub(crate) fn not_an_input(flag: &str, output: &Path, inputs: &[&Path]) -> Result<()> {
     if let Some(i) = inputs.iter().find(|i| same_file(output, i)) {
-        bail!("{flag} {}: is an input of this command ({}); outputs never replace their inputs", escape(&output.display().to_string()), escape(&i.display().to_string()));
+        bail!(
+            "{flag} {}: is an input of this command ({}); outputs never replace their inputs",
+            escape(&output.display().to_string()),
+            escape(&i.display().to_string())
+        );
     }
     Ok(())
 }

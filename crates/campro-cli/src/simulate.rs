@@ -18,7 +18,6 @@ use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-
 /// The file endings read as images.
 const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff"];
 pub(crate) use campro_eval::image_file::{Budget, Lease};
@@ -179,7 +178,7 @@ pub fn simulate(
                 paths.one(i, o, &|w| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(&i))))
             };
             if let Err(e) = r {
-                bar.suspend(|| eprintln!("error: {}: {}", crate::shown(&i), crate::one_line(&e)));
+                bar.suspend(|| eprintln!("error: {}", crate::about(i, &e)));
                 failed.fetch_add(1, Ordering::Relaxed);
             }
             bar.inc(1);
@@ -194,7 +193,12 @@ pub fn simulate(
     for (i, wanted) in &videos {
         let o = enc.output_path(wanted);
         if &o != wanted {
-            eprintln!("note: {} is written as {} ({} needs Matroska)", crate::shown(&wanted), crate::shown(&o), enc.codec);
+            eprintln!(
+                "note: {} is written as {} ({} needs Matroska)",
+                crate::shown(&wanted),
+                crate::shown(&o),
+                enc.codec
+            );
         }
         let warn = |w: &str| eprintln!("warning: {}: {w}", crate::shown(&i));
         let r = if !force && o.exists() {
@@ -205,7 +209,7 @@ pub fn simulate(
         match r {
             Ok(n) => eprintln!("simulated {n} frames of {} into {}", crate::shown(&i), crate::shown(&o)),
             Err(e) => {
-                eprintln!("error: {}: {}", crate::shown(&i), crate::one_line(&e));
+                eprintln!("error: {}", crate::about(i, &e));
                 failed += 1;
             }
         }
@@ -288,4 +292,3 @@ pub fn encode_png(samples: &[u16], w: u32, h: u32, depth: Depth) -> Result<Vec<u
         }
     }
 }
-

@@ -20,7 +20,8 @@ fn ffmpeg_present() -> bool {
 }
 
 fn ffmpeg(args: &[&str]) {
-    let out = Command::new("ffmpeg").args(["-hide_banner", "-v", "error", "-nostdin", "-y"]).args(args).output().unwrap();
+    let out =
+        Command::new("ffmpeg").args(["-hide_banner", "-v", "error", "-nostdin", "-y"]).args(args).output().unwrap();
     assert!(out.status.success(), "ffmpeg {args:?}: {}", String::from_utf8_lossy(&out.stderr));
 }
 
@@ -90,16 +91,29 @@ fn two_videos_that_meet_in_one_matroska_file_are_refused_before_anything_runs() 
 fn the_device_transform_is_blamed_on_the_flag_it_came_from() {
     let dir = tempfile::tempdir().unwrap();
     let singular = dir.path().join("result.json");
-    std::fs::write(&singular, r#"{"colorCorrectionTransform": [1,1, 2,1, 3,1, 2,1, 4,1, 6,1, 1,1, 1,1, 1,1]}"#).unwrap();
+    std::fs::write(&singular, r#"{"colorCorrectionTransform": [1,1, 2,1, 3,1, 2,1, 4,1, 6,1, 1,1, 1,1, 1,1]}"#)
+        .unwrap();
     fails_with(
         campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&singular),
         "--capture-result",
     );
-    let out = campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&singular).output().unwrap();
+    let out =
+        campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&singular).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("singular") && !err.contains("--device-ccm"), "{err}");
     fails_with(
-        campro().arg("convert").arg(bundled("identity.json")).args(["--device-ccm", "1", "2", "3", "2", "4", "6", "1", "1", "1"]),
+        campro().arg("convert").arg(bundled("identity.json")).args([
+            "--device-ccm",
+            "1",
+            "2",
+            "3",
+            "2",
+            "4",
+            "6",
+            "1",
+            "1",
+            "1",
+        ]),
         "--device-ccm: the device transform is singular",
     );
 }
@@ -113,7 +127,14 @@ fn echoed_paths_cannot_drive_the_terminal() {
     std::fs::write(inp.join("x\u{1b}[2J\u{1b}]0;pwned\u{7}.txt"), b"not an image").unwrap();
     let png = inp.join("ok\u{1b}[31m.png");
     image::RgbImage::from_pixel(4, 4, image::Rgb([1, 2, 3])).save_with_format(&png, image::ImageFormat::Png).unwrap();
-    let out = campro().arg("simulate").arg(bundled("identity.json")).arg(&inp).arg("-o").arg(dir.path().join("o")).output().unwrap();
+    let out = campro()
+        .arg("simulate")
+        .arg(bundled("identity.json"))
+        .arg(&inp)
+        .arg("-o")
+        .arg(dir.path().join("o"))
+        .output()
+        .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
     assert!(!err.contains('\u{1b}') && !err.contains('\u{7}'), "{err:?}");
@@ -129,7 +150,15 @@ fn ffmpeg_never_reads_a_file_name_as_an_option_or_a_protocol() {
     let inp = dir.path().join("in");
     std::fs::create_dir(&inp).unwrap();
     // "-report" would make ffmpeg write a report log into its working folder.
-    ffmpeg(&["-f", "lavfi", "-i", "testsrc=size=64x48:rate=5:duration=0.4", "-c:v", "ffv1", inp.join("clip.mkv").to_str().unwrap()]);
+    ffmpeg(&[
+        "-f",
+        "lavfi",
+        "-i",
+        "testsrc=size=64x48:rate=5:duration=0.4",
+        "-c:v",
+        "ffv1",
+        inp.join("clip.mkv").to_str().unwrap(),
+    ]);
     std::fs::rename(inp.join("clip.mkv"), inp.join("-report:x.mkv")).unwrap();
     let out = dir.path().join("out");
     campro()
@@ -160,9 +189,25 @@ fn a_video_whose_frames_would_overrun_the_budget_is_refused_by_its_size() {
     let dir = tempfile::tempdir().unwrap();
     let big = dir.path().join("big.mkv");
     // 12000 x 12000: one black ffv1 frame of a few KB; 432 MB a frame in flight.
-    ffmpeg(&["-f", "lavfi", "-i", "color=c=black:size=12000x12000:rate=1:duration=1", "-frames:v", "1", "-c:v", "ffv1", big.to_str().unwrap()]);
+    ffmpeg(&[
+        "-f",
+        "lavfi",
+        "-i",
+        "color=c=black:size=12000x12000:rate=1:duration=1",
+        "-frames:v",
+        "1",
+        "-c:v",
+        "ffv1",
+        big.to_str().unwrap(),
+    ]);
     fails_with(
-        campro().arg("simulate").arg(bundled("identity.json")).arg(&big).arg("-o").arg(dir.path().join("o")).timeout(LIMIT),
+        campro()
+            .arg("simulate")
+            .arg(bundled("identity.json"))
+            .arg(&big)
+            .arg("-o")
+            .arg(dir.path().join("o"))
+            .timeout(LIMIT),
         "frames in flight need",
     );
 }
@@ -191,7 +236,12 @@ fn an_interrupted_video_leaves_no_partial_files() {
     // Wait until the hidden temporary file exists, then interrupt.
     let partial = |d: &Path| -> Vec<String> {
         std::fs::read_dir(d)
-            .map(|r| r.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).filter(|n| n.starts_with(".campro-")).collect())
+            .map(|r| {
+                r.flatten()
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|n| n.starts_with(".campro-"))
+                    .collect()
+            })
             .unwrap_or_default()
     };
     let start = std::time::Instant::now();

@@ -223,8 +223,20 @@ mod tests {
     /// a few hundred bytes that ask for `4 * product(repeats)` bytes.
     fn tile_bomb(repeats: [i64; 4]) -> Vec<u8> {
         let inits = vec![
-            pb::TensorProto { name: "c".into(), dims: vec![1, 1, 1, 1], data_type: 1, float_data: vec![1.0], ..Default::default() },
-            pb::TensorProto { name: "r".into(), dims: vec![4], data_type: 7, int64_data: repeats.to_vec(), ..Default::default() },
+            pb::TensorProto {
+                name: "c".into(),
+                dims: vec![1, 1, 1, 1],
+                data_type: 1,
+                float_data: vec![1.0],
+                ..Default::default()
+            },
+            pb::TensorProto {
+                name: "r".into(),
+                dims: vec![4],
+                data_type: 7,
+                int64_data: repeats.to_vec(),
+                ..Default::default()
+            },
         ];
         let model = pb::ModelProto {
             ir_version: 8,

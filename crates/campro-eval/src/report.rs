@@ -72,7 +72,7 @@ pub fn privacy_csv(r: &PrivacyReport) -> String {
                     .collect();
                 let avg = vals.iter().sum::<f64>() / vals.len() as f64;
                 let cells: Vec<String> = vals.iter().map(|v| format!("{v:.2}")).collect();
-                let _ = writeln!(s, "LFW,{},{cond},{cls},{},{avg:.2}", order.name(), cells.join(","));
+                let _ = writeln!(s, "LFW,{},{},{cls},{},{avg:.2}", order.name(), csv(&cond), cells.join(","));
             }
         }
     }
@@ -88,7 +88,12 @@ pub fn write_privacy(r: &PrivacyReport, dir: &Path) -> Result<()> {
         let _ = writeln!(
             v,
             "LFW,{},{},{:.4},{:.4},{:.4},{}",
-            x.condition, x.model, x.accuracy_mean, x.accuracy_std, x.tar_at_far_1e3, x.pairs
+            csv(&x.condition),
+            csv(&x.model),
+            x.accuracy_mean,
+            x.accuracy_std,
+            x.tar_at_far_1e3,
+            x.pairs
         );
     }
     write_atomic(&dir.join("verification.csv"), v.as_bytes())?;
@@ -167,8 +172,9 @@ pub fn privacy_markdown(r: &PrivacyReport) -> String {
                     .map_or(String::new(), |d| format!(" (faces found: {:.1}%)", 100.0 * d));
                 let _ = writeln!(
                     s,
-                    "| {} | {cond}{det} | {cls} | {} | {:.2} |",
+                    "| {} | {}{det} | {cls} | {} | {:.2} |",
                     order.name(),
+                    md(&cond),
                     cells.join(" | "),
                     100.0 * avg
                 );
@@ -189,12 +195,32 @@ pub fn privacy_markdown(r: &PrivacyReport) -> String {
             let _ = writeln!(
                 s,
                 "| {} | {} | {:.4} ± {:.4} | {:.4} |",
-                v.condition, v.model, v.accuracy_mean, v.accuracy_std, v.tar_at_far_1e3
+                md(&v.condition),
+                md(&v.model),
+                v.accuracy_mean,
+                v.accuracy_std,
+                v.tar_at_far_1e3
             );
         }
     }
     let _ = writeln!(s, "\n![CMC](cmc.svg)\n\nRun time: {:.0} s.", r.seconds);
     s
+}
+
+/// A set name as one Markdown table cell: `|` escaped, line breaks and other control
+/// characters written out, so a name cannot split a row or forge one.
+pub fn md(text: &str) -> String {
+    campro::file::escape(text).replace('|', "\\|")
+}
+
+/// A set name as one CSV field: quoted (quotes doubled) when it holds a comma, a quote or
+/// a line break.
+pub fn csv(text: &str) -> String {
+    if text.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    } else {
+        text.to_string()
+    }
 }
 
 /// Writes utility.json, utility.csv (the paper's Table III columns) and utility.md.
@@ -213,12 +239,27 @@ pub fn write_utility(r: &UtilityReport, dir: &Path) -> Result<()> {
         let _ = writeln!(
             c,
             "{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{}",
-            x.condition, t.ap, t.ap50, t.ap75, t.precision, t.recall, t.f1, t.confidence, t.ground_truths, t.detections
+            csv(&x.condition),
+            t.ap,
+            t.ap50,
+            t.ap75,
+            t.precision,
+            t.recall,
+            t.f1,
+            t.confidence,
+            t.ground_truths,
+            t.detections
         );
         let _ = writeln!(
             m,
             "| {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
-            x.condition, t.ap, t.ap50, t.ap75, t.precision, t.recall, t.f1
+            md(&x.condition),
+            t.ap,
+            t.ap50,
+            t.ap75,
+            t.precision,
+            t.recall,
+            t.f1
         );
     }
     let _ = writeln!(m, "\nRun time: {:.0} s.", r.seconds);
@@ -238,9 +279,16 @@ pub fn write_quality(r: &QualityReport, dir: &Path) -> Result<()> {
         let _ = writeln!(
             c,
             "{},{:.4},{:.4},{:.4},{:.4},{},{}",
-            x.condition, x.rmse, x.psnr, x.ssim, x.ms_ssim, x.images, x.ms_ssim_images
+            csv(&x.condition),
+            x.rmse,
+            x.psnr,
+            x.ssim,
+            x.ms_ssim,
+            x.images,
+            x.ms_ssim_images
         );
-        let _ = writeln!(m, "| {} | {:.2} | {:.2} | {:.3} | {:.3} |", x.condition, x.rmse, x.psnr, x.ssim, x.ms_ssim);
+        let _ =
+            writeln!(m, "| {} | {:.2} | {:.2} | {:.3} | {:.3} |", md(&x.condition), x.rmse, x.psnr, x.ssim, x.ms_ssim);
     }
     let _ = writeln!(m, "\nRun time: {:.0} s.", r.seconds);
     write_atomic(&dir.join("quality.csv"), c.as_bytes())?;
@@ -304,4 +352,19 @@ pub fn write_frontier(points: &[crate::frontier::Point], dir: &Path) -> Result<(
         "# Privacy vs utility across runs\n\nx: the worst top-1 over the face models, classifiers and attacks measured; y: person AP of the set's own detector, as % of raw.\n\n![frontier](frontier.svg)\n\n{table}"
     );
     write_atomic(&dir.join("frontier.md"), md.as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn set_names_cannot_break_a_table_or_a_row() {
+        assert_eq!(md("a|b"), "a\\|b");
+        assert_eq!(md("two\nlines"), "two\\nlines");
+        assert_eq!(md("plain"), "plain");
+        assert_eq!(csv("a,b"), "\"a,b\"");
+        assert_eq!(csv("say \"hi\""), "\"say \"\"hi\"\"\"");
+        assert_eq!(csv("plain"), "plain");
+    }
 }

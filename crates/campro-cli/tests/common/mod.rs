@@ -27,7 +27,21 @@ pub fn fails_with(cmd: &mut Command, needle: &str) {
     assert!(err.contains(needle), "stderr {err:?} lacks {needle:?}");
     assert!(!err.contains("Caused by") && !err.contains("backtrace"), "{err}");
     assert!(
-        err.lines().all(|l| ["error", "warning", "simulated", "loading"].iter().any(|p| l.starts_with(p))),
+        err.lines().all(|l| {
+            // Lines of a usage error as clap words it (a tip, the valid values, the usage).
+            [
+                "error",
+                "warning",
+                "simulated",
+                "loading",
+                "  tip:",
+                "  [possible values",
+                "Usage:",
+                "For more information",
+            ]
+            .iter()
+            .any(|p| l.starts_with(p))
+        }),
         "one line per error: {err}"
     );
 }

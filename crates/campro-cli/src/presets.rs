@@ -1,0 +1,104 @@
+//! The bundled presets, built into the binary: `campro simulate campro-omega-0.5 photos -o out`
+//! works from any folder. A name is taken as a preset only when no file of that name
+//! exists, so files keep working as before (a copied preset with its enhancer beside it too).
+
+use anyhow::{anyhow, Result};
+use std::path::Path;
+
+/// One bundled parameter set, and its image enhancer when it ships one.
+pub struct Preset {
+    /// The name (`params/NAME.json` in the repository).
+    pub name: &'static str,
+    /// The parameter file's JSON.
+    pub json: &'static str,
+    /// `params/NAME.enhancer.onnx`, when present.
+    pub enhancer: Option<&'static [u8]>,
+}
+
+/// Every bundled preset, sorted by name (`params/*.json`; a test checks the list is whole).
+pub const PRESETS: &[Preset] = &[
+    Preset {
+        name: "campro-omega-0.5",
+        json: include_str!("../../../params/campro-omega-0.5.json"),
+        enhancer: Some(include_bytes!("../../../params/campro-omega-0.5.enhancer.onnx")),
+    },
+    Preset {
+        name: "campro-omega-0.5-distill",
+        json: include_str!("../../../params/campro-omega-0.5-distill.json"),
+        enhancer: None,
+    },
+    Preset {
+        name: "campro-omega-0.5-hour",
+        json: include_str!("../../../params/campro-omega-0.5-hour.json"),
+        enhancer: Some(include_bytes!("../../../params/campro-omega-0.5-hour.enhancer.onnx")),
+    },
+    Preset { name: "campro-omega-1", json: include_str!("../../../params/campro-omega-1.json"), enhancer: None },
+    Preset { name: "campro-omega-5", json: include_str!("../../../params/campro-omega-5.json"), enhancer: None },
+    Preset { name: "color-inversion", json: include_str!("../../../params/color-inversion.json"), enhancer: None },
+    Preset { name: "identity", json: include_str!("../../../params/identity.json"), enhancer: None },
+    Preset { name: "srgb-passthrough", json: include_str!("../../../params/srgb-passthrough.json"), enhancer: None },
+];
+
+/// The preset `arg` names, when `arg` is not an existing path but a bundled preset's name
+/// (with or without `.json`).
+pub fn named(arg: &Path) -> Option<&'static Preset> {
+    if arg.exists() || arg.components().count() != 1 {
+        return None;
+    }
+    let s = arg.to_str()?;
+    let name = s.strip_suffix(".json").unwrap_or(s);
+    PRESETS.iter().find(|p| p.name == name)
+}
+
+/// The error for a parameter argument that is neither a file nor a preset.
+pub fn not_found(arg: &Path) -> anyhow::Error {
+    let names: Vec<&str> = PRESETS.iter().map(|p| p.name).collect();
+    anyhow!(
+        "{}: no such file, and not a bundled preset (campro presets lists them: {})",
+        crate::shown(arg),
+        names.join(", ")
+    )
+}
+
+/// `campro presets`: each bundled preset's name, whether it ships an enhancer, and its
+/// one-line privacy and utility description.
+pub fn list(json: bool) -> Result<()> {
+    let mut rows = Vec::new();
+    for p in PRESETS {
+        let params = campro::Params::from_json(p.json)?;
+        rows.push((p.name, p.enhancer.is_some(), params.description));
+    }
+    if json {
+        let v: Vec<_> =
+            rows.iter().map(|(n, e, d)| serde_json::json!({ "name": n, "enhancer": e, "description": d })).collect();
+        crate::say!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        for (n, e, d) in rows {
+            crate::say!("{n}{}\n    {}", if e { " (with enhancer)" } else { "" }, crate::escape(&d));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_bundled_file_is_a_preset_and_parses() {
+        let dir = campro_testkit::workspace_root().join("params");
+        let mut files: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter_map(|n| n.strip_suffix(".json").map(str::to_string))
+            .collect();
+        files.sort();
+        let names: Vec<&str> = PRESETS.iter().map(|p| p.name).collect();
+        assert_eq!(names, files);
+        for p in PRESETS {
+            assert_eq!(p.json, std::fs::read_to_string(dir.join(format!("{}.json", p.name))).unwrap());
+            assert_eq!(p.enhancer.is_some(), dir.join(format!("{}.enhancer.onnx", p.name)).exists());
+            campro::Params::from_json(p.json).unwrap();
+        }
+    }
+}

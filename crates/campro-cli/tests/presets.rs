@@ -1,0 +1,105 @@
+//! Presets by name, from any folder (issue 45): the bundled presets are in the binary.
+
+mod common;
+
+use common::{bundled, campro, fails_with};
+
+fn photo(dir: &std::path::Path) -> std::path::PathBuf {
+    let p = dir.join("photo.png");
+    image::RgbImage::from_fn(24, 16, |x, y| image::Rgb([(x * 10) as u8, (y * 15) as u8, 90]))
+        .save_with_format(&p, image::ImageFormat::Png)
+        .unwrap();
+    p
+}
+
+#[test]
+fn a_bundled_preset_works_by_name_from_an_empty_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = photo(dir.path());
+    let run = |args: &[&str], out: &str| {
+        campro().current_dir(dir.path()).arg("simulate").args(args).arg(&input).arg("-o").arg(out).assert().success();
+        image::open(dir.path().join(out).join("photo.png")).unwrap().to_rgb8()
+    };
+    let by_name = run(&["campro-omega-0.5"], "a");
+    let by_json_name = run(&["campro-omega-0.5.json"], "b");
+    let by_file = run(&[bundled("campro-omega-0.5.json").to_str().unwrap()], "c");
+    assert_eq!(by_name, by_file);
+    assert_eq!(by_json_name, by_file);
+    // --enhance finds the bundled preset's enhancer, and gives what the file beside it gives.
+    let enhanced = run(&["campro-omega-0.5", "--enhance"], "d");
+    let enhanced_file = run(&[bundled("campro-omega-0.5.json").to_str().unwrap(), "--enhance"], "e");
+    assert_eq!(enhanced, enhanced_file);
+    assert_ne!(enhanced, by_name);
+}
+
+#[test]
+fn a_copied_preset_with_its_enhancer_beside_it_still_works_and_a_local_file_wins() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = photo(dir.path());
+    std::fs::copy(bundled("campro-omega-0.5.json"), dir.path().join("mine.json")).unwrap();
+    std::fs::copy(bundled("campro-omega-0.5.enhancer.onnx"), dir.path().join("campro-omega-0.5.enhancer.onnx"))
+        .unwrap();
+    campro()
+        .current_dir(dir.path())
+        .args(["simulate", "mine.json", "--enhance"])
+        .arg(&input)
+        .args(["-o", "o"])
+        .assert()
+        .success();
+    // A file named like a preset in the working folder is the file, not the preset.
+    std::fs::copy(bundled("identity.json"), dir.path().join("campro-omega-1")).unwrap();
+    campro()
+        .current_dir(dir.path())
+        .args(["simulate", "campro-omega-1"])
+        .arg(&input)
+        .args(["-o", "p"])
+        .assert()
+        .success();
+    let out = image::open(dir.path().join("p/photo.png")).unwrap().to_rgb8();
+    assert_eq!(out, image::open(&input).unwrap().to_rgb8(), "the identity file was used");
+}
+
+#[test]
+fn presets_are_listed_with_their_line_and_unknown_names_list_them() {
+    let out = campro().arg("presets").output().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    for name in
+        ["campro-omega-0.5 (with enhancer)", "campro-omega-0.5-hour (with enhancer)", "identity", "color-inversion"]
+    {
+        assert!(text.contains(name), "{name} missing from {text}");
+    }
+    let json = campro().args(["presets", "--format", "json"]).output().unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
+    assert_eq!(v.as_array().unwrap().len(), 8);
+    assert!(v[0]["description"].as_str().is_some_and(|d| !d.is_empty()));
+    fails_with(
+        campro().args(["validate", "campro-omega-9"]),
+        "not a bundled preset (campro presets lists them: campro-omega-0.5",
+    );
+    fails_with(
+        campro().args(["simulate", "identity", "x.png", "-o", "o", "--enhance"]),
+        "identity: this bundled preset has no enhancer",
+    );
+}
+
+#[test]
+fn usage_errors_say_what_is_missing_and_what_was_meant() {
+    let out = campro().args(["simulate", "identity", "photos"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(err.contains("--output"), "the missing -o is named: {err}");
+    assert!(err.contains("Usage: campro simulate"), "{err}");
+    let out = campro().output().unwrap();
+    let all = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    for cmd in ["simulate", "convert", "presets", "demo"] {
+        assert!(all.contains(cmd), "a bare campro lists {cmd}: {all}");
+    }
+    let out = campro().args(["simulat"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("tip: a similar subcommand exists: 'simulate'"), "{err}");
+    let out = campro().args(["convert", "identity", "--target", "rpi"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("rpi-pisp") && err.contains("camera2"), "valid targets listed: {err}");
+    assert!(!err.contains('\u{1b}'), "{err:?}");
+}

@@ -36,6 +36,6 @@ for f in grey-14000.png iccp-256MiB.png video-12000.mkv fifo.png urandom.png; do
   peak=$(awk -F: '/Maximum resident/ {print int($2 / 1024)}' "$d/time")
   size=$(stat -Lc %s "$d/$f" 2>/dev/null || echo -)
   if [ -p "$d/$f" ]; then size=fifo; fi
-  msg=$(grep -m1 -E '^(error|warning)' "$d/err" | sed "s|$d/||g" | cut -c1-120)
+  msg=$( (grep -m1 -E '^(error|warning)' "$d/err" || echo ok) | sed "s|$d/||g" | cut -c1-120)
   printf '| %s | %s | %s | %s | %s |\n' "$f" "$size" "$rc" "$peak" "$msg"
 done

@@ -267,7 +267,7 @@ impl Common {
             let p = crate::load_params(path)?;
             let name = set_name(path);
             if c.iter().any(|x| x.name == name) {
-                bail!("{}: two parameter sets are named {name:?}", crate::shown(&path));
+                bail!("{}: two parameter sets are named {name:?}", crate::shown(path));
             }
             c.push(params_condition(name, p));
         }
@@ -363,14 +363,14 @@ fn read_identities(path: &Path) -> Result<Vec<String>> {
             .map(|n| {
                 n.as_str()
                     .map(str::to_string)
-                    .ok_or_else(|| anyhow!("{}: validation_identities: names must be strings", crate::shown(&path)))
+                    .ok_or_else(|| anyhow!("{}: validation_identities: names must be strings", crate::shown(path)))
             })
             .collect::<Result<_>>()?
     } else {
         text.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('#')).map(str::to_string).collect()
     };
     if names.is_empty() {
-        bail!("{}: no identities", crate::shown(&path));
+        bail!("{}: no identities", crate::shown(path));
     }
     Ok(names)
 }
@@ -546,7 +546,7 @@ pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBu
         if let Some(m) = v.pointer("/provenance/detector/manifest").and_then(|m| m.as_str()) {
             let manifest = crate::capture::beside(path, "provenance.detector.manifest", m)?;
             if !manifest.is_file() {
-                bail!("{}: provenance.detector.manifest: {} not found", crate::shown(&path), crate::shown(&manifest));
+                bail!("{}: provenance.detector.manifest: {} not found", crate::shown(path), crate::shown(&manifest));
             }
             own.insert(set_name(path), manifest);
         }
@@ -557,13 +557,13 @@ pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBu
 /// The JPEG and PNG files of `dir`, sorted by name; none is an error.
 fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("{}: cannot list images", crate::shown(&dir)))?
+        .with_context(|| format!("{}: cannot list images", crate::shown(dir)))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| ["jpg", "jpeg", "png"].iter().any(|e| x.eq_ignore_ascii_case(e))))
         .collect();
     paths.sort();
     if paths.is_empty() {
-        bail!("{}: no JPEG or PNG images", crate::shown(&dir));
+        bail!("{}: no JPEG or PNG images", crate::shown(dir));
     }
     Ok(paths)
 }
@@ -628,7 +628,7 @@ pub fn run(cmd: EvalCmd) -> Result<()> {
 fn run_frontier(points: &Path, output: &Path, force: bool) -> Result<()> {
     crate::check_output_folder(output, force, "--output")?;
     let bytes = campro::file::read_capped(points, 1 << 20, "the frontier points")?;
-    let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", crate::shown(&points)))?;
+    let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", crate::shown(points)))?;
     let p = campro_eval::frontier::parse(&text).with_context(|| points.display().to_string())?;
     // The report writers create the folder (campro_eval::atomic).
     report::write_frontier(&p, output)?;

@@ -303,7 +303,7 @@ pub fn inspect(
             }
         }
     }
-    let params_name = format!("{} ({})", crate::shown(&params_file), p.name);
+    let params_name = format!("{} ({})", crate::shown(params_file), p.name);
     let panel_names: &[&str] =
         if enhancer.is_some() { &["raw", "protected", "enhanced"] } else { &["raw", "protected"] };
     let index = json!({

@@ -788,7 +788,7 @@ pub(crate) fn load_params(path: &Path) -> Result<Params> {
     Params::from_file(path).map_err(|e| match e {
         // The file error names the path already.
         campro::params::ParamsError::File(f) => anyhow!("{f}"),
-        e => anyhow!("{}: {e}", crate::shown(&path)),
+        e => anyhow!("{}: {e}", crate::shown(path)),
     })
 }
 
@@ -799,7 +799,7 @@ fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
     } else if let Some(f) = &d.capture_result {
         let text = campro::file::read_text_capped(f, 1 << 20, "a capture result")?;
         camera2::device_transform_from_capture_result(&text)
-            .map_err(|e| anyhow!("--capture-result {}: {e}", crate::shown(&f)))?
+            .map_err(|e| anyhow!("--capture-result {}: {e}", crate::shown(f)))?
     } else if let Some(ct) = d.ct {
         if p.ct_calibration.is_empty() {
             bail!("--ct needs a parameter file with ct_calibration");
@@ -832,7 +832,7 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()>
 pub(crate) fn output_result(path: &Path, r: std::io::Result<()>) -> Result<()> {
     match r {
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-            bail!("{} exists (use --force to overwrite)", crate::shown(&path))
+            bail!("{} exists (use --force to overwrite)", crate::shown(path))
         }
         r => r.with_context(|| path.display().to_string()),
     }
@@ -1063,8 +1063,8 @@ pub(crate) fn check_output_folder(out: &Path, force: bool, flag: &str) -> Result
             Ok(())
         }
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(_) if out.exists() => bail!("{flag} {}: is not a folder", crate::shown(&out)),
-        Err(e) => Err(e).with_context(|| format!("{flag} {}", crate::shown(&out))),
+        Err(_) if out.exists() => bail!("{flag} {}: is not a folder", crate::shown(out)),
+        Err(e) => Err(e).with_context(|| format!("{flag} {}", crate::shown(out))),
     }
 }
 

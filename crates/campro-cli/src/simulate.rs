@@ -40,10 +40,10 @@ pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
     let out_abs = resolved(out);
     let mut found = Inputs { jobs: Vec::new(), skipped: Vec::new() };
     for input in inputs {
-        let meta = std::fs::metadata(input).map_err(|e| anyhow!("{}: {e}", crate::shown(&input)))?;
+        let meta = std::fs::metadata(input).map_err(|e| anyhow!("{}: {e}", crate::shown(input)))?;
         if meta.is_dir() {
             if resolved(input) == out_abs {
-                bail!("--output {}: is the input folder itself; outputs would replace inputs", crate::shown(&out));
+                bail!("--output {}: is the input folder itself; outputs would replace inputs", crate::shown(out));
             }
             // Never descend into the output folder: what this run writes is not an input.
             let walk = walkdir::WalkDir::new(input).sort_by_file_name().into_iter();
@@ -67,20 +67,20 @@ pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
                 found.jobs.push((entry.path().to_path_buf(), output_for(&out.join(rel))));
             }
         } else if meta.is_file() {
-            let name = input.file_name().ok_or_else(|| anyhow!("{}: not a file name", crate::shown(&input)))?;
+            let name = input.file_name().ok_or_else(|| anyhow!("{}: not a file name", crate::shown(input)))?;
             found.jobs.push((input.clone(), output_for(&out.join(Path::new(name)))));
         } else {
-            bail!("{}: is not a regular file or folder", crate::shown(&input));
+            bail!("{}: is not a regular file or folder", crate::shown(input));
         }
     }
     let mut seen = std::collections::HashSet::new();
     let sources: std::collections::HashSet<PathBuf> = found.jobs.iter().map(|(i, _)| resolved(i)).collect();
     for (i, o) in &found.jobs {
         if !seen.insert(o.clone()) {
-            bail!("two inputs would both be written to {} (the second is {})", crate::shown(&o), crate::shown(&i));
+            bail!("two inputs would both be written to {} (the second is {})", crate::shown(o), crate::shown(i));
         }
         if sources.contains(&resolved(o)) {
-            bail!("--output: writing {} would replace an input; choose another output folder", crate::shown(&o));
+            bail!("--output: writing {} would replace an input; choose another output folder", crate::shown(o));
         }
     }
     Ok(found)
@@ -173,9 +173,9 @@ pub fn simulate(
     pool.install(|| {
         images.par_iter().for_each(|(i, o)| {
             let r = if !force && o.exists() {
-                Err(anyhow!("{} exists (use --force to overwrite)", crate::shown(&o)))
+                Err(anyhow!("{} exists (use --force to overwrite)", crate::shown(o)))
             } else {
-                paths.one(i, o, &|w| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(&i))))
+                paths.one(i, o, &|w| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(i))))
             };
             if let Err(e) = r {
                 bar.suspend(|| eprintln!("error: {}", crate::about(i, &e)));
@@ -187,7 +187,7 @@ pub fn simulate(
     bar.finish_and_clear();
     let mut failed = failed.into_inner();
     if !images.is_empty() {
-        eprintln!("simulated {} of {} images into {}", images.len() - failed, images.len(), crate::shown(&out));
+        eprintln!("simulated {} of {} images into {}", images.len() - failed, images.len(), crate::shown(out));
     }
     // Videos one after another, each frame on every core.
     for (i, wanted) in &videos {
@@ -195,19 +195,19 @@ pub fn simulate(
         if &o != wanted {
             eprintln!(
                 "note: {} is written as {} ({} needs Matroska)",
-                crate::shown(&wanted),
+                crate::shown(wanted),
                 crate::shown(&o),
                 enc.codec
             );
         }
-        let warn = |w: &str| eprintln!("warning: {}: {w}", crate::shown(&i));
+        let warn = |w: &str| eprintln!("warning: {}: {w}", crate::shown(i));
         let r = if !force && o.exists() {
             Err(anyhow!("{} exists (use --force to overwrite)", crate::shown(&o)))
         } else {
             pool.install(|| video::simulate(&capture, i, &o, enc, force, &warn))
         };
         match r {
-            Ok(n) => eprintln!("simulated {n} frames of {} into {}", crate::shown(&i), crate::shown(&o)),
+            Ok(n) => eprintln!("simulated {n} frames of {} into {}", crate::shown(i), crate::shown(&o)),
             Err(e) => {
                 eprintln!("error: {}", crate::about(i, &e));
                 failed += 1;

@@ -29,7 +29,7 @@ pub fn train(
     let opts = &campro_train::train::RunOptions { checkpoints, resume, init };
     for p in std::iter::once(output).chain(log) {
         if p.exists() && !force {
-            bail!("{} exists (use --force to replace it)", crate::shown(&p));
+            bail!("{} exists (use --force to replace it)", crate::shown(p));
         }
     }
     let pb = training_bar("train", "round", cfg.budget.rounds);
@@ -119,7 +119,7 @@ fn write_detector(det: &Yolox, params_path: &Path, name: &str, force: bool) -> R
     let manifest_path = params_path.with_extension("detector.json");
     for p in [&onnx, &manifest_path] {
         if p.exists() && !force {
-            bail!("{} exists (use --force to replace it)", crate::shown(&p));
+            bail!("{} exists (use --force to replace it)", crate::shown(p));
         }
     }
     det.save_onnx(&onnx)?;
@@ -157,7 +157,7 @@ pub fn finetune_detector(
     };
     if let Some(l) = log {
         if l.exists() && !force {
-            bail!("{} exists (use --force to replace it)", crate::shown(&l));
+            bail!("{} exists (use --force to replace it)", crate::shown(l));
         }
     }
     let mut params = load_params(params_path)?;
@@ -275,7 +275,7 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
     let manifest = a.params.with_extension(format!("{key}.json"));
     for p in [Some(&onnx), Some(&manifest), a.log.as_ref()].into_iter().flatten() {
         if p.exists() && !a.force {
-            bail!("{} exists (use --force to replace it)", crate::shown(&p));
+            bail!("{} exists (use --force to replace it)", crate::shown(p));
         }
     }
     if let Some(c) = &a.checkpoints {
@@ -472,7 +472,7 @@ fn run_anchor(python: &Path, shared: &Path, threads: usize) -> Result<serde_json
         .arg("--json")
         .stdin(std::process::Stdio::null())
         .output()
-        .map_err(|e| anyhow::anyhow!("--anchor {}: {e}", crate::shown(&python)))?;
+        .map_err(|e| anyhow::anyhow!("--anchor {}: {e}", crate::shown(python)))?;
     if !out.status.success() {
         let err = String::from_utf8_lossy(&out.stderr);
         bail!("--anchor: the anchor failed: {}", err.lines().last().unwrap_or("no message"));

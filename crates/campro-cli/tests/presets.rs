@@ -55,8 +55,16 @@ fn a_copied_preset_with_its_enhancer_beside_it_still_works_and_a_local_file_wins
         .args(["-o", "p"])
         .assert()
         .success();
-    let out = image::open(dir.path().join("p/photo.png")).unwrap().to_rgb8();
-    assert_eq!(out, image::open(&input).unwrap().to_rgb8(), "the identity file was used");
+    campro()
+        .current_dir(dir.path())
+        .arg("simulate")
+        .arg(bundled("identity.json"))
+        .arg(&input)
+        .args(["-o", "q"])
+        .assert()
+        .success();
+    let read = |d: &str| image::open(dir.path().join(d).join("photo.png")).unwrap().to_rgb8();
+    assert_eq!(read("p"), read("q"), "the local identity file was used, not the preset");
 }
 
 #[test]

@@ -58,6 +58,20 @@ impl Enhancer {
             if names != (Some(INPUT), Some(OUTPUT)) {
                 bail!("input {:?} and output {:?}, expected {INPUT:?} and {OUTPUT:?}", names.0, names.1);
             }
+            // Every node must compute from the input: tract folds constant-only nodes while
+            // it reads the graph, so a few bytes of Tile, Expand or broadcasting on constants
+            // could ask for gigabytes before any size check runs. A campro enhancer has none.
+            let mut live: std::collections::HashSet<&str> = [INPUT].into_iter().collect();
+            for n in &graph.node {
+                if !n.input.iter().any(|i| live.contains(i.as_str())) {
+                    bail!(
+                        "node {:?} ({}) computes from constants only; a campro enhancer computes every node from its input",
+                        n.name.chars().take(64).collect::<String>(),
+                        n.op_type.chars().take(32).collect::<String>()
+                    );
+                }
+                live.extend(n.output.iter().map(String::as_str));
+            }
             Ok((multiple, onnx.model_for_proto_model(&proto)?))
         });
         let e = match built {
@@ -219,9 +233,10 @@ mod tests {
         }
     }
 
-    /// An "enhancer" that adds to its input the sum of a constant tiled `repeats` times:
-    /// a few hundred bytes that ask for `4 * product(repeats)` bytes.
-    fn tile_bomb(repeats: [i64; 4]) -> Vec<u8> {
+    /// An "enhancer" that adds to its input the sum of `tiled` tiled `repeats` times (`tiled`
+    /// is the constant "c" or the input itself): a few hundred bytes that ask for
+    /// `4 * product(repeats)` bytes or more.
+    fn tile_bomb(tiled: &str, repeats: [i64; 4]) -> Vec<u8> {
         let inits = vec![
             pb::TensorProto {
                 name: "c".into(),
@@ -244,7 +259,7 @@ mod tests {
             metadata_props: vec![pb::StringStringEntryProto { key: MULTIPLE_KEY.into(), value: "8".into() }],
             graph: Some(pb::GraphProto {
                 node: vec![
-                    node("Tile", &["c", "r"], "t"),
+                    node("Tile", &[tiled, "r"], "t"),
                     node("ReduceSum", &["t"], "s"),
                     node("Add", &[INPUT, "s"], OUTPUT),
                 ],
@@ -260,16 +275,22 @@ mod tests {
 
     #[test]
     fn a_small_graph_that_asks_for_gigabytes_is_refused_before_it_runs() {
-        // 60000 x 60000 floats: 13 GiB from a file of a few hundred bytes.
-        let bytes = tile_bomb([1, 1, 60000, 60000]);
+        // 60000 x 60000 floats (13 GiB) from a constant: refused before tract folds it.
+        let bytes = tile_bomb("c", [1, 1, 60000, 60000]);
         assert!(bytes.len() < 400, "{}", bytes.len());
         let e = Enhancer::from_bytes(&bytes, Path::new("bomb.onnx")).err().expect("refused").to_string();
-        assert!(e.starts_with("model bomb.onnx: ") && e.contains("MiB"), "{e}");
-        // The same graph asking for little runs (the check does not refuse honest files).
-        let ok = Enhancer::from_bytes(&tile_bomb([1, 1, 2, 2]), Path::new("ok.onnx")).unwrap();
+        assert!(e.starts_with("model bomb.onnx: ") && e.contains("constants only"), "{e}");
+        // The same from the input: refused by its size at the smallest input (8 x 8 x 7500²).
+        let e = Enhancer::from_bytes(&tile_bomb(INPUT, [1, 1, 7500, 7500]), Path::new("big.onnx"))
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(e.contains("MiB a tensor"), "{e}");
+        // A small honest graph of the same shape runs.
+        let ok = Enhancer::from_bytes(&tile_bomb(INPUT, [1, 1, 1, 1]), Path::new("ok.onnx")).unwrap();
         let img = image::RgbImage::from_pixel(8, 8, image::Rgb([10, 20, 30]));
         let out = ok.enhance(&img).unwrap();
-        // Each channel plus the sum of four ones (4.0 in [0, 1] units): clamped to 255.
+        // Each pixel plus the sum of all 192 input values (clamped to 255).
         assert_eq!(out.get_pixel(0, 0).0, [255, 255, 255]);
     }
 

@@ -28,8 +28,6 @@ import org.robolectric.Shadows.shadowOf
 import org.robolectric.annotation.Config
 import org.robolectric.shadow.api.Shadow
 import org.robolectric.shadows.ShadowCameraCharacteristics
-import org.robolectric.shadows.ShadowCaptureResult
-import org.robolectric.shadows.ShadowTotalCaptureResult
 import java.util.concurrent.Executor
 
 /** CamProCamera2 on a Robolectric camera: tags, bursts, results, failures. */
@@ -94,13 +92,7 @@ class Camera2Test {
         return opened ?: error("Robolectric did not open the camera")
     }
 
-    private fun result(vararg values: Pair<CaptureResult.Key<*>, Any>): CaptureResult {
-        val r = ShadowTotalCaptureResult.newTotalCaptureResult()
-        val shadow = Shadow.extract<ShadowCaptureResult>(r)
-        @Suppress("UNCHECKED_CAST")
-        for ((k, v) in values) shadow.set(k as CaptureResult.Key<Any>, v)
-        return r
-    }
+    private fun result(vararg values: Pair<CaptureResult.Key<*>, Any>) = scriptedResult(*values)
 
     private fun converged() = result(
         CaptureResult.CONTROL_AWB_MODE to 1, CaptureResult.CONTROL_AWB_STATE to 2,

@@ -26,8 +26,6 @@ import org.robolectric.RobolectricTestRunner
 import org.robolectric.annotation.Config
 import org.robolectric.shadow.api.Shadow
 import org.robolectric.shadows.ShadowCameraCharacteristics
-import org.robolectric.shadows.ShadowCaptureResult
-import org.robolectric.shadows.ShadowTotalCaptureResult
 import java.util.concurrent.Executor
 import java.util.concurrent.TimeUnit
 
@@ -40,13 +38,7 @@ class GlueTest {
     @After
     fun close() = session.close()
 
-    private fun result(vararg values: Pair<CaptureResult.Key<*>, Any>): CaptureResult {
-        val r = ShadowTotalCaptureResult.newTotalCaptureResult()
-        val shadow = Shadow.extract<ShadowCaptureResult>(r)
-        @Suppress("UNCHECKED_CAST")
-        for ((k, v) in values) shadow.set(k as CaptureResult.Key<Any>, v)
-        return r
-    }
+    private fun result(vararg values: Pair<CaptureResult.Key<*>, Any>) = scriptedResult(*values)
 
     /** The result a device that honours [settings] reports (what CaptureRequest carried, read back). */
     private fun honouring(settings: List<Pair<CaptureRequest.Key<*>, Any>>, ts: Long): CaptureResult {

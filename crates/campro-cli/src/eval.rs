@@ -297,6 +297,9 @@ pub(crate) fn shared_dir(given: Option<&Path>) -> PathBuf {
 
 /// A parameter file's image-type name in the reports: its file stem.
 fn set_name(path: &Path) -> String {
+    if let Some(preset) = crate::presets::named(path) {
+        return preset.name.to_string();
+    }
     path.file_stem().map_or("params".into(), |s| s.to_string_lossy().into_owned())
 }
 
@@ -538,11 +541,11 @@ fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utili
 pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBuf>> {
     let mut own = HashMap::new();
     for path in params {
-        let v: serde_json::Value = serde_json::from_str(&campro::file::read_text_capped(
-            path,
-            campro::params::MAX_JSON_BYTES as u64,
-            "a parameter file",
-        )?)?;
+        let text = match crate::presets::named(path) {
+            Some(preset) => preset.json.to_string(),
+            None => campro::file::read_text_capped(path, campro::params::MAX_JSON_BYTES as u64, "a parameter file")?,
+        };
+        let v: serde_json::Value = serde_json::from_str(&text)?;
         if let Some(m) = v.pointer("/provenance/detector/manifest").and_then(|m| m.as_str()) {
             let manifest = crate::capture::beside(path, "provenance.detector.manifest", m)?;
             if !manifest.is_file() {

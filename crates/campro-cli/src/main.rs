@@ -535,6 +535,9 @@ pub(crate) fn about(path: &Path, e: &anyhow::Error) -> String {
     }
 }
 
+/// Measured conversion error above which `convert` warns, 8-bit LSB.
+const CONVERT_WARN_LSB: f64 = 2.0;
+
 /// Longest error line printed, characters.
 const MAX_ERROR_CHARS: usize = 1000;
 
@@ -631,14 +634,31 @@ fn run(cli: Cli) -> Result<()> {
             eprintln!("wrote {} ({} knots)", crate::shown(&output), p.tone_curve.len());
             Ok(())
         }
-        Cmd::Convert { params, target, files, output, force, .. } if target != "camera2" => {
+        Cmd::Convert { params, target, files, output, force, format, .. } if target != "camera2" => {
+            if matches!(format, Format::Kotlin) {
+                bail!("--format kotlin: only --target camera2 has a Kotlin form; --target {target} writes the stack's own file");
+            }
             if let Some(o) = &output {
                 not_an_input("--output", o, &[&params])?;
                 not_an_input("--output", o, &files.paths())?;
             }
             let p = load_params(&params)?;
             let t = files.target(&target, Camera2::default())?;
-            let (bytes, _) = files.export(t.as_ref(), &p)?;
+            let (bytes, base) = files.export(t.as_ref(), &p)?;
+            // What the stack will do with it, measured as compare does (fewer random pixels):
+            // a conversion that errs visibly never passes in silence.
+            let conditions = t.emulate(&p, &bytes, base.as_deref())?;
+            let rows = comparison(&p, &conditions, 20_000, 1)?;
+            let worst = rows.iter().map(|r| r.stats.max_lsb()).fold(0.0, f64::max);
+            eprintln!(
+                "measured against the desktop pipeline: up to {worst:.2} LSB (8-bit) over {} conditions; campro compare --target {target} shows each",
+                conditions.len()
+            );
+            if worst > CONVERT_WARN_LSB {
+                eprintln!(
+                    "warning: --target {target} errs by up to {worst:.1} LSB: the deployed camera differs visibly from the preset (more LUT points, or another target, err less)"
+                );
+            }
             match output {
                 Some(o) => write_atomic(&o, &bytes, force),
                 None if target == "hald" => bail!("a Hald image is binary: pass --output FILE.ppm"),
@@ -735,7 +755,15 @@ fn run(cli: Cli) -> Result<()> {
             let p = load_params(&params)?;
             check_output_folder(&output, force, "--output")?;
             let enhancer = if enhance { Some(capture::enhancer_of(&params, &p)?) } else { None };
+            let given = models.is_some();
             let models = models.unwrap_or_else(|| eval::shared_dir(shared.as_deref()).join("models"));
+            if !models.is_dir() {
+                bail!(
+                    "{} {}: no such folder; inspect runs the face and person models of the shared data folder: pass --shared DIR or set CAMPRO_SHARED (default ../shared), or --models DIR",
+                    if given { "--models" } else { "the models folder" },
+                    crate::shown(&models)
+                );
+            }
             let people = eval::load(&person_detector, &models)?;
             let own = if own_detector {
                 let own = eval::own_detectors(std::slice::from_ref(&params))?;

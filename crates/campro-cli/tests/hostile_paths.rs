@@ -3,21 +3,12 @@
 
 mod common;
 
-use common::{bundled, campro, fails_with};
+use common::{bundled, campro, fails_with, ffmpeg_present};
 use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
 const LIMIT: Duration = Duration::from_secs(120);
-
-fn ffmpeg_present() -> bool {
-    let ok = Command::new("ffmpeg").arg("-version").output().is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(std::env::var("CI").as_deref() != Ok("true"), "CI=true but ffmpeg is missing (.ci/run installs it)");
-        eprintln!("SKIP: ffmpeg not on PATH (apt-get install ffmpeg)");
-    }
-    ok
-}
 
 fn ffmpeg(args: &[&str]) {
     let out =

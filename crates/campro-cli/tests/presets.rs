@@ -111,3 +111,42 @@ fn usage_errors_say_what_is_missing_and_what_was_meant() {
     assert!(err.contains("rpi-pisp") && err.contains("camera2"), "valid targets listed: {err}");
     assert!(!err.contains('\u{1b}'), "{err:?}");
 }
+
+#[test]
+fn convert_says_what_a_target_costs_and_refuses_kotlin_where_there_is_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = campro()
+        .args(["convert", "campro-omega-0.5", "--target", "cube", "--cube-size", "33", "-o"])
+        .arg(dir.path().join("a.cube"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("measured against the desktop pipeline: up to"), "{err}");
+    // A 2-point cube cannot hold the curve: said as a warning with the size of the error.
+    let out = campro()
+        .args(["convert", "campro-omega-0.5", "--target", "cube", "--cube-size", "2", "-o"])
+        .arg(dir.path().join("b.cube"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("warning: --target cube errs by up to"), "{err}");
+    fails_with(
+        campro().args(["convert", "identity", "--target", "cube", "--format", "kotlin"]),
+        "--format kotlin: only --target camera2 has a Kotlin form",
+    );
+}
+
+#[test]
+fn inspect_says_where_its_models_come_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("look");
+    fails_with(
+        campro()
+            .env("CAMPRO_SHARED", dir.path().join("nowhere"))
+            .args(["inspect", "campro-omega-0.5", "photo.png", "-o"])
+            .arg(&out),
+        "pass --shared DIR or set CAMPRO_SHARED",
+    );
+}

@@ -7,18 +7,9 @@ mod common;
 
 use campro::pipeline::fast::Exact8;
 use campro::Params;
-use common::{bundled, campro, fails_with};
+use common::{bundled, campro, fails_with, ffmpeg_present};
 use std::path::Path;
 use std::process::Command;
-
-fn ffmpeg_present() -> bool {
-    let ok = Command::new("ffmpeg").arg("-version").output().is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(std::env::var("CI").as_deref() != Ok("true"), "CI=true but ffmpeg is missing (.ci/run installs it)");
-        eprintln!("SKIP: ffmpeg not on PATH (apt-get install ffmpeg)");
-    }
-    ok
-}
 
 fn ffmpeg(args: &[&str]) -> Vec<u8> {
     let out = Command::new("ffmpeg").args(["-hide_banner", "-v", "error", "-nostdin"]).args(args).output().unwrap();

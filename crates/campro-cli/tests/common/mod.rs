@@ -61,3 +61,14 @@ pub fn write_pt(path: &Path, pkl: &[u8], storages: &[(&str, Vec<u8>)]) {
     }
     z.finish().unwrap();
 }
+
+/// Whether ffmpeg runs here; without it a video test skips with a message, except under
+/// `CI=true` (where `.ci/run` installs it), where it fails.
+pub fn ffmpeg_present() -> bool {
+    let ok = std::process::Command::new("ffmpeg").arg("-version").output().is_ok_and(|o| o.status.success());
+    if !ok {
+        assert!(std::env::var("CI").as_deref() != Ok("true"), "CI=true but ffmpeg is missing (.ci/run installs it)");
+        eprintln!("SKIP: ffmpeg not on PATH (apt-get install ffmpeg)");
+    }
+    ok
+}

@@ -638,6 +638,9 @@ fn run(cli: Cli) -> Result<()> {
             if matches!(format, Format::Kotlin) {
                 bail!("--format kotlin: only --target camera2 has a Kotlin form; --target {target} writes the stack's own file");
             }
+            if output.is_none() && target == "hald" {
+                bail!("a Hald image is binary: pass --output FILE.ppm");
+            }
             if let Some(o) = &output {
                 not_an_input("--output", o, &[&params])?;
                 not_an_input("--output", o, &files.paths())?;
@@ -661,7 +664,6 @@ fn run(cli: Cli) -> Result<()> {
             }
             match output {
                 Some(o) => write_atomic(&o, &bytes, force),
-                None if target == "hald" => bail!("a Hald image is binary: pass --output FILE.ppm"),
                 None => {
                     say_bytes(&bytes);
                     Ok(())

@@ -121,6 +121,13 @@ enum Cmd {
         /// train-enhancer) on the camera's 8-bit output: what a human viewer is shown.
         #[arg(long, conflicts_with = "bit_depth")]
         enhance: bool,
+        /// Leave outputs that exist and skip their inputs (re-runs do only what is missing).
+        #[arg(long, conflicts_with = "force")]
+        skip_existing: bool,
+        /// Progress on stderr only, or also one JSON object on stdout: each input's output,
+        /// status (written, skipped, failed) and time.
+        #[arg(long, value_enum, default_value_t = Report::Text)]
+        format: Report,
     },
     /// Look at what a parameter set does to your images: raw | protected side by side with
     /// the faces (YuNet) and people (person detector) found on each, a JSON of the
@@ -723,7 +730,21 @@ fn run(cli: Cli) -> Result<()> {
                 }
             }
         }
-        Cmd::Simulate { params, inputs, output, bit_depth, force, jobs, codec, crf, bitrate, preset, enhance } => {
+        Cmd::Simulate {
+            params,
+            inputs,
+            output,
+            bit_depth,
+            force,
+            jobs,
+            codec,
+            crf,
+            bitrate,
+            preset,
+            enhance,
+            skip_existing,
+            format,
+        } => {
             let enc = video::Encoding { codec, crf: Some(crf), bitrate, preset };
             let p = load_params(&params)?;
             let enhancer = if enhance { Some(capture::enhancer_of(&params, &p)?) } else { None };
@@ -735,10 +756,15 @@ fn run(cli: Cli) -> Result<()> {
                     BitDepth::Eight => Depth::Eight,
                     BitDepth::Sixteen => Depth::Sixteen,
                 },
-                force,
+                match (force, skip_existing) {
+                    (true, _) => simulate::Existing::Replace,
+                    (_, true) => simulate::Existing::Skip,
+                    _ => simulate::Existing::Refuse,
+                },
                 jobs.map(|j| j as usize),
                 &enc,
                 enhancer.as_ref(),
+                matches!(format, Report::Json),
             )
         }
         Cmd::Inspect {

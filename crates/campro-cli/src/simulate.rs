@@ -102,17 +102,50 @@ pub(crate) fn is_image(path: &Path) -> bool {
         .unwrap_or(false)
 }
 
-/// Runs `p` over every image and video under `inputs` into PNGs and videos under `out`.
+/// What `simulate` does with an output that exists already.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Existing {
+    /// Refuse it (the default).
+    Refuse,
+    /// Replace it (`--force`).
+    Replace,
+    /// Leave it and skip its input (`--skip-existing`: re-runs do only what is missing).
+    Skip,
+}
+
+/// One input's outcome, for `--format json`.
+fn record(
+    input: &Path,
+    output: &Path,
+    status: &str,
+    started: std::time::Instant,
+    error: Option<String>,
+) -> serde_json::Value {
+    serde_json::json!({
+        "input": input.display().to_string(), "output": output.display().to_string(), "status": status,
+        "ms": (started.elapsed().as_secs_f64() * 1000.0 * 10.0).round() / 10.0, "error": error,
+    })
+}
+
+/// Runs `p` over every image and video under `inputs` into PNGs and videos under `out`;
+/// with `json`, prints what happened to each input (written, skipped, failed, with its time)
+/// as one JSON object on stdout.
+#[allow(clippy::too_many_arguments)]
 pub fn simulate(
     p: &Params,
     inputs: &[PathBuf],
     out: &Path,
     depth: Depth,
-    force: bool,
+    existing: Existing,
     jobs: Option<usize>,
     enc: &Encoding,
     enhancer: Option<&campro_eval::enhance::Enhancer>,
+    json: bool,
 ) -> Result<()> {
+    let force = existing == Existing::Replace;
+    let records = std::sync::Mutex::new(Vec::new());
+    let note = |v: serde_json::Value| records.lock().unwrap_or_else(|p| p.into_inner()).push(v);
+    let skipped = AtomicUsize::new(0);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = match jobs {
         Some(j) if j > cores => {
@@ -172,22 +205,37 @@ pub fn simulate(
     let paths = Paths { capture: &capture, p8: &prepared8, p16: &prepared16, budget, depth, force };
     pool.install(|| {
         images.par_iter().for_each(|(i, o)| {
+            let started = std::time::Instant::now();
+            if existing == Existing::Skip && o.exists() {
+                skipped.fetch_add(1, Ordering::Relaxed);
+                note(record(i, o, "skipped", started, None));
+                bar.inc(1);
+                return;
+            }
             let r = if !force && o.exists() {
-                Err(anyhow!("{} exists (use --force to overwrite)", crate::shown(o)))
+                Err(anyhow!("{} exists (use --force to overwrite, or --skip-existing)", crate::shown(o)))
             } else {
                 paths.one(i, o, &|w| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(i))))
             };
-            if let Err(e) = r {
-                bar.suspend(|| eprintln!("error: {}", crate::about(i, &e)));
-                failed.fetch_add(1, Ordering::Relaxed);
+            match r {
+                Ok(()) => note(record(i, o, "written", started, None)),
+                Err(e) => {
+                    let line = crate::about(i, &e);
+                    bar.suspend(|| eprintln!("error: {line}"));
+                    failed.fetch_add(1, Ordering::Relaxed);
+                    note(record(i, o, "failed", started, Some(line)));
+                }
             }
             bar.inc(1);
         })
     });
     bar.finish_and_clear();
     let mut failed = failed.into_inner();
+    let mut skipped = skipped.into_inner();
     if !images.is_empty() {
-        eprintln!("simulated {} of {} images into {}", images.len() - failed, images.len(), crate::shown(out));
+        let done = images.len() - failed - skipped;
+        let note = if skipped > 0 { format!(" ({skipped} skipped: already there)") } else { String::new() };
+        eprintln!("simulated {done} of {} images into {}{note}", images.len(), crate::shown(out));
     }
     // Videos one after another, each frame on every core.
     for (i, wanted) in &videos {
@@ -201,18 +249,43 @@ pub fn simulate(
             );
         }
         let warn = |w: &str| eprintln!("warning: {}: {w}", crate::shown(i));
+        let started = std::time::Instant::now();
+        if existing == Existing::Skip && o.exists() {
+            skipped += 1;
+            eprintln!("skipped {}: {} is already there", crate::shown(i), crate::shown(&o));
+            note(record(i, &o, "skipped", started, None));
+            continue;
+        }
         let r = if !force && o.exists() {
-            Err(anyhow!("{} exists (use --force to overwrite)", crate::shown(&o)))
+            Err(anyhow!("{} exists (use --force to overwrite, or --skip-existing)", crate::shown(&o)))
         } else {
             pool.install(|| video::simulate(&capture, i, &o, enc, force, &warn))
         };
         match r {
-            Ok(n) => eprintln!("simulated {n} frames of {} into {}", crate::shown(i), crate::shown(&o)),
+            Ok(n) => {
+                eprintln!("simulated {n} frames of {} into {}", crate::shown(i), crate::shown(&o));
+                let mut r = record(i, &o, "written", started, None);
+                r["frames"] = n.into();
+                note(r);
+            }
             Err(e) => {
-                eprintln!("error: {}", crate::about(i, &e));
+                let line = crate::about(i, &e);
+                eprintln!("error: {line}");
                 failed += 1;
+                note(record(i, &o, "failed", started, Some(line)));
             }
         }
+    }
+    if json {
+        let mut files = records.into_inner().unwrap_or_else(|p| p.into_inner());
+        files.sort_by(|a, b| a["input"].as_str().cmp(&b["input"].as_str()));
+        let written = files.len() - failed - skipped;
+        crate::say!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "output": out.display().to_string(), "written": written, "skipped": skipped, "failed": failed, "files": files,
+            }))?
+        );
     }
     if failed > 0 {
         bail!("{failed} input(s) failed");

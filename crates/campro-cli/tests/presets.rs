@@ -150,3 +150,46 @@ fn inspect_says_where_its_models_come_from() {
         "pass --shared DIR or set CAMPRO_SHARED",
     );
 }
+
+#[test]
+fn re_runs_skip_what_is_there_and_json_says_what_happened() {
+    let dir = tempfile::tempdir().unwrap();
+    let inp = dir.path().join("in");
+    std::fs::create_dir(&inp).unwrap();
+    photo(&inp);
+    std::fs::copy(inp.join("photo.png"), inp.join("second.png")).unwrap();
+    std::fs::write(inp.join("broken.png"), b"not a png").unwrap();
+    let out = dir.path().join("out");
+    let run = |extra: &[&str]| {
+        let o = campro().arg("simulate").arg("identity").arg(&inp).arg("-o").arg(&out).args(extra).output().unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null);
+        (o.status.success(), v, String::from_utf8_lossy(&o.stderr).to_string())
+    };
+    let (ok, v, _) = run(&["--format", "json"]);
+    assert!(!ok, "the broken file fails the run");
+    assert_eq!(
+        (v["written"].as_u64(), v["skipped"].as_u64(), v["failed"].as_u64()),
+        (Some(2), Some(0), Some(1)),
+        "{v}"
+    );
+    let files = v["files"].as_array().unwrap();
+    assert_eq!(files.len(), 3);
+    let broken = files.iter().find(|f| f["input"].as_str().unwrap().ends_with("broken.png")).unwrap();
+    assert_eq!(broken["status"], "failed");
+    assert!(broken["error"].as_str().unwrap().contains("broken.png"));
+    assert!(files.iter().all(|f| f["ms"].as_f64().is_some_and(|ms| ms >= 0.0)));
+    // A plain re-run refuses the existing outputs; --skip-existing leaves them and redoes nothing.
+    let before = std::fs::metadata(out.join("photo.png")).unwrap().modified().unwrap();
+    let (ok, _, err) = run(&[]);
+    assert!(!ok && err.contains("--skip-existing"), "{err}");
+    std::fs::remove_file(inp.join("broken.png")).unwrap();
+    let (ok, v, err) = run(&["--skip-existing", "--format", "json"]);
+    assert!(ok, "{err}");
+    assert_eq!((v["written"].as_u64(), v["skipped"].as_u64()), (Some(0), Some(2)), "{v}");
+    assert!(err.contains("2 skipped: already there"), "{err}");
+    assert_eq!(std::fs::metadata(out.join("photo.png")).unwrap().modified().unwrap(), before);
+    fails_with(
+        campro().arg("simulate").arg("identity").arg(&inp).arg("-o").arg(&out).args(["--skip-existing", "--force"]),
+        "cannot be used with",
+    );
+}

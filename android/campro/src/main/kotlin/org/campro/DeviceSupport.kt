@@ -2,14 +2,16 @@ package org.campro
 
 /**
  * Whether a camera can run CamPro through Camera2, decided from plain values so the
- * rule runs (and is tested) off the phone; `org.campro.android.supportOf` reads them
+ * rule runs (and is tested) off the phone; `org.campro.android.camproSupport` reads them
  * from `CameraCharacteristics`.
  *
  * Camera2's rules: `TONEMAP_CURVE` is honoured only in `TONEMAP_MODE_CONTRAST_CURVE`,
  * which a device lists in `TONEMAP_AVAILABLE_TONE_MAP_MODES` (guaranteed with the
  * `MANUAL_POST_PROCESSING` capability); `COLOR_CORRECTION_TRANSFORM` is used only with
  * `COLOR_CORRECTION_MODE_TRANSFORM_MATRIX` *and* `CONTROL_AWB_MODE_OFF`, so AWB must be
- * switchable off; `TONEMAP_MAX_CURVE_POINTS` bounds the curve (>= 64 when present).
+ * switchable off; `TONEMAP_MAX_CURVE_POINTS` bounds the curve (the documentation promises
+ * at least 64, but some devices report 32 and some HALs take fewer: the curve is fitted to
+ * what the device reports, and the fit's error is stated).
  */
 object DeviceSupport {
     /** `CameraMetadata.REQUEST_AVAILABLE_CAPABILITIES_MANUAL_POST_PROCESSING`. */

@@ -159,7 +159,7 @@ fn one(
     warn: &dyn Fn(&str),
 ) -> Result<Value> {
     let raw = {
-        let (img, _lease) = simulate::decode(input, budget, warn)?;
+        let (img, _lease) = campro_eval::image_file::read(input, budget, warn)?;
         img.into_rgb8()
     };
     let mut protected = RgbImage::new(raw.width(), raw.height());
@@ -265,11 +265,11 @@ pub fn inspect(
 ) -> Result<()> {
     let found = simulate::collect_inputs(inputs, out)?;
     for (i, why) in &found.skipped {
-        eprintln!("warning: skipping {}: {why}", escape(&i.display().to_string()));
+        eprintln!("warning: skipping {}: {why}", crate::shown(i));
     }
     let (images, others): (Vec<_>, Vec<_>) = found.jobs.into_iter().partition(|(i, _)| simulate::is_image(i));
     for (i, _) in &others {
-        eprintln!("warning: skipping {} (not a PNG, JPEG or TIFF file)", escape(&i.display().to_string()));
+        eprintln!("warning: skipping {} (not a PNG, JPEG or TIFF file)", crate::shown(i));
     }
     if images.is_empty() {
         bail!("no PNG, JPEG or TIFF file among the inputs: nothing to inspect");
@@ -284,7 +284,7 @@ pub fn inspect(
     let results: Vec<Result<Value>> = images
         .par_iter()
         .map(|(i, o)| {
-            let warn = |w: &str| bar.suspend(|| eprintln!("warning: {}: {w}", escape(&i.display().to_string())));
+            let warn = |w: &str| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(i)));
             let r = one(i, o, &fast, enhancer, det, budget, &warn);
             bar.inc(1);
             r

@@ -382,7 +382,7 @@ impl DeviceArgs {
     /// The option the device transform came from, as the user typed it.
     fn flag(&self) -> String {
         match &self.capture_result {
-            Some(f) => format!("--capture-result {}", escape(&f.display().to_string())),
+            Some(f) => format!("--capture-result {}", crate::shown(f)),
             None if self.ct.is_some() => "--ct".into(),
             None => "--device-ccm".into(),
         }
@@ -1097,8 +1097,8 @@ pub(crate) fn not_an_input(flag: &str, output: &Path, inputs: &[&Path]) -> Resul
     if let Some(i) = inputs.iter().find(|i| same_file(output, i)) {
         bail!(
             "{flag} {}: is an input of this command ({}); outputs never replace their inputs",
-            escape(&output.display().to_string()),
-            escape(&i.display().to_string())
+            crate::shown(output),
+            crate::shown(i)
         );
     }
     Ok(())

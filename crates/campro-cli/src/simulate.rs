@@ -20,7 +20,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// The file endings read as images.
 const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff"];
-pub(crate) use campro_eval::image_file::{Budget, Lease};
+pub(crate) use campro_eval::image_file::Budget;
 
 /// What a walk over the inputs found.
 pub(crate) struct Inputs {
@@ -158,15 +158,12 @@ pub fn simulate(
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
     let found = collect_inputs(inputs, out)?;
     for (i, why) in &found.skipped {
-        eprintln!("warning: skipping {}: {why}", crate::escape(&i.display().to_string()));
+        eprintln!("warning: skipping {}: {why}", crate::shown(i));
     }
     let (videos, rest): (Vec<_>, Vec<_>) = found.jobs.into_iter().partition(|(i, _)| video::is_video(i));
     let (images, others): (Vec<_>, Vec<_>) = rest.into_iter().partition(|(i, _)| is_image(i));
     for (i, _) in &others {
-        eprintln!(
-            "warning: skipping {} (not a PNG, JPEG, TIFF or video file)",
-            crate::escape(&i.display().to_string())
-        );
+        eprintln!("warning: skipping {} (not a PNG, JPEG, TIFF or video file)", crate::shown(i));
     }
     if images.is_empty() && videos.is_empty() {
         bail!("no PNG, JPEG, TIFF or video file among the inputs: nothing to do");
@@ -179,9 +176,9 @@ pub fn simulate(
         if let Some(other) = targets.insert(enc.output_path(wanted), i) {
             bail!(
                 "{} and {} would both be written to {} (--codec {} writes Matroska); simulate them into different folders",
-                crate::escape(&other.display().to_string()),
-                crate::escape(&i.display().to_string()),
-                crate::escape(&enc.output_path(wanted).display().to_string()),
+                crate::shown(other),
+                crate::shown(i),
+                crate::shown(&enc.output_path(wanted)),
                 enc.codec
             );
         }
@@ -305,7 +302,7 @@ struct Paths<'a, 'p> {
 
 impl Paths<'_, '_> {
     fn one(&self, input: &Path, output: &Path, warn: &dyn Fn(&str)) -> Result<()> {
-        let (img, _lease) = decode(input, self.budget, warn)?;
+        let (img, _lease) = campro_eval::image_file::read(input, self.budget, warn)?;
         let (w, h) = (img.width(), img.height());
         let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
         let row = 3 * w as usize;
@@ -332,16 +329,6 @@ impl Paths<'_, '_> {
         let png = encode_png(&dst, w, h, self.depth)?;
         write_atomic(output, &png, self.force)
     }
-}
-
-/// Reads and decodes one image file through the one hardened reader
-/// ([`campro_eval::image_file::read`]), its memory held from `budget` until the lease drops.
-pub(crate) fn decode<'b>(
-    input: &Path,
-    budget: &'b Budget,
-    warn: &dyn Fn(&str),
-) -> Result<(image::DynamicImage, Lease<'b>)> {
-    Ok(campro_eval::image_file::read(input, budget, warn)?)
 }
 
 /// 8-bit RGB samples as a PNG.

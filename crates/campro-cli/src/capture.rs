@@ -5,6 +5,7 @@
 
 use anyhow::{anyhow, bail, Result};
 use campro::pipeline::fast::Exact8;
+use campro::pipeline::{Depth, Prepared};
 use campro::Params;
 use rayon::prelude::*;
 use std::path::Path;
@@ -13,14 +14,32 @@ use std::path::Path;
 /// 200 bytes a pixel at the recommended size.
 pub const MAX_ENHANCE_PIXELS: u64 = 3840 * 2160;
 
-/// What `simulate` does to an 8-bit frame: the camera (exact, on every core), then, with
+/// What `simulate` does to a frame: the camera (exact, on every core), then, with
 /// `--enhance`, the preset's enhancer (tract, one thread a frame).
 pub(crate) struct Capture<'a, 'p> {
+    /// The exact 8-bit path.
     pub fast8: &'a Exact8<'p>,
+    /// The reference path tabulated for 8-bit input (also the params).
+    pub p8: &'a Prepared<'p>,
+    /// The same for 16-bit input: its 65,536-entry degamma table is built on first use.
+    pub p16: &'a std::sync::OnceLock<Prepared<'p>>,
     pub enhancer: Option<&'a campro_eval::enhance::Enhancer>,
 }
 
-impl Capture<'_, '_> {
+impl<'p> Capture<'_, 'p> {
+    /// The reference path for 16-bit input.
+    pub fn prepared16(&self) -> &Prepared<'p> {
+        self.p16.get_or_init(|| Prepared::new(self.p8.params(), Depth::Sixteen))
+    }
+
+    /// `dst` = the 16-bit capture of the `w`-pixel-wide 16-bit RGB frame `src` (the exact
+    /// reference path on every core; no enhancer: it takes 8 bits).
+    pub fn run16(&self, src: &[u16], dst: &mut [u16], w: u32) {
+        let prep = self.prepared16();
+        let row = 3 * w as usize;
+        src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| prep.run(s, d, Depth::Sixteen));
+    }
+
     /// `dst` = the capture of the `w` x `h` RGB frame `src`.
     pub fn run(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32) -> Result<()> {
         let row = 3 * w as usize;

@@ -263,7 +263,7 @@ pub fn inspect(
     enhancer: Option<&campro_eval::enhance::Enhancer>,
     json_out: bool,
 ) -> Result<()> {
-    let found = simulate::collect_inputs(inputs, out)?;
+    let found = simulate::collect_inputs(inputs, out, &|p| p.with_extension("png"))?;
     for (i, why) in &found.skipped {
         eprintln!("warning: skipping {}: {why}", crate::shown(i));
     }

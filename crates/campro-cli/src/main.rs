@@ -90,15 +90,33 @@ enum Cmd {
     },
     /// Run the desktop pipeline on images and videos (files or folders, recursive) into PNGs and videos (ffmpeg).
     Simulate {
+        /// Parameter set: a bundled preset's name (campro presets) or a JSON file.
         params: PathBuf,
+        /// Images, videos or folders (recursive); `-` reads one video from standard input
+        /// (a container, or raw RGB frames with --size); /dev/videoN a live camera (Linux).
         #[arg(required = true)]
         inputs: Vec<PathBuf>,
-        /// Output folder.
+        /// Output folder; for one video also a video file name, `-` (standard output,
+        /// Matroska) or a V4L2 output device (v4l2loopback).
         #[arg(short, long)]
         output: PathBuf,
-        /// Output bit depth.
+        /// Output bit depth of images; 16 also gives video 16-bit frames (video of more
+        /// than 8 bits gets them anyway).
         #[arg(long, value_enum, default_value_t = BitDepth::Eight)]
         bit_depth: BitDepth,
+        /// JPEG quality of JPEG outputs (a JPEG input stays JPEG), 1 to 100.
+        #[arg(long, default_value_t = 92, value_parser = clap::value_parser!(u8).range(1..=100))]
+        quality: u8,
+        /// Raw standard input's frame size (WxH, 8-bit RGB), or the size asked of a camera.
+        #[arg(long, value_parser = parse_size)]
+        size: Option<(u32, u32)>,
+        /// Raw standard input's frame rate (default 30), or the rate asked of a camera
+        /// (frames a second: 30, 29.97 or 30000/1001).
+        #[arg(long, value_parser = parse_rate)]
+        rate: Option<String>,
+        /// Stop each video after this many frames (a live camera runs until Ctrl-C without).
+        #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+        frames: Option<u64>,
         /// Overwrite existing outputs.
         #[arg(long)]
         force: bool,
@@ -342,6 +360,31 @@ fn parse_bitrate(s: &str) -> std::result::Result<String, String> {
         Ok(s.to_string())
     } else {
         Err(format!("must be a bitrate such as 8M or 2500k, got {s}"))
+    }
+}
+
+/// `--size`: WxH, each side 1 to 16384 pixels.
+fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
+    let side = |v: &str| v.parse::<u32>().ok().filter(|v| (1..=16384).contains(v));
+    s.split_once(['x', 'X'])
+        .and_then(|(w, h)| Some((side(w)?, side(h)?)))
+        .ok_or_else(|| format!("must be WIDTHxHEIGHT with sides of 1 to 16384 pixels, got {}", short(s, 40)))
+}
+
+/// `--rate`: frames a second, a positive number (`29.97`) or fraction (`30000/1001`) up to 1000.
+fn parse_rate(s: &str) -> std::result::Result<String, String> {
+    let num = |v: &str| v.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0);
+    let value = match s.split_once('/') {
+        Some((n, d)) if n.bytes().all(|b| b.is_ascii_digit()) && d.bytes().all(|b| b.is_ascii_digit()) => {
+            num(n).zip(num(d)).map(|(n, d)| n / d)
+        }
+        Some(_) => None,
+        None if s.len() <= 12 && s.bytes().all(|b| b.is_ascii_digit() || b == b'.') => num(s),
+        None => None,
+    };
+    match value {
+        Some(v) if v <= 1000.0 => Ok(s.to_string()),
+        _ => Err(format!("must be frames a second up to 1000 (30, 29.97 or 30000/1001), got {}", short(s, 40))),
     }
 }
 
@@ -735,6 +778,10 @@ fn run(cli: Cli) -> Result<()> {
             inputs,
             output,
             bit_depth,
+            quality,
+            size,
+            rate,
+            frames,
             force,
             jobs,
             codec,
@@ -748,24 +795,25 @@ fn run(cli: Cli) -> Result<()> {
             let enc = video::Encoding { codec, crf: Some(crf), bitrate, preset };
             let p = load_params(&params)?;
             let enhancer = if enhance { Some(capture::enhancer_of(&params, &p)?) } else { None };
-            simulate::simulate(
-                &p,
-                &inputs,
-                &output,
-                match bit_depth {
+            let options = simulate::Options {
+                depth: match bit_depth {
                     BitDepth::Eight => Depth::Eight,
                     BitDepth::Sixteen => Depth::Sixteen,
                 },
-                match (force, skip_existing) {
+                existing: match (force, skip_existing) {
                     (true, _) => simulate::Existing::Replace,
                     (_, true) => simulate::Existing::Skip,
                     _ => simulate::Existing::Refuse,
                 },
-                jobs.map(|j| j as usize),
-                &enc,
-                enhancer.as_ref(),
-                matches!(format, Report::Json),
-            )
+                jobs: jobs.map(|j| j as usize),
+                enc: &enc,
+                enhancer: enhancer.as_ref(),
+                json: matches!(format, Report::Json),
+                quality,
+                frames: video::FrameFormat { size, rate },
+                max_frames: frames,
+            };
+            simulate::simulate(&p, &inputs, &output, &options)
         }
         Cmd::Inspect {
             params,

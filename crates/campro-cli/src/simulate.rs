@@ -1,4 +1,6 @@
-//! `campro simulate`: the desktop pipeline on image files and folders, into PNGs.
+//! `campro simulate`: the desktop pipeline on image files, videos and folders (each output
+//! keeps its input's format: JPEG, PNG, TIFF or the video's container), and on one video
+//! stream (standard input, a camera) into a file, standard output or a device.
 //!
 //! Hostile input is normal input here: inputs are regular files read with a byte cap;
 //! links, FIFOs and devices inside folders are skipped with a warning; an output folder
@@ -8,7 +10,7 @@
 //! other instead of adding up.
 
 use crate::capture::Capture;
-use crate::video::{self, Encoding};
+use crate::video::{self, Encoding, FrameFormat, Sink, Source};
 use crate::write_atomic;
 use anyhow::{anyhow, bail, Result};
 use campro::pipeline::fast::Exact8;
@@ -35,8 +37,9 @@ fn resolved(p: &Path) -> PathBuf {
     std::fs::canonicalize(p).or_else(|_| std::path::absolute(p)).unwrap_or_else(|_| p.to_path_buf())
 }
 
-/// Every (input file, output file) pair: folders are walked recursively and mirrored.
-pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
+/// Every (input file, output file) pair: folders are walked recursively and mirrored;
+/// `name` turns a mirrored path into its output's (the ending).
+pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path, name: &dyn Fn(&Path) -> PathBuf) -> Result<Inputs> {
     let out_abs = resolved(out);
     let mut found = Inputs { jobs: Vec::new(), skipped: Vec::new() };
     for input in inputs {
@@ -64,11 +67,11 @@ pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
                     continue;
                 }
                 let rel = entry.path().strip_prefix(input).expect("walkdir yields paths under its root");
-                found.jobs.push((entry.path().to_path_buf(), output_for(&out.join(rel))));
+                found.jobs.push((entry.path().to_path_buf(), name(&out.join(rel))));
             }
         } else if meta.is_file() {
-            let name = input.file_name().ok_or_else(|| anyhow!("{}: not a file name", crate::shown(input)))?;
-            found.jobs.push((input.clone(), output_for(&out.join(Path::new(name)))));
+            let file = input.file_name().ok_or_else(|| anyhow!("{}: not a file name", crate::shown(input)))?;
+            found.jobs.push((input.clone(), name(&out.join(Path::new(file)))));
         } else {
             bail!("{}: is not a regular file or folder", crate::shown(input));
         }
@@ -86,12 +89,34 @@ pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path) -> Result<Inputs> {
     Ok(found)
 }
 
-/// Where an input goes: images become PNGs, videos keep their container.
-fn output_for(path: &Path) -> PathBuf {
-    if video::is_video(path) {
-        path.to_path_buf()
-    } else {
-        path.with_extension("png")
+/// Where an input goes: a video keeps its container, a PNG or TIFF its format, a JPEG
+/// stays JPEG at 8 bits (PNG at 16: JPEG has no 16-bit form); anything else becomes PNG.
+fn output_for(path: &Path, depth: Depth) -> PathBuf {
+    match ImageFormat::of(path) {
+        _ if video::is_video(path) => path.to_path_buf(),
+        Some(ImageFormat::Jpeg) if depth == Depth::Eight => path.to_path_buf(),
+        Some(ImageFormat::Png | ImageFormat::Tiff) => path.to_path_buf(),
+        _ => path.with_extension("png"),
+    }
+}
+
+/// The image formats `simulate` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ImageFormat {
+    Png,
+    Jpeg,
+    Tiff,
+}
+
+impl ImageFormat {
+    /// The format a path names by its ending.
+    fn of(path: &Path) -> Option<Self> {
+        match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
+            "png" => Some(Self::Png),
+            "jpg" | "jpeg" => Some(Self::Jpeg),
+            "tif" | "tiff" => Some(Self::Tiff),
+            _ => None,
+        }
     }
 }
 
@@ -127,27 +152,196 @@ fn record(
     })
 }
 
-/// Runs `p` over every image and video under `inputs` into PNGs and videos under `out`;
-/// with `json`, prints what happened to each input (written, skipped, failed, with its time)
-/// as one JSON object on stdout.
-#[allow(clippy::too_many_arguments)]
-pub fn simulate(
-    p: &Params,
-    inputs: &[PathBuf],
-    out: &Path,
-    depth: Depth,
-    existing: Existing,
-    jobs: Option<usize>,
-    enc: &Encoding,
-    enhancer: Option<&campro_eval::enhance::Enhancer>,
-    json: bool,
-) -> Result<()> {
-    let force = existing == Existing::Replace;
+/// How `simulate` runs.
+pub struct Options<'a> {
+    /// Output bit depth of images; `Sixteen` also makes video frames 16-bit.
+    pub depth: Depth,
+    pub existing: Existing,
+    /// Worker threads (all cores when `None`).
+    pub jobs: Option<usize>,
+    pub enc: &'a Encoding,
+    pub enhancer: Option<&'a campro_eval::enhance::Enhancer>,
+    /// Print one JSON object on stdout at the end.
+    pub json: bool,
+    /// JPEG quality, 1..=100.
+    pub quality: u8,
+    /// Raw standard input's frame size and rate, or a camera's.
+    pub frames: FrameFormat,
+    /// Stop every video after this many frames.
+    pub max_frames: Option<u64>,
+}
+
+/// What `-` and device paths mean among the inputs and for the output: one video stream.
+fn stream_job(inputs: &[PathBuf], out: &Path, o: &Options) -> Result<Option<(Source, Sink)>> {
+    let is_dash = |p: &Path| p.as_os_str() == "-";
+    let source_of = |i: &Path| -> Option<Source> {
+        if is_dash(i) {
+            Some(Source::Stdin(o.frames.clone()))
+        } else if video::is_device(i) {
+            Some(Source::Camera(i.to_path_buf(), o.frames.clone()))
+        } else {
+            None
+        }
+    };
+    let stream_in = inputs.iter().find_map(|i| source_of(i));
+    let stream_out = if is_dash(out) {
+        Some(Sink::Stdout)
+    } else if video::is_device(out) {
+        Some(Sink::Device(out.to_path_buf()))
+    } else {
+        None
+    };
+    if stream_in.is_none() && stream_out.is_none() {
+        if o.frames != (FrameFormat { size: None, rate: None }) {
+            bail!("--size and --rate: only for standard input (-) or a camera (/dev/videoN)");
+        }
+        return Ok(None);
+    }
+    if inputs.len() != 1 {
+        bail!("standard input, a camera, standard output or a device: one input only ({} given)", inputs.len());
+    }
+    let source = match stream_in {
+        Some(s) => s,
+        None if video::is_video(&inputs[0]) && inputs[0].is_file() => Source::File(inputs[0].clone()),
+        None => bail!(
+            "--output {}: streams a video; {} is not a video file (endings: {})",
+            crate::shown(out),
+            crate::shown(&inputs[0]),
+            video::VIDEO_EXTENSIONS.join(", ")
+        ),
+    };
+    if matches!(source, Source::File(_)) && o.frames != (FrameFormat { size: None, rate: None }) {
+        bail!("--size and --rate: only for standard input (-) or a camera (/dev/videoN)");
+    }
+    let sink = match stream_out {
+        Some(s) => s,
+        None if video::is_video(out) && !out.is_dir() => Sink::File(o.enc.output_path(out)),
+        None => bail!(
+            "--output {}: with standard input or a camera, give a video file name (endings: {}), - (standard output) or a V4L2 device",
+            crate::shown(out),
+            video::VIDEO_EXTENSIONS.join(", ")
+        ),
+    };
+    if o.enc.codec == "rawvideo" && sink != Sink::Stdout {
+        bail!("--codec rawvideo: raw frames go to standard output only (-o -)");
+    }
+    Ok(Some((source, sink)))
+}
+
+/// One input file and an output with an image or video ending that is not a folder: the
+/// output is that file (`simulate P photo.jpg -o protected.jpg`), in the format its ending
+/// names.
+fn single_file(inputs: &[PathBuf], out: &Path) -> Result<Option<(PathBuf, PathBuf)>> {
+    let [input] = inputs else { return Ok(None) };
+    let named = video::is_video(out) || ImageFormat::of(out).is_some();
+    if !named || out.is_dir() || !input.is_file() {
+        return Ok(None);
+    }
+    if video::is_video(input) != video::is_video(out) {
+        bail!(
+            "--output {}: {} is {}; name a {} file or a folder",
+            crate::shown(out),
+            crate::shown(input),
+            if video::is_video(input) { "a video" } else { "an image" },
+            if video::is_video(input) { "video" } else { "PNG, JPEG or TIFF" }
+        );
+    }
+    if resolved(input) == resolved(out) {
+        bail!("--output: writing {} would replace its input", crate::shown(out));
+    }
+    Ok(Some((input.clone(), out.to_path_buf())))
+}
+
+/// One video stream: `source` into `sink`.
+fn stream(capture: &Capture, source: &Source, sink: &Sink, o: &Options, pool: &rayon::ThreadPool) -> Result<()> {
+    let started = std::time::Instant::now();
+    let (input, output) = (PathBuf::from(source.shown()), PathBuf::from(sink_shown(sink)));
+    if let Sink::File(f) = sink {
+        if o.existing == Existing::Skip && f.exists() {
+            eprintln!("skipped {}: {} is already there", source.shown(), crate::shown(f));
+            if o.json {
+                print_json(&input, vec![record(&input, f, "skipped", started, None)], 0, 1)?;
+            }
+            return Ok(());
+        }
+        if o.existing != Existing::Replace && f.exists() {
+            bail!("{} exists (use --force to overwrite, or --skip-existing)", crate::shown(f));
+        }
+        if matches!(source, Source::File(i) if std::fs::canonicalize(i).ok() == std::fs::canonicalize(f).ok()) {
+            bail!("--output: writing {} would replace its input", crate::shown(f));
+        }
+    }
+    let job = video::Job {
+        capture,
+        enc: o.enc,
+        force: o.existing == Existing::Replace,
+        sixteen: o.depth == Depth::Sixteen,
+        max_frames: o.max_frames,
+    };
+    let warn = |w: &str| eprintln!("warning: {}: {w}", source.shown());
+    match pool.install(|| video::simulate(&job, source, sink, &warn)) {
+        Ok(done) => {
+            eprintln!("{}", summary(&source.shown(), &sink_shown(sink), &done));
+            if o.json {
+                let mut r = record(&input, &output, "written", started, None);
+                r["frames"] = done.frames.into();
+                r["fps"] = ((done.fps * 10.0).round() / 10.0).into();
+                r["capacityFps"] = ((done.capacity * 10.0).round() / 10.0).into();
+                print_json(&output, vec![r], 0, 0)?;
+            }
+            Ok(())
+        }
+        Err(e) => {
+            if o.json {
+                print_json(&output, vec![record(&input, &output, "failed", started, Some(crate::one_line(&e)))], 1, 0)?;
+            }
+            Err(e)
+        }
+    }
+}
+
+fn sink_shown(sink: &Sink) -> String {
+    match sink {
+        Sink::File(p) | Sink::Device(p) => crate::shown(p),
+        Sink::Stdout => "standard output".into(),
+    }
+}
+
+/// The line a finished video gets: frames, bits and the rate sustained against the source's.
+fn summary(input: &str, output: &str, done: &video::Outcome) -> String {
+    let bits = if done.sixteen { ", 16-bit frames" } else { "" };
+    let rate = match done.source_fps {
+        Some(s) => {
+            format!("{:.1} frames a second, the camera stage alone {:.1}; the source's {s:.1}", done.fps, done.capacity)
+        }
+        None => format!("{:.1} frames a second", done.fps),
+    };
+    format!("simulated {} frames of {input} into {output} ({rate}{bits})", done.frames)
+}
+
+/// The `--format json` object.
+fn print_json(out: &Path, mut files: Vec<serde_json::Value>, failed: usize, skipped: usize) -> Result<()> {
+    files.sort_by(|a, b| a["input"].as_str().cmp(&b["input"].as_str()));
+    let written = files.len() - failed - skipped;
+    crate::say!(
+        "{}",
+        serde_json::to_string_pretty(&serde_json::json!({
+            "output": out.display().to_string(), "written": written, "skipped": skipped, "failed": failed, "files": files,
+        }))?
+    );
+    Ok(())
+}
+
+/// Runs `p` over every image and video under `inputs` into images and videos under `out`
+/// (or one video stream, see [`stream_job`]); with `json`, prints what happened to each
+/// input (written, skipped, failed, with its time) as one JSON object on stdout.
+pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Result<()> {
+    let force = o.existing == Existing::Replace;
     let records = std::sync::Mutex::new(Vec::new());
     let note = |v: serde_json::Value| records.lock().unwrap_or_else(|p| p.into_inner()).push(v);
     let skipped = AtomicUsize::new(0);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let threads = match jobs {
+    let threads = match o.jobs {
         Some(j) if j > cores => {
             eprintln!("warning: --jobs {j} is more than the {cores} cores; using {cores}");
             cores
@@ -156,7 +350,22 @@ pub fn simulate(
         None => cores,
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
-    let found = collect_inputs(inputs, out)?;
+    // The 16-bit degamma table (65536 powers) is built only if a 16-bit image turns up.
+    let prepared8 = Prepared::new(p, Depth::Eight);
+    let fast8 = Exact8::new(p);
+    let prepared16 = std::sync::OnceLock::new();
+    let capture = Capture { fast8: &fast8, p8: &prepared8, p16: &prepared16, enhancer: o.enhancer };
+    if let Some((source, sink)) = stream_job(inputs, out, o)? {
+        return stream(&capture, &source, &sink, o, &pool);
+    }
+    let enc = o.enc;
+    if enc.codec == "rawvideo" {
+        bail!("--codec rawvideo: raw frames go to standard output only (-o -)");
+    }
+    let found = match single_file(inputs, out)? {
+        Some(job) => Inputs { jobs: vec![job], skipped: Vec::new() },
+        None => collect_inputs(inputs, out, &|p| output_for(p, o.depth))?,
+    };
     for (i, why) in &found.skipped {
         eprintln!("warning: skipping {}: {why}", crate::shown(i));
     }
@@ -192,35 +401,30 @@ pub fn simulate(
         indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta}")
             .expect("valid template"),
     );
-    // The 16-bit degamma table (65536 powers) is built only if a 16-bit image turns up.
-    let prepared8 = Prepared::new(p, Depth::Eight);
-    let fast8 = Exact8::new(p);
-    let prepared16 = std::sync::OnceLock::new();
     let budget = Budget::global();
     let failed = AtomicUsize::new(0);
-    let capture = Capture { fast8: &fast8, enhancer };
-    let paths = Paths { capture: &capture, p8: &prepared8, p16: &prepared16, budget, depth, force };
+    let paths = Paths { capture: &capture, budget, depth: o.depth, force, quality: o.quality };
     pool.install(|| {
-        images.par_iter().for_each(|(i, o)| {
+        images.par_iter().for_each(|(i, out)| {
             let started = std::time::Instant::now();
-            if existing == Existing::Skip && o.exists() {
+            if o.existing == Existing::Skip && out.exists() {
                 skipped.fetch_add(1, Ordering::Relaxed);
-                note(record(i, o, "skipped", started, None));
+                note(record(i, out, "skipped", started, None));
                 bar.inc(1);
                 return;
             }
-            let r = if !force && o.exists() {
-                Err(anyhow!("{} exists (use --force to overwrite, or --skip-existing)", crate::shown(o)))
+            let r = if !force && out.exists() {
+                Err(anyhow!("{} exists (use --force to overwrite, or --skip-existing)", crate::shown(out)))
             } else {
-                paths.one(i, o, &|w| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(i))))
+                paths.one(i, out, &|w| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(i))))
             };
             match r {
-                Ok(()) => note(record(i, o, "written", started, None)),
+                Ok(()) => note(record(i, out, "written", started, None)),
                 Err(e) => {
                     let line = crate::about(i, &e);
                     bar.suspend(|| eprintln!("error: {line}"));
                     failed.fetch_add(1, Ordering::Relaxed);
-                    note(record(i, o, "failed", started, Some(line)));
+                    note(record(i, out, "failed", started, Some(line)));
                 }
             }
             bar.inc(1);
@@ -236,53 +440,52 @@ pub fn simulate(
     }
     // Videos one after another, each frame on every core.
     for (i, wanted) in &videos {
-        let o = enc.output_path(wanted);
-        if &o != wanted {
+        let out = enc.output_path(wanted);
+        if &out != wanted {
             eprintln!(
                 "note: {} is written as {} ({} needs Matroska)",
                 crate::shown(wanted),
-                crate::shown(&o),
+                crate::shown(&out),
                 enc.codec
             );
         }
         let warn = |w: &str| eprintln!("warning: {}: {w}", crate::shown(i));
         let started = std::time::Instant::now();
-        if existing == Existing::Skip && o.exists() {
+        if o.existing == Existing::Skip && out.exists() {
             skipped += 1;
-            eprintln!("skipped {}: {} is already there", crate::shown(i), crate::shown(&o));
-            note(record(i, &o, "skipped", started, None));
+            eprintln!("skipped {}: {} is already there", crate::shown(i), crate::shown(&out));
+            note(record(i, &out, "skipped", started, None));
             continue;
         }
-        let r = if !force && o.exists() {
-            Err(anyhow!("{} exists (use --force to overwrite, or --skip-existing)", crate::shown(&o)))
+        let r = if !force && out.exists() {
+            Err(anyhow!("{} exists (use --force to overwrite, or --skip-existing)", crate::shown(&out)))
         } else {
-            pool.install(|| video::simulate(&capture, i, &o, enc, force, &warn))
+            let job = video::Job {
+                capture: &capture,
+                enc,
+                force,
+                sixteen: o.depth == Depth::Sixteen,
+                max_frames: o.max_frames,
+            };
+            pool.install(|| video::simulate(&job, &Source::File(i.clone()), &Sink::File(out.clone()), &warn))
         };
         match r {
-            Ok(n) => {
-                eprintln!("simulated {n} frames of {} into {}", crate::shown(i), crate::shown(&o));
-                let mut r = record(i, &o, "written", started, None);
-                r["frames"] = n.into();
+            Ok(done) => {
+                eprintln!("{}", summary(&crate::shown(i), &crate::shown(&out), &done));
+                let mut r = record(i, &out, "written", started, None);
+                r["frames"] = done.frames.into();
                 note(r);
             }
             Err(e) => {
                 let line = crate::about(i, &e);
                 eprintln!("error: {line}");
                 failed += 1;
-                note(record(i, &o, "failed", started, Some(line)));
+                note(record(i, &out, "failed", started, Some(line)));
             }
         }
     }
-    if json {
-        let mut files = records.into_inner().unwrap_or_else(|p| p.into_inner());
-        files.sort_by(|a, b| a["input"].as_str().cmp(&b["input"].as_str()));
-        let written = files.len() - failed - skipped;
-        crate::say!(
-            "{}",
-            serde_json::to_string_pretty(&serde_json::json!({
-                "output": out.display().to_string(), "written": written, "skipped": skipped, "failed": failed, "files": files,
-            }))?
-        );
+    if o.json {
+        print_json(out, records.into_inner().unwrap_or_else(|p| p.into_inner()), failed, skipped)?;
     }
     if failed > 0 {
         bail!("{failed} input(s) failed");
@@ -293,11 +496,10 @@ pub fn simulate(
 /// What every job shares.
 struct Paths<'a, 'p> {
     capture: &'a Capture<'a, 'p>,
-    p8: &'a Prepared<'p>,
-    p16: &'a std::sync::OnceLock<Prepared<'p>>,
     budget: &'a Budget,
     depth: Depth,
     force: bool,
+    quality: u8,
 }
 
 impl Paths<'_, '_> {
@@ -306,6 +508,7 @@ impl Paths<'_, '_> {
         let (w, h) = (img.width(), img.height());
         let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
         let row = 3 * w as usize;
+        let format = ImageFormat::of(output).unwrap_or(ImageFormat::Png);
         if self.capture.enhancer.is_some() || (!sixteen && self.depth == Depth::Eight) {
             // 8 bits in and out: the exact path (AVX-512 blocks where the CPU has them),
             // bit-identical to the reference; the enhancer reads what an 8-bit camera gives.
@@ -316,39 +519,60 @@ impl Paths<'_, '_> {
             let mut dst = vec![0u8; src.len()];
             self.capture.run(&src, &mut dst, w, h)?;
             drop(src);
-            return write_atomic(output, &encode_png8(&dst, w, h)?, self.force);
+            return write_atomic(output, &encode(format, Samples::Eight(&dst), w, h, self.quality)?, self.force);
         }
         let (src, prep): (Vec<u16>, &Prepared) = if sixteen {
-            (img.into_rgb16().into_raw(), self.p16.get_or_init(|| Prepared::new(self.p8.params(), Depth::Sixteen)))
+            (img.into_rgb16().into_raw(), self.capture.prepared16())
         } else {
-            (img.into_rgb8().into_raw().into_iter().map(u16::from).collect(), self.p8)
+            (img.into_rgb8().into_raw().into_iter().map(u16::from).collect(), self.capture.p8)
         };
         let mut dst = vec![0u16; src.len()];
         src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| prep.run(s, d, self.depth));
         drop(src);
-        let png = encode_png(&dst, w, h, self.depth)?;
-        write_atomic(output, &png, self.force)
+        let samples = match self.depth {
+            Depth::Sixteen => Samples::Sixteen(&dst),
+            Depth::Eight => {
+                let eight: Vec<u8> = dst.iter().map(|&v| v as u8).collect();
+                return write_atomic(output, &encode(format, Samples::Eight(&eight), w, h, self.quality)?, self.force);
+            }
+        };
+        write_atomic(output, &encode(format, samples, w, h, self.quality)?, self.force)
     }
 }
 
-/// 8-bit RGB samples as a PNG.
-fn encode_png8(samples: &[u8], w: u32, h: u32) -> Result<Vec<u8>> {
+/// RGB samples of 8 or 16 bits.
+enum Samples<'a> {
+    Eight(&'a [u8]),
+    Sixteen(&'a [u16]),
+}
+
+/// `samples` (a `w` x `h` RGB image) as a file of `format`; JPEG at `quality` (8 bits only).
+fn encode(format: ImageFormat, samples: Samples, w: u32, h: u32, quality: u8) -> Result<Vec<u8>> {
     use image::ImageEncoder;
-    let mut buf = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut buf).write_image(samples, w, h, image::ExtendedColorType::Rgb8)?;
-    Ok(buf)
+    let (bytes, color) = match samples {
+        Samples::Eight(s) => (std::borrow::Cow::Borrowed(s), image::ExtendedColorType::Rgb8),
+        Samples::Sixteen(s) => {
+            (std::borrow::Cow::Owned(s.iter().flat_map(|v| v.to_ne_bytes()).collect()), image::ExtendedColorType::Rgb16)
+        }
+    };
+    let mut buf = std::io::Cursor::new(Vec::new());
+    match format {
+        ImageFormat::Png => image::codecs::png::PngEncoder::new(&mut buf).write_image(&bytes, w, h, color)?,
+        ImageFormat::Tiff => image::codecs::tiff::TiffEncoder::new(&mut buf).write_image(&bytes, w, h, color)?,
+        ImageFormat::Jpeg => {
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, quality).write_image(&bytes, w, h, color)?
+        }
+    }
+    Ok(buf.into_inner())
 }
 
 /// RGB samples (codes of `depth`) as a PNG of that depth.
 pub fn encode_png(samples: &[u16], w: u32, h: u32, depth: Depth) -> Result<Vec<u8>> {
-    use image::ImageEncoder;
     match depth {
-        Depth::Eight => encode_png8(&samples.iter().map(|&v| v as u8).collect::<Vec<u8>>(), w, h),
-        Depth::Sixteen => {
-            let mut buf = Vec::new();
-            let bytes: Vec<u8> = samples.iter().flat_map(|v| v.to_ne_bytes()).collect();
-            image::codecs::png::PngEncoder::new(&mut buf).write_image(&bytes, w, h, image::ExtendedColorType::Rgb16)?;
-            Ok(buf)
+        Depth::Eight => {
+            let eight: Vec<u8> = samples.iter().map(|&v| v as u8).collect();
+            encode(ImageFormat::Png, Samples::Eight(&eight), w, h, 100)
         }
+        Depth::Sixteen => encode(ImageFormat::Png, Samples::Sixteen(samples), w, h, 100),
     }
 }

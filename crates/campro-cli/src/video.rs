@@ -1,22 +1,37 @@
-//! Video through `campro simulate`: ffmpeg decodes (a process, raw RGB on a pipe), every
-//! frame goes through the exact 8-bit path on all cores, ffmpeg encodes (raw RGB in on a
-//! pipe), and the input's audio, subtitle and data streams and metadata are copied. Frames
-//! stream through: memory holds a few frames whatever the length.
+//! Video through `campro simulate`: ffmpeg decodes (a process, raw RGB on a pipe, each
+//! frame's timestamp beside it), every frame goes through the exact pipeline on all cores,
+//! ffmpeg encodes (the frames and their timestamps in on a pipe, as IVF), and a file
+//! input's audio, subtitle and data streams and metadata are copied. Frames stream through:
+//! memory holds a few frames whatever the length.
 //!
-//! What is kept: the frame size, the frame count, the frame rate (the stream's
-//! `r_frame_rate`; the output is constant-rate), the rotation (display matrix), every other
-//! stream, the container metadata. The output is written to a temporary file beside its
-//! destination and renamed when ffmpeg has finished, under the usual overwrite rules.
+//! What is kept: the frame size (an odd size is padded by one edge-replicated row or column
+//! for 4:2:0 codecs, with a warning; `ffv1` keeps it exactly), every frame's timestamp (so
+//! variable-frame-rate video keeps its timing and stays in step with its audio), the bit
+//! depth (input of more than 8 bits goes through the 16-bit path and is encoded with 10
+//! bits, or 16 with `ffv1`), the rotation (display matrix), every other stream, the
+//! container metadata. HDR transfer curves are noted: the camera model is SDR.
+//!
+//! Sources: a file, standard input (`-`: any container ffmpeg reads from a pipe, or raw
+//! RGB frames of a given size), a live V4L2 camera (`/dev/videoN`). Sinks: a file (written
+//! beside its destination and renamed when ffmpeg has finished, under the usual overwrite
+//! rules), standard output (`-`: Matroska, or raw RGB with `--codec rawvideo`), a V4L2
+//! output device (v4l2loopback).
 
+use crate::capture::Capture;
 use anyhow::{anyhow, bail, Context, Result};
-use std::io::{Read, Write};
+use std::io::{BufRead, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use std::sync::mpsc;
 
 /// Frames in flight between the decoder, the camera and the encoder.
 const IN_FLIGHT: usize = 4;
 /// Bytes of an ffmpeg's error output kept (the rest is read and dropped).
 const STDERR_KEPT: usize = 64 << 10;
+/// Longest line read from the decoder's timestamp stream, bytes.
+const LINE_MAX: u64 = 4096;
+/// Largest frame side, pixels.
+const MAX_SIDE: u32 = 16384;
 
 /// `path` as ffmpeg's `file:` URL of its absolute form: a name such as `-report:x.mp4`
 /// or `pipe:0.mp4` is then never read as an option or a protocol.
@@ -94,10 +109,25 @@ pub fn is_video(path: &Path) -> bool {
         .is_some_and(|e| VIDEO_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
+/// Whether `path` is a character device (a V4L2 camera or loopback output), Unix only.
+pub fn is_device(path: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        std::fs::metadata(path).is_ok_and(|m| m.file_type().is_char_device())
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = path;
+        false
+    }
+}
+
 /// How to encode.
 #[derive(Debug, Clone)]
 pub struct Encoding {
-    /// ffmpeg encoder name (`libx264`, `ffv1`, `libvpx-vp9`, ...).
+    /// ffmpeg encoder name (`libx264`, `ffv1`, `libvpx-vp9`, ...; `rawvideo` on standard
+    /// output writes raw RGB frames).
     pub codec: String,
     /// Constant quality (`-crf`), when no bitrate is given.
     pub crf: Option<u32>,
@@ -113,6 +143,11 @@ impl Encoding {
         self.codec == "ffv1"
     }
 
+    /// Whether the codec is one whose frames campro stores as 4:2:0 (even sizes only).
+    fn subsampled(&self) -> bool {
+        self.codec.starts_with("libx26") || self.codec.starts_with("libvpx")
+    }
+
     /// The output path for `wanted`: a lossless codec needs a container that holds it
     /// (Matroska); the ending is changed, and the caller says so.
     pub fn output_path(&self, wanted: &Path) -> PathBuf {
@@ -124,6 +159,53 @@ impl Encoding {
     }
 }
 
+/// Raw RGB frames: their size and rate (`--size`, `--rate`), for raw standard input; the
+/// size and rate asked of a camera.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FrameFormat {
+    /// Width and height, pixels.
+    pub size: Option<(u32, u32)>,
+    /// Frames a second, as ffmpeg reads it (`30`, `30000/1001`).
+    pub rate: Option<String>,
+}
+
+/// Where frames come from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Source {
+    /// A video file: its other streams, metadata and rotation are kept.
+    File(PathBuf),
+    /// Standard input: a container ffmpeg reads from a pipe, or raw 8-bit RGB frames when
+    /// the format gives a size. Audio from a pipe is not kept.
+    Stdin(FrameFormat),
+    /// A live V4L2 camera (`/dev/videoN`), at the size and rate asked, if any.
+    Camera(PathBuf, FrameFormat),
+}
+
+impl Source {
+    /// How the source is named in messages.
+    pub fn shown(&self) -> String {
+        match self {
+            Source::File(p) | Source::Camera(p, _) => crate::shown(p),
+            Source::Stdin(_) => "standard input".into(),
+        }
+    }
+
+    fn live(&self) -> bool {
+        !matches!(self, Source::File(_))
+    }
+}
+
+/// Where the protected video goes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Sink {
+    /// A file, replaced atomically (only with `--force` when it exists).
+    File(PathBuf),
+    /// Standard output: Matroska, or raw RGB frames with `--codec rawvideo`.
+    Stdout,
+    /// A V4L2 output device (v4l2loopback), raw YUV 4:2:0.
+    Device(PathBuf),
+}
+
 /// The first video stream, as ffprobe reports it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Probe {
@@ -131,12 +213,14 @@ pub struct Probe {
     pub width: u32,
     /// Frame height, pixels.
     pub height: u32,
-    /// `r_frame_rate`, as ffmpeg writes it (`30000/1001`).
-    pub rate: String,
     /// Frames, when the container says (`nb_frames`).
     pub frames: Option<u64>,
     /// Rotation from the display matrix, degrees.
     pub rotation: Option<i64>,
+    /// Bits a sample, when more than 8 (`bits_per_raw_sample`, or the pixel format's).
+    pub deep: bool,
+    /// The transfer curve, when the stream names one (`smpte2084`, `arib-std-b67`, ...).
+    pub transfer: Option<String>,
 }
 
 /// Fails with a message saying how to install ffmpeg when `name` cannot be run.
@@ -158,12 +242,29 @@ fn ffmpeg() -> Result<Command> {
     Ok(c)
 }
 
-/// Reads the first video stream's size, rate, frame count and rotation.
+/// Whether an ffmpeg pixel format holds more than 8 bits a sample (`yuv420p10le`,
+/// `p010le`, `rgb48le`, `gbrp12le`, ...).
+pub fn deep_pixel_format(name: &str) -> bool {
+    let Some(stem) = name.strip_suffix("le").or_else(|| name.strip_suffix("be")) else {
+        return false;
+    };
+    let digits: String = stem.chars().rev().take_while(|c| c.is_ascii_digit()).collect();
+    let bits: u32 = digits.chars().rev().collect::<String>().parse().unwrap_or(0);
+    // Packed formats name their bits a pixel (rgb48, rgba64, bgr565); planar ones a sample
+    // (yuv420p10, gbrp16, p010).
+    match bits {
+        9..=16 => !stem.starts_with("rgb") && !stem.starts_with("bgr") || bits == 16 && stem.starts_with("gray"),
+        48 | 64 => true,
+        _ => false,
+    }
+}
+
+/// Reads the first video stream's size, frame count, rotation, depth and transfer.
 pub fn probe(input: &Path) -> Result<Probe> {
     installed("ffprobe")?;
     let out = Command::new("ffprobe")
         .args(["-hide_banner", "-v", "error", "-select_streams", "v:0", "-of", "json", "-show_entries"])
-        .arg("stream=width,height,r_frame_rate,nb_frames:stream_side_data=rotation")
+        .arg("stream=width,height,nb_frames,pix_fmt,bits_per_raw_sample,color_transfer:stream_side_data=rotation")
         .arg(file_url(input)?)
         .stdin(Stdio::null())
         .output()?;
@@ -172,148 +273,445 @@ pub fn probe(input: &Path) -> Result<Probe> {
     }
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).context("ffprobe printed no JSON")?;
     let s = v.pointer("/streams/0").ok_or_else(|| anyhow!("no video stream"))?;
-    let dim = |k: &str| s.get(k).and_then(|x| x.as_u64()).filter(|&d| (1..=16384).contains(&d)).map(|d| d as u32);
+    let dim =
+        |k: &str| s.get(k).and_then(|x| x.as_u64()).filter(|&d| (1..=MAX_SIDE as u64).contains(&d)).map(|d| d as u32);
     let (width, height) =
-        dim("width").zip(dim("height")).ok_or_else(|| anyhow!("the video's size is missing or over 16384"))?;
-    let rate = s.get("r_frame_rate").and_then(|r| r.as_str()).unwrap_or("").to_string();
-    let ok = rate
-        .split_once('/')
-        .is_some_and(|(n, d)| n.parse::<u32>().is_ok_and(|n| n > 0) && d.parse::<u32>().is_ok_and(|d| d > 0));
-    if !ok {
-        bail!("the video's frame rate {rate:?} is not a positive fraction");
-    }
-    let frames = s.get("nb_frames").and_then(|n| n.as_str()).and_then(|n| n.parse().ok());
+        dim("width").zip(dim("height")).ok_or_else(|| anyhow!("the video's size is missing or over {MAX_SIDE}"))?;
+    let text = |k: &str| s.get(k).and_then(|n| n.as_str()).map(str::to_string);
+    let frames = text("nb_frames").and_then(|n| n.parse().ok());
     let rotation = s
         .get("side_data_list")
         .and_then(|l| l.as_array())
         .and_then(|l| l.iter().find_map(|d| d.get("rotation").and_then(|r| r.as_i64())));
-    Ok(Probe { width, height, rate, frames, rotation })
+    let bits = text("bits_per_raw_sample").and_then(|b| b.parse::<u32>().ok());
+    let deep = bits.is_some_and(|b| b > 8) || text("pix_fmt").is_some_and(|f| deep_pixel_format(&f));
+    let transfer = text("color_transfer").filter(|t| t != "unknown");
+    Ok(Probe { width, height, frames, rotation, deep, transfer })
 }
 
-/// Simulates `params`' camera on `input` into `output` (which the caller checked).
-pub fn simulate(
-    capture: &crate::capture::Capture,
-    input: &Path,
-    output: &Path,
-    enc: &Encoding,
-    force: bool,
-    warn: &dyn Fn(&str),
-) -> Result<u64> {
-    let p = probe(input)?;
-    let frame_bytes = 3 * p.width as usize * p.height as usize;
-    // The frames in flight (the pool, the output frame) come from the process's budget.
-    let held = (frame_bytes as u64).saturating_mul(IN_FLIGHT as u64 + 1);
+/// What a video run did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    /// Frames written.
+    pub frames: u64,
+    /// Frames a second the whole run sustained (decode, camera, encode), first frame to last.
+    pub fps: f64,
+    /// Frames a second the camera stage alone can do (its busy time): what a live source
+    /// must not outrun.
+    pub capacity: f64,
+    /// Frames a second of the source, from its first and last timestamps (two frames or more).
+    pub source_fps: Option<f64>,
+    /// Whether the 16-bit path ran.
+    pub sixteen: bool,
+}
+
+/// One video run.
+pub struct Job<'a, 'c, 'p> {
+    pub capture: &'a Capture<'c, 'p>,
+    pub enc: &'a Encoding,
+    /// Replace an existing output file.
+    pub force: bool,
+    /// Frames of 16 bits even from an 8-bit source (`--bit-depth 16`).
+    pub sixteen: bool,
+    /// Stop after this many frames (`--frames`).
+    pub max_frames: Option<u64>,
+}
+
+/// The decoder's timestamp stream (`framecrc` on its stderr): its header, then a
+/// presentation timestamp a frame.
+enum Clock {
+    /// The time base (numerator, denominator) and the frame size.
+    Header { tb: (u64, u64), width: u32, height: u32 },
+    /// The next frame's presentation timestamp, in the time base.
+    Pts(i64),
+}
+
+/// Reads the decoder's stderr: `framecrc` lines become [`Clock`] events, other lines (its
+/// errors) are kept, at most [`STDERR_KEPT`] bytes.
+fn clock(stderr: std::process::ChildStderr, tx: mpsc::Sender<Clock>) -> std::thread::JoinHandle<Vec<u8>> {
+    std::thread::spawn(move || {
+        let mut r = std::io::BufReader::new(stderr);
+        let mut kept = Vec::new();
+        let mut tb = None;
+        let mut line = Vec::new();
+        loop {
+            line.clear();
+            match r.by_ref().take(LINE_MAX).read_until(b'\n', &mut line) {
+                Ok(0) | Err(_) => break,
+                Ok(_) => {}
+            }
+            let text = String::from_utf8_lossy(&line);
+            let text = text.trim_end();
+            let event = if let Some(v) = text.strip_prefix("#tb 0: ") {
+                tb = v.split_once('/').and_then(|(n, d)| Some((n.parse::<u64>().ok()?, d.parse::<u64>().ok()?)));
+                tb.filter(|&(n, d)| n > 0 && d > 0).map(|_| None)
+            } else if let Some(v) = text.strip_prefix("#dimensions 0: ") {
+                let size = v.split_once('x').and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)));
+                match (tb, size) {
+                    (Some(tb), Some((width, height))) => Some(Some(Clock::Header { tb, width, height })),
+                    _ => None,
+                }
+            } else if text.starts_with('#') {
+                Some(None)
+            } else {
+                let f: Vec<&str> = text.split(',').map(str::trim).collect();
+                match (f.len(), f.first(), f.get(2).and_then(|p| p.parse::<i64>().ok())) {
+                    (6, Some(&"0"), Some(pts)) => Some(Some(Clock::Pts(pts))),
+                    _ => None,
+                }
+            };
+            match event {
+                Some(Some(e)) => {
+                    let _ = tx.send(e);
+                }
+                Some(None) => {}
+                None => {
+                    let room = STDERR_KEPT.saturating_sub(kept.len());
+                    kept.extend_from_slice(&line[..line.len().min(room)]);
+                }
+            }
+        }
+        kept
+    })
+}
+
+/// The decoder's command: `source` as raw RGB (`rgb24`, or `rgb48le` when `sixteen`) on
+/// stdout and each frame's timestamp as `framecrc` on stderr.
+fn decoder(source: &Source, sixteen: bool) -> Result<Command> {
+    let mut c = ffmpeg()?;
+    match source {
+        Source::File(path) => {
+            // Original timestamps, so that the encoder's copy of the other streams lines up.
+            c.args(["-copyts", "-autorotate", "0", "-i"]).arg(file_url(path)?);
+        }
+        Source::Stdin(fmt) => {
+            if let Some((w, h)) = fmt.size {
+                c.args(["-f", "rawvideo", "-pix_fmt", "rgb24", "-video_size", &format!("{w}x{h}")]);
+                c.args(["-framerate", fmt.rate.as_deref().unwrap_or("30")]);
+            }
+            c.args(["-i", "pipe:0"]).stdin(Stdio::inherit());
+        }
+        Source::Camera(dev, fmt) => {
+            c.args(["-f", "v4l2"]);
+            if let Some((w, h)) = fmt.size {
+                c.args(["-video_size", &format!("{w}x{h}")]);
+            }
+            if let Some(r) = &fmt.rate {
+                c.args(["-framerate", r]);
+            }
+            c.arg("-i").arg(dev);
+        }
+    }
+    if !matches!(source, Source::Stdin(_)) {
+        c.stdin(Stdio::null());
+    }
+    let pix = if sixteen { "rgb48le" } else { "rgb24" };
+    c.args(["-map", "0:v:0", "-fps_mode", "passthrough", "-flush_packets", "1", "-f", "rawvideo", "-pix_fmt", pix])
+        .arg("pipe:1")
+        .args(["-map", "0:v:0", "-fps_mode", "passthrough", "-enc_time_base", "-1", "-c:v", "wrapped_avframe"])
+        .args(["-flush_packets", "1", "-f", "framecrc", "pipe:2"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    Ok(c)
+}
+
+/// The encoder's command: IVF frames (raw RGB with timestamps) on stdin, `source`'s other
+/// streams beside them when it is a file, into `target`.
+fn encoder(
+    job: &Job,
+    source: &Source,
+    sink: &Sink,
+    target: Option<&Path>,
+    size: (u32, u32),
+    sixteen: bool,
+) -> Result<Command> {
+    let enc = job.enc;
+    let mut c = ffmpeg()?;
+    c.arg("-y");
+    if matches!(source, Source::File(_)) {
+        c.arg("-copyts");
+    }
+    c.args(["-f", "ivf", "-c:v", "rawvideo", "-i", "pipe:0"]);
+    if let Source::File(path) = source {
+        c.arg("-i").arg(file_url(path)?);
+        c.args(["-map", "0:v", "-map", "1:a?", "-map", "1:s?", "-map", "1:d?", "-map_metadata", "1"]);
+        c.args(["-c:a", "copy", "-c:s", "copy", "-c:d", "copy"]);
+    } else {
+        c.args(["-map", "0:v"]);
+    }
+    c.args(["-fps_mode", "passthrough", "-enc_time_base", "-1"]);
+    let device = matches!(sink, Sink::Device(_));
+    let subsampled = device || enc.subsampled();
+    if subsampled && (size.0 % 2 == 1 || size.1 % 2 == 1) {
+        // 4:2:0 holds even sizes only: one more column or row, a copy of the last one.
+        let (right, bottom) = (size.0 % 2, size.1 % 2);
+        c.args(["-vf", &format!("pad=iw+{right}:ih+{bottom},fillborders=right={right}:bottom={bottom}:mode=smear")]);
+    }
+    if device {
+        c.args(["-c:v", "rawvideo", "-pix_fmt", "yuv420p", "-f", "v4l2"]);
+    } else {
+        c.args(["-c:v", &enc.codec]);
+        if enc.lossless() {
+            c.args(["-pix_fmt", if sixteen { "gbrp16le" } else { "gbrp" }, "-level", "3"]);
+        } else if subsampled {
+            c.args(["-pix_fmt", if sixteen { "yuv420p10le" } else { "yuv420p" }]);
+        }
+        match (&enc.bitrate, enc.crf) {
+            (Some(b), _) => {
+                c.args(["-b:v", b]);
+            }
+            (None, Some(q)) if !enc.lossless() => {
+                c.args(["-crf", &q.to_string()]);
+                if enc.codec.starts_with("libvpx") {
+                    c.args(["-b:v", "0"]);
+                }
+            }
+            _ => {}
+        }
+        if let Some(pr) = &enc.preset {
+            c.args(["-preset", pr]);
+        }
+    }
+    match (sink, target) {
+        (Sink::Stdout, _) => {
+            c.args(["-f", "matroska", "pipe:1"]).stdout(Stdio::inherit());
+        }
+        (Sink::Device(dev), _) => {
+            c.arg(dev);
+        }
+        (Sink::File(_), Some(t)) => {
+            c.arg(file_url(t)?);
+        }
+        (Sink::File(p), None) => bail!("{}: no temporary file to write", crate::shown(p)),
+    }
+    c.stdin(Stdio::piped()).stderr(Stdio::piped());
+    Ok(c)
+}
+
+/// The 32-byte IVF file header for raw frames of `size` (fourcc `RGB` and the bits a
+/// pixel, ffmpeg's raw tag) in time base `tb`.
+fn ivf_header(size: (u32, u32), sixteen: bool, tb: (u64, u64)) -> Result<[u8; 32]> {
+    let side = |v: u32| u16::try_from(v).map_err(|_| anyhow!("a frame side of {v} pixels is over 65535"));
+    let base =
+        |v: u64| u32::try_from(v).map_err(|_| anyhow!("the decoder's time base {}/{} does not fit IVF", tb.0, tb.1));
+    let mut h = [0u8; 32];
+    h[..4].copy_from_slice(b"DKIF");
+    h[6..8].copy_from_slice(&32u16.to_le_bytes());
+    h[8..12].copy_from_slice(&[b'R', b'G', b'B', if sixteen { 48 } else { 24 }]);
+    h[12..14].copy_from_slice(&side(size.0)?.to_le_bytes());
+    h[14..16].copy_from_slice(&side(size.1)?.to_le_bytes());
+    h[16..20].copy_from_slice(&base(tb.1)?.to_le_bytes());
+    h[20..24].copy_from_slice(&base(tb.0)?.to_le_bytes());
+    Ok(h)
+}
+
+/// A frame's 12-byte IVF header: its size in bytes and its timestamp.
+fn ivf_frame_header(len: usize, pts: i64) -> Result<[u8; 12]> {
+    let mut h = [0u8; 12];
+    h[..4].copy_from_slice(
+        &u32::try_from(len).map_err(|_| anyhow!("a frame of {len} bytes does not fit IVF"))?.to_le_bytes(),
+    );
+    h[4..].copy_from_slice(&pts.to_le_bytes());
+    Ok(h)
+}
+
+/// A frame and its presentation timestamp.
+struct Frame {
+    data: Vec<u8>,
+    pts: i64,
+}
+
+/// Simulates the camera on `source` into `sink` (an output file the caller checked).
+pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) -> Result<Outcome> {
+    let probe = match source {
+        Source::File(path) => Some(probe(path)?),
+        _ => None,
+    };
+    let sixteen = job.sixteen || probe.as_ref().is_some_and(|p| p.deep);
+    let sixteen = if sixteen && job.capture.enhancer.is_some() {
+        warn("--enhance: read as 8 bits (the enhancer takes the camera's 8-bit output)");
+        false
+    } else {
+        sixteen
+    };
+    if let Some(t) = probe.as_ref().and_then(|p| p.transfer.as_deref()) {
+        if matches!(t, "smpte2084" | "arib-std-b67") {
+            warn(&format!(
+                "HDR ({t}): the camera model is SDR; the decoded code values go through the preset as they are and the output is not tagged HDR"
+            ));
+        }
+    }
+    let raw_out = *sink == Sink::Stdout && job.enc.codec == "rawvideo";
+    if raw_out && sixteen {
+        warn("--codec rawvideo writes 16-bit frames as rgb48le");
+    }
+    let started = std::time::Instant::now();
+    let mut decode = spawn(&mut decoder(source, sixteen)?, "decode")?;
+    let (clock_tx, clock_rx) = mpsc::channel();
+    let dec_err = clock(decode.stderr.take().expect("piped"), clock_tx);
+    let mut from = decode.stdout.take().expect("piped");
+    // The size and time base arrive with the first decoded frame.
+    let (tb, width, height) = match clock_rx.recv() {
+        Ok(Clock::Header { tb, width, height }) => (tb, width, height),
+        _ => {
+            let _ = decode.kill();
+            let _ = wait(&mut decode);
+            let err = dec_err.join().unwrap_or_default();
+            let hint = match source {
+                Source::Stdin(_) => " (from a pipe, MP4 and MOV need their index first, ffmpeg -movflags +faststart; Matroska, WebM, MPEG-TS and NUT stream as they are; raw frames need --size)",
+                _ => "",
+            };
+            bail!("ffmpeg could not decode it: {}{hint}", first_line(&err));
+        }
+    };
+    if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
+        let _ = decode.kill();
+        let _ = wait(&mut decode);
+        bail!("the video is {width} x {height} pixels; at most {MAX_SIDE} a side");
+    }
+    let bytes_per = if sixteen { 6 } else { 3 };
+    let frame_bytes = bytes_per * width as usize * height as usize;
+    // The frames in flight (the pool, the output frame, 16-bit scratch) come from the budget.
+    let held = (frame_bytes as u64).saturating_mul(IN_FLIGHT as u64 + if sixteen { 3 } else { 1 });
     let budget = campro_eval::image_file::Budget::global();
     let Some(_lease) = budget.take(held) else {
+        let _ = decode.kill();
+        let _ = wait(&mut decode);
         bail!(
-            "the video is {} x {} pixels; its {} frames in flight need {} MiB, over the {} MiB limit",
-            p.width,
-            p.height,
+            "the video is {width} x {height} pixels; its {} frames in flight need {} MiB, over the {} MiB limit",
             IN_FLIGHT + 1,
             held >> 20,
             budget.total() >> 20
         );
     };
-    let mut decode = ffmpeg()?;
-    let decode = decode
-        .args(["-autorotate", "0", "-i"])
-        .arg(file_url(input)?)
-        .args(["-map", "0:v:0", "-fps_mode", "passthrough", "-f", "rawvideo", "-pix_fmt", "rgb24", "-"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
-    let mut decode = spawn(decode, "decode")?;
-    let ext = output.extension().and_then(|e| e.to_str()).unwrap_or("mkv");
-    let tmp = campro_eval::atomic::temporary_beside(output, &format!(".{ext}"))
-        .with_context(|| output.display().to_string())?;
-    let mut cmd = ffmpeg()?;
-    cmd.args(["-y", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", &format!("{}x{}", p.width, p.height)])
-        .args(["-framerate", &p.rate, "-i", "-", "-i"])
-        .arg(file_url(input)?)
-        .args(["-map", "0:v", "-map", "1:a?", "-map", "1:s?", "-map", "1:d?", "-map_metadata", "1"])
-        .args(["-fps_mode", "passthrough", "-c:a", "copy", "-c:s", "copy", "-c:d", "copy", "-c:v", &enc.codec]);
-    if enc.lossless() {
-        cmd.args(["-pix_fmt", "gbrp", "-level", "3"]);
-    } else if enc.codec.starts_with("libx26") || enc.codec.starts_with("libvpx") {
-        cmd.args(["-pix_fmt", "yuv420p"]);
+    let padded = (job.enc.subsampled() && !raw_out) || matches!(sink, Sink::Device(_));
+    if padded && (width % 2 == 1 || height % 2 == 1) {
+        warn(&format!(
+            "{width} x {height}: 4:2:0 video holds even sizes only; written as {} x {} (the last column or row repeated); --codec ffv1 keeps the size",
+            width + width % 2,
+            height + height % 2
+        ));
     }
-    match (&enc.bitrate, enc.crf) {
-        (Some(b), _) => {
-            cmd.args(["-b:v", b]);
-        }
-        (None, Some(q)) if !enc.lossless() => {
-            cmd.args(["-crf", &q.to_string()]);
-            if enc.codec.starts_with("libvpx") {
-                cmd.args(["-b:v", "0"]);
-            }
-        }
-        _ => {}
-    }
-    if let Some(pr) = &enc.preset {
-        cmd.args(["-preset", pr]);
-    }
-    cmd.arg(file_url(tmp.path())?).stdin(Stdio::piped()).stderr(Stdio::piped());
-    let mut encode = spawn(&mut cmd, "encode")?;
-    let bar = match p.frames {
-        Some(n) => indicatif::ProgressBar::new(n),
+    let ext = match sink {
+        Sink::File(o) => o.extension().and_then(|e| e.to_str()).unwrap_or("mkv").to_string(),
+        _ => "mkv".into(),
+    };
+    let tmp = match sink {
+        Sink::File(o) => Some(
+            campro_eval::atomic::temporary_beside(o, &format!(".{ext}")).with_context(|| o.display().to_string())?,
+        ),
+        _ => None,
+    };
+    let mut encode = if raw_out {
+        None
+    } else {
+        let mut cmd = encoder(job, source, sink, tmp.as_ref().map(|t| t.path()), (width, height), sixteen)?;
+        Some(spawn(&mut cmd, "encode")?)
+    };
+    let mut to: Box<dyn Write + Send> = match &mut encode {
+        Some(e) => Box::new(e.stdin.take().expect("piped")),
+        None => Box::new(std::io::stdout()),
+    };
+    let enc_err = drain(encode.as_mut().and_then(|e| e.stderr.take()));
+    let bar = match probe.as_ref().and_then(|p| p.frames) {
+        Some(n) => indicatif::ProgressBar::new(job.max_frames.map_or(n, |m| m.min(n))),
         None => indicatif::ProgressBar::no_length(),
     };
     bar.set_style(
         indicatif::ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} frames {per_sec} eta {eta}")
             .expect("valid template"),
     );
-    bar.set_message(input.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
+    bar.set_message(match source {
+        Source::File(p) => p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+        other => other.shown(),
+    });
     // Three stages overlap: a reader thread fills frames from the decoder, this thread runs
     // the camera on every core, a writer thread feeds the encoder. Frames circulate through
     // a fixed pool of IN_FLIGHT buffers, so memory stays bounded whatever the length.
     let mut frames = 0u64;
-    let mut from = decode.stdout.take().expect("piped");
-    let mut to = encode.stdin.take().expect("piped");
-    let dec_err = drain(decode.stderr.take());
-    let enc_err = drain(encode.stderr.take());
-    let (free_tx, free_rx) = std::sync::mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
-    let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
-    let (done_tx, done_rx) = std::sync::mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
+    let mut busy = std::time::Duration::ZERO;
+    let (mut first_pts, mut last_pts) = (None, None);
+    let (free_tx, free_rx) = mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
+    let (full_tx, full_rx) = mpsc::sync_channel::<Frame>(IN_FLIGHT);
+    let (done_tx, done_rx) = mpsc::sync_channel::<Frame>(IN_FLIGHT);
     for _ in 0..IN_FLIGHT {
         free_tx.send(vec![0u8; frame_bytes]).expect("room for the pool");
     }
+    let header = ivf_header((width, height), sixteen, tb)?;
     let result = std::thread::scope(|scope| {
         let reader = scope.spawn(move || -> Result<()> {
-            while let Ok(mut buf) = free_rx.recv() {
-                if !read_frame(&mut from, &mut buf)? {
+            while let Ok(mut data) = free_rx.recv() {
+                if !read_frame(&mut from, &mut data)? {
                     return Ok(());
                 }
-                if full_tx.send(buf).is_err() {
+                let pts = loop {
+                    match clock_rx.recv() {
+                        Ok(Clock::Pts(p)) => break p,
+                        Ok(Clock::Header { .. }) => {}
+                        Err(_) => bail!("the decoder gave a frame without its timestamp"),
+                    }
+                };
+                if full_tx.send(Frame { data, pts }).is_err() {
                     return Ok(());
                 }
             }
             Ok(())
         });
         let writer = scope.spawn(move || -> Result<()> {
-            for buf in done_rx {
-                to.write_all(&buf).map_err(|e| anyhow!("the encoder stopped: {e}"))?;
+            let stopped = |e: std::io::Error| anyhow!("the encoder stopped: {e}");
+            if !raw_out {
+                to.write_all(&header).map_err(stopped)?;
+            }
+            for f in done_rx {
+                if !raw_out {
+                    to.write_all(&ivf_frame_header(f.data.len(), f.pts)?).map_err(stopped)?;
+                }
+                to.write_all(&f.data).map_err(stopped)?;
                 // After the last frame the reader is gone and takes no buffer back; the
                 // frames still queued must be written all the same.
-                let _ = free_tx.send(buf);
+                let _ = free_tx.send(f.data);
             }
+            to.flush().map_err(stopped)?;
             Ok(())
         });
         let mut out = vec![0u8; frame_bytes];
+        let (mut s16, mut d16) =
+            if sixteen { (vec![0u16; frame_bytes / 2], vec![0u16; frame_bytes / 2]) } else { (Vec::new(), Vec::new()) };
         let mut failure = None;
         for src in full_rx.iter() {
-            if let Err(e) = capture.run(&src, &mut out, p.width, p.height) {
+            if job.max_frames.is_some_and(|m| frames >= m) {
+                break;
+            }
+            let began = std::time::Instant::now();
+            let ran = if sixteen {
+                for (v, b) in s16.iter_mut().zip(src.data.chunks_exact(2)) {
+                    *v = u16::from_le_bytes([b[0], b[1]]);
+                }
+                job.capture.run16(&s16, &mut d16, width);
+                for (b, v) in out.chunks_exact_mut(2).zip(&d16) {
+                    b.copy_from_slice(&v.to_le_bytes());
+                }
+                Ok(())
+            } else {
+                job.capture.run(&src.data, &mut out, width, height)
+            };
+            busy += began.elapsed();
+            if let Err(e) = ran {
                 failure = Some(e);
                 break;
             }
+            first_pts.get_or_insert((src.pts, std::time::Instant::now()));
+            last_pts = Some((src.pts, std::time::Instant::now()));
             // The processed frame goes to the writer; its input buffer becomes the next output.
-            let processed = std::mem::replace(&mut out, src);
-            if done_tx.send(processed).is_err() {
+            let processed = std::mem::replace(&mut out, src.data);
+            if done_tx.send(Frame { data: processed, pts: src.pts }).is_err() {
                 break;
             }
             frames += 1;
             bar.inc(1);
         }
         drop(done_tx);
-        // Unblock a reader waiting for a free buffer if the writer quit early.
+        // Unblock a reader waiting for a free buffer if the writer quit early or we stopped.
         drop(full_rx);
         let w = writer.join().unwrap_or_else(|_| Err(anyhow!("the writer thread panicked")));
         let r = reader.join().unwrap_or_else(|_| Err(anyhow!("the reader thread panicked")));
@@ -323,48 +721,83 @@ pub fn simulate(
         }
     });
     bar.finish_and_clear();
-    // A failed run leaves the decoder blocked on a full pipe: stop it.
-    if result.is_err() {
+    let seconds = started.elapsed().as_secs_f64();
+    // A failed or stopped run leaves the decoder blocked on a full pipe: stop it.
+    let stopped_early = job.max_frames.is_some_and(|m| frames >= m);
+    if result.is_err() || stopped_early {
         let _ = decode.kill();
     }
     let dec = wait(&mut decode)?;
-    let enc_status = wait(&mut encode)?;
+    let enc_status = match &mut encode {
+        Some(e) => Some(wait(e)?),
+        None => None,
+    };
     let dec_stderr = dec_err.join().unwrap_or_default();
     let enc_stderr = enc_err.join().unwrap_or_default();
     result?;
-    if !dec.success() {
+    if !dec.success() && !stopped_early {
         bail!("ffmpeg could not decode it: {}", first_line(&dec_stderr));
     }
-    if !enc_status.success() {
+    if enc_status.is_some_and(|s| !s.success()) {
         bail!("ffmpeg could not encode it: {}", first_line(&enc_stderr));
     }
-    if let Some(n) = p.frames.filter(|&n| n != frames) {
+    if let Some(n) = probe.as_ref().and_then(|p| p.frames).filter(|&n| n != frames && !stopped_early) {
         warn(&format!("the container says {n} frames; {frames} were decoded and written"));
     }
-    // The rotation (display matrix): ffmpeg sets it only when copying streams, so a
-    // rotated input's output is remuxed once with it (frames themselves are not rotated).
-    let tmp = match p.rotation.filter(|&r| r.rem_euclid(360) != 0) {
-        None => tmp,
-        Some(r) => {
-            let rotated = campro_eval::atomic::temporary_beside(output, &format!(".{ext}"))?;
-            let out = ffmpeg()?
-                .args(["-y", "-i"])
-                .arg(file_url(tmp.path())?)
-                .args(["-map", "0", "-c", "copy", "-map_metadata", "0", "-metadata:s:v:0"])
-                .arg(format!("rotate={}", r.rem_euclid(360)))
-                .arg(file_url(rotated.path())?)
-                .output()?;
-            if !out.status.success() {
-                bail!("ffmpeg could not set the rotation: {}", first_line(&out.stderr));
-            }
-            if probe(rotated.path())?.rotation != Some(r) {
-                warn(&format!("the {ext} container cannot hold its rotation ({r} degrees) with this ffmpeg; frames are kept as stored"));
-            }
-            rotated
+    // Rates between the first frame and the last, so that start-up does not count.
+    let source_fps = match (first_pts, last_pts) {
+        (Some((a, _)), Some((b, _))) if b > a && frames > 1 => {
+            Some((frames - 1) as f64 * tb.1 as f64 / (tb.0 as f64 * (b - a) as f64))
         }
+        _ => None,
     };
-    crate::output_result(output, campro_eval::atomic::persist(tmp, output, force))?;
-    Ok(frames)
+    let fps = match (first_pts, last_pts) {
+        (Some((_, a)), Some((_, b))) if frames > 1 && b > a => (frames - 1) as f64 / (b - a).as_secs_f64(),
+        _ => frames as f64 / seconds.max(1e-9),
+    };
+    let capacity = frames as f64 / busy.as_secs_f64().max(1e-9);
+    if source.live() && source_fps.is_some_and(|s| capacity < 0.95 * s) {
+        warn(&format!(
+            "the camera stage does {capacity:.1} frames a second, slower than the source's {:.1}: a live source drops frames",
+            source_fps.unwrap_or(0.0)
+        ));
+    }
+    if let (Sink::File(output), Some(tmp)) = (sink, tmp) {
+        let tmp = match probe.as_ref().and_then(|p| p.rotation).filter(|&r| r.rem_euclid(360) != 0) {
+            None => tmp,
+            Some(r) => rotated(tmp, output, &ext, r, warn)?,
+        };
+        crate::output_result(output, campro_eval::atomic::persist(tmp, output, job.force))?;
+    }
+    Ok(Outcome { frames, fps, capacity, source_fps, sixteen })
+}
+
+/// The rotation (display matrix): ffmpeg sets it only when copying streams, so a rotated
+/// input's output is remuxed once with it (frames themselves are not rotated).
+fn rotated(
+    tmp: campro_eval::atomic::Temporary,
+    output: &Path,
+    ext: &str,
+    r: i64,
+    warn: &dyn Fn(&str),
+) -> Result<campro_eval::atomic::Temporary> {
+    let rotated = campro_eval::atomic::temporary_beside(output, &format!(".{ext}"))?;
+    let out = ffmpeg()?
+        .args(["-y", "-i"])
+        .arg(file_url(tmp.path())?)
+        .args(["-map", "0", "-c", "copy", "-map_metadata", "0", "-metadata:s:v:0"])
+        .arg(format!("rotate={}", r.rem_euclid(360)))
+        .arg(file_url(rotated.path())?)
+        .output()?;
+    if !out.status.success() {
+        bail!("ffmpeg could not set the rotation: {}", first_line(&out.stderr));
+    }
+    if probe(rotated.path())?.rotation != Some(r) {
+        warn(&format!(
+            "the {ext} container cannot hold its rotation ({r} degrees) with this ffmpeg; frames are kept as stored"
+        ));
+    }
+    Ok(rotated)
 }
 
 /// Fills `buf` with the next frame; false at a clean end of stream.
@@ -384,4 +817,36 @@ fn read_frame(r: &mut impl Read, buf: &mut [u8]) -> Result<bool> {
 
 fn first_line(stderr: &[u8]) -> String {
     crate::escape(String::from_utf8_lossy(stderr).lines().next().unwrap_or("no message"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn deep_pixel_formats_are_told_from_8_bit_ones() {
+        for f in ["yuv420p10le", "yuv422p10be", "p010le", "rgb48le", "gbrp12le", "gray16le", "yuv444p16le", "rgba64be"]
+        {
+            assert!(deep_pixel_format(f), "{f}");
+        }
+        for f in ["yuv420p", "rgb24", "nv12", "bgr565le", "rgb555be", "yuvj420p", "gray", "bgr444le"] {
+            assert!(!deep_pixel_format(f), "{f}");
+        }
+    }
+
+    #[test]
+    fn ivf_headers_carry_size_fourcc_time_base_and_signed_timestamps() {
+        let h = ivf_header((321, 241), true, (1, 90000)).unwrap();
+        assert_eq!(&h[..4], b"DKIF");
+        assert_eq!(u16::from_le_bytes([h[6], h[7]]), 32);
+        assert_eq!(&h[8..12], b"RGB0");
+        assert_eq!((u16::from_le_bytes([h[12], h[13]]), u16::from_le_bytes([h[14], h[15]])), (321, 241));
+        assert_eq!(u32::from_le_bytes(h[16..20].try_into().unwrap()), 90000);
+        assert_eq!(u32::from_le_bytes(h[20..24].try_into().unwrap()), 1);
+        let f = ivf_frame_header(10, -1024).unwrap();
+        assert_eq!(u32::from_le_bytes(f[..4].try_into().unwrap()), 10);
+        assert_eq!(i64::from_le_bytes(f[4..].try_into().unwrap()), -1024);
+        assert!(ivf_header((70000, 1), false, (1, 1)).is_err());
+        assert!(ivf_header((1, 1), false, (1, 1 << 33)).is_err());
+    }
 }

@@ -242,7 +242,8 @@ fn simulate_folders_depths_and_bad_files() {
     assert!(!run.status.success(), "a corrupt image makes the run fail");
     assert!(err.contains("notes.txt") && err.contains("warning"), "{err}");
     assert!(err.contains("broken.png") && !err.contains("panicked"), "{err}");
-    assert_eq!(files_in(&out), vec!["a.png", "sub/b.png", "sub/c.png"], "the good images are written, nothing partial");
+    // Each keeps its format, but a JPEG asked for 16 bits becomes a PNG (JPEG has no 16 bits).
+    assert_eq!(files_in(&out), vec!["a.png", "sub/b.png", "sub/c.tif"], "the good images are written, nothing partial");
 
     // 16-bit output of an 8-bit PNG: each channel within 0.5 LSB of the f64 pipeline.
     let p = Params::from_file(&params).unwrap();
@@ -253,8 +254,10 @@ fn simulate_folders_depths_and_bad_files() {
             assert!((d[k] as f64 - want[k] * 65535.0).abs() <= 0.5 + 1e-9);
         }
     }
-    // 16-bit TIFF input is read at 16 bits.
-    let got = image::open(out.join("sub/c.png")).unwrap().into_rgb16().into_raw();
+    // 16-bit TIFF input is read at 16 bits and written as a 16-bit TIFF.
+    let tiff = image::open(out.join("sub/c.tif")).unwrap();
+    assert_eq!(tiff.color(), image::ColorType::Rgb16);
+    let got = tiff.into_rgb16().into_raw();
     for (s, d) in px16.chunks(3).zip(got.chunks(3)) {
         let want =
             campro::pipeline::process_f64(&p, [s[0] as f64 / 65535.0, s[1] as f64 / 65535.0, s[2] as f64 / 65535.0]);
@@ -279,7 +282,68 @@ fn simulate_folders_depths_and_bad_files() {
         .success();
     let eight = image::open(out.join("a.png")).unwrap();
     assert_eq!(eight.color(), image::ColorType::Rgb8);
-    assert_eq!(files_in(&out), vec!["a.png", "sub/b.png", "sub/c.png"]);
+    assert_eq!(files_in(&out), vec!["a.png", "sub/b.png", "sub/c.tif"]);
+}
+
+#[test]
+fn photos_keep_their_format_and_one_input_may_name_its_output() {
+    let dir = tempfile::tempdir().unwrap();
+    // A smooth 64 x 48 photo (JPEG compresses it well) as a JPEG at quality 100.
+    let (w, h) = (64u32, 48u32);
+    let px: Vec<u8> = (0..w * h)
+        .flat_map(|i| {
+            let (x, y) = (i % w, i / w);
+            [(x * 4) as u8, (y * 5) as u8, ((x + y) * 2) as u8]
+        })
+        .collect();
+    let photo = dir.path().join("photo.jpg");
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 100)
+        .encode(&px, w, h, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    std::fs::write(&photo, &jpeg).unwrap();
+    let params = bundled("campro-omega-0.5.json");
+    let p = Params::from_file(&params).unwrap();
+    let decoded = image::open(&photo).unwrap().into_rgb8().into_raw();
+    let mut want = vec![0u8; decoded.len()];
+    campro::pipeline::fast::Exact8::new(&p).run(&decoded, &mut want);
+    let mean_error =
+        |got: &[u8]| got.iter().zip(&want).map(|(&g, &w)| (g as f64 - w as f64).abs()).sum::<f64>() / got.len() as f64;
+    // Into a folder: photo.jpg stays photo.jpg, a JPEG, at the quality asked.
+    let mut sizes = Vec::new();
+    for q in [95, 30] {
+        let out = dir.path().join(format!("q{q}"));
+        campro()
+            .arg("simulate")
+            .arg(&params)
+            .arg(&photo)
+            .arg("-o")
+            .arg(&out)
+            .args(["--quality", &q.to_string()])
+            .assert()
+            .success();
+        assert_eq!(files_in(&out), vec!["photo.jpg"]);
+        let bytes = std::fs::read(out.join("photo.jpg")).unwrap();
+        assert_eq!(image::guess_format(&bytes).unwrap(), image::ImageFormat::Jpeg);
+        let got = image::load_from_memory(&bytes).unwrap().into_rgb8().into_raw();
+        sizes.push((bytes.len(), mean_error(&got)));
+    }
+    // Lower quality: a smaller file further from the exact output (which the higher one is near).
+    assert!(sizes[1].0 < sizes[0].0 && sizes[1].1 > sizes[0].1, "{sizes:?}");
+    assert!(sizes[0].1 < 3.0, "quality 95 is within 3 levels on average: {sizes:?}");
+
+    // One input and an output with an image ending: that file, in the format it names.
+    let named = dir.path().join("protected.png");
+    campro().arg("simulate").arg(&params).arg(&photo).arg("-o").arg(&named).assert().success();
+    let img = image::open(&named).unwrap();
+    assert_eq!(img.into_rgb8().into_raw(), want, "PNG out of a JPEG: the exact path, bit for bit");
+    fails_with(campro().arg("simulate").arg(&params).arg(&photo).arg("-o").arg(&named), "exists");
+    fails_with(campro().arg("simulate").arg(&params).arg(&photo).arg("-o").arg(dir.path().join("x.mp4")), "an image");
+    fails_with(campro().arg("simulate").arg(&params).arg(&photo).arg("-o").arg(&photo), "replace");
+    fails_with(
+        campro().arg("simulate").arg(&params).arg(&photo).arg("-o").arg(dir.path().join("q")).args(["--quality", "0"]),
+        "--quality",
+    );
 }
 
 #[test]

@@ -178,3 +178,381 @@ fn a_broken_video_is_one_named_error() {
     );
     assert!(!dir.path().join("o/broken.mkv").exists());
 }
+
+/// The video stream's presentation timestamps, seconds, in order.
+fn timestamps(path: &Path) -> Vec<f64> {
+    let out = Command::new("ffprobe")
+        .args(["-v", "error", "-select_streams", "v:0", "-show_entries", "packet=pts_time", "-of", "csv=p=0"])
+        .arg(path)
+        .output()
+        .unwrap();
+    let mut t: Vec<f64> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| l.trim().trim_end_matches(',').parse().ok())
+        .collect();
+    t.sort_by(f64::total_cmp);
+    t
+}
+
+/// A stream's duration, seconds.
+fn duration(path: &Path, stream: &str) -> f64 {
+    probe(path, stream, "stream=duration").parse().unwrap()
+}
+
+#[test]
+fn variable_frame_rate_keeps_every_timestamp_and_stays_with_its_audio() {
+    if !ffmpeg_present() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("vfr.mp4");
+    // 20 frames at 30 fps, then 22 frames at 10 fps (2.8 s of video), over 2.8 s of tone.
+    ffmpeg(&[
+        "-f",
+        "lavfi",
+        "-i",
+        "testsrc2=size=160x120:rate=30",
+        "-f",
+        "lavfi",
+        "-i",
+        "sine=frequency=440:sample_rate=48000",
+        "-t",
+        "2.8",
+        "-vf",
+        "setpts='if(lt(N,20),N/30,20/30+(N-20)/10)/TB'",
+        "-fps_mode",
+        "vfr",
+        "-c:v",
+        "libx264",
+        "-c:a",
+        "aac",
+        "-shortest",
+        input.to_str().unwrap(),
+    ]);
+    let want = timestamps(&input);
+    assert!(want.len() > 30, "{want:?}");
+    let steps: Vec<f64> = want.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(steps.iter().any(|&s| (s - 1.0 / 30.0).abs() < 1e-3) && steps.iter().any(|&s| (s - 0.1).abs() < 1e-3));
+    let out = dir.path().join("out");
+    let run = campro()
+        .arg("simulate")
+        .arg(bundled("campro-omega-0.5.json"))
+        .arg(&input)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let output = out.join("vfr.mp4");
+    let got = timestamps(&output);
+    assert_eq!(got.len(), want.len());
+    for (g, w) in got.iter().zip(&want) {
+        assert!((g - w).abs() < 1e-3, "a frame at {w} s came out at {g} s");
+    }
+    // The video still spans what the audio spans (a constant-rate output would end at 42/30 s).
+    assert!((duration(&output, "v:0") - duration(&input, "v:0")).abs() < 0.05);
+    assert!((duration(&output, "a:0") - duration(&input, "a:0")).abs() < 1e-6);
+}
+
+#[test]
+fn odd_sizes_are_padded_for_4_2_0_and_kept_exactly_by_ffv1() {
+    if !ffmpeg_present() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("odd.mkv");
+    ffmpeg(&[
+        "-f",
+        "lavfi",
+        "-i",
+        "testsrc=size=321x241:rate=25",
+        "-t",
+        "0.4",
+        "-c:v",
+        "ffv1",
+        input.to_str().unwrap(),
+    ]);
+    let preset = bundled("campro-omega-0.5.json");
+    let run =
+        campro().arg("simulate").arg(&preset).arg(&input).arg("-o").arg(dir.path().join("h264")).output().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(err.contains("321 x 241") && err.contains("written as 322 x 242"), "{err}");
+    let h264 = dir.path().join("h264/odd.mkv");
+    assert_eq!(probe(&h264, "v:0", "stream=width,height"), "322\n242");
+    assert_eq!(probe(&h264, "v:0", "stream=nb_read_frames"), "10");
+    // The added column repeats the last one (within the codec's error), not black.
+    let frame = rgb_frames(&h264);
+    let (w, row) = (322usize, 322 * 3);
+    let (mut diff, mut n) = (0.0, 0.0);
+    for y in 0..241 {
+        for c in 0..3 {
+            diff += (frame[y * row + (w - 1) * 3 + c] as f64 - frame[y * row + (w - 2) * 3 + c] as f64).abs();
+            n += 1.0;
+        }
+    }
+    assert!(diff / n < 12.0, "mean difference of the padded column to its neighbour: {}", diff / n);
+
+    let run = campro()
+        .arg("simulate")
+        .arg(&preset)
+        .arg(&input)
+        .arg("-o")
+        .arg(dir.path().join("ffv1"))
+        .args(["--codec", "ffv1"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success() && !err.contains("even sizes"), "{err}");
+    let lossless = dir.path().join("ffv1/odd.mkv");
+    let src = rgb_frames(&input);
+    let mut want = vec![0u8; src.len()];
+    Exact8::new(&Params::from_file(&preset).unwrap()).run(&src, &mut want);
+    assert_eq!(rgb_frames(&lossless), want, "321 x 241 kept, every frame the exact path");
+}
+
+/// The video stream decoded to packed 16-bit RGB (little-endian).
+fn rgb48_frames(path: &Path) -> Vec<u16> {
+    let bytes = ffmpeg(&[
+        "-i",
+        path.to_str().unwrap(),
+        "-map",
+        "0:v:0",
+        "-fps_mode",
+        "passthrough",
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "rgb48le",
+        "-",
+    ]);
+    bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect()
+}
+
+#[test]
+fn ten_bit_video_goes_through_the_16_bit_path_and_stays_ten_bit() {
+    if !ffmpeg_present() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("ten.mp4");
+    ffmpeg(&[
+        "-f",
+        "lavfi",
+        "-i",
+        "testsrc2=size=128x96:rate=25",
+        "-t",
+        "0.4",
+        "-c:v",
+        "libx264",
+        "-pix_fmt",
+        "yuv420p10le",
+        input.to_str().unwrap(),
+    ]);
+    let preset = bundled("campro-omega-0.5.json");
+    for codec in ["ffv1", "libx264"] {
+        let run = campro()
+            .arg("simulate")
+            .arg(&preset)
+            .arg(&input)
+            .arg("-o")
+            .arg(dir.path().join(codec))
+            .args(["--codec", codec])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(run.status.success() && err.contains("16-bit frames"), "{err}");
+    }
+    assert_eq!(probe(&dir.path().join("libx264/ten.mp4"), "v:0", "stream=pix_fmt"), "yuv420p10le");
+    assert_eq!(probe(&dir.path().join("ffv1/ten.mkv"), "v:0", "stream=pix_fmt"), "gbrp16le");
+    // Lossless: each frame is the 16-bit reference path on the decoded 16-bit input frame.
+    let p = Params::from_file(&preset).unwrap();
+    let prep = campro::pipeline::Prepared::new(&p, campro::pipeline::Depth::Sixteen);
+    let src = rgb48_frames(&input);
+    let mut want = vec![0u16; src.len()];
+    prep.run(&src, &mut want, campro::pipeline::Depth::Sixteen);
+    let got = rgb48_frames(&dir.path().join("ffv1/ten.mkv"));
+    assert_eq!(got.len(), src.len());
+    assert!(got == want, "the 16-bit frames differ from the 16-bit path");
+    // More than 8 bits survive: 10-bit input gives more than 256 levels a channel.
+    let levels: std::collections::BTreeSet<u16> = got.iter().step_by(3).copied().collect();
+    assert!(levels.len() > 256, "{} levels of red", levels.len());
+}
+
+/// Runs campro with `stdin` on standard input; returns its stdout and stderr.
+fn piped(args: &[&std::ffi::OsStr], stdin: Vec<u8>) -> (bool, Vec<u8>, String) {
+    let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("campro"))
+        .args(args)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut sin = child.stdin.take().unwrap();
+    let feeder = std::thread::spawn(move || {
+        use std::io::Write;
+        let _ = sin.write_all(&stdin);
+    });
+    let out = child.wait_with_output().unwrap();
+    feeder.join().unwrap();
+    (out.status.success(), out.stdout, String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+#[test]
+fn standard_input_and_output_carry_containers_and_raw_frames() {
+    if !ffmpeg_present() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let preset = bundled("campro-omega-0.5.json");
+    let params = Params::from_file(&preset).unwrap();
+    let exact = Exact8::new(&params);
+    let os = |s: &str| std::ffi::OsString::from(s);
+    // A Matroska stream in, a lossless Matroska stream out: every frame the exact path.
+    let mkv = ffmpeg(&[
+        "-f",
+        "lavfi",
+        "-i",
+        "testsrc2=size=96x64:rate=20",
+        "-t",
+        "0.5",
+        "-c:v",
+        "ffv1",
+        "-f",
+        "matroska",
+        "-",
+    ]);
+    let input = dir.path().join("in.mkv");
+    std::fs::write(&input, &mkv).unwrap();
+    let args = [os("simulate"), preset.clone().into_os_string(), os("-"), os("-o"), os("-"), os("--codec"), os("ffv1")];
+    let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
+    let (ok, out, err) = piped(&args, mkv.clone());
+    assert!(ok, "{err}");
+    assert!(err.contains("simulated 10 frames of standard input into standard output"), "{err}");
+    let output = dir.path().join("out.mkv");
+    std::fs::write(&output, &out).unwrap();
+    let src = rgb_frames(&input);
+    let mut want = vec![0u8; src.len()];
+    exact.run(&src, &mut want);
+    assert_eq!(rgb_frames(&output), want);
+    assert_eq!(timestamps(&output), timestamps(&input));
+
+    // Raw RGB in (--size, --rate), raw RGB out, and --frames stops early.
+    let raw: Vec<u8> = (0..5 * 32 * 24 * 3).map(|i| (i * 37 % 251) as u8).collect();
+    let args = [
+        os("simulate"),
+        preset.clone().into_os_string(),
+        os("-"),
+        os("--size"),
+        os("32x24"),
+        os("--rate"),
+        os("30000/1001"),
+        os("-o"),
+        os("-"),
+        os("--codec"),
+        os("rawvideo"),
+        os("--frames"),
+        os("3"),
+    ];
+    let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
+    let (ok, out, err) = piped(&args, raw.clone());
+    assert!(ok, "{err}");
+    let frame = 32 * 24 * 3;
+    let mut want = vec![0u8; 3 * frame];
+    exact.run(&raw[..3 * frame], &mut want);
+    assert_eq!(out, want, "three raw frames out, each the exact path");
+    assert!(err.contains("the source's 30.0") || err.contains("the source's 29.9"), "{err}");
+
+    // Standard input into a named file, then the usual rules.
+    let named = dir.path().join("named.mkv");
+    let args = [os("simulate"), preset.clone().into_os_string(), os("-"), os("-o"), named.clone().into_os_string()];
+    let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
+    let (ok, _, err) = piped(&args, mkv.clone());
+    assert!(ok && named.is_file(), "{err}");
+    let (ok, _, err) = piped(&args, mkv);
+    assert!(!ok && err.contains("exists"), "{err}");
+
+    // What ffmpeg cannot read from a pipe gets the reason and the ways out, in one line.
+    let mp4 = dir.path().join("clip.mp4");
+    ffmpeg(&[
+        "-f",
+        "lavfi",
+        "-i",
+        "testsrc2=size=64x48:rate=10",
+        "-t",
+        "0.5",
+        "-c:v",
+        "libx264",
+        mp4.to_str().unwrap(),
+    ]);
+    let args = [os("simulate"), preset.clone().into_os_string(), os("-"), os("-o"), os("-")];
+    let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
+    let (ok, _, err) = piped(&args, b"not a video at all".repeat(100));
+    assert!(!ok && err.contains("faststart") && err.contains("--size") && err.lines().count() == 1, "{err}");
+    // Refusals by name.
+    fails_with(campro().arg("simulate").arg(&preset).arg("-").arg(&mp4).arg("-o").arg("-"), "one input only");
+    fails_with(
+        campro().arg("simulate").arg(&preset).arg(&mp4).arg("-o").arg(dir.path().join("o")).args(["--size", "2x2"]),
+        "--size",
+    );
+    fails_with(campro().arg("simulate").arg(&preset).arg("-").arg("-o").arg(dir.path()), "video file name");
+    fails_with(
+        campro()
+            .arg("simulate")
+            .arg(&preset)
+            .arg(&mp4)
+            .arg("-o")
+            .arg(dir.path().join("r"))
+            .args(["--codec", "rawvideo"]),
+        "rawvideo",
+    );
+    fails_with(campro().arg("simulate").arg(&preset).arg("-").args(["--rate", "0", "-o", "-"]), "--rate");
+    fails_with(campro().arg("simulate").arg(&preset).arg("-").args(["--size", "3x", "-o", "-"]), "--size");
+}
+
+/// A live source at its own pace (ffmpeg's `-re` on a generated pattern, piped in as a
+/// camera would stream): the run keeps up and says the rate it sustained. A real V4L2
+/// camera (`/dev/videoN`) goes through the same code with ffmpeg's v4l2 input; it is run
+/// here only where one exists.
+#[test]
+fn a_live_source_is_processed_at_its_pace_and_the_rate_reported() {
+    if !ffmpeg_present() {
+        return;
+    }
+    let preset = bundled("campro-omega-0.5.json");
+    let mut source = Command::new("ffmpeg")
+        .args(["-hide_banner", "-v", "error", "-nostdin", "-re", "-f", "lavfi", "-i", "testsrc2=size=320x240:rate=30"])
+        .args(["-t", "1.5", "-c:v", "rawvideo", "-pix_fmt", "rgb24", "-f", "nut", "-"])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let run = Command::new(assert_cmd::cargo::cargo_bin("campro"))
+        .arg("simulate")
+        .arg(&preset)
+        .args(["-", "-o", "-", "--codec", "rawvideo"])
+        .stdin(source.stdout.take().unwrap())
+        .output()
+        .unwrap();
+    source.wait().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert_eq!(run.stdout.len(), 45 * 320 * 240 * 3, "{err}");
+    // "simulated 45 frames ... (N frames a second, the camera stage alone C; the source's
+    // 30.0)": a camera stage slower than the source is said to drop frames.
+    let summary = err.lines().find(|l| l.starts_with("simulated")).unwrap();
+    let capacity: f64 =
+        summary.split("stage alone ").nth(1).and_then(|s| s.split(';').next()).unwrap().parse().unwrap();
+    eprintln!("live 320x240 at 30 fps: the camera stage does {capacity:.1} frames a second");
+    assert!(summary.contains("the source's 30.0") && capacity > 0.0, "{err}");
+    assert_eq!(capacity < 28.5, err.contains("drops frames"), "{err}");
+    if let Some(cam) = (0..4).map(|i| std::path::PathBuf::from(format!("/dev/video{i}"))).find(|p| p.exists()) {
+        let run = campro()
+            .arg("simulate")
+            .arg(&preset)
+            .arg(&cam)
+            .args(["-o", "-", "--codec", "rawvideo", "--frames", "5"])
+            .output()
+            .unwrap();
+        eprintln!("{}: {}", cam.display(), String::from_utf8_lossy(&run.stderr));
+    }
+}

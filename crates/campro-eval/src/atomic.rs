@@ -34,10 +34,13 @@ pub fn write(path: &Path, bytes: &[u8], replace: bool) -> std::io::Result<()> {
     persist(tmp, path, replace)
 }
 
+/// A file written beside its destination, removed when dropped unless persisted.
+pub type Temporary = tempfile::NamedTempFile;
+
 /// A temporary file (`.campro-*SUFFIX`, permissions of an ordinary new file) in the folder
 /// `path` will be in, which is created if missing: for output that a program (ffmpeg)
 /// writes by name before [`persist`] renames it over `path`. Refuses what [`write`] refuses.
-pub fn temporary_beside(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
+pub fn temporary_beside(path: &Path, suffix: &str) -> std::io::Result<Temporary> {
     let refuse = |what: String| Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, what));
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if let Some(up) = dir.ancestors().find(|a| !a.as_os_str().is_empty() && std::fs::symlink_metadata(a).is_ok()) {
@@ -81,7 +84,7 @@ fn check_replaceable(path: &Path) -> std::io::Result<()> {
 /// Renames the finished temporary file `tmp` over `path`: only over a regular file, and
 /// only with `replace` (otherwise [`std::io::ErrorKind::AlreadyExists`], checked at the
 /// rename).
-pub fn persist(tmp: tempfile::NamedTempFile, path: &Path, replace: bool) -> std::io::Result<()> {
+pub fn persist(tmp: Temporary, path: &Path, replace: bool) -> std::io::Result<()> {
     if replace {
         check_replaceable(path)?;
     }

@@ -5,6 +5,8 @@
 # not reachable here), then runs the JVM tests (android/jvm-test/src/test: scripted camera
 # sequences, and the Android glue under Robolectric) against the real libcampro_jni.so.
 #
+# Also compiles what `campro convert --format kotlin` prints (target/generated-snippets).
+#
 # Needs: JDK 17, Maven, cargo. Last line: "kotlin files compiled: N/M" (M = every .kt under
 # android/, tests and stubs included). Exits non-zero when anything fails to compile or a
 # test fails.
@@ -18,7 +20,27 @@ cargo build --release --locked --lib -p campro-jni
 lib="$root/target/release/libcampro_jni.so"
 test -f "$lib"
 
-# Compile (main: library + app + stubs; test: the tests) and run the tests.
+# The statements `campro convert --format kotlin` prints (with known gains and with gains
+# read back from a result), wrapped in functions, so that they compile against the real
+# framework classes too.
+snippets="$here/jvm-test/target/generated-snippets"
+rm -rf "$snippets" && mkdir -p "$snippets"
+{
+  echo "package org.campro.snippets"
+  echo "import android.hardware.camera2.CaptureRequest"
+  echo "import android.hardware.camera2.CaptureResult"
+  echo "import android.hardware.camera2.params.ColorSpaceTransform"
+  echo "import android.hardware.camera2.params.RggbChannelVector"
+  echo "import android.hardware.camera2.params.TonemapCurve"
+  echo "fun withKnownGains(builder: CaptureRequest.Builder) {"
+  cargo run -q --release --locked -p campro-cli -- convert campro-omega-0.5 --format kotlin --device-gains 2 1 1 1.5
+  echo "}"
+  echo "fun withMeteredGains(builder: CaptureRequest.Builder, meteringResult: CaptureResult) {"
+  cargo run -q --release --locked -p campro-cli -- convert campro-omega-0.5 --format kotlin
+  echo "}"
+} > "$snippets/ConvertSnippets.kt"
+
+# Compile (main: library + app + stubs + snippets; test: the tests) and run the tests.
 mvn -B -q -f "$here/jvm-test/pom.xml" -Dcampro.jni.dir="$(dirname "$lib")" test
 # Surefire's summary for the log (Maven ran quietly).
 reports="$here/jvm-test/target/surefire-reports"

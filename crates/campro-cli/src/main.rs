@@ -335,6 +335,11 @@ struct DeviceArgs {
     /// A saved capture result (JSON with colorCorrectionTransform) giving the device transform.
     #[arg(long)]
     capture_result: Option<PathBuf>,
+    /// The device's white-balance gains metered with its transform (R G_EVEN G_ODD B, each in
+    /// (0, 64]): printed into the Kotlin statements and the JSON (a capture result's
+    /// colorCorrectionGains give them too).
+    #[arg(long, num_args = 4, value_name = "G", conflicts_with = "capture_result", value_parser = parse_gain)]
+    device_gains: Option<Vec<f32>>,
     /// Colour temperature (K, 1000 to 40000) at which to interpolate the parameter file's ct_calibration.
     #[arg(long, allow_negative_numbers = true, conflicts_with_all = ["device_ccm", "capture_result"], value_parser = parse_ct)]
     ct: Option<f64>,
@@ -361,6 +366,12 @@ fn parse_bitrate(s: &str) -> std::result::Result<String, String> {
     } else {
         Err(format!("must be a bitrate such as 8M or 2500k, got {s}"))
     }
+}
+
+/// `--device-gains`: a white-balance gain in (0, 64].
+fn parse_gain(s: &str) -> std::result::Result<f32, String> {
+    camera2::gain(s.parse().ok())
+        .ok_or_else(|| format!("must be a gain in (0, {}], got {}", camera2::MAX_GAIN, short(s, 40)))
 }
 
 /// `--size`: WxH, each side 1 to 16384 pixels.
@@ -761,9 +772,14 @@ fn run(cli: Cli) -> Result<()> {
                     r.curve_max_abs * 255.0
                 );
             }
+            let gains = device_gains(&device)?;
             let text = match format {
-                Format::Json => serde_json::to_string(&v.to_json())? + "\n",
-                Format::Kotlin => v.to_kotlin(),
+                Format::Json => {
+                    let mut j = v.to_json();
+                    j["colorCorrectionGains"] = gains.map_or(serde_json::Value::Null, |g| serde_json::json!(g));
+                    serde_json::to_string(&j)? + "\n"
+                }
+                Format::Kotlin => v.to_kotlin(gains),
             };
             match output {
                 Some(o) => write_atomic(&o, text.as_bytes(), force),
@@ -897,6 +913,16 @@ pub(crate) fn load_params(path: &Path) -> Result<Params> {
 }
 
 /// The device matrix and conversion options from the command line.
+/// The device's white-balance gains: `--device-gains`, or a capture result's.
+fn device_gains(d: &DeviceArgs) -> Result<Option<[f32; 4]>> {
+    if let Some(g) = &d.device_gains {
+        return Ok(Some([g[0], g[1], g[2], g[3]]));
+    }
+    let Some(f) = &d.capture_result else { return Ok(None) };
+    let text = campro::file::read_text_capped(f, 1 << 20, "a capture result")?;
+    camera2::gains_from_capture_result(&text).map_err(|e| anyhow!("--capture-result {}: {e}", crate::shown(f)))
+}
+
 fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
     let m = if let Some(v) = &d.device_ccm {
         [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]]

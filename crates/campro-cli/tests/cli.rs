@@ -93,6 +93,58 @@ fn convert_capture_result_and_bad_device_input() {
     let out = campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&cr).output().unwrap();
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["colorCorrectionTransform"][0], 2);
+    assert!(v["colorCorrectionGains"].is_null(), "no gains in the result, none invented");
+
+    // The gains metered with the transform travel into the JSON and the Kotlin statements.
+    std::fs::write(
+        &cr,
+        r#"{"colorCorrectionTransform": [2,1,0,1,0,1, 0,1,1,1,0,1, 0,1,0,1,1,1], "colorCorrectionGains": [2.25, 1, 1, 1.5]}"#,
+    )
+    .unwrap();
+    let convert = |format: &str| {
+        let out = campro()
+            .arg("convert")
+            .arg(bundled("identity.json"))
+            .arg("--capture-result")
+            .arg(&cr)
+            .args(["--format", format])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let v: serde_json::Value = serde_json::from_str(&convert("json")).unwrap();
+    assert_eq!(v["colorCorrectionGains"], serde_json::json!([2.25, 1.0, 1.0, 1.5]));
+    let kt = convert("kotlin");
+    assert!(kt.contains("COLOR_CORRECTION_GAINS, RggbChannelVector(2.25f, 1.0f, 1.0f, 1.5f))"), "{kt}");
+    let kt = campro()
+        .args(["convert", "identity", "--format", "kotlin", "--device-gains", "1.9", "1", "1", "2.5"])
+        .output()
+        .unwrap();
+    let kt = String::from_utf8(kt.stdout).unwrap();
+    assert!(kt.contains("RggbChannelVector(1.9f, 1.0f, 1.0f, 2.5f)"), "{kt}");
+    let kt = campro().args(["convert", "identity", "--format", "kotlin"]).output().unwrap();
+    let kt = String::from_utf8(kt.stdout).unwrap();
+    assert!(
+        kt.contains("meteringResult.get(CaptureResult.COLOR_CORRECTION_GAINS)"),
+        "unknown gains are read back: {kt}"
+    );
+    std::fs::write(
+        &cr,
+        r#"{"colorCorrectionTransform": [1,0,0,1,0,1, 0,1,1,1,0,1, 0,1,0,1,1,1], "colorCorrectionGains": [2, 1, 1]}"#,
+    )
+    .unwrap();
+    fails_with(
+        campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&cr),
+        "colorCorrectionGains: must have 4 entries, got 3",
+    );
+    std::fs::write(&cr, r#"{"colorCorrectionTransform": [1,0,0,1,0,1, 0,1,1,1,0,1, 0,1,0,1,1,1], "colorCorrectionGains": [2, 1, 1, -1]}"#).unwrap();
+    fails_with(
+        campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&cr),
+        "colorCorrectionGains[3]",
+    );
+    fails_with(campro().args(["convert", "identity", "--device-gains", "1", "1", "1", "0"]), "--device-gains");
+
     std::fs::write(&cr, r#"{"colorCorrectionTransform": [1,0]}"#).unwrap();
     fails_with(
         campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&cr),

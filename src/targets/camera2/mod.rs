@@ -25,7 +25,7 @@ mod wire;
 pub use camera_loop::{Camera2Loop, LoopStats, Update, DEFAULT_TOLERANCE};
 pub use device::{device, Camera2};
 pub use readback::{readback, Readback};
-pub use wire::{device_transform_from_capture_result, values_from_json};
+pub use wire::{device_transform_from_capture_result, gain, gains_from_capture_result, values_from_json, MAX_GAIN};
 
 use crate::ccm::{self, Mat3};
 use crate::emulate::error_bound;

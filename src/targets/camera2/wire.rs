@@ -36,15 +36,31 @@ impl Camera2Values {
     }
 
     /// Kotlin statements setting these values on a `CaptureRequest.Builder` named `builder`.
-    pub fn to_kotlin(&self) -> String {
+    /// `gains` are the device's white-balance gains (R, G_even, G_odd, B) metered with the
+    /// device transform; AWB is off while CamPro's transform is used, so the request must
+    /// carry them. Unknown, the statement copies them from a `CaptureResult` named
+    /// `meteringResult` (an AWB-converged result).
+    pub fn to_kotlin(&self, gains: Option<[f32; 4]>) -> String {
         let ints = self.color_correction_transform.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(", ");
         let floats = |v: &[f32]| v.iter().map(|f| format!("{f:?}f")).collect::<Vec<_>>().join(", ");
         let c = floats(&self.tonemap_curve.red);
+        let gains = match gains {
+            Some(g) => format!(
+                "// The device's white balance (R, G_even, G_odd, B), metered with the device transform.\n\
+                 builder.set(CaptureRequest.COLOR_CORRECTION_GAINS, RggbChannelVector({}))\n",
+                floats(&g)
+            ),
+            None => "// The device's white balance from an AWB-converged result (campro applies it unchanged;\n\
+                     // campro convert --capture-result or --device-gains prints its values here).\n\
+                     builder.set(CaptureRequest.COLOR_CORRECTION_GAINS, meteringResult.get(CaptureResult.COLOR_CORRECTION_GAINS))\n"
+                .to_string(),
+        };
         format!(
             "// CamPro via Camera2 (scale {scale}, bound {bound:.3} LSB). COLOR_CORRECTION_MODE is\n\
-             // only honoured with CONTROL_AWB_MODE_OFF: also set COLOR_CORRECTION_GAINS.\n\
+             // only honoured with CONTROL_AWB_MODE_OFF, which also needs COLOR_CORRECTION_GAINS.\n\
              val campro = floatArrayOf({c})\n\
              builder.set(CaptureRequest.CONTROL_AWB_MODE, CaptureRequest.CONTROL_AWB_MODE_OFF)\n\
+             {gains}\
              builder.set(CaptureRequest.COLOR_CORRECTION_MODE, CaptureRequest.COLOR_CORRECTION_MODE_TRANSFORM_MATRIX)\n\
              builder.set(CaptureRequest.COLOR_CORRECTION_TRANSFORM, ColorSpaceTransform(intArrayOf({ints})))\n\
              builder.set(CaptureRequest.TONEMAP_MODE, CaptureRequest.TONEMAP_MODE_CONTRAST_CURVE)\n\
@@ -103,6 +119,39 @@ pub fn device_transform_from_capture_result(text: &str) -> Result<Mat3, Validati
             Err(ValidationError::WrongLength { field: key.into(), expected: "18 integers or 9 numbers".into(), got: n })
         }
     }
+}
+
+/// Largest white-balance gain read (devices report about 1 to 8).
+pub const MAX_GAIN: f64 = 64.0;
+
+/// The white-balance gains of a saved capture result, when it has them:
+/// `colorCorrectionGains` (or `android.colorCorrection.gains`), four finite numbers in
+/// (0, [`MAX_GAIN`]]: R, G_even, G_odd, B.
+pub fn gains_from_capture_result(text: &str) -> Result<Option<[f32; 4]>, ValidationError> {
+    let v: serde_json::Value = serde_json::from_str(text)
+        .map_err(|e| ValidationError::Rule { field: "<capture result>".into(), rule: format!("not JSON: {e}") })?;
+    let Some((key, g)) =
+        ["colorCorrectionGains", "android.colorCorrection.gains"].iter().find_map(|k| v.get(*k).map(|g| (*k, g)))
+    else {
+        return Ok(None);
+    };
+    let a = g.as_array().ok_or_else(|| ValidationError::Rule { field: key.into(), rule: "must be an array".into() })?;
+    if a.len() != 4 {
+        return Err(ValidationError::WrongLength { field: key.into(), expected: "4".into(), got: a.len() });
+    }
+    let mut out = [0f32; 4];
+    for (i, (slot, x)) in out.iter_mut().zip(a).enumerate() {
+        *slot = gain(x.as_f64()).ok_or_else(|| ValidationError::Rule {
+            field: format!("{key}[{i}]"),
+            rule: format!("must be a number in (0, {MAX_GAIN}]"),
+        })?;
+    }
+    Ok(Some(out))
+}
+
+/// A gain in (0, [`MAX_GAIN`]] as `f32`.
+pub fn gain(x: Option<f64>) -> Option<f32> {
+    x.filter(|g| g.is_finite() && *g > 0.0 && *g <= MAX_GAIN).map(|g| g as f32)
 }
 
 /// Reads back what [`Camera2Values::to_json`] wrote: the matrix the device receives (from

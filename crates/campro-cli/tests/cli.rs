@@ -131,14 +131,14 @@ fn convert_capture_result_and_bad_device_input() {
     );
     std::fs::write(
         &cr,
-        r#"{"colorCorrectionTransform": [1,0,0,1,0,1, 0,1,1,1,0,1, 0,1,0,1,1,1], "colorCorrectionGains": [2, 1, 1]}"#,
+        r#"{"colorCorrectionTransform": [2,1,0,1,0,1, 0,1,1,1,0,1, 0,1,0,1,1,1], "colorCorrectionGains": [2, 1, 1]}"#,
     )
     .unwrap();
     fails_with(
         campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&cr),
         "colorCorrectionGains: must have 4 entries, got 3",
     );
-    std::fs::write(&cr, r#"{"colorCorrectionTransform": [1,0,0,1,0,1, 0,1,1,1,0,1, 0,1,0,1,1,1], "colorCorrectionGains": [2, 1, 1, -1]}"#).unwrap();
+    std::fs::write(&cr, r#"{"colorCorrectionTransform": [2,1,0,1,0,1, 0,1,1,1,0,1, 0,1,0,1,1,1], "colorCorrectionGains": [2, 1, 1, -1]}"#).unwrap();
     fails_with(
         campro().arg("convert").arg(bundled("identity.json")).arg("--capture-result").arg(&cr),
         "colorCorrectionGains[3]",

@@ -110,6 +110,8 @@ pub struct Common {
     /// its captured images: rows "NAME enhanced".
     #[arg(long)]
     enhanced: bool,
+    #[command(flatten)]
+    scale: crate::capture::ScaleArg,
 }
 
 /// The first error an enhancer met inside an evaluation (protections cannot fail, so an
@@ -461,7 +463,8 @@ fn with_networks(
         out.push(x.clone());
         let Some(path) = c.params.iter().find(|p| set_name(p) == x.name) else { continue };
         let Some(protect) = x.protect.clone() else { continue };
-        let net = crate::capture::network_of(path, &crate::load_params(path)?, which)?;
+        let net =
+            crate::capture::network_of(path, &crate::load_params(path)?, which)?.with_scale(c.scale.enhance_scale);
         let (f, shown) = (failures.clone(), path.display().to_string());
         let key = which.key();
         out.push(Condition::new(format!("{} {suffix}", x.name), move |img: &RgbImage| {

@@ -139,6 +139,8 @@ enum Cmd {
         /// train-enhancer) on the camera's 8-bit output: what a human viewer is shown.
         #[arg(long, conflicts_with = "bit_depth")]
         enhance: bool,
+        #[command(flatten)]
+        scale: capture::ScaleArg,
         /// Leave outputs that exist and skip their inputs (re-runs do only what is missing).
         #[arg(long, conflicts_with = "force")]
         skip_existing: bool,
@@ -184,6 +186,8 @@ enum Cmd {
         /// (provenance.enhancer), with what each detector finds there.
         #[arg(long)]
         enhance: bool,
+        #[command(flatten)]
+        scale: capture::ScaleArg,
     },
     /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
     Compare {
@@ -805,12 +809,13 @@ fn run(cli: Cli) -> Result<()> {
             bitrate,
             preset,
             enhance,
+            scale,
             skip_existing,
             format,
         } => {
             let enc = video::Encoding { codec, crf: Some(crf), bitrate, preset };
             let p = load_params(&params)?;
-            let enhancer = if enhance { Some(capture::enhancer_of(&params, &p)?) } else { None };
+            let enhancer = if enhance { Some(capture::enhancer_of(&params, &p, scale)?) } else { None };
             let options = simulate::Options {
                 depth: match bit_depth {
                     BitDepth::Eight => Depth::Eight,
@@ -843,10 +848,11 @@ fn run(cli: Cli) -> Result<()> {
             force,
             format,
             enhance,
+            scale,
         } => {
             let p = load_params(&params)?;
             check_output_folder(&output, force, "--output")?;
-            let enhancer = if enhance { Some(capture::enhancer_of(&params, &p)?) } else { None };
+            let enhancer = if enhance { Some(capture::enhancer_of(&params, &p, scale)?) } else { None };
             let given = models.is_some();
             let models = models.unwrap_or_else(|| eval::shared_dir(shared.as_deref()).join("models"));
             if !models.is_dir() {

@@ -24,7 +24,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::mpsc;
 
-/// Frames in flight between the decoder, the camera and the encoder.
+/// Frames in flight between the decoder, the camera and the encoder (at least).
 const IN_FLIGHT: usize = 4;
 /// Bytes of an ffmpeg's error output kept (the rest is read and dropped).
 const STDERR_KEPT: usize = 64 << 10;
@@ -569,17 +569,20 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         let _ = wait(&mut decode);
         bail!("the video is {width} x {height} pixels; at most {MAX_SIDE} a side");
     }
+    // Frames the camera stage takes at once, and the frames in flight around it.
+    let batch_max = if job.capture.enhancer.is_some() && !sixteen { rayon::current_num_threads().max(1) } else { 1 };
+    let in_flight = IN_FLIGHT.max(batch_max + 2);
     let bytes_per = if sixteen { 6 } else { 3 };
     let frame_bytes = bytes_per * width as usize * height as usize;
     // The frames in flight (the pool, the output frame, 16-bit scratch) come from the budget.
-    let held = (frame_bytes as u64).saturating_mul(IN_FLIGHT as u64 + if sixteen { 3 } else { 1 });
+    let held = (frame_bytes as u64).saturating_mul((in_flight + batch_max) as u64 + if sixteen { 2 } else { 0 });
     let budget = campro_eval::image_file::Budget::global();
     let Some(_lease) = budget.take(held) else {
         let _ = decode.kill();
         let _ = wait(&mut decode);
         bail!(
             "the video is {width} x {height} pixels; its {} frames in flight need {} MiB, over the {} MiB limit",
-            IN_FLIGHT + 1,
+            in_flight + batch_max,
             held >> 20,
             budget.total() >> 20
         );
@@ -631,10 +634,10 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
     let mut frames = 0u64;
     let mut busy = std::time::Duration::ZERO;
     let (mut first_pts, mut last_pts) = (None, None);
-    let (free_tx, free_rx) = mpsc::sync_channel::<Vec<u8>>(IN_FLIGHT);
-    let (full_tx, full_rx) = mpsc::sync_channel::<Frame>(IN_FLIGHT);
-    let (done_tx, done_rx) = mpsc::sync_channel::<Frame>(IN_FLIGHT);
-    for _ in 0..IN_FLIGHT {
+    let (free_tx, free_rx) = mpsc::sync_channel::<Vec<u8>>(in_flight);
+    let (full_tx, full_rx) = mpsc::sync_channel::<Frame>(in_flight);
+    let (done_tx, done_rx) = mpsc::sync_channel::<Frame>(in_flight);
+    for _ in 0..in_flight {
         free_tx.send(vec![0u8; frame_bytes]).expect("room for the pool");
     }
     let header = ivf_header((width, height), sixteen, tb)?;
@@ -674,16 +677,29 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
             to.flush().map_err(stopped)?;
             Ok(())
         });
-        let mut out = vec![0u8; frame_bytes];
+        // The enhancer runs several frames at once, one core each (tract spreads one frame
+        // over cores only partly); the camera alone is one frame on every core.
+        let mut outs: Vec<Vec<u8>> = (0..batch_max).map(|_| vec![0u8; frame_bytes]).collect();
         let (mut s16, mut d16) =
             if sixteen { (vec![0u16; frame_bytes / 2], vec![0u16; frame_bytes / 2]) } else { (Vec::new(), Vec::new()) };
         let mut failure = None;
-        for src in full_rx.iter() {
-            if job.max_frames.is_some_and(|m| frames >= m) {
+        'frames: while let Ok(first) = full_rx.recv() {
+            let mut batch = vec![first];
+            while batch.len() < batch_max {
+                match full_rx.try_recv() {
+                    Ok(f) => batch.push(f),
+                    Err(_) => break,
+                }
+            }
+            if let Some(m) = job.max_frames {
+                batch.truncate(m.saturating_sub(frames) as usize);
+            }
+            if batch.is_empty() {
                 break;
             }
             let began = std::time::Instant::now();
             let ran = if sixteen {
+                let (src, out) = (&batch[0], &mut outs[0]);
                 for (v, b) in s16.iter_mut().zip(src.data.chunks_exact(2)) {
                     *v = u16::from_le_bytes([b[0], b[1]]);
                 }
@@ -692,23 +708,33 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
                     b.copy_from_slice(&v.to_le_bytes());
                 }
                 Ok(())
+            } else if batch.len() == 1 {
+                // One frame: the enhancer spreads it over the pool's cores as it can.
+                let threads = rayon::current_num_threads();
+                let (src, out) = (&batch[0], &mut outs[0]);
+                campro_eval::enhance::with_threads(threads, || job.capture.run(&src.data, out, width, height))
             } else {
-                job.capture.run(&src.data, &mut out, width, height)
+                use rayon::prelude::*;
+                batch.par_iter().zip(outs.par_iter_mut()).try_for_each(|(src, out)| {
+                    campro_eval::enhance::with_threads(1, || job.capture.run(&src.data, out, width, height))
+                })
             };
             busy += began.elapsed();
             if let Err(e) = ran {
                 failure = Some(e);
                 break;
             }
-            first_pts.get_or_insert((src.pts, std::time::Instant::now()));
-            last_pts = Some((src.pts, std::time::Instant::now()));
-            // The processed frame goes to the writer; its input buffer becomes the next output.
-            let processed = std::mem::replace(&mut out, src.data);
-            if done_tx.send(Frame { data: processed, pts: src.pts }).is_err() {
-                break;
+            for (src, out) in batch.into_iter().zip(outs.iter_mut()) {
+                first_pts.get_or_insert((src.pts, std::time::Instant::now()));
+                last_pts = Some((src.pts, std::time::Instant::now()));
+                // The processed frame goes to the writer; its input buffer becomes the next output.
+                let processed = std::mem::replace(out, src.data);
+                if done_tx.send(Frame { data: processed, pts: src.pts }).is_err() {
+                    break 'frames;
+                }
+                frames += 1;
+                bar.inc(1);
             }
-            frames += 1;
-            bar.inc(1);
         }
         drop(done_tx);
         // Unblock a reader waiting for a free buffer if the writer quit early or we stopped.

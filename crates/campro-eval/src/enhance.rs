@@ -27,9 +27,72 @@ pub const MAX_FILE: u64 = 64 << 20;
 /// size; COCO has a few dozen).
 pub struct Enhancer {
     model: InferenceModel,
-    plans: std::sync::Mutex<std::collections::HashMap<(usize, usize), std::sync::Arc<TypedSimplePlan>>>,
+    plans: std::sync::Mutex<std::collections::HashMap<(usize, usize, Outputs), std::sync::Arc<TypedSimplePlan>>>,
     multiple: usize,
     path: PathBuf,
+    parts: Parts,
+    /// The network from its own input (the restoration, when there is a table) to the
+    /// ungated output and the gate: what runs at reduced resolution.
+    unet: Option<InferenceModel>,
+    scale: Scale,
+}
+
+/// The resolution the U-Net runs at, against the image's.
+///
+/// At a reduced factor `f` the network runs on the image averaged down `f` times a side,
+/// and its contribution over the per-pixel restoration (its residual, `ungated − restored`)
+/// is upsampled bilinearly and added to the restoration computed at full resolution; the
+/// face gate's map is upsampled the same way and its blend (toward the result pixelated in
+/// the file's own blocks, at full resolution) is applied at full resolution. So the colours
+/// stay per-pixel exact and only the network's spatial correction is coarser; the cost
+/// falls about `f²` times. Measured quality and speed: `docs/enhancer.md`, "Speed".
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Scale {
+    /// Full resolution below 1280 x 720 pixels, half from there, a quarter from 2560 x 1440.
+    #[default]
+    Auto,
+    /// The network at 1/f of the image's width and height (1: full resolution; 2 or 4).
+    Factor(usize),
+}
+
+impl Scale {
+    /// The factor for a `w` x `h` image.
+    pub fn factor(self, w: usize, h: usize) -> usize {
+        match self {
+            Scale::Factor(f) => f.max(1),
+            Scale::Auto if w * h >= 2560 * 1440 => 4,
+            Scale::Auto if w * h >= 1280 * 720 => 2,
+            Scale::Auto => 1,
+        }
+    }
+}
+
+/// Which graph a plan runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Outputs {
+    /// The whole file: captured in, enhanced out.
+    Enhanced,
+    /// The network alone: its input (the restoration, or the captured image) in, the
+    /// ungated output and the gate out (or the output, without a gate).
+    Network,
+}
+
+/// The restoration stage's output in a campro enhancer with a table.
+pub const RESTORED: &str = "restored";
+/// The U-Net's output before the face gate's blend.
+pub const UNGATED: &str = "ungated";
+/// The face gate's probability map (1, 1, H, W).
+pub const GATE: &str = "gate";
+
+/// What a file's graph holds besides its input and output, for the reduced path.
+#[derive(Debug, Clone, Default)]
+struct Parts {
+    /// The restoration stage's table, when the file has campro's: run here, at full
+    /// resolution, in front of the network.
+    table: Option<RestoreTable>,
+    /// A face gate ([`UNGATED`] and [`GATE`]) and the side of its pixelation blocks (0: it
+    /// blends toward the captured image).
+    gate: Option<usize>,
 }
 
 impl Enhancer {
@@ -41,56 +104,105 @@ impl Enhancer {
     /// Reads an enhancer from the bytes of its ONNX file; `path` names it in errors.
     pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self> {
         let bad = |m: String| EvalError::Model { path: path.to_path_buf(), message: m };
-        let built = std::panic::catch_unwind(|| -> TractResult<(usize, InferenceModel)> {
-            let onnx = tract_onnx::onnx();
-            let proto = onnx.proto_model_for_read(&mut &bytes[..])?;
-            let multiple = proto
-                .metadata_props
-                .iter()
-                .find(|p| p.key == MULTIPLE_KEY)
-                .and_then(|p| p.value.parse::<usize>().ok())
-                .filter(|m| m.is_power_of_two() && *m <= 64)
-                .ok_or_else(|| {
-                    format_err!("no {MULTIPLE_KEY} entry (a power of two up to 64): not a campro enhancer")
-                })?;
-            let graph = proto.graph.as_ref().ok_or_else(|| format_err!("no graph"))?;
-            let names = (graph.input.first().map(|i| i.name.as_str()), graph.output.first().map(|o| o.name.as_str()));
-            if names != (Some(INPUT), Some(OUTPUT)) {
-                bail!("input {:?} and output {:?}, expected {INPUT:?} and {OUTPUT:?}", names.0, names.1);
-            }
-            // Every node must compute from the input: tract folds constant-only nodes while
-            // it reads the graph, so a few bytes of Tile, Expand or broadcasting on constants
-            // could ask for gigabytes before any size check runs. A campro enhancer has none.
-            let mut live: std::collections::HashSet<&str> = [INPUT].into_iter().collect();
-            for n in &graph.node {
-                if !n.input.iter().any(|i| live.contains(i.as_str())) {
-                    bail!(
+        #[allow(clippy::type_complexity)]
+        let built = std::panic::catch_unwind(
+            || -> TractResult<(usize, Parts, InferenceModel, Option<InferenceModel>)> {
+                let onnx = tract_onnx::onnx();
+                let proto = onnx.proto_model_for_read(&mut &bytes[..])?;
+                let multiple = proto
+                    .metadata_props
+                    .iter()
+                    .find(|p| p.key == MULTIPLE_KEY)
+                    .and_then(|p| p.value.parse::<usize>().ok())
+                    .filter(|m| m.is_power_of_two() && *m <= 64)
+                    .ok_or_else(|| {
+                        format_err!("no {MULTIPLE_KEY} entry (a power of two up to 64): not a campro enhancer")
+                    })?;
+                let graph = proto.graph.as_ref().ok_or_else(|| format_err!("no graph"))?;
+                let names =
+                    (graph.input.first().map(|i| i.name.as_str()), graph.output.first().map(|o| o.name.as_str()));
+                if names != (Some(INPUT), Some(OUTPUT)) {
+                    bail!("input {:?} and output {:?}, expected {INPUT:?} and {OUTPUT:?}", names.0, names.1);
+                }
+                // Every node must compute from the input: tract folds constant-only nodes while
+                // it reads the graph, so a few bytes of Tile, Expand or broadcasting on constants
+                // could ask for gigabytes before any size check runs. A campro enhancer has none.
+                let mut live: std::collections::HashSet<&str> = [INPUT].into_iter().collect();
+                for n in &graph.node {
+                    if !n.input.iter().any(|i| live.contains(i.as_str())) {
+                        bail!(
                         "node {:?} ({}) computes from constants only; a campro enhancer computes every node from its input",
                         n.name.chars().take(64).collect::<String>(),
                         n.op_type.chars().take(32).collect::<String>()
                     );
+                    }
+                    live.extend(n.output.iter().map(String::as_str));
                 }
-                live.extend(n.output.iter().map(String::as_str));
-            }
-            Ok((multiple, onnx.model_for_proto_model(&proto)?))
-        });
+                let made = |name: &str| graph.node.iter().any(|n| n.output.iter().any(|o| o == name));
+                let blocks = graph
+                    .node
+                    .iter()
+                    .find(|n| n.op_type == "AveragePool" && n.input.first().is_some_and(|i| i == UNGATED))
+                    .and_then(|n| n.attribute.iter().find(|a| a.name == "kernel_shape"))
+                    .and_then(|a| a.ints.first().copied())
+                    .map_or(0, |k| k.clamp(0, 1024) as usize);
+                let parts = Parts {
+                    table: made(RESTORED).then(|| RestoreTable::from_graph(graph)).flatten(),
+                    gate: (made(UNGATED) && made(GATE)).then_some(blocks),
+                };
+                // The network alone, for the reduced path: a graph without a readable table
+                // (another restoration stage) has none and always runs whole.
+                let unet = match (made(RESTORED), &parts.table) {
+                    (false, _) => Some(onnx.model_for_proto_model(&proto)?),
+                    (true, Some(_)) => Some(onnx.model_for_proto_model(&network_only(&proto, parts.gate.is_some()))?),
+                    (true, None) => None,
+                };
+                Ok((multiple, parts, onnx.model_for_proto_model(&proto)?, unet))
+            },
+        );
         let e = match built {
-            Ok(Ok((multiple, model))) => Self { model, plans: Default::default(), multiple, path: path.to_path_buf() },
+            Ok(Ok((multiple, parts, model, unet))) => Self {
+                model,
+                plans: Default::default(),
+                multiple,
+                path: path.to_path_buf(),
+                parts,
+                unet,
+                scale: Scale::Auto,
+            },
             Ok(Err(e)) => return Err(bad(format!("{e:#}"))),
             Err(_) => return Err(bad("tract could not read it (malformed graph)".into())),
         };
         // Built once at the smallest size, so a graph that cannot run fails here.
-        e.plan(e.multiple, e.multiple)?;
+        e.plan(e.multiple, e.multiple, Outputs::Enhanced)?;
         Ok(e)
     }
 
+    /// The same enhancer at `scale` ([`Scale::Auto`] unless set).
+    pub fn with_scale(mut self, scale: Scale) -> Self {
+        self.scale = scale;
+        self
+    }
+
     /// The plan for a padded `w` x `h` input (built on first use).
-    fn plan(&self, w: usize, h: usize) -> Result<std::sync::Arc<TypedSimplePlan>> {
+    fn plan(&self, w: usize, h: usize, outputs: Outputs) -> Result<std::sync::Arc<TypedSimplePlan>> {
         let mut plans = self.plans.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some(p) = plans.get(&(w, h)) {
+        if let Some(p) = plans.get(&(w, h, outputs)) {
             return Ok(p.clone());
         }
-        let model = self.model.clone();
+        let mut model = match (outputs, &self.unet) {
+            (Outputs::Enhanced, _) => self.model.clone(),
+            (Outputs::Network, Some(u)) => u.clone(),
+            (Outputs::Network, None) => {
+                return Err(EvalError::Model { path: self.path.clone(), message: "has no separable network".into() })
+            }
+        };
+        if outputs == Outputs::Network {
+            let names: &[&str] = if self.parts.gate.is_some() { &[UNGATED, GATE] } else { &[OUTPUT] };
+            model
+                .select_outputs_by_name(names)
+                .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") })?;
+        }
         let limit = tensor_limit(w, h);
         // The model is a fresh copy, dropped on a panic. Its shapes are checked before
         // tract optimises it (constant folding would compute every constant tensor).
@@ -116,8 +228,37 @@ impl Enhancer {
                 })
             }
         };
-        plans.insert((w, h), plan.clone());
+        plans.insert((w, h, outputs), plan.clone());
         Ok(plan)
+    }
+
+    /// Runs `plan` on a (1, 3, `ph`, `pw`) input, returning its outputs as float vectors.
+    fn run(
+        &self,
+        plan: &std::sync::Arc<TypedSimplePlan>,
+        data: Vec<f32>,
+        pw: usize,
+        ph: usize,
+    ) -> Result<Vec<Vec<f32>>> {
+        let input = Tensor::from_shape(&[1, 3, ph, pw], &data).expect("shape matches data");
+        let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| in_scope(|| plan.run(tvec!(input.into())))))
+            .map_err(|_| EvalError::Model { path: self.path.clone(), message: "tract failed while running it".into() })?
+            .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") })?;
+        out.iter()
+            .map(|t| {
+                let v = t
+                    .try_as_plain_ram()
+                    .and_then(|t| t.as_slice::<f32>())
+                    .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e}") })?;
+                if v.len() != 3 * pw * ph && v.len() != pw * ph {
+                    return Err(EvalError::Model {
+                        path: self.path.clone(),
+                        message: format!("an output has {} values, expected {} or {}", v.len(), 3 * pw * ph, pw * ph),
+                    });
+                }
+                Ok(v.to_vec())
+            })
+            .collect()
     }
 
     /// Height and width multiple the network needs (images are padded to it).
@@ -128,24 +269,104 @@ impl Enhancer {
     /// The enhanced image of a captured 8-bit image (same size).
     pub fn enhance(&self, img: &RgbImage) -> Result<RgbImage> {
         let (w, h) = (img.width() as usize, img.height() as usize);
-        let (data, pw, ph) = padded_chw(img, self.multiple);
-        let input = Tensor::from_shape(&[1, 3, ph, pw], &data).expect("shape matches data");
-        let plan = self.plan(pw, ph)?;
-        let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| plan.run(tvec!(input.into()))))
-            .map_err(|_| EvalError::Model { path: self.path.clone(), message: "tract failed while running it".into() })?
-            .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") })?;
-        let v = out[0]
-            .try_as_plain_ram()
-            .and_then(|t| t.as_slice::<f32>())
-            .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e}") })?;
-        if v.len() != 3 * pw * ph {
-            return Err(EvalError::Model {
-                path: self.path.clone(),
-                message: format!("output has {} values, expected {}", v.len(), 3 * pw * ph),
-            });
+        let f = self.scale.factor(w, h);
+        if f > 1 && w >= f * self.multiple && h >= f * self.multiple && self.unet.is_some() {
+            return self.enhance_reduced(img, f);
         }
-        Ok(cropped_rgb8(v, pw, ph, w as u32, h as u32))
+        let (data, pw, ph) = padded_chw(img, self.multiple);
+        let plan = self.plan(pw, ph, Outputs::Enhanced)?;
+        let out = self.run(&plan, data, pw, ph)?;
+        if out[0].len() != 3 * pw * ph {
+            return Err(EvalError::Model { path: self.path.clone(), message: "the output is not an RGB image".into() });
+        }
+        Ok(cropped_rgb8(&out[0], pw, ph, w as u32, h as u32))
     }
+
+    /// [`Self::enhance`] with the network at 1/`f` of the resolution ([`Scale`]): its
+    /// input (the restoration, or the captured image) at full resolution, averaged down;
+    /// the network's residual over that input upsampled and added back; the gate's map
+    /// upsampled and its blend made at full resolution.
+    fn enhance_reduced(&self, img: &RgbImage, f: usize) -> Result<RgbImage> {
+        use rayon::prelude::*;
+        let (w, h) = (img.width() as usize, img.height() as usize);
+        let (pw, ph) = (w.div_ceil(self.multiple) * self.multiple, h.div_ceil(self.multiple) * self.multiple);
+        let captured = || padded_chw(img, self.multiple).0;
+        let mut base = match &self.parts.table {
+            Some(t) => t.restore(img, pw, ph),
+            None => captured(),
+        };
+        let (sw, sh) = (w.div_ceil(f), h.div_ceil(f));
+        let (lpw, lph) = (sw.div_ceil(self.multiple) * self.multiple, sh.div_ceil(self.multiple) * self.multiple);
+        let low = averaged_down(&base, pw, ph, (w, h), f, (lpw, lph));
+        let mut out = self.run(&self.plan(lpw, lph, Outputs::Network)?, low.clone(), lpw, lph)?.into_iter();
+        let (Some(ungated_low), gate_low) = (out.next(), out.next()) else {
+            return Err(EvalError::Model { path: self.path.clone(), message: "the network gave no output".into() });
+        };
+        // The network's output as a local linear function of its input (a guided filter
+        // fitted at low resolution, He et al.), applied to the full-resolution input: the
+        // edges the input has at full resolution stay sharp.
+        let (gain, offset) = guided_coefficients(&low, &ungated_low, (sw, sh), lpw, lph);
+        let plane = pw * ph;
+        let (cols, rows) = (taps(pw, sw, f), taps(ph, sh, f));
+        base.par_chunks_mut(pw).enumerate().for_each(|(row, line)| {
+            let (c, y) = (row / ph, row % ph);
+            let at = c * lpw * lph..(c + 1) * lpw * lph;
+            let mut g = vec![0f32; line.len()];
+            upsample_row(&gain[at.clone()], lpw, rows[y], &cols, &mut g, |v, x| *v = x);
+            let mut o = vec![0f32; line.len()];
+            upsample_row(&offset[at], lpw, rows[y], &cols, &mut o, |v, x| *v = x);
+            for ((v, g), o) in line.iter_mut().zip(&g).zip(&o) {
+                *v = g * *v + o;
+            }
+        });
+        let ungated = base;
+        let Some((blocks, gate_low)) = self.parts.gate.zip(gate_low) else {
+            return Ok(cropped_rgb8(&ungated, pw, ph, w as u32, h as u32));
+        };
+        // The gate's blend at full resolution, toward the pixelated result (or the capture).
+        let toward = if blocks > 0 { pixelated(&ungated, pw, ph, blocks) } else { captured() };
+        let mut gate = vec![0f32; plane];
+        gate.par_chunks_mut(pw).enumerate().for_each(|(y, line)| {
+            upsample_row(&gate_low, lpw, rows[y], &cols, line, |v, g| *v = g.clamp(0.0, 1.0));
+        });
+        Ok(cropped_rgb8(&blended(ungated, &gate, &toward, pw * ph), pw, ph, w as u32, h as u32))
+    }
+}
+
+/// The executor for tract's kernels: the cores of [`with_threads`]' scope, one by default.
+static POOLS: std::sync::Mutex<Vec<(usize, tract_linalg::multithread::Executor)>> = std::sync::Mutex::new(Vec::new());
+
+thread_local! {
+    static THREADS: std::cell::Cell<usize> = const { std::cell::Cell::new(1) };
+}
+
+/// Runs `f` with every enhancer it calls spreading one image's convolutions over `n`
+/// threads (one pool a thread count, made once). For one frame at a time (video); images
+/// processed in parallel are better left at one thread each.
+pub fn with_threads<R>(n: usize, f: impl FnOnce() -> R) -> R {
+    let before = THREADS.with(|t| t.replace(n.max(1)));
+    let r = f();
+    THREADS.with(|t| t.set(before));
+    r
+}
+
+fn in_scope<R>(f: impl FnOnce() -> R) -> R {
+    let n = THREADS.with(|t| t.get());
+    if n <= 1 {
+        return f();
+    }
+    let executor = {
+        let mut pools = POOLS.lock().unwrap_or_else(|p| p.into_inner());
+        match pools.iter().find(|(k, _)| *k == n) {
+            Some((_, e)) => e.clone(),
+            None => {
+                let e = tract_linalg::multithread::Executor::multithread_with_name(n, "campro-enhancer");
+                pools.push((n, e.clone()));
+                e
+            }
+        }
+    };
+    tract_linalg::multithread::multithread_tract_scope(executor, f)
 }
 
 /// Widest activation an enhancer may hold at full resolution, channels: a campro U-Net's
@@ -180,6 +401,245 @@ pub fn cropped_rgb8(v: &[f32], pw: usize, ph: usize, w: u32, h: u32) -> RgbImage
         let i = y as usize * pw + x as usize;
         image::Rgb([q(v[i]), q(v[pw * ph + i]), q(v[2 * pw * ph + i])])
     })
+}
+
+/// campro's per-pixel restoration stage read from its graph's constants
+/// (`restore.bins`: each channel's level already scaled to its place in the index;
+/// `restore.table`: 2^18 RGB entries), computed as the graph does: the entry of
+/// `bins[r] + bins[256 + g] + bins[512 + b]`, times 1/255 in f32 (bit for bit: a test).
+#[derive(Debug, Clone)]
+struct RestoreTable {
+    bins: Vec<u32>,
+    entries: Vec<u8>,
+}
+
+impl RestoreTable {
+    /// Entries of the table: 64 bins a channel, cubed.
+    const ENTRIES: usize = 1 << 18;
+
+    fn from_graph(graph: &tract_onnx::pb::GraphProto) -> Option<Self> {
+        let init = |name: &str| graph.initializer.iter().find(|t| t.name == name);
+        let table = init("restore.table").filter(|t| t.data_type == 2 && t.raw_data.len() == 3 * Self::ENTRIES)?;
+        let bins = init("restore.bins").filter(|t| t.data_type == 1)?;
+        let floats: Vec<f32> = if bins.raw_data.is_empty() {
+            bins.float_data.clone()
+        } else {
+            bins.raw_data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+        };
+        // Three channels' places must sum below the table's size: integers in f32.
+        let ok = floats.len() == 768
+            && floats.iter().all(|&v| v >= 0.0 && v.fract() == 0.0 && (v as usize) < Self::ENTRIES)
+            && (0..3)
+                .map(|c| floats[c * 256..(c + 1) * 256].iter().fold(0f32, |m, &v| m.max(v)) as usize)
+                .sum::<usize>()
+                < Self::ENTRIES;
+        ok.then(|| Self { bins: floats.iter().map(|&v| v as u32).collect(), entries: table.raw_data.clone() })
+    }
+
+    /// The restored image as (3, `ph`, `pw`) floats, padded as [`padded_chw`] pads.
+    fn restore(&self, img: &RgbImage, pw: usize, ph: usize) -> Vec<f32> {
+        use rayon::prelude::*;
+        let (w, h) = (img.width() as usize, img.height() as usize);
+        let plane = pw * ph;
+        let inv = 1.0f32 / 255.0;
+        let rows: Vec<Vec<[f32; 3]>> = (0..ph)
+            .into_par_iter()
+            .map(|y| {
+                (0..pw)
+                    .map(|x| {
+                        let p = img.get_pixel(x.min(w - 1) as u32, y.min(h - 1) as u32).0;
+                        let i = (self.bins[p[0] as usize]
+                            + self.bins[256 + p[1] as usize]
+                            + self.bins[512 + p[2] as usize]) as usize
+                            * 3;
+                        let e = &self.entries[i..i + 3];
+                        [e[0] as f32 * inv, e[1] as f32 * inv, e[2] as f32 * inv]
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut out = vec![0f32; 3 * plane];
+        for (y, row) in rows.iter().enumerate() {
+            for (x, v) in row.iter().enumerate() {
+                for c in 0..3 {
+                    out[c * plane + y * pw + x] = v[c];
+                }
+            }
+        }
+        out
+    }
+}
+
+/// A (3, `ph`, `pw`) image whose top-left `size` is real, averaged down `f` times a side
+/// (the last block of a row or column averages what it has) into (3, `low.1`, `low.0`),
+/// padded past its own size by repeating its last row and column.
+fn averaged_down(img: &[f32], pw: usize, ph: usize, size: (usize, usize), f: usize, low: (usize, usize)) -> Vec<f32> {
+    use rayon::prelude::*;
+    let (w, h) = size;
+    let (sw, sh) = (w.div_ceil(f), h.div_ceil(f));
+    let (lpw, lph) = low;
+    let mut out = vec![0f32; 3 * lpw * lph];
+    out.par_chunks_mut(lpw).enumerate().for_each(|(row, line)| {
+        let (c, sy) = (row / lph, (row % lph).min(sh - 1));
+        let plane = &img[c * pw * ph..(c + 1) * pw * ph];
+        let (y0, y1) = (sy * f, (sy * f + f).min(h));
+        for (sx, v) in line.iter_mut().enumerate() {
+            let sx = sx.min(sw - 1);
+            let (x0, x1) = (sx * f, (sx * f + f).min(w));
+            let sum: f32 = (y0..y1).map(|y| plane[y * pw + x0..y * pw + x1].iter().sum::<f32>()).sum();
+            *v = sum / ((y1 - y0) * (x1 - x0)) as f32;
+        }
+    });
+    out
+}
+
+/// The file's network alone: the restoration stage's nodes removed and the graph's input
+/// renamed to what they made ([`RESTORED`]); with a gate, the blend removed and the output
+/// renamed [`UNGATED`] (the gate map is read by name).
+fn network_only(proto: &tract_onnx::pb::ModelProto, gated: bool) -> tract_onnx::pb::ModelProto {
+    let mut m = proto.clone();
+    if let Some(g) = m.graph.as_mut() {
+        let front = |o: &str| o == RESTORED || o.starts_with("restore.");
+        let blend = |o: &str| {
+            gated && (o == OUTPUT || o.starts_with("gate.pix") || ["gate.neg", "gate.diff", "gate.move"].contains(&o))
+        };
+        g.node.retain(|n| !n.output.iter().any(|o| front(o) || blend(o)));
+        g.initializer.retain(|t| !t.name.starts_with("restore."));
+        if let Some(i) = g.input.first_mut() {
+            i.name = RESTORED.into();
+        }
+        if gated {
+            if let Some(o) = g.output.first_mut() {
+                o.name = UNGATED.into();
+            }
+        }
+    }
+    m
+}
+
+/// The face gate's blend, as the file makes it: `ungated + gate · (toward − ungated)`, on
+/// (3, H, W) planes of `plane` pixels and a (1, H, W) gate.
+fn blended(mut ungated: Vec<f32>, gate: &[f32], toward: &[f32], plane: usize) -> Vec<f32> {
+    use rayon::prelude::*;
+    ungated.par_chunks_mut(plane).zip(toward.par_chunks(plane)).for_each(|(line, to)| {
+        for ((v, &t), &g) in line.iter_mut().zip(to).zip(gate) {
+            *v += g * (t - *v);
+        }
+    });
+    ungated
+}
+
+/// Radius of the guided filter's window at low resolution, pixels (a 5 x 5 window).
+const GUIDE_RADIUS: usize = 2;
+/// The guided filter's regulariser (values in 0..1): flatter than this a window is fitted
+/// by its mean.
+const GUIDE_EPS: f32 = 1e-4;
+
+/// Per channel, the coefficients (gain, offset) of the guided filter that fits `output`
+/// as a linear function of `input` in every window, averaged over the windows that hold
+/// each pixel: (3, `lph`, `lpw`) planes whose top-left `size` is real.
+fn guided_coefficients(
+    input: &[f32],
+    output: &[f32],
+    size: (usize, usize),
+    lpw: usize,
+    lph: usize,
+) -> (Vec<f32>, Vec<f32>) {
+    let n = lpw * lph;
+    let (mut gain, mut offset) = (vec![0f32; 3 * n], vec![0f32; 3 * n]);
+    for c in 0..3 {
+        let (i, p) = (&input[c * n..(c + 1) * n], &output[c * n..(c + 1) * n]);
+        let ip: Vec<f32> = i.iter().zip(p).map(|(a, b)| a * b).collect();
+        let ii: Vec<f32> = i.iter().map(|a| a * a).collect();
+        let (mi, mp, mip, mii) =
+            (boxed(i, lpw, size), boxed(p, lpw, size), boxed(&ip, lpw, size), boxed(&ii, lpw, size));
+        let a: Vec<f32> = (0..n).map(|k| (mip[k] - mi[k] * mp[k]) / (mii[k] - mi[k] * mi[k] + GUIDE_EPS)).collect();
+        let b: Vec<f32> = (0..n).map(|k| mp[k] - a[k] * mi[k]).collect();
+        gain[c * n..(c + 1) * n].copy_from_slice(&boxed(&a, lpw, size));
+        offset[c * n..(c + 1) * n].copy_from_slice(&boxed(&b, lpw, size));
+    }
+    (gain, offset)
+}
+
+/// The mean over the (2 [`GUIDE_RADIUS`] + 1)² window around each pixel of a plane (row
+/// stride `stride`), the window cut to the top-left `size`; pixels outside it copy the
+/// nearest inside.
+fn boxed(v: &[f32], stride: usize, size: (usize, usize)) -> Vec<f32> {
+    let (w, h) = size;
+    let r = GUIDE_RADIUS;
+    let mut rows = vec![0f32; v.len()];
+    for y in 0..h {
+        for x in 0..w {
+            let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
+            rows[y * stride + x] = v[y * stride + x0..y * stride + x1].iter().sum::<f32>() / (x1 - x0) as f32;
+        }
+    }
+    let mut out = vec![0f32; v.len()];
+    let lh = v.len() / stride;
+    for y in 0..lh {
+        let yy = y.min(h - 1);
+        let (y0, y1) = (yy.saturating_sub(r), (yy + r + 1).min(h));
+        for x in 0..stride {
+            let xx = x.min(w - 1);
+            out[y * stride + x] = (y0..y1).map(|k| rows[k * stride + xx]).sum::<f32>() / (y1 - y0) as f32;
+        }
+    }
+    out
+}
+
+/// Bilinear taps from `n` full-resolution positions onto `low` positions computed at 1/`f`
+/// resolution: (first, second, weight of the second), between the low-resolution pixel
+/// centres, clamped at the image's edge.
+fn taps(n: usize, low: usize, f: usize) -> Vec<(usize, usize, f32)> {
+    (0..n)
+        .map(|p| {
+            let u = ((p as f32 + 0.5) / f as f32 - 0.5).clamp(0.0, (low - 1) as f32);
+            let i = (u.floor() as usize).min(low.saturating_sub(2));
+            (i, (i + 1).min(low - 1), u - i as f32)
+        })
+        .collect()
+}
+
+/// One full-resolution row of a plane (row stride `stride`) computed at low resolution,
+/// bilinear through the row's tap `row` and the columns' `cols`, handed to `put`.
+fn upsample_row(
+    plane: &[f32],
+    stride: usize,
+    row: (usize, usize, f32),
+    cols: &[(usize, usize, f32)],
+    line: &mut [f32],
+    put: impl Fn(&mut f32, f32),
+) {
+    let (y0, y1, fy) = row;
+    let (top, bottom) = (&plane[y0 * stride..], &plane[y1 * stride..]);
+    for (v, &(x0, x1, fx)) in line.iter_mut().zip(cols) {
+        let t = top[x0] + fx * (top[x1] - top[x0]);
+        let b = bottom[x0] + fx * (bottom[x1] - bottom[x0]);
+        put(v, t + fy * (b - t));
+    }
+}
+
+/// A (3, `ph`, `pw`) image pixelated in `n` x `n` blocks (each block's mean; edge blocks
+/// average what they hold): the gate's target at full resolution.
+fn pixelated(img: &[f32], pw: usize, ph: usize, n: usize) -> Vec<f32> {
+    use rayon::prelude::*;
+    let mut out = vec![0f32; img.len()];
+    // One band of n rows of one channel at a time.
+    out.par_chunks_mut(pw * ph).zip(img.par_chunks(pw * ph)).for_each(|(dst, src)| {
+        dst.par_chunks_mut(pw * n).zip(src.par_chunks(pw * n)).for_each(|(dst, src)| {
+            let rows = dst.len() / pw;
+            for bx in (0..pw).step_by(n) {
+                let x1 = (bx + n).min(pw);
+                let sum: f64 =
+                    (0..rows).map(|y| src[y * pw + bx..y * pw + x1].iter().map(|&v| v as f64).sum::<f64>()).sum();
+                let mean = (sum / (rows * (x1 - bx)) as f64) as f32;
+                for y in 0..rows {
+                    dst[y * pw + bx..y * pw + x1].fill(mean);
+                }
+            }
+        })
+    });
+    out
 }
 
 /// `img` as (3, H', W') floats in [0, 1], H' and W' rounded up to multiples of `multiple` by
@@ -292,6 +752,110 @@ mod tests {
         let out = ok.enhance(&img).unwrap();
         // Each pixel plus the sum of all 192 input values (clamped to 255).
         assert_eq!(out.get_pixel(0, 0).0, [255, 255, 255]);
+    }
+
+    /// The shipped recommended enhancer (table, U-Net, face gate pixelating 16 x 16).
+    fn shipped() -> (Vec<u8>, Enhancer) {
+        let path = campro_testkit::workspace_root().join("params/campro-omega-0.5.enhancer.onnx");
+        let bytes = std::fs::read(&path).unwrap();
+        let e = Enhancer::from_bytes(&bytes, &path).unwrap();
+        (bytes, e)
+    }
+
+    /// A textured test picture: gradients, a disc and stripes.
+    fn picture(w: u32, h: u32) -> RgbImage {
+        RgbImage::from_fn(w, h, |x, y| {
+            let (fx, fy) = (x as f32 / w as f32, y as f32 / h as f32);
+            let disc = ((fx - 0.5).powi(2) + (fy - 0.5).powi(2)) < 0.06;
+            let stripe = (x / 3) % 2 == 0;
+            image::Rgb([
+                (255.0 * fx) as u8,
+                if disc { 230 } else { (200.0 * fy) as u8 },
+                if stripe { 40 } else { 180 } ^ (y as u8 & 0x1f),
+            ])
+        })
+    }
+
+    #[test]
+    fn the_restoration_here_is_the_files_bit_for_bit() {
+        let (bytes, e) = shipped();
+        assert!(e.parts.table.is_some() && e.parts.gate == Some(16), "{:?}", e.parts.gate);
+        let (w, h) = (2 * e.multiple, e.multiple);
+        let img = picture(w as u32, h as u32);
+        let (data, pw, ph) = padded_chw(&img, e.multiple);
+        let model = tract_onnx::onnx()
+            .model_for_read(&mut &bytes[..])
+            .unwrap()
+            .with_outputs_by_name([RESTORED])
+            .unwrap()
+            .with_input_fact(0, f32::fact([1, 3, ph, pw]).into())
+            .unwrap()
+            .into_optimized()
+            .unwrap()
+            .into_runnable()
+            .unwrap();
+        let input = Tensor::from_shape(&[1, 3, ph, pw], &data).unwrap();
+        let out = model.run(tvec!(input.into())).unwrap();
+        let want = out[0].try_as_plain_ram().unwrap().as_slice::<f32>().unwrap().to_vec();
+        let got = e.parts.table.as_ref().unwrap().restore(&img, pw, ph);
+        assert!(got == want, "the table read from the file differs from tract's run of it");
+    }
+
+    #[test]
+    fn the_network_alone_and_the_blend_here_make_the_whole_file() {
+        let (_, e) = shipped();
+        let e = e.with_scale(Scale::Factor(1));
+        let (w, h) = (3 * e.multiple as u32 + 5, 2 * e.multiple as u32 + 3);
+        let img = picture(w, h);
+        let whole = e.enhance(&img).unwrap();
+        // Restoration here, the network cut out of the file, the gate's blend here.
+        let (pw, ph) = ((w as usize).div_ceil(e.multiple) * e.multiple, (h as usize).div_ceil(e.multiple) * e.multiple);
+        let restored = e.parts.table.as_ref().unwrap().restore(&img, pw, ph);
+        let out = e.run(&e.plan(pw, ph, Outputs::Network).unwrap(), restored, pw, ph).unwrap();
+        let (ungated, gate) = (out[0].clone(), &out[1]);
+        let toward = pixelated(&ungated, pw, ph, 16);
+        let parts = cropped_rgb8(&blended(ungated, gate, &toward, pw * ph), pw, ph, w, h);
+        let worst = whole.as_raw().iter().zip(parts.as_raw()).map(|(a, b)| a.abs_diff(*b)).max().unwrap();
+        assert!(worst <= 1, "the parts differ from the whole file by {worst} LSB");
+    }
+
+    #[test]
+    fn the_guided_upsampling_keeps_what_is_linear_in_the_input() {
+        let (w, h) = (40usize, 24usize);
+        let img = picture(w as u32, h as u32);
+        let (input, pw, ph) = padded_chw(&img, 8);
+        // An output that is 0.8 · input + 0.1 everywhere: gain 0.8 and offset 0.1 wherever
+        // the window has texture (the regulariser pulls flat windows toward their mean).
+        let output: Vec<f32> = input.iter().map(|v| 0.8 * v + 0.1).collect();
+        let (gain, offset) = guided_coefficients(&input, &output, (w, h), pw, ph);
+        let errors: Vec<f32> = (0..input.len()).map(|k| (gain[k] * input[k] + offset[k] - output[k]).abs()).collect();
+        let (mean, worst) =
+            (errors.iter().sum::<f32>() / errors.len() as f32, errors.iter().fold(0f32, |m, &e| m.max(e)));
+        // In a window of variance v the gain is 0.8 · v / (v + eps): off by at most
+        // 0.8 · eps / v times the pixel's distance to the window's mean.
+        assert!(mean < 1e-3 && worst < 1e-2, "mean {mean}, worst {worst}");
+        // A constant output is a zero gain and that constant.
+        let flat = vec![0.25f32; input.len()];
+        let (gain, offset) = guided_coefficients(&input, &flat, (w, h), pw, ph);
+        assert!(gain.iter().all(|g| g.abs() < 1e-4) && offset.iter().all(|o| (o - 0.25).abs() < 1e-4));
+    }
+
+    #[test]
+    fn the_reduced_network_follows_the_full_one_and_auto_picks_by_size() {
+        assert_eq!(Scale::Auto.factor(640, 480), 1);
+        assert_eq!(Scale::Auto.factor(1280, 720), 2);
+        assert_eq!(Scale::Auto.factor(3840, 2160), 4);
+        assert_eq!(Scale::Factor(1).factor(3840, 2160), 1);
+        let (_, e) = shipped();
+        let img = picture(256, 160);
+        let full = e.with_scale(Scale::Factor(1)).enhance(&img).unwrap();
+        let (_, e) = shipped();
+        let half = e.with_scale(Scale::Factor(2)).enhance(&img).unwrap();
+        assert_eq!(half.dimensions(), img.dimensions());
+        let mse = full.as_raw().iter().zip(half.as_raw()).map(|(a, b)| (*a as f64 - *b as f64).powi(2)).sum::<f64>()
+            / full.as_raw().len() as f64;
+        let psnr = 10.0 * (255.0f64 * 255.0 / mse).log10();
+        assert!(psnr > 25.0 && full != half, "half against full resolution: {psnr:.1} dB");
     }
 
     #[test]

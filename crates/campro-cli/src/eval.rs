@@ -180,6 +180,7 @@ pub struct PrivacyArgs {
     /// Runs (random gallery/probe splits) to average, 1 to 1000.
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u16).range(1..=1000))]
     runs: u16,
+    /// Seed of the seeded choices (identities, images kept, each run's gallery and probes).
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Photos kept per identity (gallery, probe and the linear classifier's training photos).

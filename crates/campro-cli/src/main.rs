@@ -5,6 +5,7 @@ mod bench;
 mod capture;
 mod eval;
 mod inspect;
+mod man;
 mod presets;
 mod retrain;
 mod simulate;
@@ -29,6 +30,9 @@ use std::path::{Path, PathBuf};
 const DEFAULT_PARAMS: &str = include_str!("../../../params/campro-omega-0.5.json");
 /// The file name [`DEFAULT_PARAMS`] is bundled as, for messages.
 const DEFAULT_PARAMS_FILE: &str = "params/campro-omega-0.5.json";
+
+/// What a PARAMS argument is, in every command's help.
+const PARAMS_HELP: &str = "Parameter set: a bundled preset's name (campro presets lists them) or a JSON file";
 
 #[derive(Parser)]
 #[command(
@@ -58,8 +62,23 @@ enum Cmd {
         /// The shell.
         shell: clap_complete::Shell,
     },
-    /// Print the manual page (roff) to stdout: `campro man > campro.1`.
-    Man,
+    /// Print a manual page (roff) to stdout, `campro man > campro.1`, or a command's
+    /// (`campro man eval privacy`); with -o, write one page per command into a folder; with
+    /// --markdown, the whole reference as Markdown (docs/cli.md).
+    Man {
+        /// The command whose page to print (default: campro's own page).
+        command: Vec<String>,
+        /// Write campro.1 and one page per command (campro-simulate.1, campro-eval-privacy.1,
+        /// ...) into this folder.
+        #[arg(short, long, conflicts_with_all = ["command", "markdown"])]
+        output: Option<PathBuf>,
+        /// Print every command's help as one Markdown page instead.
+        #[arg(long, conflicts_with = "command")]
+        markdown: bool,
+        /// Replace pages that exist in the output folder.
+        #[arg(long, requires = "output")]
+        force: bool,
+    },
     /// Convert a CamPro checkpoint (Pipeline.save .pt) to a parameter file.
     ImportPt {
         /// The checkpoint.
@@ -73,24 +92,30 @@ enum Cmd {
     },
     /// Map parameters onto a camera stack (Camera2: COLOR_CORRECTION_TRANSFORM, TONEMAP_CURVE).
     Convert {
+        #[arg(help = PARAMS_HELP)]
         params: PathBuf,
+        /// The camera stack: camera2 (JSON or Kotlin values), or a file for another stack
+        /// (rpi-*, rkaiq-*, cube, hald; campro convert --help lists them).
         #[arg(long, default_value = "camera2", value_parser = target_names())]
         target: String,
         #[command(flatten)]
         device: DeviceArgs,
         #[command(flatten)]
         files: FileTargetArgs,
+        /// Camera2 values as JSON, or as Kotlin statements for a CaptureRequest.Builder.
         #[arg(long, value_enum, default_value_t = Format::Json)]
         format: Format,
         /// Write to this file instead of standard output.
         #[arg(short, long)]
         output: Option<PathBuf>,
+        /// Replace the output file if it exists.
         #[arg(long)]
         force: bool,
     },
-    /// Run the desktop pipeline on images and videos (files or folders, recursive) into PNGs and videos (ffmpeg).
+    /// Run the desktop pipeline on images and videos (files, folders, standard input, a
+    /// camera): each output keeps its input's format (JPEG, PNG, TIFF, the video's container).
     Simulate {
-        /// Parameter set: a bundled preset's name (campro presets) or a JSON file.
+        #[arg(help = PARAMS_HELP)]
         params: PathBuf,
         /// Images, videos or folders (recursive); `-` reads one video from standard input
         /// (a container, or raw RGB frames with --size); /dev/videoN a live camera (Linux).
@@ -153,6 +178,7 @@ enum Cmd {
     /// the faces (YuNet) and people (person detector) found on each, a JSON of the
     /// detections per image, and OUTPUT/index.html linking them.
     Inspect {
+        #[arg(help = PARAMS_HELP)]
         params: PathBuf,
         /// Images or folders (recursive).
         #[arg(required = true)]
@@ -191,7 +217,9 @@ enum Cmd {
     },
     /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
     Compare {
+        #[arg(help = PARAMS_HELP)]
         params: PathBuf,
+        /// The camera stack to emulate (camera2, rpi-*, rkaiq-*, cube, hald).
         #[arg(long, default_value = "camera2", value_parser = target_names())]
         target: String,
         #[command(flatten)]
@@ -207,8 +235,10 @@ enum Cmd {
         /// Random pixels to test (1 to 10,000,000).
         #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
         random: u32,
+        /// Seed of the random pixels.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// A text report, or one JSON object.
         #[arg(long, value_enum, default_value_t = Report::Text)]
         format: Report,
     },
@@ -653,12 +683,7 @@ fn run(cli: Cli) -> Result<()> {
             say_bytes(&buf);
             Ok(())
         }
-        Cmd::Man => {
-            let mut buf = Vec::new();
-            clap_mangen::Man::new(<Cli as clap::CommandFactory>::command()).render(&mut buf)?;
-            say_bytes(&buf);
-            Ok(())
-        }
+        Cmd::Man { command, output, markdown, force } => man::run(&command, output.as_deref(), markdown, force),
         Cmd::Validate { params, format: Report::Json } => {
             for p in params {
                 let v = load_params(&p)?;

@@ -47,6 +47,8 @@ use std::sync::Mutex;
 pub struct PrivacyOptions {
     /// Protocol repetitions (the paper: 10).
     pub runs: usize,
+    /// Seed of the seeded choices (identities, images kept); run `r` draws its gallery and
+    /// probes from `seed + 1 + r`.
     pub seed: u64,
     /// Images kept per identity (drawn once, seeded); gallery, probe and the linear
     /// classifier's training images come from this pool. At least 2.

@@ -169,8 +169,9 @@ pub struct PrivacyArgs {
     /// Face recognition models: bundled names or manifest files (repeatable).
     #[arg(long = "face-model", default_values_t = ["faceplugin".to_string(), "mobilefacenet-casia".to_string()])]
     face_models: Vec<String>,
-    /// Only these identities: a parameter file from `campro train` (its held-out
-    /// `provenance.data.validation_identities`) or a text file of LFW names, one per line.
+    /// Only these identities: a parameter set from `campro train` (a file or a bundled
+    /// preset's name: its held-out `provenance.data.validation_identities`) or a text file of
+    /// LFW names, one per line.
     #[arg(long, value_name = "FILE")]
     identities: Option<PathBuf>,
     /// Other LFW identities (≥ 2 photos) to add to the gallery as distractors, raw and never
@@ -356,7 +357,10 @@ fn parse_distractors(v: &str) -> std::result::Result<usize, String> {
 
 /// Identity names from a trained parameter file (held-out identities) or a list file.
 fn read_identities(path: &Path) -> Result<Vec<String>> {
-    let text = campro::file::read_text_capped(path, 16 << 20, "an identity list (--identities)")?;
+    let text = match crate::presets::named(path) {
+        Some(preset) => preset.json.to_string(),
+        None => campro::file::read_text_capped(path, 16 << 20, "an identity list (--identities)")?,
+    };
     let names: Vec<String> = if text.trim_start().starts_with('{') {
         let v: serde_json::Value = serde_json::from_str(&text).with_context(|| path.display().to_string())?;
         let list = v.pointer("/provenance/data/validation_identities").and_then(|l| l.as_array()).ok_or_else(|| {

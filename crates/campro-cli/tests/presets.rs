@@ -193,3 +193,37 @@ fn re_runs_skip_what_is_there_and_json_says_what_happened() {
         "cannot be used with",
     );
 }
+
+/// A preset's name works as `--identities` too (its held-out validation identities), from
+/// a folder outside the repository, exactly as the file does.
+#[test]
+fn a_presets_name_gives_its_held_out_identities() {
+    let Some(lfw) = campro_testkit::shared("data/lfw/pairs.txt") else { return };
+    let shared = lfw.parent().unwrap().parent().unwrap().parent().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut reports = Vec::new();
+    for (k, identities) in [bundled("campro-omega-0.5.json"), "campro-omega-0.5".into()].iter().enumerate() {
+        let out = dir.path().join(format!("p{k}"));
+        campro()
+            .current_dir(dir.path())
+            .args(["eval", "privacy", "campro-omega-0.5", "--identities"])
+            .arg(identities)
+            .args(["--limit", "3", "--runs", "1", "--no-verification", "--shared"])
+            .arg(shared)
+            .arg("-o")
+            .arg(&out)
+            .assert()
+            .success();
+        let v: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("privacy.json")).unwrap()).unwrap();
+        assert!(!v["identification"].is_null(), "{v}");
+        reports.push(v["identification"].clone());
+    }
+    assert_eq!(reports[0], reports[1], "the name and the file give the same evaluation");
+    fails_with(
+        campro()
+            .current_dir(dir.path())
+            .args(["eval", "privacy", "campro-omega-0.5", "--identities", "no-such-list", "--shared"])
+            .arg(shared),
+        "no-such-list",
+    );
+}

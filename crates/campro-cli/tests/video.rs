@@ -38,23 +38,18 @@ fn probe(path: &Path, streams: &str, entries: &str) -> String {
     text.lines().filter(|l| !l.trim().is_empty()).collect::<Vec<_>>().join("\n")
 }
 
-/// The video stream decoded to packed RGB, frame after frame, as stored (not rotated).
+/// The video stream decoded to packed RGB of `pix_fmt` (rgb24, rgb48le), frame after
+/// frame, as stored (not rotated).
+fn decoded(path: &Path, pix_fmt: &str) -> Vec<u8> {
+    let mut args: Vec<&str> = vec!["-autorotate", "0", "-i", path.to_str().unwrap()];
+    args.extend("-map 0:v:0 -fps_mode passthrough -f rawvideo -pix_fmt".split_whitespace());
+    args.extend([pix_fmt, "-"]);
+    ffmpeg(&args)
+}
+
+/// [`decoded`] as 8-bit RGB.
 fn rgb_frames(path: &Path) -> Vec<u8> {
-    ffmpeg(&[
-        "-autorotate",
-        "0",
-        "-i",
-        path.to_str().unwrap(),
-        "-map",
-        "0:v:0",
-        "-fps_mode",
-        "passthrough",
-        "-f",
-        "rawvideo",
-        "-pix_fmt",
-        "rgb24",
-        "-",
-    ])
+    decoded(path, "rgb24")
 }
 
 #[test]
@@ -194,6 +189,13 @@ fn timestamps(path: &Path) -> Vec<f64> {
     t
 }
 
+/// Makes `path` with ffmpeg from `args` (whitespace-separated, none holding a space).
+fn make(path: &Path, args: &str) {
+    let mut all: Vec<&str> = args.split_whitespace().collect();
+    all.push(path.to_str().unwrap());
+    ffmpeg(&all);
+}
+
 /// A stream's duration, seconds.
 fn duration(path: &Path, stream: &str) -> f64 {
     probe(path, stream, "stream=duration").parse().unwrap()
@@ -207,28 +209,11 @@ fn variable_frame_rate_keeps_every_timestamp_and_stays_with_its_audio() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("vfr.mp4");
     // 20 frames at 30 fps, then 22 frames at 10 fps (2.8 s of video), over 2.8 s of tone.
-    ffmpeg(&[
-        "-f",
-        "lavfi",
-        "-i",
-        "testsrc2=size=160x120:rate=30",
-        "-f",
-        "lavfi",
-        "-i",
-        "sine=frequency=440:sample_rate=48000",
-        "-t",
-        "2.8",
-        "-vf",
-        "setpts='if(lt(N,20),N/30,20/30+(N-20)/10)/TB'",
-        "-fps_mode",
-        "vfr",
-        "-c:v",
-        "libx264",
-        "-c:a",
-        "aac",
-        "-shortest",
-        input.to_str().unwrap(),
-    ]);
+    make(
+        &input,
+        "-f lavfi -i testsrc2=size=160x120:rate=30 -f lavfi -i sine=frequency=440:sample_rate=48000 -t 2.8 \
+         -vf setpts='if(lt(N,20),N/30,20/30+(N-20)/10)/TB' -fps_mode vfr -c:v libx264 -c:a aac -shortest",
+    );
     let want = timestamps(&input);
     assert!(want.len() > 30, "{want:?}");
     let steps: Vec<f64> = want.windows(2).map(|w| w[1] - w[0]).collect();
@@ -261,17 +246,7 @@ fn odd_sizes_are_padded_for_4_2_0_and_kept_exactly_by_ffv1() {
     }
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("odd.mkv");
-    ffmpeg(&[
-        "-f",
-        "lavfi",
-        "-i",
-        "testsrc=size=321x241:rate=25",
-        "-t",
-        "0.4",
-        "-c:v",
-        "ffv1",
-        input.to_str().unwrap(),
-    ]);
+    make(&input, "-f lavfi -i testsrc=size=321x241:rate=25 -t 0.4 -c:v ffv1");
     let preset = bundled("campro-omega-0.5.json");
     let run =
         campro().arg("simulate").arg(&preset).arg(&input).arg("-o").arg(dir.path().join("h264")).output().unwrap();
@@ -311,22 +286,9 @@ fn odd_sizes_are_padded_for_4_2_0_and_kept_exactly_by_ffv1() {
     assert_eq!(rgb_frames(&lossless), want, "321 x 241 kept, every frame the exact path");
 }
 
-/// The video stream decoded to packed 16-bit RGB (little-endian).
+/// [`decoded`] as 16-bit RGB.
 fn rgb48_frames(path: &Path) -> Vec<u16> {
-    let bytes = ffmpeg(&[
-        "-i",
-        path.to_str().unwrap(),
-        "-map",
-        "0:v:0",
-        "-fps_mode",
-        "passthrough",
-        "-f",
-        "rawvideo",
-        "-pix_fmt",
-        "rgb48le",
-        "-",
-    ]);
-    bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect()
+    decoded(path, "rgb48le").chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect()
 }
 
 #[test]
@@ -336,19 +298,7 @@ fn ten_bit_video_goes_through_the_16_bit_path_and_stays_ten_bit() {
     }
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("ten.mp4");
-    ffmpeg(&[
-        "-f",
-        "lavfi",
-        "-i",
-        "testsrc2=size=128x96:rate=25",
-        "-t",
-        "0.4",
-        "-c:v",
-        "libx264",
-        "-pix_fmt",
-        "yuv420p10le",
-        input.to_str().unwrap(),
-    ]);
+    make(&input, "-f lavfi -i testsrc2=size=128x96:rate=25 -t 0.4 -c:v libx264 -pix_fmt yuv420p10le");
     let preset = bundled("campro-omega-0.5.json");
     for codec in ["ffv1", "libx264"] {
         let run = campro()
@@ -474,17 +424,7 @@ fn standard_input_and_output_carry_containers_and_raw_frames() {
 
     // What ffmpeg cannot read from a pipe gets the reason and the ways out, in one line.
     let mp4 = dir.path().join("clip.mp4");
-    ffmpeg(&[
-        "-f",
-        "lavfi",
-        "-i",
-        "testsrc2=size=64x48:rate=10",
-        "-t",
-        "0.5",
-        "-c:v",
-        "libx264",
-        mp4.to_str().unwrap(),
-    ]);
+    make(&mp4, "-f lavfi -i testsrc2=size=64x48:rate=10 -t 0.5 -c:v libx264");
     let args = [os("simulate"), preset.clone().into_os_string(), os("-"), os("-o"), os("-")];
     let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
     let (ok, _, err) = piped(&args, b"not a video at all".repeat(100));

@@ -19,8 +19,8 @@ cp "$coco/000000338625.jpg" "$work/raw/street.jpg"
 for id in 000000549930 000000500270 000000210230 000000572900 000000480985 000000074200; do
   cp "$coco/$id.jpg" "$work/raw/$id.jpg"
 done
-$campro simulate "$params" "$work/raw" -o "$work/captured" 2>/dev/null
-$campro simulate "$params" "$work/raw" -o "$work/enhanced" --enhance 2>/dev/null
+$campro simulate "$params" "$work/raw" -o "$work/captured" --image-format png 2>/dev/null
+$campro simulate "$params" "$work/raw" -o "$work/enhanced" --enhance --image-format png 2>/dev/null
 # row NAME HEIGHT: raw | captured | enhanced of NAME, HEIGHT pixels high, 4 px apart.
 row() {
   ffmpeg -v error -y -i "$work/raw/$1.jpg" -i "$work/captured/$1.png" -i "$work/enhanced/$1.png" -filter_complex \

@@ -5,7 +5,7 @@ scores the table alone against raw on the held-out images (COCO id % 5 == 0), me
 image, for several binnings. A simplified fit: each bin shrunk toward the prior's mean colour
 with 4 pseudo-pixels (campro_eval::restore shrinks toward the coarser bin instead).
 
-    campro simulate params/campro-omega-0.5.json ../shared/data/coco-person/images -o cap/
+    campro simulate params/campro-omega-0.5.json ../shared/data/coco-person/images -o cap/ --image-format png
     python3 docs/scripts/restore-bins.py cap/ ../shared/data/coco-person/images
 
 Needs numpy and Pillow (pip install numpy pillow).

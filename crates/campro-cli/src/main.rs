@@ -132,6 +132,10 @@ enum Cmd {
         /// JPEG quality of JPEG outputs (a JPEG input stays JPEG), 1 to 100.
         #[arg(long, default_value_t = 92, value_parser = clap::value_parser!(u8).range(1..=100))]
         quality: u8,
+        /// Write every image in this format instead of its input's (png for exact work:
+        /// a JPEG output is lossy).
+        #[arg(long, value_enum)]
+        image_format: Option<simulate::ImageFormat>,
         /// Raw standard input's frame size (WxH, 8-bit RGB), or the size asked of a camera.
         #[arg(long, value_parser = parse_size)]
         size: Option<(u32, u32)>,
@@ -824,6 +828,7 @@ fn run(cli: Cli) -> Result<()> {
             output,
             bit_depth,
             quality,
+            image_format,
             size,
             rate,
             frames,
@@ -856,6 +861,7 @@ fn run(cli: Cli) -> Result<()> {
                 enhancer: enhancer.as_ref(),
                 json: matches!(format, Report::Json),
                 quality,
+                image_format,
                 frames: video::FrameFormat { size, rate },
                 max_frames: frames,
             };

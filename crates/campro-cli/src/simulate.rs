@@ -89,26 +89,42 @@ pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path, name: &dyn Fn(&Path
     Ok(found)
 }
 
-/// Where an input goes: a video keeps its container, a PNG or TIFF its format, a JPEG
-/// stays JPEG at 8 bits (PNG at 16: JPEG has no 16-bit form); anything else becomes PNG.
-fn output_for(path: &Path, depth: Depth) -> PathBuf {
-    match ImageFormat::of(path) {
-        _ if video::is_video(path) => path.to_path_buf(),
-        Some(ImageFormat::Jpeg) if depth == Depth::Eight => path.to_path_buf(),
-        Some(ImageFormat::Png | ImageFormat::Tiff) => path.to_path_buf(),
+/// Where an input goes: a video keeps its container; an image keeps its format, or takes
+/// `format` when one is asked; a JPEG at 16 bits becomes a PNG (JPEG has no 16-bit form);
+/// anything else becomes PNG.
+fn output_for(path: &Path, depth: Depth, format: Option<ImageFormat>) -> PathBuf {
+    if video::is_video(path) {
+        return path.to_path_buf();
+    }
+    match format.or(ImageFormat::of(path)) {
+        Some(ImageFormat::Jpeg) if depth == Depth::Eight => path.with_extension(ImageFormat::Jpeg.ending(path)),
+        Some(f @ (ImageFormat::Png | ImageFormat::Tiff)) => path.with_extension(f.ending(path)),
         _ => path.with_extension("png"),
     }
 }
 
 /// The image formats `simulate` writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum ImageFormat {
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ImageFormat {
     Png,
     Jpeg,
     Tiff,
 }
 
 impl ImageFormat {
+    /// The ending for this format: the path's own when it names this format already.
+    fn ending(self, path: &Path) -> String {
+        match path.extension().and_then(|e| e.to_str()) {
+            Some(e) if Self::of(path) == Some(self) => e.to_string(),
+            _ => match self {
+                Self::Png => "png",
+                Self::Jpeg => "jpg",
+                Self::Tiff => "tif",
+            }
+            .to_string(),
+        }
+    }
+
     /// The format a path names by its ending.
     fn of(path: &Path) -> Option<Self> {
         match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
@@ -165,6 +181,8 @@ pub struct Options<'a> {
     pub json: bool,
     /// JPEG quality, 1..=100.
     pub quality: u8,
+    /// Every image output in this format instead of its input's.
+    pub image_format: Option<ImageFormat>,
     /// Raw standard input's frame size and rate, or a camera's.
     pub frames: FrameFormat,
     /// Stop every video after this many frames.
@@ -364,7 +382,7 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
     }
     let found = match single_file(inputs, out)? {
         Some(job) => Inputs { jobs: vec![job], skipped: Vec::new() },
-        None => collect_inputs(inputs, out, &|p| output_for(p, o.depth))?,
+        None => collect_inputs(inputs, out, &|p| output_for(p, o.depth, o.image_format))?,
     };
     for (i, why) in &found.skipped {
         eprintln!("warning: skipping {}: {why}", crate::shown(i));

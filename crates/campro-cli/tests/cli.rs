@@ -384,6 +384,20 @@ fn photos_keep_their_format_and_one_input_may_name_its_output() {
     assert!(sizes[1].0 < sizes[0].0 && sizes[1].1 > sizes[0].1, "{sizes:?}");
     assert!(sizes[0].1 < 3.0, "quality 95 is within 3 levels on average: {sizes:?}");
 
+    // --image-format png: the folder gets photo.png, the exact path bit for bit.
+    let out = dir.path().join("png");
+    campro()
+        .arg("simulate")
+        .arg(&params)
+        .arg(&photo)
+        .arg("-o")
+        .arg(&out)
+        .args(["--image-format", "png"])
+        .assert()
+        .success();
+    assert_eq!(files_in(&out), vec!["photo.png"]);
+    assert_eq!(image::open(out.join("photo.png")).unwrap().into_rgb8().into_raw(), want);
+
     // One input and an output with an image ending: that file, in the format it names.
     let named = dir.path().join("protected.png");
     campro().arg("simulate").arg(&params).arg(&photo).arg("-o").arg(&named).assert().success();

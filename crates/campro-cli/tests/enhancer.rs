@@ -114,10 +114,11 @@ fn train_enhancer_restores_the_scene_but_not_the_faces() {
 
     // simulate --enhance = the enhancer (tract) on simulate's own 8-bit output.
     let img = coco.parent().unwrap().join("images/000000000139.jpg");
-    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("cap")).assert().success();
-    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("enh")).arg("--enhance").assert().success();
-    let captured = image::open(d.join("cap/000000000139.png")).unwrap().to_rgb8();
-    let enhanced = image::open(d.join("enh/000000000139.png")).unwrap().to_rgb8();
+    // (A JPEG stays JPEG in a folder; a named PNG output keeps every bit.)
+    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("cap.png")).assert().success();
+    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("enh.png")).arg("--enhance").assert().success();
+    let captured = image::open(d.join("cap.png")).unwrap().to_rgb8();
+    let enhanced = image::open(d.join("enh.png")).unwrap().to_rgb8();
     let e = campro_eval::enhance::Enhancer::load(&d.join("p.enhancer.onnx")).unwrap();
     assert_eq!(e.enhance(&captured).unwrap(), enhanced);
     assert_ne!(captured, enhanced);
@@ -327,10 +328,11 @@ fn the_face_gate_learns_where_faces_are_and_leaves_them_as_captured() {
     assert!(last(&log, "val_psnr") > last(&log, "val_psnr_captured") + 1.0, "{log}");
     // The written file (the blend in ONNX) is what simulate --enhance runs.
     let img = coco.parent().unwrap().join("images/000000000139.jpg");
-    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("cap")).assert().success();
-    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("enh")).arg("--enhance").assert().success();
-    let captured = image::open(d.join("cap/000000000139.png")).unwrap().to_rgb8();
-    let enhanced = image::open(d.join("enh/000000000139.png")).unwrap().to_rgb8();
+    // (A JPEG stays JPEG in a folder; a named PNG output keeps every bit.)
+    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("cap.png")).assert().success();
+    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("enh.png")).arg("--enhance").assert().success();
+    let captured = image::open(d.join("cap.png")).unwrap().to_rgb8();
+    let enhanced = image::open(d.join("enh.png")).unwrap().to_rgb8();
     assert_ne!(captured, enhanced);
     // A resumed leg keeps where the run started in its provenance.
     std::fs::write(d.join("longer.toml"), config(310, true)).unwrap();

@@ -16,8 +16,17 @@ static PARTIAL: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 /// SIGINT/SIGTERM handler: destructors do not run when a signal ends the process).
 /// Returns how many were deleted.
 pub fn remove_partial_files() -> usize {
-    let list = std::mem::take(&mut *PARTIAL.lock().unwrap_or_else(|p| p.into_inner()));
-    list.iter().filter(|p| std::fs::remove_file(p).is_ok()).count()
+    remove_partial_files_where(|_| true)
+}
+
+/// [`remove_partial_files`] for the unfinished files `which` picks; the others stay listed
+/// (tests pick their own folder, leaving other tests' writes alone).
+fn remove_partial_files_where(which: impl Fn(&Path) -> bool) -> usize {
+    let mut list = PARTIAL.lock().unwrap_or_else(|p| p.into_inner());
+    let (gone, kept): (Vec<PathBuf>, Vec<PathBuf>) = std::mem::take(&mut *list).into_iter().partition(|p| which(p));
+    *list = kept;
+    drop(list);
+    gone.iter().filter(|p| std::fs::remove_file(p).is_ok()).count()
 }
 
 /// Writes `bytes` to `path` atomically, creating missing parent folders. With `replace`
@@ -135,12 +144,14 @@ mod tests {
         // What a signal does: the process ends without running destructors.
         std::mem::forget(tmp);
         assert!(path.exists());
-        assert!(remove_partial_files() >= 1);
+        // (This test's folder only: the whole list would be other tests' writes in flight.)
+        let ours = |p: &Path| p.starts_with(dir.path());
+        assert_eq!(remove_partial_files_where(ours), 1);
         assert!(!path.exists());
         // A finished one is not touched.
         let done = temporary_beside(&out, ".mkv").unwrap();
         persist(done, &out, false).unwrap();
-        remove_partial_files();
+        assert_eq!(remove_partial_files_where(ours), 0);
         assert!(out.exists());
     }
 

@@ -209,10 +209,10 @@ fn stream_job(inputs: &[PathBuf], out: &Path, o: &Options) -> Result<Option<(Sou
     } else {
         None
     };
+    if stream_in.is_none() && o.frames != FrameFormat::default() {
+        bail!("--size and --rate: only for standard input (-) or a camera (/dev/videoN)");
+    }
     if stream_in.is_none() && stream_out.is_none() {
-        if o.frames != (FrameFormat { size: None, rate: None }) {
-            bail!("--size and --rate: only for standard input (-) or a camera (/dev/videoN)");
-        }
         return Ok(None);
     }
     if inputs.len() != 1 {
@@ -228,9 +228,6 @@ fn stream_job(inputs: &[PathBuf], out: &Path, o: &Options) -> Result<Option<(Sou
             video::VIDEO_EXTENSIONS.join(", ")
         ),
     };
-    if matches!(source, Source::File(_)) && o.frames != (FrameFormat { size: None, rate: None }) {
-        bail!("--size and --rate: only for standard input (-) or a camera (/dev/videoN)");
-    }
     let sink = match stream_out {
         Some(s) => s,
         None if video::is_video(out) && !out.is_dir() => Sink::File(o.enc.output_path(out)),

@@ -161,7 +161,7 @@ impl Encoding {
 
 /// Raw RGB frames: their size and rate (`--size`, `--rate`), for raw standard input; the
 /// size and rate asked of a camera.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct FrameFormat {
     /// Width and height, pixels.
     pub size: Option<(u32, u32)>,

@@ -361,19 +361,14 @@ fn photos_keep_their_format_and_one_input_may_name_its_output() {
     campro::pipeline::fast::Exact8::new(&p).run(&decoded, &mut want);
     let mean_error =
         |got: &[u8]| got.iter().zip(&want).map(|(&g, &w)| (g as f64 - w as f64).abs()).sum::<f64>() / got.len() as f64;
+    let simulate_into = |out: &Path, flags: &[&str]| {
+        campro().arg("simulate").arg(&params).arg(&photo).arg("-o").arg(out).args(flags).assert().success();
+    };
     // Into a folder: photo.jpg stays photo.jpg, a JPEG, at the quality asked.
     let mut sizes = Vec::new();
     for q in [95, 30] {
         let out = dir.path().join(format!("q{q}"));
-        campro()
-            .arg("simulate")
-            .arg(&params)
-            .arg(&photo)
-            .arg("-o")
-            .arg(&out)
-            .args(["--quality", &q.to_string()])
-            .assert()
-            .success();
+        simulate_into(&out, &["--quality", &q.to_string()]);
         assert_eq!(files_in(&out), vec!["photo.jpg"]);
         let bytes = std::fs::read(out.join("photo.jpg")).unwrap();
         assert_eq!(image::guess_format(&bytes).unwrap(), image::ImageFormat::Jpeg);
@@ -386,15 +381,7 @@ fn photos_keep_their_format_and_one_input_may_name_its_output() {
 
     // --image-format png: the folder gets photo.png, the exact path bit for bit.
     let out = dir.path().join("png");
-    campro()
-        .arg("simulate")
-        .arg(&params)
-        .arg(&photo)
-        .arg("-o")
-        .arg(&out)
-        .args(["--image-format", "png"])
-        .assert()
-        .success();
+    simulate_into(&out, &["--image-format", "png"]);
     assert_eq!(files_in(&out), vec!["photo.png"]);
     assert_eq!(image::open(out.join("photo.png")).unwrap().into_rgb8().into_raw(), want);
 

@@ -233,14 +233,8 @@ impl Enhancer {
     }
 
     /// Runs `plan` on a (1, 3, `ph`, `pw`) input, returning its outputs as float vectors.
-    fn run(
-        &self,
-        plan: &std::sync::Arc<TypedSimplePlan>,
-        data: Vec<f32>,
-        pw: usize,
-        ph: usize,
-    ) -> Result<Vec<Vec<f32>>> {
-        let input = Tensor::from_shape(&[1, 3, ph, pw], &data).expect("shape matches data");
+    fn run(&self, plan: &std::sync::Arc<TypedSimplePlan>, data: &[f32], pw: usize, ph: usize) -> Result<Vec<Vec<f32>>> {
+        let input = Tensor::from_shape(&[1, 3, ph, pw], data).expect("shape matches data");
         let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| in_scope(|| plan.run(tvec!(input.into())))))
             .map_err(|_| EvalError::Model { path: self.path.clone(), message: "tract failed while running it".into() })?
             .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") })?;
@@ -275,7 +269,7 @@ impl Enhancer {
         }
         let (data, pw, ph) = padded_chw(img, self.multiple);
         let plan = self.plan(pw, ph, Outputs::Enhanced)?;
-        let out = self.run(&plan, data, pw, ph)?;
+        let out = self.run(&plan, &data, pw, ph)?;
         if out[0].len() != 3 * pw * ph {
             return Err(EvalError::Model { path: self.path.clone(), message: "the output is not an RGB image".into() });
         }
@@ -298,7 +292,7 @@ impl Enhancer {
         let (sw, sh) = (w.div_ceil(f), h.div_ceil(f));
         let (lpw, lph) = (sw.div_ceil(self.multiple) * self.multiple, sh.div_ceil(self.multiple) * self.multiple);
         let low = averaged_down(&base, pw, ph, (w, h), f, (lpw, lph));
-        let mut out = self.run(&self.plan(lpw, lph, Outputs::Network)?, low.clone(), lpw, lph)?.into_iter();
+        let mut out = self.run(&self.plan(lpw, lph, Outputs::Network)?, &low, lpw, lph)?.into_iter();
         let (Some(ungated_low), gate_low) = (out.next(), out.next()) else {
             return Err(EvalError::Model { path: self.path.clone(), message: "the network gave no output".into() });
         };
@@ -308,14 +302,13 @@ impl Enhancer {
         let (gain, offset) = guided_coefficients(&low, &ungated_low, (sw, sh), lpw, lph);
         let plane = pw * ph;
         let (cols, rows) = (taps(pw, sw, f), taps(ph, sh, f));
-        base.par_chunks_mut(pw).enumerate().for_each(|(row, line)| {
+        let scratch = || (vec![0f32; pw], vec![0f32; pw]);
+        base.par_chunks_mut(pw).enumerate().for_each_init(scratch, |(g, o), (row, line)| {
             let (c, y) = (row / ph, row % ph);
             let at = c * lpw * lph..(c + 1) * lpw * lph;
-            let mut g = vec![0f32; line.len()];
-            upsample_row(&gain[at.clone()], lpw, rows[y], &cols, &mut g, |v, x| *v = x);
-            let mut o = vec![0f32; line.len()];
-            upsample_row(&offset[at], lpw, rows[y], &cols, &mut o, |v, x| *v = x);
-            for ((v, g), o) in line.iter_mut().zip(&g).zip(&o) {
+            upsample_row(&gain[at.clone()], lpw, rows[y], &cols, g, |v, x| *v = x);
+            upsample_row(&offset[at], lpw, rows[y], &cols, o, |v, x| *v = x);
+            for ((v, g), o) in line.iter_mut().zip(g.iter()).zip(o.iter()) {
                 *v = g * *v + o;
             }
         });
@@ -442,28 +435,24 @@ impl RestoreTable {
         let (w, h) = (img.width() as usize, img.height() as usize);
         let plane = pw * ph;
         let inv = 1.0f32 / 255.0;
-        let rows: Vec<Vec<[f32; 3]>> = (0..ph)
-            .into_par_iter()
-            .map(|y| {
-                (0..pw)
-                    .map(|x| {
-                        let p = img.get_pixel(x.min(w - 1) as u32, y.min(h - 1) as u32).0;
-                        let i = (self.bins[p[0] as usize]
-                            + self.bins[256 + p[1] as usize]
-                            + self.bins[512 + p[2] as usize]) as usize
-                            * 3;
-                        let e = &self.entries[i..i + 3];
-                        [e[0] as f32 * inv, e[1] as f32 * inv, e[2] as f32 * inv]
-                    })
-                    .collect()
-            })
-            .collect();
-        let mut out = vec![0f32; 3 * plane];
-        for (y, row) in rows.iter().enumerate() {
-            for (x, v) in row.iter().enumerate() {
+        // Each row's entries, channel after channel (one row of each plane), then the rows
+        // put in their planes.
+        let mut rows = vec![0f32; 3 * plane];
+        rows.par_chunks_mut(3 * pw).enumerate().for_each(|(y, row)| {
+            for x in 0..pw {
+                let p = img.get_pixel(x.min(w - 1) as u32, y.min(h - 1) as u32).0;
+                let i = (self.bins[p[0] as usize] + self.bins[256 + p[1] as usize] + self.bins[512 + p[2] as usize])
+                    as usize
+                    * 3;
                 for c in 0..3 {
-                    out[c * plane + y * pw + x] = v[c];
+                    row[c * pw + x] = self.entries[i + c] as f32 * inv;
                 }
+            }
+        });
+        let mut out = vec![0f32; 3 * plane];
+        for (y, row) in rows.chunks_exact(3 * pw).enumerate() {
+            for c in 0..3 {
+                out[c * plane + y * pw..][..pw].copy_from_slice(&row[c * pw..(c + 1) * pw]);
             }
         }
         out
@@ -811,7 +800,7 @@ mod tests {
         // Restoration here, the network cut out of the file, the gate's blend here.
         let (pw, ph) = ((w as usize).div_ceil(e.multiple) * e.multiple, (h as usize).div_ceil(e.multiple) * e.multiple);
         let restored = e.parts.table.as_ref().unwrap().restore(&img, pw, ph);
-        let out = e.run(&e.plan(pw, ph, Outputs::Network).unwrap(), restored, pw, ph).unwrap();
+        let out = e.run(&e.plan(pw, ph, Outputs::Network).unwrap(), &restored, pw, ph).unwrap();
         let (ungated, gate) = (out[0].clone(), &out[1]);
         let toward = pixelated(&ungated, pw, ph, 16);
         let parts = cropped_rgb8(&blended(ungated, gate, &toward, pw * ph), pw, ph, w, h);

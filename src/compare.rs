@@ -10,7 +10,7 @@ use crate::emulate::Emulator;
 use crate::error::ValidationError;
 use crate::params::Params;
 use crate::pipeline::{degamma, process_f64};
-use crate::targets::Feed;
+use crate::targets::{Condition, Feed};
 
 /// Running error statistics over pixel channels.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -126,6 +126,50 @@ pub fn deployment_vs_desktop(
     Ok(stats)
 }
 
+/// One measured cell of a comparison: a deployment condition on one pixel set.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Row {
+    /// The condition's label (`ct 4650`, `33^3 tetrahedral`, ...).
+    pub condition: String,
+    /// The pixel set's name (`every grey level`, `RGB cube, step 5`, ...).
+    pub pixels: String,
+    /// The measured error.
+    pub stats: Stats,
+    /// The condition's stated bound (output units), where the target states one.
+    pub bound: Option<f64>,
+}
+
+/// The test pixels every comparison uses, named: every grey level, the RGB cube in steps of
+/// 5, `random` seeded random pixels and the built-in chart.
+pub fn pixel_sets(random: usize, seed: u64) -> Vec<(String, Vec<[u8; 3]>)> {
+    let chart: Vec<[u8; 3]> = crate::chart::render().chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+    vec![
+        ("every grey level".to_string(), grey_levels()),
+        ("RGB cube, step 5".to_string(), code_cube(5)),
+        (format!("{random} random pixels"), random_pixels(random, seed)),
+        ("built-in chart".to_string(), chart),
+    ]
+}
+
+/// Every condition on every pixel set of [`pixel_sets`], conditions outermost: what
+/// `campro compare` reports and `campro convert` checks before it writes a file target.
+pub fn comparison(
+    params: &Params,
+    conditions: &[Condition],
+    random: usize,
+    seed: u64,
+) -> Result<Vec<Row>, ValidationError> {
+    let sets = pixel_sets(random, seed);
+    let mut rows = Vec::with_capacity(conditions.len() * sets.len());
+    for c in conditions {
+        for (name, px) in &sets {
+            let stats = deployment_vs_desktop(params, &c.feed, c.emulator.as_ref(), px)?;
+            rows.push(Row { condition: c.label.clone(), pixels: name.clone(), stats, bound: c.bound });
+        }
+    }
+    Ok(rows)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -138,6 +182,34 @@ mod tests {
         assert!((s.mean_abs() - 0.25 / 3.0).abs() < 1e-15);
         // mse = 0.0625 / 3 -> psnr = 10 log10(48)
         assert!((s.psnr() - 10.0 * 48f64.log10()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn comparison_is_every_condition_on_every_set_in_order() {
+        let p = Params::identity_curve(9);
+        // Two conditions: the exact ISP, and one whose matrix is off by 1% on the diagonal.
+        let conditions: Vec<Condition> = [1.0, 1.01]
+            .into_iter()
+            .map(|g| Condition {
+                label: format!("gain {g}"),
+                feed: Feed::Sensor(ccm::IDENTITY),
+                emulator: Box::new(crate::emulate::Isp { matrix: ccm::scale(&p.ccm, g), curve: p.tone_curve.clone() }),
+                bound: Some(0.5),
+            })
+            .collect();
+        let rows = comparison(&p, &conditions, 50, 3).unwrap();
+        let sets = super::pixel_sets(50, 3);
+        assert_eq!(rows.len(), 2 * 4);
+        for (i, r) in rows.iter().enumerate() {
+            let (c, (name, px)) = (&conditions[i / 4], &sets[i % 4]);
+            assert_eq!((&r.condition, &r.pixels, r.bound), (&c.label, name, Some(0.5)));
+            assert_eq!(r.stats, deployment_vs_desktop(&p, &c.feed, c.emulator.as_ref(), px).unwrap());
+            assert_eq!(r.stats.count, 3 * px.len());
+        }
+        assert_eq!(rows[0].stats.max_abs, 0.0, "the exact ISP on grey levels");
+        assert!(rows[4].stats.max_abs > 0.0);
+        assert_eq!(sets.iter().map(|s| s.1.len()).collect::<Vec<_>>(), [256, 52 * 52 * 52, 50, sets[3].1.len()]);
+        assert_eq!(sets[3].1.len(), (crate::chart::WIDTH * crate::chart::HEIGHT) as usize);
     }
 
     #[test]

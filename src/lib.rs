@@ -16,7 +16,9 @@
 //!
 //! The default build has no desktop-only dependency. The `pt` feature adds
 //! [`import_pt`] (CamPro's PyTorch checkpoints, read by the bounded [`pickle`] reader
-//! without executing anything).
+//! without executing anything). The `stress` feature adds [`stress`] (adversarial cases
+//! and the invariants every path keeps) and [`bench`] (the benchmarks' inputs), which the
+//! `campro stress` and `campro bench` commands and the property tests run.
 //! Errors: each module returns its own error kind; all of them convert into [`Error`].
 #![warn(missing_docs)]
 
@@ -34,10 +36,14 @@ pub mod rational;
 pub mod targets;
 pub mod tone_curve;
 
+#[cfg(feature = "stress")]
+pub mod bench;
 #[cfg(feature = "pt")]
 pub mod import_pt;
 #[cfg(feature = "pt")]
 pub mod pickle;
+#[cfg(feature = "stress")]
+pub mod stress;
 
 pub use ccm::Mat3;
 pub use error::ValidationError;

@@ -1,6 +1,8 @@
 //! `campro bench`: one table of run time against error for every path and setting,
 //! with the copy baseline measured in the same run. Medians over repeated runs.
 
+use crate::args::{BenchArgs, Report};
+use campro::bench::test_frame;
 use campro::ccm::{self, Mat3};
 use campro::color_temp::DngCalibration;
 use campro::compare::random_pixels;
@@ -10,14 +12,13 @@ use campro::pipeline::{Depth, Prepared};
 use campro::targets::camera2::Camera2Loop;
 use campro::targets::camera2::{convert, Options, RationalMode};
 use campro::Params;
-use campro_testkit::bench::test_frame;
 use rayon::prelude::*;
 use std::hint::black_box;
 use std::time::Instant;
 
 const PHONE: Mat3 = [[1.78, -0.62, -0.16], [-0.28, 1.62, -0.34], [0.02, -0.71, 1.69]];
 
-use campro_testkit::bench::median_seconds as median;
+use campro::bench::median_seconds as median;
 
 /// Median seconds per call of `f`, timed in batches of `batch` calls.
 fn per_call(batch: usize, runs: usize, mut f: impl FnMut()) -> f64 {
@@ -328,7 +329,7 @@ pub fn run(params: &Params, quick: bool) -> Vec<Row> {
     let fm1 = [[0.6, 0.3, 0.06], [0.25, 0.7, 0.05], [0.03, 0.1, 0.7]];
     let fm2 = [[0.65, 0.25, 0.07], [0.27, 0.68, 0.05], [0.02, 0.15, 0.65]];
     let cal = DngCalibration { illuminant1: 17, forward_matrix1: fm1, illuminant2: 21, forward_matrix2: fm2 };
-    let mut jitter = campro_testkit::stress::Rng(11);
+    let mut jitter = campro::stress::Rng(11);
     let noise: Vec<f64> = (0..1000).map(|_| jitter.range(-10.0, 10.0)).collect();
     for (scene, ct_at) in [
         ("CT drift 2800->6500 K", Box::new(|f: usize| 2800.0 + 3700.0 * f as f64 / 999.0) as Box<dyn Fn(usize) -> f64>),
@@ -410,9 +411,19 @@ pub fn json(rows: &[Row]) -> serde_json::Value {
     serde_json::json!({ "frame": [1920, 1080], "rows": rows })
 }
 
-/// The parameter set the table uses by default: like the paper's strong checkpoints.
-pub fn default_params() -> Params {
-    campro_testkit::bench::bench_params()
+/// `campro bench` (without a subcommand): the table for `--params` or, by default, a set
+/// like the paper's strong checkpoints ([`campro::bench::bench_params`]).
+pub fn run_command(a: &BenchArgs) -> anyhow::Result<()> {
+    let p = match &a.params {
+        Some(path) => crate::load_params(path)?,
+        None => campro::bench::bench_params(),
+    };
+    let rows = run(&p, a.quick);
+    match a.format {
+        Report::Text => markdown(&rows).iter().for_each(|line| crate::say!("{line}")),
+        Report::Json => crate::say!("{}", json(&rows)),
+    }
+    Ok(())
 }
 
 #[cfg(test)]

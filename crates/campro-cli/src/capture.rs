@@ -3,6 +3,7 @@
 //! enhancer, an attacker's restoration network). Shared by `simulate` (images and video),
 //! `inspect` and `eval`.
 
+use crate::args::ScaleArg;
 use anyhow::{anyhow, bail, Result};
 use campro::pipeline::fast::Exact8;
 use campro::pipeline::{Depth, Prepared};
@@ -61,26 +62,6 @@ pub fn enhance(e: &campro_eval::enhance::Enhancer, captured: &image::RgbImage) -
         bail!("--enhance: the image is {w} x {h}; the enhancer runs on at most 3840 x 2160 pixels");
     }
     Ok(e.enhance(captured)?)
-}
-
-/// `--enhance-scale`: the resolution the enhancer's network runs at (shared by simulate,
-/// inspect and eval).
-#[derive(clap::Args, Debug, Clone, Copy)]
-pub struct ScaleArg {
-    /// The enhancer's network at full resolution (1), at half or a quarter of it (2, 4:
-    /// colours stay per-pixel, the network's correction is upsampled; about 4 and 16 times
-    /// less work), or auto: 1 below 1280x720, 2 from there, 4 from 2560x1440.
-    #[arg(long = "enhance-scale", default_value = "auto", value_parser = parse_scale)]
-    pub enhance_scale: campro_eval::enhance::Scale,
-}
-
-fn parse_scale(s: &str) -> std::result::Result<campro_eval::enhance::Scale, String> {
-    use campro_eval::enhance::Scale;
-    match s {
-        "auto" => Ok(Scale::Auto),
-        "1" | "2" | "4" => Ok(Scale::Factor(s.parse().expect("a digit"))),
-        _ => Err(format!("must be auto, 1, 2 or 4, got {}", crate::short(s, 20))),
-    }
 }
 
 /// What a parameter set's provenance can name beside it: its enhancer (shown to people) or

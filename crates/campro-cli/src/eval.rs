@@ -1,6 +1,7 @@
 //! `campro eval privacy|utility|quality|all`: the paper's evaluation with real models
 //! (campro-eval), with CamPro parameter sets run through the exact 8-bit pipeline.
 
+use crate::args::{AttackArg, Common, EnrolArg, EvalCmd, PrivacyArgs, UtilityArgs};
 use anyhow::{anyhow, bail, Context, Result};
 use campro::pipeline::fast::Exact8;
 use campro::Params;
@@ -12,7 +13,6 @@ use campro_eval::person::PersonDetector;
 use campro_eval::privacy::{Enrolment, FaceModels, PrivacyOptions};
 use campro_eval::utility::UtilityOptions;
 use campro_eval::{data, privacy, quality, report, utility, Condition};
-use clap::{Args, Subcommand};
 use image::RgbImage;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -27,92 +27,6 @@ const BUNDLED: [(&str, &str); 4] = [
     ("faceplugin", include_str!("../../../crates/campro-eval/models/faceplugin.json")),
     ("mobilefacenet-casia", include_str!("../../../crates/campro-eval/models/mobilefacenet_casia.json")),
 ];
-
-#[derive(Subcommand)]
-pub enum EvalCmd {
-    /// Face identification (closed set, 10 runs, nearest + linear, both protection orders) and LFW verification.
-    Privacy {
-        #[command(flatten)]
-        common: Common,
-        #[command(flatten)]
-        p: PrivacyArgs,
-    },
-    /// Person detection on COCO: AP, AP@0.5, AP@0.75, precision / recall / F1.
-    Utility {
-        #[command(flatten)]
-        common: Common,
-        #[command(flatten)]
-        u: UtilityArgs,
-    },
-    /// RMSE, PSNR, SSIM, MS-SSIM of protected against raw images.
-    Quality {
-        #[command(flatten)]
-        common: Common,
-        /// Images to score (default: the COCO person images).
-        #[arg(long)]
-        images: Option<PathBuf>,
-        /// Only the COCO images no training reads (id % 5 == 0, 399 of 2,044: the enhancer's
-        /// and the detectors' held-out images), by file name.
-        #[arg(long)]
-        held_out: bool,
-    },
-    /// All three plus report.md with the privacy-utility trade-off plot.
-    All {
-        #[command(flatten)]
-        common: Common,
-        #[command(flatten)]
-        p: PrivacyArgs,
-        #[command(flatten)]
-        u: UtilityArgs,
-    },
-    /// The privacy-utility frontier across runs (the paper's Figure 10) from measured points:
-    /// frontier.svg and frontier.md.
-    Frontier {
-        /// CSV of points read off the reports: `set,hours,top1,top1_attacked,ap_ratio`
-        /// (campro_eval::frontier), at most 1 MB.
-        points: PathBuf,
-        /// Output folder (a new or empty folder, unless --force).
-        #[arg(short, long)]
-        output: PathBuf,
-        /// Write into an output folder that already holds files (replacing its reports).
-        #[arg(long)]
-        force: bool,
-    },
-}
-
-#[derive(Args)]
-pub struct Common {
-    /// CamPro parameter sets to evaluate (raw images are always included).
-    params: Vec<PathBuf>,
-    /// Baselines: lowres-S or defocus-K-SIGMA (repeatable).
-    #[arg(long = "baseline", value_name = "B")]
-    baselines: Vec<Baseline>,
-    /// Add the paper's seven baselines (lowres 4/8/16, defocus 9/3, 13/5, 15/7, 25/7).
-    #[arg(long)]
-    paper_baselines: bool,
-    /// The shared data folder (default: $CAMPRO_SHARED or ../shared).
-    #[arg(long)]
-    shared: Option<PathBuf>,
-    /// Folder of the model files (default: SHARED/models).
-    #[arg(long)]
-    models: Option<PathBuf>,
-    /// Use only the first N (images, or identities for privacy): quick looks and CI.
-    #[arg(long, value_parser = parse_limit)]
-    limit: Option<usize>,
-    /// Output folder for the CSV, JSON, SVG and Markdown reports (a new or empty folder,
-    /// unless --force).
-    #[arg(short, long, default_value = "campro-eval")]
-    output: PathBuf,
-    /// Write into an output folder that already holds files (replacing its reports).
-    #[arg(long)]
-    force: bool,
-    /// Also score what each parameter set's image enhancer (provenance.enhancer) makes of
-    /// its captured images: rows "NAME enhanced".
-    #[arg(long)]
-    enhanced: bool,
-    #[command(flatten)]
-    scale: crate::capture::ScaleArg,
-}
 
 /// The first error an enhancer met inside an evaluation (protections cannot fail, so an
 /// enhanced condition records it here and passes the captured image on; the evaluation is
@@ -134,124 +48,12 @@ impl Failures {
     }
 }
 
-/// `--limit`: at least 1 (an empty selection has nothing to score).
-fn parse_limit(s: &str) -> std::result::Result<usize, String> {
-    match s.parse::<usize>() {
-        Ok(n) if n >= 1 => Ok(n),
-        _ => Err(format!("must be a whole number >= 1, got {s}")),
-    }
-}
-
-/// `--confidence`: a score threshold in [0, 1].
-pub(crate) fn parse_confidence(s: &str) -> std::result::Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
-        _ => Err(format!("must be a number in [0, 1], got {s}")),
-    }
-}
-
 impl Common {
     /// Refuses an output folder that already holds files, unless --force: a quick look
     /// must not replace the reports of a long run.
     fn check_output(&self) -> Result<()> {
         crate::check_output_folder(&self.output, self.force, "--output")
     }
-}
-
-#[derive(Args)]
-pub struct PrivacyArgs {
-    /// LFW folder (default: SHARED/data/lfw).
-    #[arg(long)]
-    lfw: Option<PathBuf>,
-    /// Face detector: a bundled name or a manifest file.
-    #[arg(long, default_value = "yunet")]
-    face_detector: String,
-    /// Face recognition models: bundled names or manifest files (repeatable).
-    #[arg(long = "face-model", default_values_t = ["faceplugin".to_string(), "mobilefacenet-casia".to_string()])]
-    face_models: Vec<String>,
-    /// Only these identities: a parameter set from `campro train` (a file or a bundled
-    /// preset's name: its held-out `provenance.data.validation_identities`) or a text file of
-    /// LFW names, one per line.
-    #[arg(long, value_name = "FILE")]
-    identities: Option<PathBuf>,
-    /// Other LFW identities (≥ 2 photos) to add to the gallery as distractors, raw and never
-    /// probed: a number (seeded choice) or `all` (the paper's gallery of every subject).
-    #[arg(long, value_name = "N|all", default_value = "0", value_parser = parse_distractors)]
-    distractors: usize,
-    /// Runs (random gallery/probe splits) to average, 1 to 1000.
-    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u16).range(1..=1000))]
-    runs: u16,
-    /// Seed of the seeded choices (identities, images kept, each run's gallery and probes).
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Photos kept per identity (gallery, probe and the linear classifier's training photos).
-    #[arg(long, default_value_t = 6)]
-    pool: usize,
-    /// Skip the pairs.txt verification.
-    #[arg(long)]
-    no_verification: bool,
-    /// Verification pairs of each kind per fold (default: all 300).
-    #[arg(long)]
-    pairs_per_fold: Option<usize>,
-    /// Also attack each parameter set after a restoration that knows the camera: every
-    /// protected colour mapped back to the mean raw colour producing it, under the colour
-    /// histogram of `--restore-prior` (rows "NAME restored"; campro_eval::restore).
-    #[arg(long)]
-    restore: bool,
-    /// Raw images whose colours are the restoration's prior: the first 200 of this folder
-    /// (default: SHARED/data/coco-person/images, people but not LFW's).
-    #[arg(long, value_name = "DIR")]
-    restore_prior: Option<PathBuf>,
-    /// Adaptive attacks of the paper's Sec. VII beyond --restore (repeatable):
-    /// `restore-net`, each parameter set's learnt restoration network
-    /// (provenance.restorer, from campro train-enhancer with data.faces = "restore") on its
-    /// captured images: rows "NAME restore-net"; `retrain`, each face model fine-tuned on
-    /// the set's protected faces of identities never probed (needs --identities; the
-    /// --retrain-* options): rows "NAME retrained".
-    #[arg(long = "attack", value_enum)]
-    attacks: Vec<AttackArg>,
-    #[command(flatten)]
-    retrain: crate::retrain::RetrainArgs,
-    /// How the attacker enrolled its gallery and classifier photos: `raw` (the paper's
-    /// protocol) or `camera` (through the same camera as the probes: the re-enrolment
-    /// attacker, who matches protected to protected).
-    #[arg(long, value_enum, default_value = "raw")]
-    enrol: EnrolArg,
-}
-
-/// `--attack`.
-#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum AttackArg {
-    RestoreNet,
-    Retrain,
-}
-
-/// `--enrol` (campro_eval::privacy::Enrolment).
-#[derive(Clone, Copy, clap::ValueEnum)]
-pub enum EnrolArg {
-    Raw,
-    Camera,
-}
-
-#[derive(Args)]
-pub struct UtilityArgs {
-    /// COCO person folder (default: SHARED/data/coco-person).
-    #[arg(long)]
-    coco: Option<PathBuf>,
-    /// Person detector: a bundled name or a manifest file.
-    #[arg(long, default_value = "yolox-nano")]
-    person_detector: String,
-    /// Confidence for precision / recall / F1, in [0, 1].
-    #[arg(long, default_value_t = 0.25, value_parser = parse_confidence)]
-    confidence: f64,
-    /// Score each parameter set from `campro train` or `campro finetune-detector` with the
-    /// detector fine-tuned beside it (its `provenance.detector.manifest`); raw images and
-    /// other sets use --person-detector. Implies --held-out.
-    #[arg(long)]
-    own_detector: bool,
-    /// Only the images no detector fine-tuning trains on (COCO id % 5 == 0, 399 of 2,044).
-    #[arg(long)]
-    held_out: bool,
 }
 
 impl Common {
@@ -345,14 +147,6 @@ fn face_models(a: &PrivacyArgs, models: &Path) -> Result<FaceModels> {
         detector: face_detector(a, models)?,
         embedders: a.face_models.iter().map(|n| Ok(Embedder::new(load(n, models)?)?)).collect::<Result<_>>()?,
     })
-}
-
-/// `--distractors`: a count, or `all` (every other identity).
-fn parse_distractors(v: &str) -> std::result::Result<usize, String> {
-    match v {
-        "all" => Ok(usize::MAX),
-        n => n.parse().map_err(|_| format!("expected a count or `all`, got {n:?}")),
-    }
 }
 
 /// Identity names from a trained parameter file (held-out identities) or a list file.

@@ -7,9 +7,10 @@
 //! without following links, one shared decode budget); outputs are written atomically under
 //! names taken from the input paths, never from file contents.
 
+use crate::args::{InspectArgs, Report};
 use crate::simulate::{self, Budget};
 use crate::{escape, say, write_atomic};
-use anyhow::{bail, Result};
+use anyhow::{anyhow, bail, Result};
 use campro::pipeline::fast::Exact8;
 use campro::Params;
 use campro_eval::face::{Face, FaceDetector};
@@ -249,6 +250,54 @@ fn count(v: &Value, panel: usize, what: &str) -> usize {
 /// The picture's path under `out`, for display.
 fn href_name(picture: &Path, out: &Path) -> String {
     picture.strip_prefix(out).unwrap_or(picture).display().to_string()
+}
+
+/// `campro inspect`: the models loaded, then [`inspect`].
+pub fn run(a: InspectArgs) -> Result<()> {
+    let InspectArgs {
+        params,
+        inputs,
+        output,
+        shared,
+        models,
+        person_detector,
+        own_detector,
+        confidence,
+        force,
+        format,
+        enhance,
+        scale,
+    } = a;
+    let p = crate::load_params(&params)?;
+    crate::check_output_folder(&output, force, "--output")?;
+    let enhancer = if enhance { Some(crate::capture::enhancer_of(&params, &p, scale)?) } else { None };
+    let given = models.is_some();
+    let models = models.unwrap_or_else(|| crate::eval::shared_dir(shared.as_deref()).join("models"));
+    if !models.is_dir() {
+        bail!(
+            "{} {}: no such folder; inspect runs the face and person models of the shared data folder: pass --shared DIR or set CAMPRO_SHARED (default ../shared), or --models DIR",
+            if given { "--models" } else { "the models folder" },
+            crate::shown(&models)
+        );
+    }
+    let people = crate::eval::load(&person_detector, &models)?;
+    let own = if own_detector {
+        let own = crate::eval::own_detectors(std::slice::from_ref(&params))?;
+        let manifest = own.values().next().ok_or_else(|| {
+            anyhow!("--own-detector: {} names no fine-tuned detector (provenance.detector)", crate::shown(&params))
+        })?;
+        let m = crate::eval::load(&manifest.to_string_lossy(), &models)?;
+        Some((m.manifest.name.clone(), campro_eval::person::PersonDetector::new(m)?))
+    } else {
+        None
+    };
+    let det = Detectors {
+        faces: campro_eval::face::FaceDetector::new(crate::eval::load("yunet", &models)?)?,
+        people: (people.manifest.name.clone(), campro_eval::person::PersonDetector::new(people)?),
+        own,
+        confidence: confidence as f32,
+    };
+    inspect(&params, &p, &inputs, &output, &det, enhancer.as_ref(), matches!(format, Report::Json))
 }
 
 /// Runs the inspection of every image under `inputs` into `out` (checked by the caller:

@@ -10,60 +10,17 @@
 //! few people itself (`--retrain-photos 2`); a black-box one has no labels and cannot
 //! re-train (the plain rows).
 
+use crate::args::{LossArg, RetrainArgs};
 use anyhow::{bail, Context, Result};
 use campro_eval::data::Lfw;
 use campro_eval::face::{central_face, Embedder, FaceDetector};
 use campro_eval::privacy::{self, FaceModels, IdentRow, PrivacyOptions};
 use campro_eval::Condition;
 use campro_train::retrain::{fine_tune, Loss, RetrainConfig, Sample};
-use clap::Args;
 use image::RgbImage;
 use rand::seq::{IndexedRandom, SliceRandom};
 use rand::SeedableRng;
 use std::path::{Path, PathBuf};
-
-/// The re-training attacker's settings (`--attack retrain`).
-#[derive(Args, Clone)]
-pub struct RetrainArgs {
-    /// Re-training: photos per training identity (white-box: as many as it likes; gray-box:
-    /// the few it photographs itself, e.g. 2).
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=1000))]
-    retrain_photos: u32,
-    /// Re-training: at most this many training identities (seeded choice; default all
-    /// with 2 or more photos that the evaluation does not probe).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(2..))]
-    retrain_identities: Option<u32>,
-    /// Re-training: passes over the training faces (the paper: 20).
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=1000))]
-    retrain_epochs: u32,
-    /// Re-training: SGD rate for three quarters of the epochs, then a tenth. The paper's
-    /// 0.1 diverges on the shared models (batch norm folded), and 0.01 did on faceplugin
-    /// with 1,177 identities.
-    #[arg(long, default_value_t = 0.003, value_parser = parse_rate)]
-    retrain_lr: f64,
-    /// Re-training: faces per step.
-    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(1..=4096))]
-    retrain_batch: u32,
-    /// Re-training: the head's loss, `softmax` (a linear classifier) or `arcface` (scale
-    /// 64, margin 0.5); the paper tries both.
-    #[arg(long, value_enum, default_value = "softmax")]
-    retrain_loss: LossArg,
-}
-
-/// `--retrain-loss`.
-#[derive(Clone, Copy, clap::ValueEnum)]
-pub enum LossArg {
-    Softmax,
-    Arcface,
-}
-
-/// `--retrain-lr`: a rate in (0, 10].
-fn parse_rate(s: &str) -> std::result::Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(v) if v > 0.0 && v <= 10.0 => Ok(v),
-        _ => Err(format!("must be a number in (0, 10], got {s}")),
-    }
-}
 
 /// A training photo: its identity and the five landmarks of its face.
 struct Photo {
@@ -171,7 +128,7 @@ pub fn attack(
                 .iter()
                 .map(|p| Sample { crop: protect(&base.align(&p.image, &p.landmarks)), label: p.label })
                 .collect();
-            let (net, log) = fine_tune(&m.file, &m.input, &samples, classes, &cfg, &campro_train::Device::Cpu)
+            let (net, log) = fine_tune(&m.file, &m.input, &samples, classes, &cfg, &campro_nn::Context::cpu().device)
                 .with_context(|| format!("re-training {} on {}", m.name, cond.name))?;
             let file = dir.join(format!("{}.{}.onnx", cond.name, m.name));
             net.save_onnx(&file)?;

@@ -9,6 +9,7 @@
 //! decompression bomb is refused by its header and several large images wait for each
 //! other instead of adding up.
 
+use crate::args::{BitDepth, Report, SimulateArgs};
 use crate::capture::Capture;
 use crate::video::{self, Encoding, FrameFormat, Sink, Source};
 use crate::write_atomic;
@@ -345,6 +346,54 @@ fn print_json(out: &Path, mut files: Vec<serde_json::Value>, failed: usize, skip
         }))?
     );
     Ok(())
+}
+
+/// `campro simulate`: the arguments as [`Options`], then [`simulate`].
+pub fn run(a: SimulateArgs) -> Result<()> {
+    let SimulateArgs {
+        params,
+        inputs,
+        output,
+        bit_depth,
+        quality,
+        image_format,
+        size,
+        rate,
+        frames,
+        force,
+        jobs,
+        codec,
+        crf,
+        bitrate,
+        preset,
+        enhance,
+        scale,
+        skip_existing,
+        format,
+    } = a;
+    let enc = video::Encoding { codec, crf: Some(crf), bitrate, preset };
+    let p = crate::load_params(&params)?;
+    let enhancer = if enhance { Some(crate::capture::enhancer_of(&params, &p, scale)?) } else { None };
+    let options = Options {
+        depth: match bit_depth {
+            BitDepth::Eight => Depth::Eight,
+            BitDepth::Sixteen => Depth::Sixteen,
+        },
+        existing: match (force, skip_existing) {
+            (true, _) => Existing::Replace,
+            (_, true) => Existing::Skip,
+            _ => Existing::Refuse,
+        },
+        jobs: jobs.map(|j| j as usize),
+        enc: &enc,
+        enhancer: enhancer.as_ref(),
+        json: matches!(format, Report::Json),
+        quality,
+        image_format,
+        frames: video::FrameFormat { size, rate },
+        max_frames: frames,
+    };
+    simulate(&p, &inputs, &output, &options)
 }
 
 /// Runs `p` over every image and video under `inputs` into images and videos under `out`

@@ -1,37 +1,46 @@
-//! `campro train` and `campro finetune-detector`: the optimiser's CLI (crate campro-train).
+//! `campro train`, `campro finetune-detector`, `campro train-enhancer` and the training
+//! benchmarks: the optimiser's CLI (crate campro-train).
 
+use crate::args::{
+    BenchEnhancerArgs, BenchTrainArgs, FinetuneDetectorArgs, RunFiles, StepArg, TrainArgs, TrainEnhancerArgs,
+};
 use crate::{eval, load_params, write_atomic};
 use anyhow::{bail, Result};
-use campro_train::yolox::Yolox;
+use campro_nn::yolox::Yolox;
 use std::path::{Path, PathBuf};
 
-pub fn train(
-    config: &Path,
-    output: &Path,
-    log: Option<&Path>,
-    checkpoints: Option<PathBuf>,
-    resume: Option<PathBuf>,
-    init: Option<&Path>,
-    force: bool,
-) -> Result<()> {
+impl RunFiles {
+    /// Refuses to start a run that would replace `outputs` or the log without --force, or
+    /// write into a checkpoint folder holding an earlier run (unless resuming from it).
+    fn check(&self, outputs: &[&Path]) -> Result<()> {
+        for p in outputs.iter().copied().chain(self.log.as_deref()) {
+            if p.exists() && !self.force {
+                bail!("{} exists (use --force to replace it)", crate::shown(p));
+            }
+        }
+        if let Some(c) = &self.checkpoints {
+            if self.resume.as_deref() != Some(c.as_path()) {
+                crate::check_output_folder(c, self.force, "--checkpoints")?;
+            }
+        }
+        Ok(())
+    }
+}
+
+pub fn train(a: &TrainArgs) -> Result<()> {
+    let (config, output, files) = (a.config.as_path(), a.output.as_path(), &a.files);
     let cfg = campro_train::config::Config::load(config)?;
-    let init = match init {
+    let init = match &a.init {
         Some(p) => Some(campro_train::train::Initial::from_params(&load_params(p)?, &p.display().to_string())?),
         None => None,
     };
-    // A checkpoint folder that holds an earlier run is written into only when resuming
-    // from it, or with --force.
-    if let Some(c) = &checkpoints {
-        if resume.as_deref() != Some(c.as_path()) {
-            crate::check_output_folder(c, force, "--checkpoints")?;
-        }
-    }
-    let opts = &campro_train::train::RunOptions { checkpoints, resume, init };
-    for p in std::iter::once(output).chain(log) {
-        if p.exists() && !force {
-            bail!("{} exists (use --force to replace it)", crate::shown(p));
-        }
-    }
+    files.check(&[output])?;
+    let opts = &campro_train::train::RunOptions {
+        checkpoints: files.checkpoints.clone(),
+        resume: files.resume.clone(),
+        init,
+        ctx: campro_nn::Context::cpu(),
+    };
     let pb = training_bar("train", "round", cfg.budget.rounds);
     let out = campro_train::train::run(&cfg, opts, |r| {
         pb.set_position(r.round as u64);
@@ -59,7 +68,8 @@ pub fn train(
             if v["stopped_early"] == true { " (stopped early: no better camera within the patience)" } else { "" }
         );
     }
-    if let Some(l) = log {
+    let force = files.force;
+    if let Some(l) = &files.log {
         let (losses, acc) = campro_train::log::plot_log(&out.log);
         write_log(l, &campro_train::log::log_csv(&out.log), [("losses", losses), ("accuracy", acc)], force)?;
     }
@@ -134,24 +144,16 @@ fn write_detector(det: &Yolox, params_path: &Path, name: &str, force: bool) -> R
     )
 }
 
-/// The optimiser's camera values of `params` (read from `path`): CCM rows, curve outputs,
-/// degamma exponent; its curve must have evenly spaced knots.
 /// Fine-tunes YOLOX-Nano behind the camera of `params_path` and records it in that file.
-pub fn finetune_detector(
-    params_path: &Path,
-    config: Option<&Path>,
-    steps: usize,
-    seconds: f64,
-    log: Option<&Path>,
-    force: bool,
-) -> Result<()> {
+pub fn finetune_detector(a: &FinetuneDetectorArgs) -> Result<()> {
+    let (params_path, steps, seconds, log, force) = (a.params.as_path(), a.steps, a.seconds, a.log.as_deref(), a.force);
     if steps == 0 {
         bail!("--steps: must be at least 1");
     }
     if seconds.is_nan() || seconds <= 0.0 {
         bail!("--seconds: must be > 0 (inf for no limit), got {seconds}");
     }
-    let cfg = match config {
+    let cfg = match &a.config {
         Some(c) => campro_train::config::Config::load(c)?,
         None => campro_train::config::Config::default(),
     };
@@ -164,15 +166,8 @@ pub fn finetune_detector(
     let campro_train::train::Initial { ccm, curve, gamma, .. } =
         campro_train::train::Initial::from_params(&params, &params_path.display().to_string())?;
     let imaging = campro_train::finetune::Imaging::Camera { ccm, curve, gamma };
-    let opts = campro_train::finetune::FinetuneOptions { steps, seconds, seed: cfg.seed };
-    let pb = indicatif::ProgressBar::new(steps as u64);
-    pb.set_style(
-        indicatif::ProgressStyle::with_template(
-            "finetune-detector [{bar:30}] step {pos}/{len} {elapsed_precise} eta {eta} {msg}",
-        )
-        .unwrap()
-        .progress_chars("=> "),
-    );
+    let opts = campro_train::finetune::FinetuneOptions { steps, seconds, seed: cfg.seed, ..Default::default() };
+    let pb = training_bar("finetune-detector", "step", steps);
     let every = (steps / 20).max(1);
     let done = campro_train::finetune::run(&imaging, &cfg.detector, &opts, |r| {
         pb.set_position(r.step as u64);
@@ -214,36 +209,6 @@ pub fn finetune_detector(
     );
     Ok(())
 }
-
-/// `campro train-enhancer`.
-#[derive(clap::Args)]
-pub struct TrainEnhancerArgs {
-    /// The parameter set (JSON) whose camera the enhancer inverts; its provenance gains
-    /// `enhancer`. LFW identities it held out (`provenance.data.validation_identities`)
-    /// are never read.
-    params: PathBuf,
-    /// TOML configuration (every key optional: the paper's settings, sized for the CPU).
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// The training log (CSV), with LOG-losses.svg and LOG-psnr.svg.
-    #[arg(long)]
-    log: Option<PathBuf>,
-    /// Checkpoint folder (every budget.checkpoint_every steps and at the end).
-    #[arg(long)]
-    checkpoints: Option<PathBuf>,
-    /// Resume from this checkpoint folder (same configuration).
-    #[arg(long)]
-    resume: Option<PathBuf>,
-    /// Start from the weights in this checkpoint folder of another run, or in an enhancer
-    /// file (PARAMS.enhancer.onnx): a fresh step count and log; a face gate it lacks starts
-    /// fresh.
-    #[arg(long, conflicts_with = "resume")]
-    init: Option<PathBuf>,
-    /// Replace existing enhancer files and log.
-    #[arg(long)]
-    force: bool,
-}
-
 /// LFW identities a trained parameter set held out (`provenance.data.validation_identities`).
 fn held_out_identities(params: &campro::Params) -> Option<Vec<String>> {
     let list = params.provenance.get("data")?.get("validation_identities")?.as_array()?;
@@ -273,20 +238,12 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
     let key = which.key();
     let onnx = a.params.with_extension(format!("{key}.onnx"));
     let manifest = a.params.with_extension(format!("{key}.json"));
-    for p in [Some(&onnx), Some(&manifest), a.log.as_ref()].into_iter().flatten() {
-        if p.exists() && !a.force {
-            bail!("{} exists (use --force to replace it)", crate::shown(p));
-        }
-    }
-    if let Some(c) = &a.checkpoints {
-        if a.resume.as_deref() != Some(c.as_path()) {
-            crate::check_output_folder(c, a.force, "--checkpoints")?;
-        }
-    }
+    a.files.check(&[&onnx, &manifest])?;
     let opts = campro_train::enhancer::EnhancerOptions {
-        checkpoints: a.checkpoints.clone(),
-        resume: a.resume.clone(),
+        checkpoints: a.files.checkpoints.clone(),
+        resume: a.files.resume.clone(),
         init: a.init.clone(),
+        ctx: campro_nn::Context::cpu(),
     };
     let pb = indicatif::ProgressBar::new(cfg.budget.steps as u64);
     pb.set_style(
@@ -325,9 +282,9 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
         }
     })?;
     pb.finish_and_clear();
-    if let Some(l) = &a.log {
+    if let Some(l) = &a.files.log {
         let (losses, psnr) = campro_train::enhancer::plot_log(&out.log);
-        write_log(l, &campro_train::enhancer::log_csv(&out.log), [("losses", losses), ("psnr", psnr)], a.force)?;
+        write_log(l, &campro_train::enhancer::log_csv(&out.log), [("losses", losses), ("psnr", psnr)], a.files.force)?;
     }
     out.enhancer.save_onnx(&onnx)?;
     let file = |p: &Path| p.file_name().expect("a file name").to_string_lossy().into_owned();
@@ -340,7 +297,7 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
         "restoration_table": out.enhancer.table.is_some(),
         "provenance": out.provenance,
     });
-    write_atomic(&manifest, (serde_json::to_string_pretty(&m)? + "\n").as_bytes(), a.force)?;
+    write_atomic(&manifest, (serde_json::to_string_pretty(&m)? + "\n").as_bytes(), a.files.force)?;
     let last = out.log.iter().rev().find_map(|r| r.validation.clone());
     params.provenance.insert(
         key.into(),
@@ -355,44 +312,6 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
         onnx.display()
     );
     Ok(())
-}
-
-/// `campro bench train`.
-#[derive(clap::Args)]
-pub struct BenchTrainArgs {
-    /// Threads for every step (default: all cores).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
-    threads: Option<u32>,
-    /// Timed runs per step (the median is reported, after one warm-up).
-    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
-    runs: u32,
-    /// The configuration whose face batch, person batch and size the players' steps use
-    /// (default: the paper's).
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// Only these steps (repeatable; default: all).
-    #[arg(long = "only", value_enum)]
-    only: Vec<StepArg>,
-    /// The shared data folder (default: $CAMPRO_SHARED or ../shared).
-    #[arg(long)]
-    shared: Option<PathBuf>,
-    /// Also run PyTorch's anchor (SHARED/anchors/torch_step.py) with this Python, with the
-    /// same threads, right after, and report the ratios.
-    #[arg(long, value_name = "PYTHON")]
-    anchor: Option<PathBuf>,
-    /// A table, or one JSON object.
-    #[arg(long, value_enum, default_value_t = crate::Report::Text)]
-    format: crate::Report,
-}
-
-/// `--only`.
-#[derive(Clone, Copy, clap::ValueEnum)]
-pub enum StepArg {
-    Mobilefacenet,
-    Yolox,
-    Attacker,
-    Privacy,
-    Detector,
 }
 
 pub fn bench_train(a: &BenchTrainArgs) -> Result<()> {
@@ -420,8 +339,8 @@ pub fn bench_train(a: &BenchTrainArgs) -> Result<()> {
     };
     let shared = eval::shared_dir(a.shared.as_deref());
     let models = shared.join("models");
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
-    let times = pool.install(|| campro_train::bench::run(&models, &cfg, &steps, a.runs as usize))?;
+    let ctx = campro_nn::Context::cpu().with_threads(threads);
+    let times = ctx.install(|| campro_train::bench::run(&ctx, &models, &cfg, &steps, a.runs as usize))?;
     let mut json = serde_json::Map::new();
     json.insert("threads".into(), threads.into());
     json.insert("face_batch".into(), cfg.data.batch.into());
@@ -443,8 +362,8 @@ pub fn bench_train(a: &BenchTrainArgs) -> Result<()> {
         }
     }
     match a.format {
-        crate::Report::Json => crate::say!("{}", serde_json::Value::Object(json)),
-        crate::Report::Text => {
+        crate::args::Report::Json => crate::say!("{}", serde_json::Value::Object(json)),
+        crate::args::Report::Text => {
             crate::say!("| step ({threads} threads) | campro-train | PyTorch | ratio |");
             crate::say!("|---|---|---|---|");
             for (s, ms) in &times {
@@ -482,34 +401,6 @@ fn run_anchor(python: &Path, shared: &Path, threads: usize) -> Result<serde_json
     serde_json::from_str(last).map_err(|e| anyhow::anyhow!("--anchor: the anchor printed no JSON ({e})"))
 }
 
-/// `campro bench enhancer`.
-#[derive(clap::Args)]
-pub struct BenchEnhancerArgs {
-    /// U-Net widths to compare, comma-separated, full resolution first (repeatable; default:
-    /// the configuration's).
-    #[arg(long = "widths", value_delimiter = ',', num_args = 1.., action = clap::ArgAction::Append)]
-    widths: Vec<usize>,
-    /// Several sizes: repeat --size; each is one comma-separated list (overrides --widths).
-    #[arg(long = "size", value_name = "W0,W1,...")]
-    sizes: Vec<String>,
-    /// Per-pixel stem widths to combine with each size (repeatable; default: the
-    /// configuration's).
-    #[arg(long = "stem")]
-    stems: Vec<usize>,
-    /// Threads for the training step (default: all cores); inference runs on one.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
-    threads: Option<u32>,
-    /// Timed runs (the median is reported, after one warm-up).
-    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
-    runs: u32,
-    /// The configuration whose widths, batch and crop are used (default: the built-in one).
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// A table, or one JSON object.
-    #[arg(long, value_enum, default_value_t = crate::Report::Text)]
-    format: crate::Report,
-}
-
 pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
     let threads = a.threads.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |t| t as usize);
     std::env::set_var("RAYON_NUM_THREADS", threads.to_string());
@@ -532,7 +423,7 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
     let frame = image::RgbImage::from_fn(640, 480, |x, y| {
         image::Rgb([(x % 256) as u8, (y % 256) as u8, ((x + y) % 256) as u8])
     });
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let ctx = campro_nn::Context::cpu().with_threads(threads);
     let stems = if a.stems.is_empty() { vec![cfg.model.stem] } else { a.stems.clone() };
     let shapes: Vec<campro_train::config::UnetConfig> = sizes
         .iter()
@@ -564,7 +455,7 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
             Ok(())
         })?;
         let step_cfg = campro_train::config::EnhancerConfig { model: shape.clone(), ..cfg.clone() };
-        let step = pool.install(|| campro_train::bench::enhancer_step(&step_cfg, a.runs as usize))?;
+        let step = ctx.install(|| campro_train::bench::enhancer_step(&ctx, &step_cfg, a.runs as usize))?;
         rows.push(serde_json::json!({
             "widths": w, "stem": shape.stem, "restorer": shape.restorer, "parameters": campro_train::unet::parameter_count(shape),
             "macs_per_pixel": campro_train::unet::macs_per_pixel(shape), "onnx_bytes": bytes,
@@ -573,8 +464,8 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
         }));
     }
     match a.format {
-        crate::Report::Json => crate::say!("{}", serde_json::Value::Array(rows)),
-        crate::Report::Text => {
+        crate::args::Report::Json => crate::say!("{}", serde_json::Value::Array(rows)),
+        crate::args::Report::Text => {
             crate::say!(
                 "| widths | stem | parameters | MACs/pixel | ONNX | tract 640x480, 1 thread | training step ({} x {}², {threads} threads) |",
                 cfg.data.batch,

@@ -17,8 +17,8 @@
 //! (empty for a fixed transform). Lines starting with `#` are comments.
 
 use crate::plot::{chart, Series, Style};
+use crate::table::{Column, Table};
 use crate::{EvalError, Result};
-use std::fmt::Write;
 
 /// At most this many points (a frontier of runs, not a dataset).
 pub const MAX_POINTS: usize = 200;
@@ -101,8 +101,8 @@ pub fn on_frontier(points: &[Point]) -> Vec<bool> {
         .collect()
 }
 
-/// The plot (SVG) and the table (Markdown) of `points`.
-pub fn render(points: &[Point]) -> (String, String) {
+/// The plot (SVG) and the table of `points`.
+pub fn render(points: &[Point]) -> (String, Table) {
     let front = on_frontier(points);
     let label = |p: &Point| match p.hours {
         Some(h) => format!("{} ({h:.1} h)", p.set),
@@ -119,22 +119,25 @@ pub fn render(points: &[Point]) -> (String, String) {
         None,
         None,
     );
-    let mut md = String::from(
-        "| set | training time | worst top-1 %, captured | worst top-1 %, attacked | AP, % of raw | on the frontier |\n|---|---|---|---|---|---|\n",
-    );
+    let mut t = Table::new([
+        Column::new("set", "set", 0),
+        Column::new("training time", "training_time", 0),
+        Column::new("worst top-1 %, captured", "top1", 2),
+        Column::new("worst top-1 %, attacked", "top1_attacked", 2),
+        Column::new("AP, % of raw", "ap_ratio", 0),
+        Column::new("on the frontier", "on_frontier", 0),
+    ]);
     for (p, f) in points.iter().zip(&front) {
-        let hours = p.hours.map_or("—".to_string(), |h| format!("{h:.1} h"));
-        let _ = writeln!(
-            md,
-            "| {} | {hours} | {:.2} | {:.2} | {:.0} | {} |",
-            p.set,
-            p.top1,
-            p.top1_attacked,
-            p.ap_ratio,
-            if *f { "yes" } else { "" }
-        );
+        t.push(vec![
+            p.set.as_str().into(),
+            p.hours.map_or("—".to_string(), |h| format!("{h:.1} h")).into(),
+            p.top1.into(),
+            p.top1_attacked.into(),
+            p.ap_ratio.into(),
+            if *f { "yes" } else { "" }.into(),
+        ]);
     }
-    (svg, md)
+    (svg, t)
 }
 
 #[cfg(test)]
@@ -151,7 +154,8 @@ mod tests {
         // By hand: b (13.2, 34) is beaten by a (3.0, 60) on both; a, c (the most useful) and
         // d (the most private) are not beaten.
         assert_eq!(on_frontier(&p), vec![true, false, true, true]);
-        let (svg, md) = render(&p);
+        let (svg, table) = render(&p);
+        let md = table.markdown();
         assert!(svg.starts_with("<svg") && svg.contains("a (1.0 h)") && svg.contains(">c<"));
         assert!(
             md.contains("| b | 2.0 h | 0.20 | 13.20 | 34 |  |") && md.contains("| c | — | 5.00 | 100.00 | 74 | yes |")

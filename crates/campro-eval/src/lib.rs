@@ -29,6 +29,7 @@ pub mod privacy;
 pub mod quality;
 pub mod report;
 pub mod restore;
+pub mod table;
 pub mod utility;
 
 pub use error::{EvalError, Result};

@@ -7,6 +7,7 @@ use crate::error::{EvalError, Result};
 use crate::plot::{chart, Series, Style};
 use crate::privacy::{Enrolment, Order, PrivacyReport};
 use crate::quality::QualityReport;
+use crate::table::{Cell, Column, Table};
 use crate::utility::UtilityReport;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -53,50 +54,86 @@ pub fn mean_top1(r: &PrivacyReport, condition: &str, order: Order, classifier: &
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
-/// The privacy table as CSV, like the paper's Table I: one row per protection order x image
-/// type x classifier, one column per model (top-1 %, mean over runs) and their average.
-pub fn privacy_csv(r: &PrivacyReport) -> String {
+/// The privacy table, like the paper's Table I: one row per protection order x image type
+/// x classifier, one column per model (top-1 %, mean ± std over runs) and their average;
+/// people also see, after each end-to-end image type, how often the face detector found
+/// the face.
+pub fn privacy_table(r: &PrivacyReport) -> Table {
     let models = models_of(r);
-    let mut s = format!("dataset,order,image_type,classifier,{},average\n", models.join(","));
+    let mut t = Table::new(
+        [Column::new("dataset", "dataset", 0), Column::new("order", "order", 0)]
+            .into_iter()
+            .chain([Column::new("image type", "image_type", 0), Column::new("classifier", "classifier", 0)])
+            .chain(models.iter().map(|m| Column::new(m.as_str(), m.as_str(), 2)))
+            .chain([Column::new("average", "average", 2)]),
+    );
     for order in [Order::Paper, Order::EndToEnd] {
         for cond in conditions_of(r.identification.iter().map(|x| &x.condition)) {
             for cls in ["nearest", "linear"] {
-                let vals: Vec<f64> = models
+                let rows: Vec<_> = models
                     .iter()
                     .map(|m| {
                         r.identification
                             .iter()
                             .find(|x| x.order == order && x.condition == cond && x.classifier == cls && &x.model == m)
-                            .map_or(f64::NAN, |x| 100.0 * x.top1_mean)
                     })
                     .collect();
-                let avg = vals.iter().sum::<f64>() / vals.len() as f64;
-                let cells: Vec<String> = vals.iter().map(|v| format!("{v:.2}")).collect();
-                let _ = writeln!(s, "LFW,{},{},{cls},{},{avg:.2}", order.name(), csv(&cond), cells.join(","));
+                let note = rows
+                    .iter()
+                    .flatten()
+                    .next()
+                    .and_then(|x| x.detection_rate)
+                    .map(|d| format!("faces found: {:.1}%", 100.0 * d));
+                let mut cells = vec![
+                    Cell::text("LFW"),
+                    Cell::text(order.name()),
+                    Cell::Text { text: cond.clone(), note },
+                    Cell::text(cls),
+                ];
+                cells.extend(rows.iter().map(|x| match x {
+                    Some(x) => Cell::MeanStd(100.0 * x.top1_mean, 100.0 * x.top1_std),
+                    None => Cell::Num(f64::NAN),
+                }));
+                let avg = rows.iter().map(|x| x.map_or(f64::NAN, |x| 100.0 * x.top1_mean)).sum::<f64>()
+                    / rows.len().max(1) as f64;
+                cells.push(Cell::Num(avg));
+                t.push(cells);
             }
         }
     }
-    s
+    t
+}
+
+/// The verification table: per image type and model, 10-fold accuracy and TAR at FAR 1e-3.
+pub fn verification_table(r: &PrivacyReport) -> Table {
+    let mut t = Table::new([
+        Column::new("dataset", "dataset", 0),
+        Column::new("image type", "image_type", 0),
+        Column::new("model", "model", 0),
+        Column::new("10-fold accuracy", "accuracy_mean", 4),
+        Column::new("std", "accuracy_std", 4),
+        Column::new("TAR @ FAR 1e-3", "tar_at_far_1e-3", 4),
+        Column::new("pairs", "pairs", 0),
+    ]);
+    for x in &r.verification {
+        t.push(vec![
+            "LFW".into(),
+            x.condition.as_str().into(),
+            x.model.as_str().into(),
+            x.accuracy_mean.into(),
+            x.accuracy_std.into(),
+            x.tar_at_far_1e3.into(),
+            x.pairs.into(),
+        ]);
+    }
+    t
 }
 
 /// Writes privacy.json, privacy.csv, verification.csv, cmc.svg and privacy.md into `dir`.
 pub fn write_privacy(r: &PrivacyReport, dir: &Path) -> Result<()> {
     write_atomic(&dir.join("privacy.json"), &json(r))?;
-    write_atomic(&dir.join("privacy.csv"), privacy_csv(r).as_bytes())?;
-    let mut v = String::from("dataset,image_type,model,accuracy_mean,accuracy_std,tar_at_far_1e-3,pairs\n");
-    for x in &r.verification {
-        let _ = writeln!(
-            v,
-            "LFW,{},{},{:.4},{:.4},{:.4},{}",
-            csv(&x.condition),
-            csv(&x.model),
-            x.accuracy_mean,
-            x.accuracy_std,
-            x.tar_at_far_1e3,
-            x.pairs
-        );
-    }
-    write_atomic(&dir.join("verification.csv"), v.as_bytes())?;
+    write_atomic(&dir.join("privacy.csv"), privacy_table(r).csv().as_bytes())?;
+    write_atomic(&dir.join("verification.csv"), verification_table(r).csv().as_bytes())?;
     // CMC, paper order, nearest neighbour: one curve per condition x model.
     let series: Vec<Series> = r
         .identification
@@ -122,7 +159,6 @@ pub fn write_privacy(r: &PrivacyReport, dir: &Path) -> Result<()> {
 
 /// The privacy report as Markdown.
 pub fn privacy_markdown(r: &PrivacyReport) -> String {
-    let models = models_of(r);
     let mut s = String::from("# Privacy: face identification on LFW\n\n");
     let camera = r.options.enrolment == Enrolment::Camera;
     let gallery = if r.gallery > r.identities {
@@ -150,37 +186,7 @@ pub fn privacy_markdown(r: &PrivacyReport) -> String {
         r.options.seed,
         100.0 / r.gallery as f64
     );
-    let _ = writeln!(s, "| order | image type | classifier | {} | average |", models.join(" | "));
-    let _ = writeln!(s, "|---|---|---|{}---|", "---|".repeat(models.len()));
-    for order in [Order::Paper, Order::EndToEnd] {
-        for cond in conditions_of(r.identification.iter().map(|x| &x.condition)) {
-            for cls in ["nearest", "linear"] {
-                let rows: Vec<_> = models
-                    .iter()
-                    .filter_map(|m| {
-                        r.identification
-                            .iter()
-                            .find(|x| x.order == order && x.condition == cond && x.classifier == cls && &x.model == m)
-                    })
-                    .collect();
-                let cells: Vec<String> =
-                    rows.iter().map(|x| format!("{:.2} ± {:.2}", 100.0 * x.top1_mean, 100.0 * x.top1_std)).collect();
-                let avg = rows.iter().map(|x| x.top1_mean).sum::<f64>() / rows.len().max(1) as f64;
-                let det = rows
-                    .first()
-                    .and_then(|x| x.detection_rate)
-                    .map_or(String::new(), |d| format!(" (faces found: {:.1}%)", 100.0 * d));
-                let _ = writeln!(
-                    s,
-                    "| {} | {}{det} | {cls} | {} | {:.2} |",
-                    order.name(),
-                    md(&cond),
-                    cells.join(" | "),
-                    100.0 * avg
-                );
-            }
-        }
-    }
+    s += &privacy_table(r).markdown();
     if !r.verification.is_empty() {
         let _ = writeln!(
             s,
@@ -190,109 +196,103 @@ pub fn privacy_markdown(r: &PrivacyReport) -> String {
             r.pairs_skipped_absent,
             r.pairs_skipped_undetected
         );
-        s.push_str("| image type | model | 10-fold accuracy | TAR @ FAR 1e-3 |\n|---|---|---|---|\n");
-        for v in &r.verification {
-            let _ = writeln!(
-                s,
-                "| {} | {} | {:.4} ± {:.4} | {:.4} |",
-                md(&v.condition),
-                md(&v.model),
-                v.accuracy_mean,
-                v.accuracy_std,
-                v.tar_at_far_1e3
-            );
-        }
+        s += &verification_table(r).markdown();
     }
     let _ = writeln!(s, "\n![CMC](cmc.svg)\n\nRun time: {:.0} s.", r.seconds);
     s
 }
 
-/// A set name as one Markdown table cell: `|` escaped, line breaks and other control
-/// characters written out, so a name cannot split a row or forge one.
-pub fn md(text: &str) -> String {
-    campro::file::escape(text).replace('|', "\\|")
+/// The utility table, the paper's Table III columns (precision, recall and F1 at the
+/// report's confidence and IoU 0.5).
+pub fn utility_table(r: &UtilityReport) -> Table {
+    let mut t = Table::new([
+        Column::new("image type", "image_type", 0),
+        Column::new("AP", "AP", 3),
+        Column::new("AP@0.5", "AP50", 3),
+        Column::new("AP@0.75", "AP75", 3),
+        Column::new("precision", "precision", 3),
+        Column::new("recall", "recall", 3),
+        Column::new("F1", "F1", 3),
+        Column::new("ground truths", "ground_truths", 0),
+        Column::new("detections", "detections", 0),
+    ]);
+    for x in &r.rows {
+        let m = &x.metrics;
+        t.push(vec![
+            x.condition.as_str().into(),
+            m.ap.into(),
+            m.ap50.into(),
+            m.ap75.into(),
+            m.precision.into(),
+            m.recall.into(),
+            m.f1.into(),
+            m.ground_truths.into(),
+            m.detections.into(),
+        ]);
+    }
+    t
 }
 
-/// A set name as one CSV field: quoted (quotes doubled) when it holds a comma, a quote or
-/// a line break.
-pub fn csv(text: &str) -> String {
-    if text.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", text.replace('"', "\"\""))
-    } else {
-        text.to_string()
-    }
+/// The utility report as Markdown.
+pub fn utility_markdown(r: &UtilityReport) -> String {
+    format!(
+        "# Utility: person detection ({}) on COCO\n\n{} images{}; precision, recall and F1 at confidence {} and IoU 0.5.\n\n{}\nRun time: {:.0} s.\n",
+        r.detector,
+        r.images,
+        if r.options.held_out { format!(" (those held out of detector fine-tuning: COCO id % {} == 0)", crate::data::HOLDOUT_EVERY) } else { String::new() },
+        r.options.confidence,
+        utility_table(r).markdown(),
+        r.seconds
+    )
 }
 
 /// Writes utility.json, utility.csv (the paper's Table III columns) and utility.md.
 pub fn write_utility(r: &UtilityReport, dir: &Path) -> Result<()> {
     write_atomic(&dir.join("utility.json"), &json(r))?;
-    let mut c = String::from("image_type,AP,AP50,AP75,precision,recall,F1,confidence,ground_truths,detections\n");
-    let mut m = format!(
-        "# Utility: person detection ({}) on COCO\n\n{} images{}; precision, recall and F1 at confidence {} and IoU 0.5.\n\n| image type | AP | AP@0.5 | AP@0.75 | precision | recall | F1 |\n|---|---|---|---|---|---|---|\n",
-        r.detector,
-        r.images,
-        if r.options.held_out { format!(" (those held out of detector fine-tuning: COCO id % {} == 0)", crate::data::HOLDOUT_EVERY) } else { String::new() },
-        r.options.confidence
-    );
+    write_atomic(&dir.join("utility.csv"), utility_table(r).csv().as_bytes())?;
+    write_atomic(&dir.join("utility.md"), utility_markdown(r).as_bytes())
+}
+
+/// The quality table, the paper's Table IV columns.
+pub fn quality_table(r: &QualityReport) -> Table {
+    let mut t = Table::new([
+        Column::new("image type", "image_type", 0),
+        Column::new("RMSE", "RMSE", 2),
+        Column::new("PSNR (dB)", "PSNR", 2),
+        Column::new("SSIM", "SSIM", 3),
+        Column::new("MS-SSIM", "MS-SSIM", 3),
+        Column::new("images", "images", 0),
+        Column::new("MS-SSIM images", "ms_ssim_images", 0),
+    ]);
     for x in &r.rows {
-        let t = &x.metrics;
-        let _ = writeln!(
-            c,
-            "{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{}",
-            csv(&x.condition),
-            t.ap,
-            t.ap50,
-            t.ap75,
-            t.precision,
-            t.recall,
-            t.f1,
-            t.confidence,
-            t.ground_truths,
-            t.detections
-        );
-        let _ = writeln!(
-            m,
-            "| {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
-            md(&x.condition),
-            t.ap,
-            t.ap50,
-            t.ap75,
-            t.precision,
-            t.recall,
-            t.f1
-        );
+        t.push(vec![
+            x.condition.as_str().into(),
+            x.rmse.into(),
+            x.psnr.into(),
+            x.ssim.into(),
+            x.ms_ssim.into(),
+            x.images.into(),
+            x.ms_ssim_images.into(),
+        ]);
     }
-    let _ = writeln!(m, "\nRun time: {:.0} s.", r.seconds);
-    write_atomic(&dir.join("utility.csv"), c.as_bytes())?;
-    write_atomic(&dir.join("utility.md"), m.as_bytes())
+    t
+}
+
+/// The quality report as Markdown.
+pub fn quality_markdown(r: &QualityReport) -> String {
+    format!(
+        "# Image quality against the raw images\n\n{} images (RMSE on 0..255; MS-SSIM over images ≥ 176 px a side).\n\n{}\nRun time: {:.0} s.\n",
+        r.images,
+        quality_table(r).markdown(),
+        r.seconds
+    )
 }
 
 /// Writes quality.json, quality.csv (the paper's Table IV columns) and quality.md.
 pub fn write_quality(r: &QualityReport, dir: &Path) -> Result<()> {
     write_atomic(&dir.join("quality.json"), &json(r))?;
-    let mut c = String::from("image_type,RMSE,PSNR,SSIM,MS-SSIM,images,ms_ssim_images\n");
-    let mut m = format!(
-        "# Image quality against the raw images\n\n{} images (RMSE on 0..255; MS-SSIM over images ≥ 176 px a side).\n\n| image type | RMSE | PSNR (dB) | SSIM | MS-SSIM |\n|---|---|---|---|---|\n",
-        r.images
-    );
-    for x in &r.rows {
-        let _ = writeln!(
-            c,
-            "{},{:.4},{:.4},{:.4},{:.4},{},{}",
-            csv(&x.condition),
-            x.rmse,
-            x.psnr,
-            x.ssim,
-            x.ms_ssim,
-            x.images,
-            x.ms_ssim_images
-        );
-        let _ =
-            writeln!(m, "| {} | {:.2} | {:.2} | {:.3} | {:.3} |", md(&x.condition), x.rmse, x.psnr, x.ssim, x.ms_ssim);
-    }
-    let _ = writeln!(m, "\nRun time: {:.0} s.", r.seconds);
-    write_atomic(&dir.join("quality.csv"), c.as_bytes())?;
-    write_atomic(&dir.join("quality.md"), m.as_bytes())
+    write_atomic(&dir.join("quality.csv"), quality_table(r).csv().as_bytes())?;
+    write_atomic(&dir.join("quality.md"), quality_markdown(r).as_bytes())
 }
 
 /// The privacy-utility trade-off (the paper's Figure 10): x = mean top-1 over the face
@@ -306,7 +306,8 @@ pub fn tradeoff(p: &PrivacyReport, u: &UtilityReport) -> Vec<(String, f64, f64)>
         .collect()
 }
 
-/// Writes report.md (all three evaluations) and tradeoff.svg.
+/// Writes report.md (all three evaluations, rendered from the reports themselves) and
+/// tradeoff.svg.
 pub fn write_summary(p: &PrivacyReport, u: &UtilityReport, q: &QualityReport, dir: &Path) -> Result<()> {
     let points = tradeoff(p, u);
     let series: Vec<Series> =
@@ -321,27 +322,21 @@ pub fn write_summary(p: &PrivacyReport, u: &UtilityReport, q: &QualityReport, di
         None,
     );
     write_atomic(&dir.join("tradeoff.svg"), svg.as_bytes())?;
-    let mut s = String::from("# campro evaluation\n\n## Privacy vs utility\n\n| image type | top-1 (%, mean over models) | person AP |\n|---|---|---|\n");
+    let mut t = Table::new([
+        Column::new("image type", "image_type", 0),
+        Column::new("top-1 (%, mean over models)", "top1", 2),
+        Column::new("person AP", "AP", 3),
+    ]);
     for (n, x, y) in &points {
-        let _ = writeln!(s, "| {n} | {:.2} | {:.3} |", 100.0 * x, y);
+        t.push(vec![n.as_str().into(), (100.0 * x).into(), (*y).into()]);
     }
+    let mut s = format!("# campro evaluation\n\n## Privacy vs utility\n\n{}", t.markdown());
     s.push_str("\n![trade-off](tradeoff.svg)\n\n");
-    for part in [privacy_markdown(p), utility_markdown_from(dir)?, quality_markdown_from(dir)?] {
+    for part in [privacy_markdown(p), utility_markdown(u), quality_markdown(q)] {
         s.push_str(&part.replacen("# ", "## ", 1).replace("\n## Verification", "\n### Verification"));
         s.push('\n');
     }
-    let _ = q;
     write_atomic(&dir.join("report.md"), s.as_bytes())
-}
-
-fn utility_markdown_from(dir: &Path) -> Result<String> {
-    let p = dir.join("utility.md");
-    std::fs::read_to_string(&p).map_err(EvalError::io(p))
-}
-
-fn quality_markdown_from(dir: &Path) -> Result<String> {
-    let p = dir.join("quality.md");
-    std::fs::read_to_string(&p).map_err(EvalError::io(p))
 }
 
 /// Writes frontier.svg and frontier.md of measured points ([`crate::frontier`]).
@@ -349,7 +344,8 @@ pub fn write_frontier(points: &[crate::frontier::Point], dir: &Path) -> Result<(
     let (svg, table) = crate::frontier::render(points);
     write_atomic(&dir.join("frontier.svg"), svg.as_bytes())?;
     let md = format!(
-        "# Privacy vs utility across runs\n\nx: the worst top-1 over the face models, classifiers and attacks measured; y: person AP of the set's own detector, as % of raw.\n\n![frontier](frontier.svg)\n\n{table}"
+        "# Privacy vs utility across runs\n\nx: the worst top-1 over the face models, classifiers and attacks measured; y: person AP of the set's own detector, as % of raw.\n\n![frontier](frontier.svg)\n\n{}",
+        table.markdown()
     );
     write_atomic(&dir.join("frontier.md"), md.as_bytes())
 }
@@ -357,14 +353,26 @@ pub fn write_frontier(points: &[crate::frontier::Point], dir: &Path) -> Result<(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::quality::QualityRow;
 
     #[test]
-    fn set_names_cannot_break_a_table_or_a_row() {
-        assert_eq!(md("a|b"), "a\\|b");
-        assert_eq!(md("two\nlines"), "two\\nlines");
-        assert_eq!(md("plain"), "plain");
-        assert_eq!(csv("a,b"), "\"a,b\"");
-        assert_eq!(csv("say \"hi\""), "\"say \"\"hi\"\"\"");
-        assert_eq!(csv("plain"), "plain");
+    fn quality_renders_one_table_three_ways() {
+        let r = QualityReport {
+            rows: vec![QualityRow {
+                condition: "a|b".into(),
+                rmse: 1.234,
+                psnr: 40.0,
+                ssim: 0.98765,
+                ms_ssim: 0.5,
+                images: 3,
+                ms_ssim_images: 2,
+            }],
+            images: 3,
+            seconds: 1.0,
+        };
+        let t = quality_table(&r);
+        assert_eq!(t.csv(), "image_type,RMSE,PSNR,SSIM,MS-SSIM,images,ms_ssim_images\na|b,1.234,40,0.98765,0.5,3,2\n");
+        assert!(quality_markdown(&r).contains("| a\\|b | 1.23 | 40.00 | 0.988 | 0.500 | 3 | 2 |\n"));
+        assert_eq!(t.json()[0]["SSIM"], 0.98765);
     }
 }

@@ -25,12 +25,17 @@ fn main() -> anyhow::Result<()> {
         max_images: Some(images),
         ..DetectorConfig::default()
     };
-    let done = run(&Imaging::Raw, &cfg, &FinetuneOptions { steps, seconds: f64::INFINITY, seed: 0 }, |r| {
-        println!(
-            "step {}: L_det {:.3} (iou {:.3} obj {:.3} cls {:.3}, {} positives)",
-            r.step, r.loss, r.iou, r.obj, r.cls, r.positives
-        )
-    })?;
+    let done = run(
+        &Imaging::Raw,
+        &cfg,
+        &FinetuneOptions { steps, seconds: f64::INFINITY, seed: 0, ..Default::default() },
+        |r| {
+            println!(
+                "step {}: L_det {:.3} (iou {:.3} obj {:.3} cls {:.3}, {} positives)",
+                r.step, r.loss, r.iou, r.obj, r.cls, r.positives
+            )
+        },
+    )?;
     done.detector.save_onnx(&out)?;
     Ok(())
 }

@@ -6,9 +6,9 @@
 use crate::camera::Camera;
 use crate::config::Config;
 use crate::detection::yolox_loss;
-use crate::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet, EMBEDDING};
 use crate::persons::detector_input;
-use crate::yolox::Yolox;
+use campro_nn::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet, EMBEDDING};
+use campro_nn::yolox::Yolox;
 use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::{linear, loss, AdamW, Optimizer, ParamsAdamW, VarBuilder, VarMap, SGD};
 use std::path::Path;
@@ -59,8 +59,14 @@ pub fn median_secs(runs: usize, mut f: impl FnMut() -> crate::Result<()>) -> cra
 
 /// Times `steps` with the models of `models` (the shared folder's `models/`) at `cfg`'s
 /// face batch, person batch and size; (step, median milliseconds) in the order asked.
-pub fn run(models: &Path, cfg: &Config, steps: &[Step], runs: usize) -> crate::Result<Vec<(Step, f64)>> {
-    let dev = Device::Cpu;
+pub fn run(
+    ctx: &campro_nn::Context,
+    models: &Path,
+    cfg: &Config,
+    steps: &[Step],
+    runs: usize,
+) -> crate::Result<Vec<(Step, f64)>> {
+    let dev = ctx.device.clone();
     let mut out = Vec::new();
     let needs_mfn = steps.iter().any(|s| matches!(s, Step::MobileFaceNet | Step::Attacker | Step::Privacy));
     let needs_yolox = steps.iter().any(|s| matches!(s, Step::Yolox | Step::Detector));
@@ -162,8 +168,8 @@ fn seeded(shape: &[usize], scale: f32, seed: u64, dev: &Device) -> candle_core::
 /// Median seconds of one enhancer training step (forward, [`crate::enhancer::step_loss`]
 /// with `cfg`'s loss, gate and SSIM term, backward, AdamW) on `cfg.data.batch` seeded
 /// `cfg.data.crop`-pixel crops, for a U-Net of `cfg.model`.
-pub fn enhancer_step(cfg: &crate::config::EnhancerConfig, runs: usize) -> crate::Result<f64> {
-    let dev = Device::Cpu;
+pub fn enhancer_step(ctx: &campro_nn::Context, cfg: &crate::config::EnhancerConfig, runs: usize) -> crate::Result<f64> {
+    let dev = ctx.device.clone();
     let unet = crate::unet::Unet::new(&cfg.model, 1, &dev)?;
     let mut adam = AdamW::new(unet.vars(), ParamsAdamW { lr: 3e-4, weight_decay: 1e-2, ..Default::default() })?;
     let (batch, crop) = (cfg.data.batch, cfg.data.crop);

@@ -121,7 +121,7 @@ pub struct DetectorConfig {
     /// in the joint training and in `finetune-detector` alike; 0 (the default) leaves it out.
     pub distill: f64,
     /// Hidden units of a per-pixel colour adapter in front of the detector
-    /// ([`crate::yolox::Yolox::with_adapter`]: 1x1 convolutions, starting as the identity,
+    /// ([`campro_nn::yolox::Yolox::with_adapter`]: 1x1 convolutions, starting as the identity,
     /// written into the fine-tuned ONNX file); 0 (the default) adds none. A detector
     /// fine-tuned at `lr` = 1e-5 barely moves its first layer (Adam moves a weight by about
     /// `lr` a step), so it cannot undo even a colour inversion, which that layer could absorb

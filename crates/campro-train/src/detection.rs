@@ -11,7 +11,7 @@
 //! detached predictions; the loss is differentiable in the head.
 
 use crate::persons::{detector_input, PersonBatch};
-use crate::yolox::{anchors, decode_boxes, Yolox};
+use campro_nn::yolox::{anchors, decode_boxes, Yolox};
 use candle_core::{Result, Tensor, D};
 
 /// A positive anchor: which anchor, which box, and the IoU of its prediction with the box.
@@ -274,7 +274,7 @@ pub fn student(
     cfg: &crate::config::DetectorConfig,
     seed: u64,
     dev: &candle_core::Device,
-) -> std::result::Result<Yolox, crate::onnx_net::GraphError> {
+) -> std::result::Result<Yolox, campro_nn::onnx_net::GraphError> {
     let det = Yolox::load(&cfg.model, dev)?;
     if cfg.adapter > 0 {
         det.with_adapter(cfg.adapter, seed, dev)
@@ -288,7 +288,7 @@ pub fn student(
 pub fn teacher(
     cfg: &crate::config::DetectorConfig,
     dev: &candle_core::Device,
-) -> std::result::Result<Option<Yolox>, crate::onnx_net::GraphError> {
+) -> std::result::Result<Option<Yolox>, campro_nn::onnx_net::GraphError> {
     if cfg.distill > 0.0 {
         Yolox::load(&cfg.model, dev).map(Some)
     } else {

@@ -97,6 +97,8 @@ pub struct EnhancerOptions {
     /// every tensor of the same name and shape is copied, the face gate's start fresh if it
     /// has none (any other tensor missing is an error); step 1, a new log.
     pub init: Option<PathBuf>,
+    /// Where it computes (default: the CPU).
+    pub ctx: campro_nn::Context,
 }
 
 /// An enhancer: the optional per-pixel restoration table, then the U-Net.
@@ -262,7 +264,7 @@ pub fn run(
     mut on_row: impl FnMut(&EnhancerRow),
 ) -> Result<EnhancerOutcome, TrainError> {
     let start = std::time::Instant::now();
-    let dev = Device::Cpu;
+    let dev = opts.ctx.device.clone();
     let scenes = SceneSet::load(&cfg.data, params, held_out, cfg.model.restorer, cfg.seed)?;
     if scenes.train.is_empty() {
         return Err(TrainError::Unsupported(format!(
@@ -301,7 +303,7 @@ pub fn run(
             }
             (tensors, Some(state.step))
         } else {
-            (crate::onnx_net::f32_initializers(from, &dev)?, None)
+            (campro_nn::onnx_net::f32_initializers(from, &dev)?, None)
         };
         let fresh = load_vars(&unet, &tensors)?;
         // Only a head the other run did not have may start fresh: anything else means

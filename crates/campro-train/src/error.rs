@@ -9,13 +9,13 @@ pub enum TrainError {
     #[error(transparent)]
     Faces(#[from] FacesError),
     #[error(transparent)]
-    Torch(#[from] crate::torch_legacy::TorchError),
+    Torch(#[from] campro_nn::torch_legacy::TorchError),
     #[error("tensor: {0}")]
     Tensor(#[from] candle_core::Error),
     #[error(transparent)]
     Eval(#[from] campro_eval::EvalError),
     #[error(transparent)]
-    Graph(#[from] crate::onnx_net::GraphError),
+    Graph(#[from] campro_nn::onnx_net::GraphError),
     #[error("{0}")]
     Unsupported(String),
     #[error("training diverged: {0}")]

@@ -18,9 +18,9 @@
 use crate::config::FacePrivacyConfig;
 use crate::error::TrainError;
 use crate::faces::{FaceSet, Selection, CROP};
-use crate::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet};
 use crate::unet::Unet;
 use campro::pipeline::fast::Exact8;
+use campro_nn::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet};
 use candle_core::{Device, Tensor};
 use image::RgbImage;
 use rand::Rng;

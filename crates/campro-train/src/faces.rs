@@ -5,12 +5,12 @@
 //! to measure the attacker's accuracy.
 
 pub use crate::error::FacesError;
-use crate::mobilefacenet::EMBEDDING;
 use campro_eval::data::{read_rgb8, Lfw};
 use campro_eval::face::{central_face, FaceDetector};
 use campro_eval::geometry::{similarity, warp_affine};
 use campro_eval::manifest::{Manifest, Task};
 use campro_eval::model::Model;
+use campro_nn::mobilefacenet::EMBEDDING;
 use candle_core::{Device, Tensor};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;

@@ -13,8 +13,7 @@ use crate::detection::utility_loss;
 use crate::error::TrainError;
 use crate::persons::PersonSet;
 use crate::train::draw;
-use crate::yolox::Yolox;
-use candle_core::Device;
+use campro_nn::yolox::Yolox;
 use rand::SeedableRng;
 
 /// Adam's rate for the adapter's fit before fine-tuning (`detector.adapter_fit`).
@@ -30,8 +29,8 @@ pub enum Imaging {
     Camera { ccm: [[f64; 3]; 3], curve: Vec<f64>, gamma: f64 },
 }
 
-/// How long to fine-tune.
-#[derive(Debug, Clone)]
+/// How long to fine-tune, and where.
+#[derive(Debug, Clone, Default)]
 pub struct FinetuneOptions {
     /// Detector steps (each `batch` images).
     pub steps: usize,
@@ -39,6 +38,8 @@ pub struct FinetuneOptions {
     pub seconds: f64,
     /// Seed of the image order.
     pub seed: u64,
+    /// Where it computes (default: the CPU).
+    pub ctx: campro_nn::Context,
 }
 
 /// One step of the log.
@@ -76,7 +77,7 @@ pub fn run(
     if cfg.lr <= 0.0 {
         return Err(TrainError::Unsupported("detector.lr: must be > 0 to fine-tune".into()));
     }
-    let dev = Device::Cpu;
+    let dev = o.ctx.device.clone();
     let set = PersonSet::open(&cfg.data, cfg.size, cfg.max_images)?;
     if set.is_empty() {
         return Err(TrainError::Unsupported(format!(

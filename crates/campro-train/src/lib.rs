@@ -6,32 +6,24 @@
 //! - [`mobilefacenet`]: the white-box attacker backbone, loaded from its PyTorch checkpoint
 //!   ([`torch_legacy`]);
 
-pub mod batchnorm;
 pub mod bench;
 pub mod camera;
 pub mod checkpoint;
 pub mod config;
-pub mod conv;
 pub mod detection;
-pub mod dwconv;
 pub mod enhancer;
 pub mod error;
 pub mod face_privacy;
 pub mod faces;
 pub mod finetune;
-pub mod kernels;
 pub mod log;
-pub mod mobilefacenet;
-pub mod onnx_net;
 pub mod persons;
 pub mod retrain;
 pub mod scenes;
 pub mod ssim;
-pub mod torch_legacy;
 pub mod train;
 pub mod unet;
 pub mod validation;
-pub mod yolox;
 
 pub use candle_core::{Device, Tensor};
 pub use error::{Result, TrainError};

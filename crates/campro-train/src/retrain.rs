@@ -9,8 +9,8 @@
 //! network written back as ONNX, so the evaluation runs the fine-tuned file.
 
 use crate::error::{Result, TrainError};
-use crate::onnx_net::OnnxNet;
 use campro_eval::manifest::{Channels, Input};
+use campro_nn::onnx_net::OnnxNet;
 use candle_core::{DType, Device, Tensor, Var, D};
 use image::RgbImage;
 use rand::seq::SliceRandom;

@@ -12,10 +12,10 @@ use crate::config::{Config, Head};
 use crate::error::TrainError;
 use crate::faces::{FaceSet, Selection};
 use crate::log::LogRow;
-use crate::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet};
 use crate::persons::PersonSet;
-use crate::yolox::Yolox;
-use candle_core::{DType, Device, Tensor, Var, D};
+use campro_nn::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet};
+use campro_nn::yolox::Yolox;
+use candle_core::{DType, Tensor, Var, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW, SGD};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
@@ -30,6 +30,8 @@ pub struct RunOptions {
     /// Start the camera here instead of at the identity (`campro train --init`); a resumed
     /// run takes its camera from the checkpoint instead.
     pub init: Option<Initial>,
+    /// Where it computes (default: the CPU).
+    pub ctx: campro_nn::Context,
 }
 
 /// A camera to start from: a learnt set continued with another configuration (another ω,
@@ -165,6 +167,159 @@ pub(crate) fn draw(order: &mut Vec<usize>, pool: &[usize], n: usize, rng: &mut r
     order.drain(..n.min(order.len())).collect()
 }
 
+/// The camera a run starts from: the identity, or `init` (its knots and degamma must be
+/// the configuration's).
+fn start_camera(cfg: &Config, init: Option<&Initial>, dev: &candle_core::Device) -> Result<Camera, TrainError> {
+    let Some(i) = init else { return Ok(Camera::identity(cfg.camera.knots, cfg.camera.gamma, dev)?) };
+    if i.curve.len() != cfg.camera.knots {
+        return Err(TrainError::Unsupported(format!(
+            "--init {}: {} curve knots, but camera.knots is {}",
+            i.origin,
+            i.curve.len(),
+            cfg.camera.knots
+        )));
+    }
+    if i.gamma != cfg.camera.gamma {
+        return Err(TrainError::Unsupported(format!(
+            "--init {}: degamma {}, but camera.gamma is {}",
+            i.origin, i.gamma, cfg.camera.gamma
+        )));
+    }
+    let c = Camera::from_values(i.ccm, &i.curve, i.gamma, dev)?;
+    c.project()?;
+    Ok(c)
+}
+
+/// The utility player (the person images and the detector the camera must keep working),
+/// when the configuration weighs utility (`protector.omega > 0`).
+fn utility_player(cfg: &Config, dev: &candle_core::Device) -> Result<Option<(PersonSet, Yolox)>, TrainError> {
+    if cfg.protector.omega <= 0.0 {
+        return Ok(None);
+    }
+    let set = PersonSet::open(&cfg.detector.data, cfg.detector.size, cfg.detector.max_images)?;
+    if set.is_empty() {
+        return Err(TrainError::Unsupported(format!("{}: no person images", cfg.detector.data.display())));
+    }
+    Ok(Some((set, crate::detection::student(&cfg.detector, cfg.seed, dev)?)))
+}
+
+/// How many of the `people` person training images the validation sets aside (the last
+/// `validation.images`), refusing a count that would leave none to train on.
+fn people_set_aside(v: &crate::config::ValidationConfig, people: usize, utility: bool) -> Result<usize, TrainError> {
+    if v.every == 0 || !utility {
+        return Ok(0);
+    }
+    if v.images >= people {
+        return Err(TrainError::Unsupported(format!(
+            "validation.images: {} of the {people} person training images would leave none to train on",
+            v.images
+        )));
+    }
+    Ok(v.images)
+}
+
+/// Where a run starts: round 1 with an empty log, or a checkpoint's next round.
+struct Resumed {
+    first_round: usize,
+    log: Vec<LogRow>,
+    earlier_seconds: f64,
+    best: Option<crate::validation::Best>,
+    best_tensors: Option<HashMap<String, Tensor>>,
+}
+
+impl Default for Resumed {
+    fn default() -> Self {
+        Resumed { first_round: 1, log: Vec::new(), earlier_seconds: 0.0, best: None, best_tensors: None }
+    }
+}
+
+/// Loads the checkpoint in `dir` into the run's variables `named` (the face set and seed
+/// must be the configuration's) and, with validation on, the best camera's tensors `best`.
+fn resume(
+    dir: &std::path::Path,
+    cfg: &Config,
+    classes: &[String],
+    named: &[(String, Var)],
+    best_names: &[String],
+    dev: &candle_core::Device,
+) -> Result<Resumed, TrainError> {
+    let (tensors, state) = crate::checkpoint::load::<crate::checkpoint::State>(dir, dev)?;
+    if state.classes != classes || state.seed != cfg.seed {
+        return Err(TrainError::Unsupported(format!(
+            "{}: checkpoint of another face set or seed: resume with its own configuration",
+            dir.display()
+        )));
+    }
+    let missing =
+        |name: &str| TrainError::Unsupported(format!("{}: {name} missing from the checkpoint", dir.display()));
+    for (name, var) in named {
+        var.set(tensors.get(name).ok_or_else(|| missing(name))?)?;
+    }
+    // A resume without validation continues to its budget and writes its last camera.
+    let best = state.best.filter(|_| cfg.validation.every > 0);
+    let best_tensors = match best {
+        Some(_) => Some(
+            best_names
+                .iter()
+                .map(|name| {
+                    let key = format!("best.{name}");
+                    Ok((name.clone(), tensors.get(&key).ok_or_else(|| missing(&key))?.clone()))
+                })
+                .collect::<Result<_, TrainError>>()?,
+        ),
+        None => None,
+    };
+    Ok(Resumed {
+        first_round: state.round + 1,
+        earlier_seconds: state.log.last().map_or(0.0, |r| r.seconds),
+        log: state.log,
+        best,
+        best_tensors,
+    })
+}
+
+/// What a learnt parameter set records of its run: the configuration, the data, the rounds,
+/// the final log line and the validation's rule and outcome.
+#[allow(clippy::too_many_arguments)]
+fn provenance(
+    cfg: &Config,
+    opts: &RunOptions,
+    faces: &FaceSet,
+    (train_faces, check_faces): (usize, usize),
+    person_images: Option<usize>,
+    (best, stopped_early, set_aside): (Option<crate::validation::Best>, bool, usize),
+    log: &[LogRow],
+    seconds: f64,
+) -> serde_json::Map<String, serde_json::Value> {
+    let v = &cfg.validation;
+    let validation = (v.every > 0).then(|| {
+        serde_json::json!({
+            "rule": format!(
+                "every {} rounds: the pretrained model's nearest-class-mean top-1 on the held-aside photos of training identities, and person AP on the last {} COCO training images (set aside); the best camera is the most useful within top-1 <= {}, else the most private; stop after {} validations without a better one (0: never)",
+                v.every, set_aside, v.max_top1, v.patience
+            ),
+            "best_round": best.map(|b| b.round),
+            "best": best.map(|b| b.scores),
+            "stopped_early": stopped_early,
+            "person_images_set_aside": set_aside,
+        })
+    });
+    let prov = serde_json::json!({
+        "optimiser": "campro-train",
+        "config": cfg,
+        "data": { "classes": faces.classes.len(), "train_faces": train_faces, "check_faces": check_faces, "skipped_no_face": faces.skipped, "validation_identities": faces.validation,
+                  "person_images": person_images,
+                  "person_images_held_out": format!("COCO id % {} == 0 (never trained on)", campro_eval::data::HOLDOUT_EVERY) },
+        "init": opts.init.as_ref().map(|i| i.origin.clone()),
+        "rounds": log.last().map_or(0, |r| r.round),
+        "final": log.last(),
+        "seconds": seconds,
+        "validation": validation,
+    });
+    let serde_json::Value::Object(provenance) = prov else { unreachable!("a JSON object") };
+    provenance
+}
+
 /// Stops a diverging run at the first non-finite loss, before it reaches the parameters.
 fn finite(what: &str, v: f64) -> Result<(), TrainError> {
     if v.is_finite() {
@@ -199,7 +354,7 @@ fn accuracy(logits: &Tensor, y: &Tensor) -> candle_core::Result<f64> {
 /// Runs the optimisation described by `cfg`; `on_row` sees every log line as it happens.
 pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, TrainError> {
     let start = std::time::Instant::now();
-    let dev = Device::Cpu;
+    let dev = opts.ctx.device.clone();
     let sel = Selection {
         lfw: cfg.data.lfw.clone(),
         min_images: cfg.data.min_images,
@@ -212,53 +367,14 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let (train, check) = faces.split();
     let classes = faces.classes.len();
     let (net, net_vars) = MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?;
-    let cam = match &opts.init {
-        None => Camera::identity(cfg.camera.knots, cfg.camera.gamma, &dev)?,
-        Some(i) => {
-            if i.curve.len() != cfg.camera.knots {
-                return Err(TrainError::Unsupported(format!(
-                    "--init {}: {} curve knots, but camera.knots is {}",
-                    i.origin,
-                    i.curve.len(),
-                    cfg.camera.knots
-                )));
-            }
-            if i.gamma != cfg.camera.gamma {
-                return Err(TrainError::Unsupported(format!(
-                    "--init {}: degamma {}, but camera.gamma is {}",
-                    i.origin, i.gamma, cfg.camera.gamma
-                )));
-            }
-            let c = Camera::from_values(i.ccm, &i.curve, i.gamma, &dev)?;
-            c.project()?;
-            c
-        }
-    };
-    let utility = if cfg.protector.omega > 0.0 {
-        let set = PersonSet::open(&cfg.detector.data, cfg.detector.size, cfg.detector.max_images)?;
-        if set.is_empty() {
-            return Err(TrainError::Unsupported(format!("{}: no person images", cfg.detector.data.display())));
-        }
-        Some((set, crate::detection::student(&cfg.detector, cfg.seed, &dev)?))
-    } else {
-        None
-    };
+    let cam = start_camera(cfg, opts.init.as_ref(), &dev)?;
+    let utility = utility_player(cfg, &dev)?;
     let teacher = if utility.is_some() { crate::detection::teacher(&cfg.detector, &dev)? } else { None };
     // The validation-driven stop (`crate::validation`): the last `validation.images` training
     // people are set aside from the draw, and the pretrained face model scores privacy.
     let v = &cfg.validation;
     let people = utility.as_ref().map_or(0, |(set, _)| set.len());
-    let set_aside = if v.every > 0 && utility.is_some() {
-        if v.images >= people {
-            return Err(TrainError::Unsupported(format!(
-                "validation.images: {} of the {people} person training images would leave none to train on",
-                v.images
-            )));
-        }
-        v.images
-    } else {
-        0
-    };
+    let set_aside = people_set_aside(v, people, utility.is_some())?;
     let pretrained =
         if v.every > 0 { Some(MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?.0) } else { None };
     let embed = |x: &Tensor, train_bn: bool| -> candle_core::Result<Tensor> {
@@ -291,7 +407,6 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         }
         v
     };
-    let (mut first_round, mut log, mut earlier_seconds) = (1, Vec::new(), 0.0);
     // The best validated camera (and detector) so far, by name without the `best.` prefix:
     // what a parameter set and its detector are written from.
     let kept = || named().into_iter().filter(|(k, _)| k.starts_with("camera.") || k.starts_with("detector."));
@@ -299,44 +414,10 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let snapshot = || -> candle_core::Result<HashMap<String, Tensor>> {
         kept().map(|(k, v)| Ok((k, v.as_tensor().copy()?))).collect()
     };
-    let mut best: Option<crate::validation::Best> = None;
-    let mut best_tensors: Option<HashMap<String, Tensor>> = None;
-    if let Some(dir) = &opts.resume {
-        let (tensors, state) = crate::checkpoint::load::<crate::checkpoint::State>(dir, &dev)?;
-        if state.classes != faces.classes || state.seed != cfg.seed {
-            return Err(TrainError::Unsupported(format!(
-                "{}: checkpoint of another face set or seed: resume with its own configuration",
-                dir.display()
-            )));
-        }
-        for (name, var) in named() {
-            let t = tensors.get(&name).ok_or_else(|| {
-                TrainError::Unsupported(format!("{}: {name} missing from the checkpoint", dir.display()))
-            })?;
-            var.set(t)?;
-        }
-        first_round = state.round + 1;
-        earlier_seconds = state.log.last().map_or(0.0, |r| r.seconds);
-        log = state.log;
-        // A resume without validation continues to its budget and writes its last camera.
-        best = state.best.filter(|_| v.every > 0);
-        if best.is_some() {
-            best_tensors = Some(
-                best_names()
-                    .into_iter()
-                    .map(|name| {
-                        let t = tensors.get(&format!("best.{name}")).ok_or_else(|| {
-                            TrainError::Unsupported(format!(
-                                "{}: best.{name} missing from the checkpoint",
-                                dir.display()
-                            ))
-                        })?;
-                        Ok((name, t.clone()))
-                    })
-                    .collect::<Result<_, TrainError>>()?,
-            );
-        }
-    }
+    let Resumed { first_round, mut log, earlier_seconds, mut best, mut best_tensors } = match &opts.resume {
+        Some(dir) => resume(dir, cfg, &faces.classes, &named(), &best_names(), &dev)?,
+        None => Resumed::default(),
+    };
     let seconds = || earlier_seconds + start.elapsed().as_secs_f64();
     // The best validated camera travels in the same tensor file, as `best.NAME`.
     let save = |round: usize,
@@ -547,31 +628,16 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
             }
         }
     }
-    let validation = (v.every > 0).then(|| {
-        serde_json::json!({
-            "rule": format!(
-                "every {} rounds: the pretrained model's nearest-class-mean top-1 on the held-aside photos of training identities, and person AP on the last {} COCO training images (set aside); the best camera is the most useful within top-1 <= {}, else the most private; stop after {} validations without a better one (0: never)",
-                v.every, set_aside, v.max_top1, v.patience
-            ),
-            "best_round": best.map(|b| b.round),
-            "best": best.map(|b| b.scores),
-            "stopped_early": stopped_early,
-            "person_images_set_aside": set_aside,
-        })
-    });
-    let prov = serde_json::json!({
-        "optimiser": "campro-train",
-        "config": cfg,
-        "data": { "classes": classes, "train_faces": train.len(), "check_faces": check.len(), "skipped_no_face": faces.skipped, "validation_identities": faces.validation,
-                  "person_images": utility.as_ref().map(|(s, _)| s.len()),
-                  "person_images_held_out": format!("COCO id % {} == 0 (never trained on)", campro_eval::data::HOLDOUT_EVERY) },
-        "init": opts.init.as_ref().map(|i| i.origin.clone()),
-        "rounds": log.last().map_or(0, |r| r.round),
-        "final": log.last(),
-        "seconds": seconds(),
-        "validation": validation,
-    });
-    let serde_json::Value::Object(provenance) = prov else { unreachable!("a JSON object") };
+    let provenance = provenance(
+        cfg,
+        opts,
+        &faces,
+        (train.len(), check.len()),
+        utility.as_ref().map(|(set, _)| set.len()),
+        (best, stopped_early, set_aside),
+        &log,
+        seconds(),
+    );
     Ok(Outcome {
         ccm: cam.ccm_values()?,
         curve: cam.curve_values()?,

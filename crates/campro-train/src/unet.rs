@@ -27,8 +27,8 @@
 //! inference is one pass with no batch statistics.
 
 use crate::config::{FaceTarget, PixelLoss, UnetConfig};
-use crate::onnx_net::{conv_attrs, f32_tensor, ints_attr, node, string_attr, GraphError, OnnxNet};
 pub use campro_eval::enhance::{INPUT, MULTIPLE_KEY, OUTPUT};
+use campro_nn::onnx_net::{conv_attrs, f32_tensor, ints_attr, node, string_attr, GraphError, OnnxNet};
 /// The restoration stage's output, the U-Net's input when there is one
 /// ([`Unet::onnx_bytes_with_table`]).
 const RESTORED: &str = "restored";

@@ -6,7 +6,7 @@ use campro_testkit as shared;
 
 use campro_eval::manifest::Manifest;
 use campro_eval::model::Model;
-use campro_train::yolox::Yolox;
+use campro_nn::yolox::Yolox;
 use candle_core::{Device, Tensor};
 use std::path::Path;
 
@@ -89,8 +89,8 @@ fn iou_by_hand() {
 /// then (5·0 + Σ BCE(obj, [i = 5]) + BCE(cls_5, 1)) / 1, computed here by hand.
 #[test]
 fn simota_and_loss_by_hand() {
+    use campro_nn::yolox::anchors;
     use campro_train::detection::{simota, yolox_loss, Positive};
-    use campro_train::yolox::anchors;
     let a = anchors(32, 32);
     assert_eq!(a.len(), 21);
     assert_eq!(a[5], (1.0, 1.0, 8.0));
@@ -132,8 +132,8 @@ fn simota_and_loss_by_hand() {
 /// costs less for.
 #[test]
 fn simota_resolves_conflicts_by_cost() {
+    use campro_nn::yolox::anchors;
     use campro_train::detection::simota;
-    use campro_train::yolox::anchors;
     let a = anchors(64, 64);
     let n = a.len();
     // Every anchor predicts box A = [16, 32]²  centre (24, 24) side 16, with equal scores.

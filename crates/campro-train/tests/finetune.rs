@@ -44,7 +44,13 @@ fn fine_tuning_behind_a_camera_fits_its_images_and_stops_on_time() {
         curve: (0..32).map(|i| 1.0 - i as f64 / 31.0).collect(),
         gamma: 2.2,
     };
-    let done = run(&imaging, &cfg, &FinetuneOptions { steps: 8, seconds: f64::INFINITY, seed: 0 }, |_| {}).unwrap();
+    let done = run(
+        &imaging,
+        &cfg,
+        &FinetuneOptions { steps: 8, seconds: f64::INFINITY, seed: 0, ..Default::default() },
+        |_| {},
+    )
+    .unwrap();
     assert_eq!((done.log.len(), done.images), (8, 2));
     let l: Vec<f64> = done.log.iter().map(|r| r.loss).collect();
     assert!(l.iter().all(|v| v.is_finite() && *v > 0.0), "{l:?}");
@@ -52,15 +58,20 @@ fn fine_tuning_behind_a_camera_fits_its_images_and_stops_on_time() {
     let (first, last) = ((l[0] + l[1]) / 2.0, (l[6] + l[7]) / 2.0);
     assert!(last < 0.8 * first, "L_det {first} -> {last}: {l:?}");
     // The time budget stops it before the first step; a zero learning rate is refused.
-    assert!(run(&Imaging::Raw, &cfg, &FinetuneOptions { steps: 8, seconds: 0.0, seed: 0 }, |_| {})
-        .unwrap()
-        .log
-        .is_empty());
+    assert!(run(
+        &Imaging::Raw,
+        &cfg,
+        &FinetuneOptions { steps: 8, seconds: 0.0, seed: 0, ..Default::default() },
+        |_| {}
+    )
+    .unwrap()
+    .log
+    .is_empty());
     // Distillation: behind no camera the student starts as its teacher (L_kd = 0 at the
     // first step, not after it); behind the inverting camera it does not, and the logged
     // loss is the detection parts plus L_kd.
     let kd = DetectorConfig { distill: 1.0, ..cfg.clone() };
-    let two = FinetuneOptions { steps: 2, seconds: f64::INFINITY, seed: 0 };
+    let two = FinetuneOptions { steps: 2, seconds: f64::INFINITY, seed: 0, ..Default::default() };
     let raw = run(&Imaging::Raw, &kd, &two, |_| {}).unwrap();
     assert!(raw.log[0].kd.abs() < 1e-6 && raw.log[1].kd > 1e-6, "{:?}", raw.log);
     let inv = run(&imaging, &kd, &two, |_| {}).unwrap();
@@ -77,5 +88,11 @@ fn fine_tuning_behind_a_camera_fits_its_images_and_stops_on_time() {
     assert_eq!(fit.detector.adapter_and_rest().0.len(), 4);
     assert!(done.adapter_fit.is_empty());
     let frozen = DetectorConfig { lr: 0.0, ..cfg };
-    assert!(run(&Imaging::Raw, &frozen, &FinetuneOptions { steps: 1, seconds: 1.0, seed: 0 }, |_| {}).is_err());
+    assert!(run(
+        &Imaging::Raw,
+        &frozen,
+        &FinetuneOptions { steps: 1, seconds: 1.0, seed: 0, ..Default::default() },
+        |_| {}
+    )
+    .is_err());
 }

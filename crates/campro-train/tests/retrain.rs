@@ -7,7 +7,7 @@ use campro_testkit as shared;
 use campro_eval::face::{central_face, Embedder, FaceDetector};
 use campro_eval::manifest::Manifest;
 use campro_eval::model::Model;
-use campro_train::onnx_net::OnnxNet;
+use campro_nn::onnx_net::OnnxNet;
 use campro_train::retrain::{fine_tune, input_tensor, RetrainConfig, Sample};
 use candle_core::Device;
 use image::RgbImage;

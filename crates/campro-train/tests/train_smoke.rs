@@ -56,7 +56,12 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     c.budget.rounds = 10;
     c.budget.checkpoint_every = 10;
     let ckpts = cache.path().join("ckpt");
-    let opts = campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None, init: None };
+    let opts = campro_train::train::RunOptions {
+        checkpoints: Some(ckpts.clone()),
+        resume: None,
+        init: None,
+        ..Default::default()
+    };
     let out = campro_train::train::run(&c, &opts, |_| {}).unwrap();
     let rows = &out.log;
     assert_eq!(rows.len(), 11, "pretraining row + 10 rounds");
@@ -96,7 +101,12 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     let mut seen = Vec::new();
     let resumed = campro_train::train::run(
         &c,
-        &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts.clone()), init: None },
+        &campro_train::train::RunOptions {
+            checkpoints: None,
+            resume: Some(ckpts.clone()),
+            init: None,
+            ..Default::default()
+        },
         |r| seen.push(r.clone()),
     )
     .unwrap();
@@ -118,7 +128,7 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     c.seed = 2;
     let err = campro_train::train::run(
         &c,
-        &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts), init: None },
+        &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts), init: None, ..Default::default() },
         |_| {},
     )
     .err()
@@ -145,7 +155,12 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     let ckpts = cache.path().join("ckpt");
     let out = campro_train::train::run(
         &c,
-        &campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None, init: None },
+        &campro_train::train::RunOptions {
+            checkpoints: Some(ckpts.clone()),
+            resume: None,
+            init: None,
+            ..Default::default()
+        },
         |_| {},
     )
     .unwrap();
@@ -168,7 +183,12 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     let ckpts_a = cache.path().join("ckpt-a");
     let out = campro_train::train::run(
         &a,
-        &campro_train::train::RunOptions { checkpoints: Some(ckpts_a.clone()), resume: None, init: None },
+        &campro_train::train::RunOptions {
+            checkpoints: Some(ckpts_a.clone()),
+            resume: None,
+            init: None,
+            ..Default::default()
+        },
         |_| {},
     )
     .unwrap();
@@ -250,7 +270,12 @@ fn the_run_keeps_its_best_validated_camera_and_stops_when_none_is_better() {
     c.validation.every = 2;
     c.validation.patience = 3;
     let ckpts = cache.path().join("ckpt");
-    let opts = campro_train::train::RunOptions { checkpoints: Some(ckpts.clone()), resume: None, init: None };
+    let opts = campro_train::train::RunOptions {
+        checkpoints: Some(ckpts.clone()),
+        resume: None,
+        init: None,
+        ..Default::default()
+    };
     let out = campro_train::train::run(&c, &opts, |_| {}).unwrap();
     let validated: Vec<(usize, f64)> = out.log.iter().filter_map(|r| r.validation_top1.map(|t| (r.round, t))).collect();
     // Rounds 0, 2, 4, ...: every validation is in the log, none with an AP (ω = 0).
@@ -284,7 +309,7 @@ fn the_run_keeps_its_best_validated_camera_and_stops_when_none_is_better() {
     c.budget.rounds = last + 2;
     let resumed = campro_train::train::run(
         &c,
-        &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts), init: None },
+        &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts), init: None, ..Default::default() },
         |_| {},
     )
     .unwrap();

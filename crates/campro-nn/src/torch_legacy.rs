@@ -20,8 +20,8 @@ pub enum TorchError {
 }
 
 /// Reads every tensor of `key`'s state dict (or of the top-level dict when `key` is None)
-/// as f32 (integer buffers such as `num_batches_tracked` are skipped).
-pub fn read_state_dict(path: &Path, key: Option<&str>) -> Result<HashMap<String, Tensor>, TorchError> {
+/// as f32 on `device` (integer buffers such as `num_batches_tracked` are skipped).
+pub fn read_state_dict(path: &Path, key: Option<&str>, device: &Device) -> Result<HashMap<String, Tensor>, TorchError> {
     let p = campro::file::shown(path);
     let fmt = |message: String| TorchError::Format { path: p.clone(), message };
     let bytes = campro::file::read_capped(path, MAX_FILE_BYTES, "a torch checkpoint")?;
@@ -32,7 +32,7 @@ pub fn read_state_dict(path: &Path, key: Option<&str>) -> Result<HashMap<String,
             continue;
         }
         let data: Vec<f32> = t.data.iter().map(|&v| v as f32).collect();
-        let tensor = Tensor::from_vec(data, t.shape, &Device::Cpu).map_err(|e| fmt(format!("{name}: {e}")))?;
+        let tensor = Tensor::from_vec(data, t.shape, device).map_err(|e| fmt(format!("{name}: {e}")))?;
         out.insert(name, tensor);
     }
     Ok(out)

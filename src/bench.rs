@@ -1,6 +1,7 @@
-//! The benchmarks' inputs and timer: one parameter set, one synthetic frame, medians.
+//! The benchmarks' inputs and timer: one parameter set, one synthetic frame, medians
+//! (`cargo bench` and `campro bench`; feature `stress`: not in the default build).
 
-use campro::{Params, ToneCurve};
+use crate::{Params, ToneCurve};
 
 /// The benchmarks' parameter set ("bench"), like the paper's strong checkpoints: CCM
 /// entries to ±4.4 and a 32-knot curve with slopes to 3.5.

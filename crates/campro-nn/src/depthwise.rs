@@ -109,7 +109,7 @@ impl Geo {
 }
 
 fn slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
-    crate::conv::slice(s, l, "depthwise")
+    crate::storage::slice(s, l, "depthwise")
 }
 
 /// Per-thread scratch: phase planes and one wide plane.
@@ -284,6 +284,18 @@ impl CustomOp2 for GradWeight {
 
 /// Depthwise convolution: `x` (B, C, H, W), `w` (C, 1, kh, kw), zero padding `pad`;
 /// differentiable in both.
+/// On the CPU the custom op; on another device [`depthwise_generic`].
 pub fn depthwise(x: &Tensor, w: &Tensor, stride: usize, pad: usize) -> Result<Tensor> {
+    if !x.device().is_cpu() {
+        return depthwise_generic(x, w, stride, pad);
+    }
     x.contiguous()?.apply_op2(&w.contiguous()?, Forward { stride, pad })
+}
+
+/// The same depthwise convolution as candle's grouped `conv2d` (one group per channel):
+/// the path on other devices, and the second implementation the tests check [`depthwise`]
+/// against.
+pub fn depthwise_generic(x: &Tensor, w: &Tensor, stride: usize, pad: usize) -> Result<Tensor> {
+    let c = x.dim(1)?;
+    x.conv2d(w, pad, stride, 1, c)
 }

@@ -7,7 +7,7 @@ use candle_core::{CpuStorage, CustomOp1, CustomOp3, Layout, Result, Shape, Tenso
 use rayon::prelude::*;
 
 fn slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
-    crate::conv::slice(s, l, "batch norm")
+    crate::storage::slice(s, l, "batch norm")
 }
 
 fn dims(l: &Layout) -> Result<(usize, usize, usize)> {
@@ -218,7 +218,8 @@ impl CustomOp3 for NormaliseGrad {
 
 /// Training-mode batch norm, then PReLU with slopes `prelu` (C,) if given: returns the
 /// output and the batch (mean, biased variance) as a (2, C) tensor (for the running
-/// statistics). Differentiable in `x`, `weight`, `bias` and the slopes.
+/// statistics). Differentiable in `x`, `weight`, `bias` and the slopes. On the CPU one
+/// fused op each way; on another device [`batch_norm_train_generic`].
 pub fn batch_norm_train(
     x: &Tensor,
     weight: &Tensor,
@@ -226,6 +227,9 @@ pub fn batch_norm_train(
     eps: f64,
     prelu: Option<&Tensor>,
 ) -> Result<(Tensor, Tensor)> {
+    if !x.device().is_cpu() {
+        return batch_norm_train_generic(x, weight, bias, eps, prelu);
+    }
     let x = x.contiguous()?;
     let stats = x.apply_op1_no_bwd(&Stats)?;
     let affine = match prelu {
@@ -236,118 +240,27 @@ pub fn batch_norm_train(
     Ok((y, stats))
 }
 
-/// y = x · scale_c + shift_c per channel c of (B, C, H, W): evaluation-mode batch norm with
-/// folded statistics, one pass each way. From generic ops its two broadcasts and their
-/// gradients (strided reductions over batch and pixels) cost more than the convolution.
-struct ChannelAffine;
-
-impl ChannelAffine {
-    /// Per channel (Σ dy·x, Σ dy) over batch and pixels, in f64.
-    fn sums(x: &[f32], g: &[f32], c: usize, n: usize) -> Vec<(f64, f64)> {
-        let planes = x.len() / n;
-        let per: Vec<(f64, f64)> = (0..planes)
-            .into_par_iter()
-            .map(|p| {
-                let (s, sx) =
-                    crate::kernels::sum_and_centred_dot(&g[p * n..(p + 1) * n], &x[p * n..(p + 1) * n], 0.0, 1.0);
-                (sx as f64, s as f64)
-            })
-            .collect();
-        let sx = crate::conv::per_channel(per.iter().map(|p| p.0), c);
-        let s = crate::conv::per_channel(per.iter().map(|p| p.1), c);
-        sx.into_iter().zip(s).collect()
-    }
-}
-
-impl CustomOp3 for ChannelAffine {
-    fn name(&self) -> &'static str {
-        "channel-affine"
-    }
-
-    fn cpu_fwd(
-        &self,
-        s1: &CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-        s3: &CpuStorage,
-        l3: &Layout,
-    ) -> Result<(CpuStorage, Shape)> {
-        let (_, c, n) = dims(l1)?;
-        let (x, scale, shift) = (slice(s1, l1)?, slice(s2, l2)?, slice(s3, l3)?);
-        if scale.len() != c || shift.len() != c {
-            candle_core::bail!("channel affine: scale and shift must have {c} entries");
-        }
-        let mut y = crate::kernels::zeros(x.len());
-        y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(p, (yp, xp))| {
-            crate::kernels::affine(yp, xp, scale[p % c], shift[p % c]);
-        });
-        Ok((CpuStorage::F32(y), l1.shape().clone()))
-    }
-
-    fn bwd(
-        &self,
-        x: &Tensor,
-        scale: &Tensor,
-        shift: &Tensor,
-        _res: &Tensor,
-        grad: &Tensor,
-    ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
-        // One op reads x and dy in place and writes dx, then d(scale) and d(shift), into one
-        // buffer (three views); the sums only when the scale or shift is tracked.
-        let c = scale.elem_count();
-        let sums = scale.track_op() || shift.track_op();
-        let all = x.apply_op3_no_bwd(&grad.contiguous()?, &scale.contiguous()?, &ChannelAffineGrad { sums })?;
-        let n = x.elem_count();
-        let dx = if x.track_op() { Some(all.narrow(0, 0, n)?.reshape(x.shape())?) } else { None };
-        let (ds, db) = if sums { (Some(all.narrow(0, n, c)?), Some(all.narrow(0, n + c, c)?)) } else { (None, None) };
-        Ok((dx, ds, db))
-    }
-}
-
-/// The backward of [`ChannelAffine`] from (x, dy, scale): dx, then Σ dy·x and Σ dy per
-/// channel (zeros unless `sums`), flat in one buffer.
-struct ChannelAffineGrad {
-    sums: bool,
-}
-
-impl CustomOp3 for ChannelAffineGrad {
-    fn name(&self) -> &'static str {
-        "channel-affine-grad"
-    }
-
-    fn cpu_fwd(
-        &self,
-        s1: &CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-        s3: &CpuStorage,
-        l3: &Layout,
-    ) -> Result<(CpuStorage, Shape)> {
-        let (_, c, n) = dims(l1)?;
-        let (xv, gv, a) = (slice(s1, l1)?, slice(s2, l2)?, slice(s3, l3)?);
-        if gv.len() != xv.len() || a.len() != c {
-            candle_core::bail!("channel affine grad: operands do not match");
-        }
-        let mut out = crate::kernels::zeros(xv.len() + 2 * c);
-        let (dx, rest) = out.split_at_mut(xv.len());
-        dx.par_chunks_mut(n).zip(gv.par_chunks(n)).enumerate().for_each(|(p, (d, g))| {
-            crate::kernels::affine(d, g, a[p % c], 0.0);
-        });
-        if self.sums {
-            for (ch, (sx, s)) in ChannelAffine::sums(xv, gv, c, n).into_iter().enumerate() {
-                rest[ch] = sx as f32;
-                rest[c + ch] = s as f32;
-            }
-        }
-        let len = out.len();
-        Ok((CpuStorage::F32(out), Shape::from(len)))
-    }
-}
-
-/// `x · scale + shift` per channel of (B, C, H, W) (`scale`, `shift` of shape (C,));
-/// differentiable in all three.
-pub fn channel_affine(x: &Tensor, scale: &Tensor, shift: &Tensor) -> Result<Tensor> {
-    x.contiguous()?.apply_op3(&scale.contiguous()?, &shift.contiguous()?, ChannelAffine)
+/// The same as [`batch_norm_train`] in candle's generic ops, the textbook expression
+/// `(x − mean) / sqrt(var + eps) · weight + bias`, then PReLU as `max(z, 0) + a · min(z, 0)`:
+/// the path on other devices, and the second implementation the tests check the fused op
+/// against.
+pub fn batch_norm_train_generic(
+    x: &Tensor,
+    weight: &Tensor,
+    bias: &Tensor,
+    eps: f64,
+    prelu: Option<&Tensor>,
+) -> Result<(Tensor, Tensor)> {
+    let c = x.dim(1)?;
+    let per = |t: &Tensor| t.reshape((1, c, 1, 1));
+    let mean = x.mean_keepdim((0, 2, 3))?;
+    let centred = x.broadcast_sub(&mean)?;
+    let var = centred.sqr()?.mean_keepdim((0, 2, 3))?;
+    let z = centred.broadcast_div(&(&var + eps)?.sqrt()?)?.broadcast_mul(&per(weight)?)?.broadcast_add(&per(bias)?)?;
+    let y = match prelu {
+        Some(a) => (z.relu()? + z.minimum(0f32)?.broadcast_mul(&per(a)?)?)?,
+        None => z,
+    };
+    let stats = Tensor::stack(&[mean.flatten_all()?, var.flatten_all()?], 0)?.detach();
+    Ok((y, stats))
 }

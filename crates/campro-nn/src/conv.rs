@@ -1,4 +1,4 @@
-//! Dense 2-D convolution (and PReLU) as candle custom ops with their own backward, on the
+//! Dense 2-D convolution as candle custom ops with their own backward, on the
 //! `gemm` crate that candle's own matrix products use.
 //!
 //! Per image, a convolution is one matrix product: `Y = W · col(X)`, with `W` the
@@ -13,15 +13,9 @@
 //! Numerics: f32 throughout, as candle's `conv2d`; `tests/networks.rs` checks both directions
 //! against candle's `conv2d` and finite differences.
 
+use crate::storage::slice;
 use candle_core::{CpuStorage, CustomOp2, Layout, Result, Shape, Tensor};
 use rayon::prelude::*;
-
-/// The f32 values of a contiguous CPU operand of campro's ops (`what` names the op in errors).
-pub(crate) fn slice<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
-    let CpuStorage::F32(v) = s else { candle_core::bail!("{what}: f32 only") };
-    let Some((a, b)) = l.contiguous_offsets() else { candle_core::bail!("{what}: contiguous operands only") };
-    Ok(&v[a..b])
-}
 
 /// Row-major `dst (m×n) = [dst +] a · b` where `a` is `m×k` (or its transpose stored
 /// `k×m`, `ta`) and `b` is `k×n` (or `n×k`, `tb`). Bounds are checked before the call.
@@ -333,13 +327,17 @@ impl CustomOp2 for ConvGradInput {
 
 /// Dense convolution: `x` (B, Cin, H, W), `w` (Cout, Cin, kh, kw), zero padding `pad` on
 /// every side, stride `stride`; differentiable in both (gradients only for tracked operands).
+/// On the CPU the custom op; on another device [`conv2d_generic`].
 pub fn conv2d(x: &Tensor, w: &Tensor, stride: usize, pad: usize) -> Result<Tensor> {
+    if !x.device().is_cpu() {
+        return conv2d_generic(x, w, stride, pad);
+    }
     x.contiguous()?.apply_op2(&w.contiguous()?, Conv { stride, pad })
 }
 
 /// The same convolution as [`conv2d`] built from candle's generic ops (one matrix product per
 /// kernel tap on shifted copies, then subsampling): the second implementation the tests check
-/// [`conv2d`] against, several times slower.
+/// [`conv2d`] against, several times slower on the CPU, and the path on other devices.
 pub fn conv2d_generic(x: &Tensor, w: &Tensor, stride: usize, pad: usize) -> Result<Tensor> {
     let (b, cin, h, wd) = x.dims4()?;
     let (cout, _, kh, kw) = w.dims4()?;
@@ -366,7 +364,7 @@ pub fn conv2d_generic(x: &Tensor, w: &Tensor, stride: usize, pad: usize) -> Resu
 }
 
 /// Every `s`-th element along `dim`, from 0.
-pub(crate) fn subsample(x: &Tensor, dim: usize, s: usize) -> Result<Tensor> {
+pub fn subsample(x: &Tensor, dim: usize, s: usize) -> Result<Tensor> {
     if s == 1 {
         return Ok(x.clone());
     }
@@ -377,249 +375,4 @@ pub(crate) fn subsample(x: &Tensor, dim: usize, s: usize) -> Result<Tensor> {
     dims[dim] = m;
     dims.insert(dim + 1, s);
     x.reshape(dims)?.narrow(dim + 1, 0, 1)?.squeeze(dim + 1)
-}
-
-/// PReLU with one slope per channel: `y = x` where `x > 0`, else `a_c · x`.
-struct Prelu;
-
-impl CustomOp2 for Prelu {
-    fn name(&self) -> &'static str {
-        "campro-prelu"
-    }
-
-    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        let (x, a) = (slice(s1, l1, "prelu")?, slice(s2, l2, "prelu")?);
-        let (c, n) = plane(l1.dims(), a.len())?;
-        let mut y = crate::kernels::zeros(x.len());
-        y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(pl, (yp, xp))| {
-            crate::kernels::prelu(yp, xp, a[pl % c]);
-        });
-        Ok((CpuStorage::F32(y), l1.shape().clone()))
-    }
-
-    fn bwd(&self, x: &Tensor, a: &Tensor, _y: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
-        // One op reads x and dy in place and writes dx then da into one buffer (two views).
-        let slopes = a.track_op();
-        let both = x.apply_op3_no_bwd(&grad.contiguous()?, &a.contiguous()?, &PreluGrad { slopes })?;
-        let n = x.elem_count();
-        let dx = if x.track_op() { Some(both.narrow(0, 0, n)?.reshape(x.shape())?) } else { None };
-        let da = if slopes { Some(both.narrow(0, n, a.elem_count())?.reshape(a.shape())?) } else { None };
-        Ok((dx, da))
-    }
-}
-
-/// The backward of [`Prelu`] from (x, dy, a): dx (as x), then da (C; zeros unless `slopes`).
-struct PreluGrad {
-    slopes: bool,
-}
-
-impl candle_core::CustomOp3 for PreluGrad {
-    fn name(&self) -> &'static str {
-        "campro-prelu-grad"
-    }
-
-    fn cpu_fwd(
-        &self,
-        s1: &CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-        s3: &CpuStorage,
-        l3: &Layout,
-    ) -> Result<(CpuStorage, Shape)> {
-        let (xv, gv, av) = (slice(s1, l1, "prelu")?, slice(s2, l2, "prelu")?, slice(s3, l3, "prelu")?);
-        let (c, n) = plane(l1.dims(), av.len())?;
-        if gv.len() != xv.len() {
-            candle_core::bail!("prelu: gradient of {} values for {} inputs", gv.len(), xv.len());
-        }
-        let mut out = crate::kernels::zeros(xv.len() + c);
-        let (dx, da) = out.split_at_mut(xv.len());
-        let per: Vec<f32> = dx
-            .par_chunks_mut(n)
-            .enumerate()
-            .map(|(pl, d)| {
-                let (xp, gp) = (&xv[pl * n..(pl + 1) * n], &gv[pl * n..(pl + 1) * n]);
-                crate::kernels::prelu_grad(d, xp, gp, av[pl % c])
-            })
-            .collect();
-        if self.slopes {
-            let acc = per_channel(per.iter().map(|&v| v as f64), c);
-            da.iter_mut().zip(acc).for_each(|(o, v)| *o = v as f32);
-        }
-        let len = out.len();
-        Ok((CpuStorage::F32(out), Shape::from(len)))
-    }
-}
-
-/// Per-plane values of a (B, C, ...) tensor (plane p is channel p mod C) summed per channel,
-/// in f64.
-pub(crate) fn per_channel(per_plane: impl IntoIterator<Item = f64>, c: usize) -> Vec<f64> {
-    let mut out = vec![0f64; c];
-    for (p, v) in per_plane.into_iter().enumerate() {
-        out[p % c] += v;
-    }
-    out
-}
-
-/// (channels, plane size) of a (B, C, ...) tensor whose slopes number `slopes`.
-fn plane(dims: &[usize], slopes: usize) -> Result<(usize, usize)> {
-    match dims {
-        [_, c, rest @ ..] if *c == slopes && *c > 0 => Ok((*c, rest.iter().product::<usize>().max(1))),
-        _ => candle_core::bail!("prelu: x {dims:?} needs one slope per channel, got {slopes}"),
-    }
-}
-
-/// PReLU: `x` (B, C, ...), `a` (C,); differentiable in both.
-pub fn prelu(x: &Tensor, a: &Tensor) -> Result<Tensor> {
-    x.contiguous()?.apply_op2(&a.contiguous()?, Prelu)
-}
-
-/// An element-wise activation with its own backward, one pass each way: forward
-/// `y = f(x)`, backward `dx = dy · f'(x)` read from the saved input. Fused here because
-/// candle's generic ops take several passes and saved tensors for each (SiLU from the ONNX
-/// graph's Sigmoid and Mul: two ops, four passes; ReLU: a comparison, a cast and a product
-/// backward). A type per activation, so its loops are compiled for the CPU's vector width.
-trait Pointwise: Copy + Send + Sync + 'static {
-    const NAME: &'static str;
-    /// `y = f(x)` over one chunk.
-    fn forward(y: &mut [f32], x: &[f32]);
-    /// `dx = dy · f'(x)` over one chunk.
-    fn backward(dx: &mut [f32], x: &[f32], g: &[f32]);
-}
-
-/// SiLU: `x · σ(x)`, `dy/dx = σ(x)·(1 + x·(1 − σ(x)))`, with [`crate::kernels::exp`]
-/// (relative error below 4e-7).
-#[derive(Clone, Copy)]
-struct Silu;
-
-impl Pointwise for Silu {
-    const NAME: &'static str = "campro-silu";
-    fn forward(y: &mut [f32], x: &[f32]) {
-        crate::kernels::silu(y, x);
-    }
-    fn backward(dx: &mut [f32], x: &[f32], g: &[f32]) {
-        crate::kernels::silu_grad(dx, x, g);
-    }
-}
-
-/// ReLU: `max(x, 0)`, gradient 1 where `x > 0`, else 0 (as candle's).
-#[derive(Clone, Copy)]
-struct Relu;
-
-impl Pointwise for Relu {
-    const NAME: &'static str = "campro-relu";
-    fn forward(y: &mut [f32], x: &[f32]) {
-        y.iter_mut().zip(x).for_each(|(o, &v)| *o = v.max(0.0));
-    }
-    fn backward(dx: &mut [f32], x: &[f32], g: &[f32]) {
-        for ((o, &v), &gv) in dx.iter_mut().zip(x).zip(g) {
-            *o = if v > 0.0 { gv } else { 0.0 };
-        }
-    }
-}
-
-/// The forward op of a [`Pointwise`] activation.
-struct Activation<A>(A);
-
-impl<A: Pointwise> candle_core::CustomOp1 for Activation<A> {
-    fn name(&self) -> &'static str {
-        A::NAME
-    }
-
-    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
-        let x = slice(s, l, A::NAME)?;
-        let mut y = crate::kernels::zeros(x.len());
-        y.par_chunks_mut(4096).zip(x.par_chunks(4096)).for_each(|(o, i)| A::forward(o, i));
-        Ok((CpuStorage::F32(y), l.shape().clone()))
-    }
-
-    fn bwd(&self, x: &Tensor, _y: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
-        Ok(Some(x.apply_op2_no_bwd(&grad.contiguous()?, &ActivationGrad(self.0))?))
-    }
-}
-
-/// The input gradient of a [`Pointwise`] activation from (x, dy), reading both in place.
-struct ActivationGrad<A>(A);
-
-impl<A: Pointwise> CustomOp2 for ActivationGrad<A> {
-    fn name(&self) -> &'static str {
-        "campro-activation-grad"
-    }
-
-    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        let (x, g) = (slice(s1, l1, A::NAME)?, slice(s2, l2, A::NAME)?);
-        if x.len() != g.len() {
-            candle_core::bail!("{}: gradient of {} values for {} inputs", A::NAME, g.len(), x.len());
-        }
-        let mut dx = crate::kernels::zeros(x.len());
-        dx.par_chunks_mut(4096)
-            .zip(x.par_chunks(4096).zip(g.par_chunks(4096)))
-            .for_each(|(o, (xs, gs))| A::backward(o, xs, gs));
-        Ok((CpuStorage::F32(dx), l1.shape().clone()))
-    }
-}
-
-/// SiLU (`x · σ(x)`) of any tensor; differentiable.
-pub fn silu(x: &Tensor) -> Result<Tensor> {
-    x.contiguous()?.apply_op1(Activation(Silu))
-}
-
-/// ReLU of any tensor; differentiable (the gradient at 0 is 0, as candle's).
-pub fn relu(x: &Tensor) -> Result<Tensor> {
-    x.contiguous()?.apply_op1(Activation(Relu))
-}
-
-/// `x + b_c` per channel of (B, C, ...) (`b` of shape (C,)): a convolution's bias, one pass
-/// forward; backward passes the gradient through and sums it per channel for `b`.
-struct ChannelBias;
-
-impl CustomOp2 for ChannelBias {
-    fn name(&self) -> &'static str {
-        "campro-channel-bias"
-    }
-
-    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        let (x, b) = (slice(s1, l1, "bias")?, slice(s2, l2, "bias")?);
-        let (c, n) = plane(l1.dims(), b.len())?;
-        let mut y = crate::kernels::zeros(x.len());
-        y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(p, (yp, xp))| {
-            crate::kernels::affine(yp, xp, 1.0, b[p % c]);
-        });
-        Ok((CpuStorage::F32(y), l1.shape().clone()))
-    }
-
-    fn bwd(&self, x: &Tensor, b: &Tensor, _y: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
-        let dx = if x.track_op() { Some(grad.clone()) } else { None };
-        let db = if b.track_op() {
-            let c = b.elem_count();
-            Some(grad.contiguous()?.apply_op1_no_bwd(&ChannelSum { c })?)
-        } else {
-            None
-        };
-        Ok((dx, db))
-    }
-}
-
-/// Per channel sums of a (B, C, ...) tensor: (C,), accumulated in f64.
-struct ChannelSum {
-    c: usize,
-}
-
-impl candle_core::CustomOp1 for ChannelSum {
-    fn name(&self) -> &'static str {
-        "campro-channel-sum"
-    }
-
-    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
-        let g = slice(s, l, "bias")?;
-        let (c, n) = plane(l.dims(), self.c)?;
-        let per: Vec<f64> = g.par_chunks(n).map(|p| p.iter().map(|&v| v as f64).sum()).collect();
-        let out: Vec<f32> = per_channel(per, c).into_iter().map(|v| v as f32).collect();
-        Ok((CpuStorage::F32(out), Shape::from(c)))
-    }
-}
-
-/// `x + b` per channel: `x` (B, C, ...), `b` (C,); differentiable in both.
-pub fn channel_bias(x: &Tensor, b: &Tensor) -> Result<Tensor> {
-    x.contiguous()?.apply_op2(&b.contiguous()?, ChannelBias)
 }

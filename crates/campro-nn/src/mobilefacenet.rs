@@ -5,12 +5,12 @@
 //!
 //! Convolutions and PReLU are campro's own ops with their own backward
 //! ([`crate::conv::conv2d`], [`depthwise`], batch norm with PReLU fused in
-//! [`crate::batchnorm::batch_norm_train`]): candle runs a grouped
+//! [`crate::batch_norm::batch_norm_train`]): candle runs a grouped
 //! convolution as one convolution per group (hundreds of tiny kernels per layer here), its
 //! CPU convolution backward is a naive loop, and PReLU from generic ops is five passes.
 
 use crate::conv::conv2d;
-pub use crate::dwconv::depthwise;
+pub use crate::depthwise::depthwise;
 use crate::torch_legacy::{read_state_dict, TorchError};
 use candle_core::{DType, Device, Result, Tensor, Var, D};
 use candle_nn::{VarBuilder, VarMap};
@@ -56,14 +56,14 @@ impl BatchNorm {
             // The running statistics are state, not parameters: no gradient reaches them.
             let scale = (self.weight.as_ref() / (self.running_var.as_tensor().detach() + Self::EPS)?.sqrt()?)?;
             let shift = (&self.bias - self.running_mean.as_tensor().detach().mul(&scale)?)?;
-            let y = crate::batchnorm::channel_affine(x, &scale, &shift)?;
+            let y = crate::channel::channel_affine(x, &scale, &shift)?;
             return match prelu {
-                Some(a) => crate::conv::prelu(&y, a),
+                Some(a) => crate::activation::prelu(&y, a),
                 None => Ok(y),
             };
         }
         let n = (x.elem_count() / c) as f64;
-        let (y, stats) = crate::batchnorm::batch_norm_train(x, &self.weight, &self.bias, Self::EPS, prelu)?;
+        let (y, stats) = crate::batch_norm::batch_norm_train(x, &self.weight, &self.bias, Self::EPS, prelu)?;
         let (mean, var) = (stats.get(0)?, stats.get(1)?);
         let m = Self::MOMENTUM;
         self.running_mean.set(&((self.running_mean.as_tensor() * (1.0 - m))? + (mean * m)?)?)?;
@@ -162,7 +162,7 @@ impl MobileFaceNet {
 
     /// Loads the checkpoint (`net_state_dict` of a legacy `torch.save`) into a new VarMap.
     pub fn from_checkpoint(path: &Path, device: &Device) -> std::result::Result<(Self, VarMap), TorchError> {
-        let sd = read_state_dict(path, Some("net_state_dict"))?;
+        let sd = read_state_dict(path, Some("net_state_dict"), device)?;
         let bad =
             |e: candle_core::Error| TorchError::Format { path: path.display().to_string(), message: e.to_string() };
         let vm = VarMap::new();

@@ -132,7 +132,7 @@ pub fn f32_initializers(
 }
 
 /// An f32 initializer `name` of shape `dims` (raw little-endian data).
-pub(crate) fn f32_tensor(name: &str, dims: Vec<i64>, v: &[f32]) -> pb::TensorProto {
+pub fn f32_tensor(name: &str, dims: Vec<i64>, v: &[f32]) -> pb::TensorProto {
     pb::TensorProto {
         name: name.into(),
         dims,
@@ -143,17 +143,17 @@ pub(crate) fn f32_tensor(name: &str, dims: Vec<i64>, v: &[f32]) -> pb::TensorPro
 }
 
 /// An integer-list attribute.
-pub(crate) fn ints_attr(name: &str, v: Vec<i64>) -> pb::AttributeProto {
+pub fn ints_attr(name: &str, v: Vec<i64>) -> pb::AttributeProto {
     pb::AttributeProto { name: name.into(), r#type: 7, ints: v, ..Default::default() }
 }
 
 /// A string attribute.
-pub(crate) fn string_attr(name: &str, v: &str) -> pb::AttributeProto {
+pub fn string_attr(name: &str, v: &str) -> pb::AttributeProto {
     pb::AttributeProto { name: name.into(), r#type: 3, s: v.as_bytes().to_vec(), ..Default::default() }
 }
 
 /// A node named after its one output.
-pub(crate) fn node(op: &str, inputs: &[&str], output: &str, attribute: Vec<pb::AttributeProto>) -> pb::NodeProto {
+pub fn node(op: &str, inputs: &[&str], output: &str, attribute: Vec<pb::AttributeProto>) -> pb::NodeProto {
     pb::NodeProto {
         name: format!("{op}_{output}"),
         op_type: op.into(),
@@ -165,7 +165,7 @@ pub(crate) fn node(op: &str, inputs: &[&str], output: &str, attribute: Vec<pb::A
 }
 
 /// The attributes of a square `k` x `k` convolution with symmetric padding.
-pub(crate) fn conv_attrs(k: i64, stride: i64, pad: i64) -> Vec<pb::AttributeProto> {
+pub fn conv_attrs(k: i64, stride: i64, pad: i64) -> Vec<pb::AttributeProto> {
     vec![
         ints_attr("kernel_shape", vec![k, k]),
         ints_attr("strides", vec![stride, stride]),
@@ -182,7 +182,7 @@ impl OnnxNet {
         Self::from_model(model, p, dev)
     }
 
-    pub(crate) fn from_model(
+    pub fn from_model(
         model: pb::ModelProto,
         p: String,
         dev: &candle_core::Device,
@@ -350,7 +350,7 @@ impl OnnxNet {
     }
 
     /// Interprets the graph on `x`, up to the node writing `until` (all of it if None).
-    pub(crate) fn run(&self, x: &Tensor, until: Option<&str>) -> Result<HashMap<&str, Tensor>> {
+    pub fn run(&self, x: &Tensor, until: Option<&str>) -> Result<HashMap<&str, Tensor>> {
         let mut values: HashMap<&str, Tensor> = HashMap::new();
         values.insert(&self.input, x.clone());
         for n in &self.nodes {
@@ -374,18 +374,18 @@ impl OnnxNet {
                 Op::Conv { w, b, stride, pad, depthwise } => {
                     let w = self.param(w).as_tensor();
                     let y = if *depthwise {
-                        crate::dwconv::depthwise(arg(0)?, w, *stride, *pad)?
+                        crate::depthwise::depthwise(arg(0)?, w, *stride, *pad)?
                     } else {
                         crate::conv::conv2d(arg(0)?, w, *stride, *pad)?
                     };
                     match b {
-                        Some(b) => crate::conv::channel_bias(&y, self.param(b).as_tensor())?,
+                        Some(b) => crate::channel::channel_bias(&y, self.param(b).as_tensor())?,
                         None => y,
                     }
                 }
                 Op::Sigmoid => candle_nn::ops::sigmoid(arg(0)?)?,
-                Op::Relu => crate::conv::relu(arg(0)?)?,
-                Op::Silu => crate::conv::silu(arg(0)?)?,
+                Op::Relu => crate::activation::relu(arg(0)?)?,
+                Op::Silu => crate::activation::silu(arg(0)?)?,
                 Op::Mul => arg(0)?.broadcast_mul(arg(1)?)?,
                 Op::Scale(c) => (arg(0)? * *c as f64)?,
                 Op::Add => arg(0)?.broadcast_add(arg(1)?)?,
@@ -396,7 +396,7 @@ impl OnnxNet {
                 }
                 Op::Flatten => arg(0)?.flatten_from(2)?,
                 Op::FlattenBatch => arg(0)?.flatten_from(1)?,
-                Op::Prelu { slope } => crate::conv::prelu(arg(0)?, self.param(slope).as_tensor())?,
+                Op::Prelu { slope } => crate::activation::prelu(arg(0)?, self.param(slope).as_tensor())?,
                 Op::Transpose => arg(0)?.transpose(1, 2)?.contiguous()?,
             };
             values.insert(&n.output, y);
@@ -418,7 +418,7 @@ impl OnnxNet {
     }
 
     /// The ONNX model with the current weights.
-    pub(crate) fn current(&self) -> Result<pb::ModelProto> {
+    pub fn current(&self) -> Result<pb::ModelProto> {
         let mut model = self.model.clone();
         let graph = model.graph.as_mut().expect("checked in load");
         for t in graph.initializer.iter_mut() {

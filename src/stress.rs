@@ -1,16 +1,26 @@
 //! Numerical stress: adversarial random cases and the invariants every path must keep.
 //! The property tests (`tests/stress.rs`) and the soak (`campro stress --seconds N`) both
-//! draw cases here and call [`check`], so they test the same things.
+//! draw cases here and call [`check`], so they test the same things. (Feature `stress`:
+//! not in the default build.)
 
-use crate::{Error, Result};
-use campro::ccm::{self, Mat3};
-use campro::compare::random_pixels;
-use campro::emulate::{DeviceModel, Emulator};
-use campro::params::Params;
-use campro::pipeline::fast::{Exact8, F32Path};
-use campro::pipeline::{from_linear, Depth, Prepared};
-use campro::targets::camera2::{self, Camera2Loop, ConvertError, Options, RationalMode, MATRIX_RANGE};
-use campro::tone_curve::ToneCurve;
+use crate::ccm::{self, Mat3};
+use crate::compare::random_pixels;
+use crate::emulate::{DeviceModel, Emulator};
+use crate::params::Params;
+use crate::pipeline::fast::{Exact8, F32Path};
+use crate::pipeline::{from_linear, Depth, Prepared};
+use crate::targets::camera2::{self, Camera2Loop, ConvertError, Options, RationalMode, MATRIX_RANGE};
+use crate::tone_curve::ToneCurve;
+
+/// An invariant a stress case broke.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("seed {seed}: {what}")]
+pub struct Invariant {
+    /// The case's seed (rerun it with `campro stress --seed`).
+    pub seed: u64,
+    /// Which invariant, with the values.
+    pub what: String,
+}
 
 /// One stress case.
 #[derive(Debug, Clone)]
@@ -137,9 +147,9 @@ pub enum Outcome {
 }
 
 /// Checks every invariant on `case`; `Err` says which one broke and how.
-pub fn check(case: &Case) -> Result<Outcome> {
+pub fn check(case: &Case) -> Result<Outcome, Invariant> {
     let Case { params: p, device, opts, seed } = case;
-    let fail = |what: String| Err(Error::Invariant { seed: *seed, what });
+    let fail = |what: String| Err(Invariant { seed: *seed, what });
     let v = match camera2::convert(p, device, opts) {
         Ok(v) => v,
         // A rational that cannot fit 32 bits, refused with the entry named.
@@ -191,7 +201,7 @@ pub fn check(case: &Case) -> Result<Outcome> {
         }
     }
     // The camera loop: an unchanged scene skips; a moved one stays within what it states.
-    let loop_err = |e: &dyn std::fmt::Display| Error::Invariant { seed: *seed, what: format!("camera loop: {e}") };
+    let loop_err = |e: &dyn std::fmt::Display| Invariant { seed: *seed, what: format!("camera loop: {e}") };
     let mut l = Camera2Loop::new(p.clone(), *opts, 1.0 / 255.0).map_err(|e| loop_err(&e))?;
     l.update(device).map_err(|e| loop_err(&e))?;
     if l.update(device).map_err(|e| loop_err(&e))?.recomputed {

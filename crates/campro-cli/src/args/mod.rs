@@ -1,0 +1,103 @@
+//! Every command's arguments (clap derive), one file per command family; flags used by
+//! several commands are defined once and flattened. The bodies live in the command
+//! modules (`convert`, `simulate`, `eval`, ...); `main` only dispatches.
+
+mod bench;
+mod convert;
+mod eval;
+mod inspect;
+mod params;
+mod simulate;
+mod train;
+
+pub use bench::{BenchArgs, BenchEnhancerArgs, BenchTrainArgs, BenchWhat, StepArg, StressArgs};
+pub use convert::{CompareArgs, ConvertArgs, DeviceArgs, FileTargetArgs, Format};
+pub use eval::{AttackArg, Common, EnrolArg, EvalCmd, LossArg, PrivacyArgs, RetrainArgs, UtilityArgs};
+pub use inspect::InspectArgs;
+pub use params::{DemoArgs, ImportPtArgs, ManArgs, PresetsArgs, ValidateArgs};
+pub use simulate::{BitDepth, ScaleArg, SimulateArgs};
+pub use train::{FinetuneDetectorArgs, RunFiles, TrainArgs, TrainEnhancerArgs};
+
+use clap::{Parser, Subcommand, ValueEnum};
+
+/// What a PARAMS argument is, in every command's help.
+pub const PARAMS_HELP: &str = "Parameter set: a bundled preset's name (campro presets lists them) or a JSON file";
+
+#[derive(Parser)]
+#[command(
+    name = "campro",
+    version,
+    arg_required_else_help = true,
+    about = "CamPro anti-facial-recognition ISP parameters: simulate, convert to Camera2, compare"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+pub enum Cmd {
+    /// Check parameter files; prints a summary of each, fails on the first broken rule.
+    Validate(ValidateArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell) to stdout.
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
+    /// Print a manual page (roff) to stdout, `campro man > campro.1`, or a command's
+    /// (`campro man eval privacy`); with -o, write one page per command into a folder; with
+    /// --markdown, the whole reference as Markdown (docs/cli.md).
+    Man(ManArgs),
+    /// Convert a CamPro checkpoint (Pipeline.save .pt) to a parameter file.
+    ImportPt(ImportPtArgs),
+    /// Map parameters onto a camera stack (Camera2: COLOR_CORRECTION_TRANSFORM, TONEMAP_CURVE).
+    Convert(ConvertArgs),
+    /// Run the desktop pipeline on images and videos (files, folders, standard input, a
+    /// camera): each output keeps its input's format (JPEG, PNG, TIFF, the video's container).
+    Simulate(SimulateArgs),
+    /// Look at what a parameter set does to your images: raw | protected side by side with
+    /// the faces (YuNet) and people (person detector) found on each, a JSON of the
+    /// detections per image, and OUTPUT/index.html linking them.
+    Inspect(InspectArgs),
+    /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
+    Compare(CompareArgs),
+    /// Print the run-time-versus-error table (image paths, Camera2 updates, skips) as Markdown;
+    /// `bench train` times the optimiser's steps.
+    #[command(args_conflicts_with_subcommands = true)]
+    Bench(BenchArgs),
+    /// Randomised numerical soak: adversarial cases checked against every invariant until time runs out.
+    Stress(StressArgs),
+    /// Evaluate privacy (face recognition), utility (person detection) and image quality with real models.
+    Eval {
+        #[command(subcommand)]
+        what: Box<EvalCmd>,
+    },
+    /// Learn CamPro parameters against a face-recognition attacker (Algorithm 1; privacy player).
+    Train(TrainArgs),
+    /// Fine-tune the person detector behind a parameter set's camera (the paper's utility
+    /// protocol), for `eval utility --own-detector`: writes PARAMS.detector.onnx and
+    /// PARAMS.detector.json beside PARAMS and names them in its provenance.
+    FinetuneDetector(FinetuneDetectorArgs),
+    /// Train the image enhancer of a parameter set (paper Sec. IV-D: a U-Net from captured
+    /// images back to the scene, faces left unrestored): writes PARAMS.enhancer.onnx and
+    /// PARAMS.enhancer.json beside PARAMS and names them in its provenance. With
+    /// data.faces = "restore" it trains the restoration attacker's network instead
+    /// (PARAMS.restorer.*, for eval privacy --attack restore-net).
+    TrainEnhancer(TrainEnhancerArgs),
+    /// List the bundled presets (usable by name anywhere: `campro simulate campro-omega-0.5 ...`).
+    Presets(PresetsArgs),
+    /// Run the recommended learnt preset (or --params) on a built-in chart: before/after PNGs, Camera2 values, error report.
+    Demo(DemoArgs),
+}
+
+/// `--format` of the commands that print a report: readable text, or JSON.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Report {
+    Text,
+    Json,
+}
+
+/// `value` cut for an error message about an argument (see [`crate::short`]).
+fn shown_arg(value: &str) -> String {
+    crate::short(value, 40)
+}

@@ -1,0 +1,141 @@
+//! Arguments of `simulate` (images, videos, pipes, cameras) and the enhancer's scale (shared
+//! by simulate, inspect and eval).
+
+use super::{Report, PARAMS_HELP};
+use clap::{Args, ValueEnum};
+use std::path::PathBuf;
+
+/// `campro simulate`.
+#[derive(Args)]
+pub struct SimulateArgs {
+    #[arg(help = PARAMS_HELP)]
+    pub params: PathBuf,
+    /// Images, videos or folders (recursive); `-` reads one video from standard input
+    /// (a container, or raw RGB frames with --size); /dev/videoN a live camera (Linux).
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Output folder; for one video also a video file name, `-` (standard output,
+    /// Matroska) or a V4L2 output device (v4l2loopback).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Output bit depth of images; 16 also gives video 16-bit frames (video of more
+    /// than 8 bits gets them anyway).
+    #[arg(long, value_enum, default_value_t = BitDepth::Eight)]
+    pub bit_depth: BitDepth,
+    /// JPEG quality of JPEG outputs (a JPEG input stays JPEG), 1 to 100.
+    #[arg(long, default_value_t = 92, value_parser = clap::value_parser!(u8).range(1..=100))]
+    pub quality: u8,
+    /// Write every image in this format instead of its input's (png for exact work:
+    /// a JPEG output is lossy).
+    #[arg(long, value_enum)]
+    pub image_format: Option<crate::simulate::ImageFormat>,
+    /// Raw standard input's frame size (WxH, 8-bit RGB), or the size asked of a camera.
+    #[arg(long, value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
+    /// Raw standard input's frame rate (default 30), or the rate asked of a camera
+    /// (frames a second: 30, 29.97 or 30000/1001).
+    #[arg(long, value_parser = parse_rate)]
+    pub rate: Option<String>,
+    /// Stop each video after this many frames (a live camera runs until Ctrl-C without).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub frames: Option<u64>,
+    /// Overwrite existing outputs.
+    #[arg(long)]
+    pub force: bool,
+    /// Worker threads (default: all cores; more than the cores is clamped, with a warning).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    pub jobs: Option<u32>,
+    /// Video encoder (ffmpeg's name): libx264, libx265, libvpx-vp9, ffv1 (lossless, in Matroska), ...
+    #[arg(long, default_value = "libx264")]
+    pub codec: String,
+    /// Video constant quality (lower is better; H.264's 18 looks lossless to most).
+    #[arg(long, default_value_t = 18, value_parser = clap::value_parser!(u32).range(0..=63), conflicts_with = "bitrate")]
+    pub crf: u32,
+    /// Video bitrate instead of --crf (ffmpeg's -b:v, e.g. 8M).
+    #[arg(long, value_parser = parse_bitrate)]
+    pub bitrate: Option<String>,
+    /// Video encoder preset (libx264/libx265: ultrafast ... veryslow).
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Also run the preset's image enhancer (provenance.enhancer, from campro
+    /// train-enhancer) on the camera's 8-bit output: what a human viewer is shown.
+    #[arg(long, conflicts_with = "bit_depth")]
+    pub enhance: bool,
+    #[command(flatten)]
+    pub scale: ScaleArg,
+    /// Leave outputs that exist and skip their inputs (re-runs do only what is missing).
+    #[arg(long, conflicts_with = "force")]
+    pub skip_existing: bool,
+    /// Progress on stderr only, or also one JSON object on stdout: each input's output,
+    /// status (written, skipped, failed) and time.
+    #[arg(long, value_enum, default_value_t = Report::Text)]
+    pub format: Report,
+}
+
+/// `--bit-depth`.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum BitDepth {
+    #[value(name = "8")]
+    Eight,
+    #[value(name = "16")]
+    Sixteen,
+}
+
+/// `--bitrate`: digits with an optional k, M or G (ffmpeg's -b:v).
+fn parse_bitrate(s: &str) -> Result<String, String> {
+    let digits = s.trim_end_matches(['k', 'K', 'M', 'G']);
+    if !digits.is_empty()
+        && digits.len() <= 12
+        && digits.bytes().all(|b| b.is_ascii_digit())
+        && s.len() - digits.len() <= 1
+    {
+        Ok(s.to_string())
+    } else {
+        Err(format!("must be a bitrate such as 8M or 2500k, got {}", super::shown_arg(s)))
+    }
+}
+
+/// `--size`: WxH, each side 1 to 16384 pixels.
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let side = |v: &str| v.parse::<u32>().ok().filter(|v| (1..=16384).contains(v));
+    s.split_once(['x', 'X'])
+        .and_then(|(w, h)| Some((side(w)?, side(h)?)))
+        .ok_or_else(|| format!("must be WIDTHxHEIGHT with sides of 1 to 16384 pixels, got {}", super::shown_arg(s)))
+}
+
+/// `--rate`: frames a second, a positive number (`29.97`) or fraction (`30000/1001`) up to 1000.
+fn parse_rate(s: &str) -> Result<String, String> {
+    let num = |v: &str| v.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0);
+    let value = match s.split_once('/') {
+        Some((n, d)) if n.bytes().all(|b| b.is_ascii_digit()) && d.bytes().all(|b| b.is_ascii_digit()) => {
+            num(n).zip(num(d)).map(|(n, d)| n / d)
+        }
+        Some(_) => None,
+        None if s.len() <= 12 && s.bytes().all(|b| b.is_ascii_digit() || b == b'.') => num(s),
+        None => None,
+    };
+    match value {
+        Some(v) if v <= 1000.0 => Ok(s.to_string()),
+        _ => Err(format!("must be frames a second up to 1000 (30, 29.97 or 30000/1001), got {}", super::shown_arg(s))),
+    }
+}
+
+/// `--enhance-scale`: the resolution the enhancer's network runs at (shared by simulate,
+/// inspect and eval).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct ScaleArg {
+    /// The enhancer's network at full resolution (1), at half or a quarter of it (2, 4:
+    /// colours stay per-pixel, the network's correction is upsampled; about 4 and 16 times
+    /// less work), or auto: 1 below 1280x720, 2 from there, 4 from 2560x1440.
+    #[arg(long = "enhance-scale", default_value = "auto", value_parser = parse_scale)]
+    pub enhance_scale: campro_eval::enhance::Scale,
+}
+
+fn parse_scale(s: &str) -> Result<campro_eval::enhance::Scale, String> {
+    use campro_eval::enhance::Scale;
+    match s {
+        "auto" => Ok(Scale::Auto),
+        "1" | "2" | "4" => Ok(Scale::Factor(s.parse().expect("a digit"))),
+        _ => Err(format!("must be auto, 1, 2 or 4, got {}", super::shown_arg(s))),
+    }
+}

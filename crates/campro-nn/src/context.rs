@@ -1,0 +1,49 @@
+//! Where a training run computes: the device and the CPU threads, handed to every loop
+//! instead of a hard-coded CPU. (The seed stays in each run's configuration, which
+//! checkpoints and provenance record: one source for it.) The ops dispatch on the device their tensors live on
+//! (fast custom ops on the CPU, candle's generic ops elsewhere), so a run on another
+//! device needs no change to a loop: only a context made with that device.
+
+use candle_core::Device;
+
+/// A training run's device and threads.
+#[derive(Debug, Clone)]
+pub struct Context {
+    /// Where tensors are made and computed.
+    pub device: Device,
+    /// CPU worker threads (rayon's pool, and the CPU kernels' parallel loops), at least 1.
+    pub threads: usize,
+}
+
+impl Context {
+    /// The CPU with every core (`RAYON_NUM_THREADS` if set).
+    pub fn cpu() -> Self {
+        Context { device: Device::Cpu, threads: rayon::current_num_threads() }
+    }
+
+    /// `threads` CPU threads (at least 1).
+    pub fn with_threads(self, threads: usize) -> Self {
+        Context { threads: threads.max(1), ..self }
+    }
+
+    /// Runs `f` in a rayon pool of [`Context::threads`] threads (the CPU ops' parallel
+    /// loops), or in the current pool if a new one cannot be made.
+    pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        match rayon::ThreadPoolBuilder::new().num_threads(self.threads).build() {
+            Ok(pool) => pool.install(f),
+            Err(_) => f(),
+        }
+    }
+
+    /// The same context on `device`.
+    pub fn on(self, device: Device) -> Self {
+        Context { device, ..self }
+    }
+}
+
+impl Default for Context {
+    /// The CPU with every core.
+    fn default() -> Self {
+        Context::cpu()
+    }
+}

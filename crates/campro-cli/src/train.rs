@@ -316,7 +316,7 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
 
 pub fn bench_train(a: &BenchTrainArgs) -> Result<()> {
     use campro_train::bench::Step;
-    let threads = a.threads.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |t| t as usize);
+    let threads = a.timing.threads();
     // candle's matrix products read RAYON_NUM_THREADS on every call; rayon reads it once.
     std::env::set_var("RAYON_NUM_THREADS", threads.to_string());
     let cfg = match &a.config {
@@ -340,7 +340,7 @@ pub fn bench_train(a: &BenchTrainArgs) -> Result<()> {
     let shared = eval::shared_dir(a.shared.as_deref());
     let models = shared.join("models");
     let ctx = campro_nn::Context::cpu().with_threads(threads);
-    let times = ctx.install(|| campro_train::bench::run(&ctx, &models, &cfg, &steps, a.runs as usize))?;
+    let times = ctx.install(|| campro_train::bench::run(&ctx, &models, &cfg, &steps, a.timing.runs as usize))?;
     let mut json = serde_json::Map::new();
     json.insert("threads".into(), threads.into());
     json.insert("face_batch".into(), cfg.data.batch.into());
@@ -402,7 +402,7 @@ fn run_anchor(python: &Path, shared: &Path, threads: usize) -> Result<serde_json
 }
 
 pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
-    let threads = a.threads.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |t| t as usize);
+    let threads = a.timing.threads();
     std::env::set_var("RAYON_NUM_THREADS", threads.to_string());
     let cfg: campro_train::config::EnhancerConfig = match &a.config {
         Some(c) => campro_train::config::load(c)?,
@@ -450,12 +450,12 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
         let onnx = net.onnx_bytes()?;
         let bytes = onnx.len();
         let enh = campro_eval::enhance::Enhancer::from_bytes(&onnx, Path::new("the benchmark's U-Net"))?;
-        let infer = campro_train::bench::median_secs(a.runs as usize, || {
+        let infer = campro_train::bench::median_secs(a.timing.runs as usize, || {
             enh.enhance(&frame)?;
             Ok(())
         })?;
         let step_cfg = campro_train::config::EnhancerConfig { model: shape.clone(), ..cfg.clone() };
-        let step = ctx.install(|| campro_train::bench::enhancer_step(&ctx, &step_cfg, a.runs as usize))?;
+        let step = ctx.install(|| campro_train::bench::enhancer_step(&ctx, &step_cfg, a.timing.runs as usize))?;
         rows.push(serde_json::json!({
             "widths": w, "stem": shape.stem, "restorer": shape.restorer, "parameters": campro_train::unet::parameter_count(shape),
             "macs_per_pixel": campro_train::unet::macs_per_pixel(shape), "onnx_bytes": bytes,

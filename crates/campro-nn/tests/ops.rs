@@ -87,52 +87,53 @@ fn every_op_equals_its_generic_fallback(dev: &Device) {
     let (x, r) = (var(&[2, 4, 9, 7], 1), rng_tensor(&[2, 4, 9, 7], 2, dev));
     let (a, b) = (var(&[4], 3), var(&[4], 4));
     let xt = x.as_tensor();
-    let mut worst = vec![];
-    worst.push((
-        "prelu",
-        compare(&[&x, &a], &r, || act::prelu(xt, &a).unwrap(), || act::prelu_generic(xt, &a).unwrap()),
-    ));
-    worst.push(("silu", compare(&[&x], &r, || act::silu(xt).unwrap(), || act::silu_generic(xt).unwrap())));
-    worst.push(("relu", compare(&[&x], &r, || act::relu(xt).unwrap(), || act::relu_generic(xt).unwrap())));
-    worst.push((
-        "channel bias",
-        compare(&[&x, &b], &r, || ch::channel_bias(xt, &b).unwrap(), || ch::channel_bias_generic(xt, &b).unwrap()),
-    ));
-    worst.push((
-        "channel affine",
-        compare(
-            &[&x, &a, &b],
-            &r,
-            || ch::channel_affine(xt, &a, &b).unwrap(),
-            || ch::channel_affine_generic(xt, &a, &b).unwrap(),
+    let (wd, rd) = (var(&[4, 1, 3, 3], 5), rng_tensor(&[2, 4, 5, 4], 6, dev));
+    let (wc, rc) = (var(&[3, 4, 3, 3], 7), rng_tensor(&[2, 3, 5, 4], 8, dev));
+    let worst = [
+        ("prelu", compare(&[&x, &a], &r, || act::prelu(xt, &a).unwrap(), || act::prelu_generic(xt, &a).unwrap())),
+        ("silu", compare(&[&x], &r, || act::silu(xt).unwrap(), || act::silu_generic(xt).unwrap())),
+        ("relu", compare(&[&x], &r, || act::relu(xt).unwrap(), || act::relu_generic(xt).unwrap())),
+        (
+            "channel bias",
+            compare(&[&x, &b], &r, || ch::channel_bias(xt, &b).unwrap(), || ch::channel_bias_generic(xt, &b).unwrap()),
         ),
-    ));
-    worst.push((
-        "batch norm + prelu",
-        compare(
-            &[&x, &a, &b],
-            &r,
-            || bn::batch_norm_train(xt, &a, &b, 1e-5, Some(&b)).unwrap().0,
-            || bn::batch_norm_train_generic(xt, &a, &b, 1e-5, Some(&b)).unwrap().0,
+        (
+            "channel affine",
+            compare(
+                &[&x, &a, &b],
+                &r,
+                || ch::channel_affine(xt, &a, &b).unwrap(),
+                || ch::channel_affine_generic(xt, &a, &b).unwrap(),
+            ),
         ),
-    ));
-    let wd = var(&[4, 1, 3, 3], 5);
-    let rd = rng_tensor(&[2, 4, 5, 4], 6, dev);
-    worst.push((
-        "depthwise s2",
-        compare(
-            &[&x, &wd],
-            &rd,
-            || dw::depthwise(xt, &wd, 2, 1).unwrap(),
-            || dw::depthwise_generic(xt, &wd, 2, 1).unwrap(),
+        (
+            "batch norm + prelu",
+            compare(
+                &[&x, &a, &b],
+                &r,
+                || bn::batch_norm_train(xt, &a, &b, 1e-5, Some(&b)).unwrap().0,
+                || bn::batch_norm_train_generic(xt, &a, &b, 1e-5, Some(&b)).unwrap().0,
+            ),
         ),
-    ));
-    let wc = var(&[3, 4, 3, 3], 7);
-    let rc = rng_tensor(&[2, 3, 5, 4], 8, dev);
-    worst.push((
-        "conv s2",
-        compare(&[&x, &wc], &rc, || cv::conv2d(xt, &wc, 2, 1).unwrap(), || cv::conv2d_generic(xt, &wc, 2, 1).unwrap()),
-    ));
+        (
+            "depthwise s2",
+            compare(
+                &[&x, &wd],
+                &rd,
+                || dw::depthwise(xt, &wd, 2, 1).unwrap(),
+                || dw::depthwise_generic(xt, &wd, 2, 1).unwrap(),
+            ),
+        ),
+        (
+            "conv s2",
+            compare(
+                &[&x, &wc],
+                &rc,
+                || cv::conv2d(xt, &wc, 2, 1).unwrap(),
+                || cv::conv2d_generic(xt, &wc, 2, 1).unwrap(),
+            ),
+        ),
+    ];
     for (op, (value, grad)) in worst {
         assert!(value < 1e-5 && grad < 1e-4, "{op} on {dev:?}: values differ by {value}, gradients by {grad}");
     }

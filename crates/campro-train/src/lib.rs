@@ -1,10 +1,13 @@
-//! campro-train: CamPro's adversarial optimiser (the paper's Sec. IV-C, Algorithm 1) on
-//! candle, kept out of the Android core.
+//! campro-train: campro's training loops on candle, kept out of the Android core; the ops
+//! and networks they train are `campro-nn`'s, and a [`campro_nn::Context`] in each run's
+//! options says where they compute.
 //!
+//! - [`train`]: CamPro's adversarial optimiser (the paper's Sec. IV-C, Algorithm 1);
+//! - [`finetune`]: the person detector behind a camera; [`enhancer`] and [`unet`]: the image
+//!   enhancer (Sec. IV-D); [`retrain`]: the model re-training attack (Sec. VII);
 //! - [`camera`]: the differentiable camera (degamma, CCM, tone curve), the same maths as
-//!   campro's desktop pipeline;
-//! - [`mobilefacenet`]: the white-box attacker backbone, loaded from its PyTorch checkpoint
-//!   ([`torch_legacy`]);
+//!   campro's desktop pipeline; the losses ([`detection`], [`face_privacy`], [`ssim`]), the
+//!   data ([`faces`], [`persons`], [`scenes`]), [`checkpoint`]s, [`log`]s and [`validation`].
 
 pub mod bench;
 pub mod camera;

@@ -54,15 +54,29 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
     }
 }
 
+/// How a training-step timing runs: its threads and how many timed runs.
+#[derive(Args)]
+pub struct Timing {
+    /// Threads of the training steps (default: all cores; tract's inference runs on one).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub threads: Option<u32>,
+    /// Timed runs of each measurement (the median is reported, after one warm-up).
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub runs: u32,
+}
+
+impl Timing {
+    /// The threads asked for, else every core.
+    pub fn threads(&self) -> usize {
+        self.threads.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |t| t as usize)
+    }
+}
+
 /// `campro bench train`.
 #[derive(Args)]
 pub struct BenchTrainArgs {
-    /// Threads for every step (default: all cores).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
-    pub threads: Option<u32>,
-    /// Timed runs per step (the median is reported, after one warm-up).
-    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
-    pub runs: u32,
+    #[command(flatten)]
+    pub timing: Timing,
     /// The configuration whose face batch, person batch and size the players' steps use
     /// (default: the paper's).
     #[arg(long)]
@@ -106,12 +120,8 @@ pub struct BenchEnhancerArgs {
     /// configuration's).
     #[arg(long = "stem")]
     pub stems: Vec<usize>,
-    /// Threads for the training step (default: all cores); inference runs on one.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
-    pub threads: Option<u32>,
-    /// Timed runs (the median is reported, after one warm-up).
-    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
-    pub runs: u32,
+    #[command(flatten)]
+    pub timing: Timing,
     /// The configuration whose widths, batch and crop are used (default: the built-in one).
     #[arg(long)]
     pub config: Option<PathBuf>,

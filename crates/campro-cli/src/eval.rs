@@ -58,11 +58,11 @@ impl Common {
 
 impl Common {
     fn shared(&self) -> PathBuf {
-        shared_dir(self.shared.as_deref())
+        self.data.shared_dir()
     }
 
     fn models_dir(&self) -> PathBuf {
-        self.models.clone().unwrap_or_else(|| self.shared().join("models"))
+        self.data.models_dir()
     }
 
     /// Raw, then each parameter set (and, with --enhanced, its enhanced images), then the
@@ -91,14 +91,6 @@ impl Common {
         }
         Ok(c)
     }
-}
-
-/// The shared data folder: `given`, else $CAMPRO_SHARED, else `../shared`.
-pub(crate) fn shared_dir(given: Option<&Path>) -> PathBuf {
-    given
-        .map(Path::to_path_buf)
-        .or_else(|| std::env::var_os("CAMPRO_SHARED").map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from("../shared"))
 }
 
 /// A parameter file's image-type name in the reports: its file stem.

@@ -258,8 +258,7 @@ pub fn run(a: InspectArgs) -> Result<()> {
         params,
         inputs,
         output,
-        shared,
-        models,
+        data,
         person_detector,
         own_detector,
         confidence,
@@ -271,8 +270,8 @@ pub fn run(a: InspectArgs) -> Result<()> {
     let p = crate::load_params(&params)?;
     crate::check_output_folder(&output, force, "--output")?;
     let enhancer = if enhance { Some(crate::capture::enhancer_of(&params, &p, scale)?) } else { None };
-    let given = models.is_some();
-    let models = models.unwrap_or_else(|| crate::eval::shared_dir(shared.as_deref()).join("models"));
+    let given = data.models.is_some();
+    let models = data.models_dir();
     if !models.is_dir() {
         bail!(
             "{} {}: no such folder; inspect runs the face and person models of the shared data folder: pass --shared DIR or set CAMPRO_SHARED (default ../shared), or --models DIR",

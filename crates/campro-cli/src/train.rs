@@ -337,7 +337,7 @@ pub fn bench_train(a: &BenchTrainArgs) -> Result<()> {
             })
             .collect()
     };
-    let shared = eval::shared_dir(a.shared.as_deref());
+    let shared = crate::args::shared_dir(a.shared.as_deref());
     let models = shared.join("models");
     let ctx = campro_nn::Context::cpu().with_threads(threads);
     let times = ctx.install(|| campro_train::bench::run(&ctx, &models, &cfg, &steps, a.timing.runs as usize))?;

@@ -68,12 +68,8 @@ pub struct Common {
     /// Add the paper's seven baselines (lowres 4/8/16, defocus 9/3, 13/5, 15/7, 25/7).
     #[arg(long)]
     pub paper_baselines: bool,
-    /// The shared data folder (default: $CAMPRO_SHARED or ../shared).
-    #[arg(long)]
-    pub shared: Option<PathBuf>,
-    /// Folder of the model files (default: SHARED/models).
-    #[arg(long)]
-    pub models: Option<PathBuf>,
+    #[command(flatten)]
+    pub data: super::DataArgs,
     /// Use only the first N (images, or identities for privacy): quick looks and CI.
     #[arg(long, value_parser = parse_limit)]
     pub limit: Option<usize>,

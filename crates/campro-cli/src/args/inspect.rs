@@ -15,12 +15,8 @@ pub struct InspectArgs {
     /// Output folder (new or empty, unless --force).
     #[arg(short, long)]
     pub output: PathBuf,
-    /// The shared data folder (default: $CAMPRO_SHARED or ../shared).
-    #[arg(long)]
-    pub shared: Option<PathBuf>,
-    /// Folder of the model files (default: SHARED/models).
-    #[arg(long)]
-    pub models: Option<PathBuf>,
+    #[command(flatten)]
+    pub data: super::DataArgs,
     /// Person detector: a bundled name or a manifest file.
     #[arg(long, default_value = "yolox-nano")]
     pub person_detector: String,

@@ -19,6 +19,7 @@ pub use simulate::{BitDepth, ScaleArg, SimulateArgs};
 pub use train::{FinetuneDetectorArgs, RunFiles, TrainArgs, TrainEnhancerArgs};
 
 use clap::{Parser, Subcommand, ValueEnum};
+use std::path::{Path, PathBuf};
 
 /// What a PARAMS argument is, in every command's help.
 pub const PARAMS_HELP: &str = "Parameter set: a bundled preset's name (campro presets lists them) or a JSON file";
@@ -88,6 +89,38 @@ pub enum Cmd {
     Presets(PresetsArgs),
     /// Run the recommended learnt preset (or --params) on a built-in chart: before/after PNGs, Camera2 values, error report.
     Demo(DemoArgs),
+}
+
+/// Where the real data and models are: the shared data folder and its models (`inspect`,
+/// `eval`).
+#[derive(clap::Args)]
+pub struct DataArgs {
+    /// The shared data folder (default: $CAMPRO_SHARED or ../shared).
+    #[arg(long)]
+    pub shared: Option<PathBuf>,
+    /// Folder of the model files (default: SHARED/models).
+    #[arg(long)]
+    pub models: Option<PathBuf>,
+}
+
+impl DataArgs {
+    /// The shared data folder: --shared, else $CAMPRO_SHARED, else `../shared`.
+    pub fn shared_dir(&self) -> PathBuf {
+        shared_dir(self.shared.as_deref())
+    }
+
+    /// The models folder: --models, else SHARED/models.
+    pub fn models_dir(&self) -> PathBuf {
+        self.models.clone().unwrap_or_else(|| self.shared_dir().join("models"))
+    }
+}
+
+/// The shared data folder: `given`, else $CAMPRO_SHARED, else `../shared`.
+pub fn shared_dir(given: Option<&Path>) -> PathBuf {
+    given
+        .map(Path::to_path_buf)
+        .or_else(|| std::env::var_os("CAMPRO_SHARED").map(PathBuf::from))
+        .unwrap_or_else(|| PathBuf::from("../shared"))
 }
 
 /// `--format` of the commands that print a report: readable text, or JSON.

@@ -8,14 +8,13 @@ pub enum TrainError {
     Checkpoint(#[from] CheckpointError),
     #[error(transparent)]
     Faces(#[from] FacesError),
+    /// A network's checkpoint or graph (campro-nn).
     #[error(transparent)]
-    Torch(#[from] campro_nn::torch_legacy::TorchError),
+    Nn(#[from] campro_nn::NnError),
     #[error("tensor: {0}")]
     Tensor(#[from] candle_core::Error),
     #[error(transparent)]
     Eval(#[from] campro_eval::EvalError),
-    #[error(transparent)]
-    Graph(#[from] campro_nn::onnx_net::GraphError),
     #[error("{0}")]
     Unsupported(String),
     #[error("training diverged: {0}")]
@@ -25,6 +24,18 @@ pub enum TrainError {
     /// A training log (CSV) that does not read back: the line (1-based) and the rule.
     #[error("line {line}: {rule}")]
     Log { line: usize, rule: String },
+}
+
+impl From<campro_nn::torch_legacy::TorchError> for TrainError {
+    fn from(e: campro_nn::torch_legacy::TorchError) -> Self {
+        TrainError::Nn(e.into())
+    }
+}
+
+impl From<campro_nn::onnx_net::GraphError> for TrainError {
+    fn from(e: campro_nn::onnx_net::GraphError) -> Self {
+        TrainError::Nn(e.into())
+    }
 }
 
 /// `Result` with this crate's [`TrainError`].

@@ -354,184 +354,28 @@ fn accuracy(logits: &Tensor, y: &Tensor) -> candle_core::Result<f64> {
 /// Runs the optimisation described by `cfg`; `on_row` sees every log line as it happens.
 pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, TrainError> {
     let start = std::time::Instant::now();
-    let dev = opts.ctx.device.clone();
-    let sel = Selection {
-        lfw: cfg.data.lfw.clone(),
-        min_images: cfg.data.min_images,
-        validation_identities: cfg.data.validation_identities,
-        max_identities: cfg.data.max_identities,
-        seed: cfg.seed,
-        exclude: Vec::new(),
-    };
-    let faces = FaceSet::load_or_build(&sel, &cfg.data.models, &cfg.data.cache)?;
-    let (train, check) = faces.split();
-    let classes = faces.classes.len();
-    let (net, net_vars) = MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?;
-    let cam = start_camera(cfg, opts.init.as_ref(), &dev)?;
-    let utility = utility_player(cfg, &dev)?;
-    let teacher = if utility.is_some() { crate::detection::teacher(&cfg.detector, &dev)? } else { None };
-    // The validation-driven stop (`crate::validation`): the last `validation.images` training
-    // people are set aside from the draw, and the pretrained face model scores privacy.
-    let v = &cfg.validation;
-    let people = utility.as_ref().map_or(0, |(set, _)| set.len());
-    let set_aside = people_set_aside(v, people, utility.is_some())?;
-    let pretrained =
-        if v.every > 0 { Some(MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?.0) } else { None };
-    let embed = |x: &Tensor, train_bn: bool| -> candle_core::Result<Tensor> {
-        l2_normalise(&net.forward_t(&normalise_unit(x)?, train_bn)?)
-    };
-    // The protector's view of the attacker: the same weights, no gradient computed for them.
-    let frozen = net.frozen();
-    let embed_frozen =
-        |x: &Tensor| -> candle_core::Result<Tensor> { l2_normalise(&frozen.forward_t(&normalise_unit(x)?, false)?) };
-
-    // H from the class means of the raw training embeddings.
-    let means =
-        faces.class_means(&train, &sel, &cfg.attacker.checkpoint, &cfg.data.cache, |x| embed(x, false), &dev)?;
-    let head = ProxyHead::from_means(&means, cfg.attacker.head)?;
-    // Everything a checkpoint holds, by name.
-    let named = || -> Vec<(String, Var)> {
-        let mut v: Vec<(String, Var)> = net_vars
-            .data()
-            .lock()
-            .expect("var map lock")
-            .iter()
-            .map(|(k, v)| (format!("attacker.{k}"), v.clone()))
-            .collect();
-        v.push(("camera.ccm".into(), cam.ccm.clone()));
-        v.push(("camera.curve".into(), cam.curve.clone()));
-        v.push(("head.w".into(), head.w.clone()));
-        v.extend(head.b.clone().map(|b| ("head.b".to_string(), b)));
-        if let Some((_, det)) = &utility {
-            v.extend(det.named_vars().into_iter().map(|(k, var)| (format!("detector.{k}"), var)));
-        }
-        v
-    };
-    // The best validated camera (and detector) so far, by name without the `best.` prefix:
-    // what a parameter set and its detector are written from.
-    let kept = || named().into_iter().filter(|(k, _)| k.starts_with("camera.") || k.starts_with("detector."));
-    let best_names = || -> Vec<String> { kept().map(|(k, _)| k).collect() };
-    let snapshot = || -> candle_core::Result<HashMap<String, Tensor>> {
-        kept().map(|(k, v)| Ok((k, v.as_tensor().copy()?))).collect()
-    };
-    let Resumed { first_round, mut log, earlier_seconds, mut best, mut best_tensors } = match &opts.resume {
-        Some(dir) => resume(dir, cfg, &faces.classes, &named(), &best_names(), &dev)?,
+    let game = Game::new(cfg, opts)?;
+    let Resumed { first_round, mut log, earlier_seconds, best, best_tensors } = match &opts.resume {
+        Some(dir) => resume(dir, cfg, &game.faces.classes, &game.named(), &game.kept_names(), &game.dev)?,
         None => Resumed::default(),
     };
+    let mut kept = Kept { best, tensors: best_tensors };
     let seconds = || earlier_seconds + start.elapsed().as_secs_f64();
-    // The best validated camera travels in the same tensor file, as `best.NAME`.
-    let save = |round: usize,
-                log: &[LogRow],
-                best: &Option<crate::validation::Best>,
-                best_tensors: &Option<HashMap<String, Tensor>>|
-     -> Result<(), TrainError> {
-        let Some(dir) = &opts.checkpoints else { return Ok(()) };
-        let mut tensors: HashMap<String, Tensor> =
-            named().into_iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
-        if let Some(b) = best_tensors {
-            tensors.extend(b.iter().map(|(k, t)| (format!("best.{k}"), t.clone())));
-        }
-        crate::checkpoint::save(
-            dir,
-            &tensors,
-            &crate::checkpoint::State {
-                round,
-                seed: cfg.seed,
-                classes: faces.classes.clone(),
-                log: log.to_vec(),
-                best: *best,
-            },
-        )?;
-        Ok(())
-    };
-    // Two SGD groups: the head at `lr`, the pretrained backbone at `backbone_lr`.
-    let mut sgd = SGD::new(head.vars(), cfg.attacker.lr)?;
-    let mut sgd_backbone = SGD::new(MobileFaceNet::trainable(&net_vars), cfg.attacker.backbone_lr)?;
-    let mut adam = AdamW::new(cam.vars(), ParamsAdamW { lr: cfg.camera.lr, weight_decay: 0.0, ..Default::default() })?;
-    let mut adam_det = match &utility {
-        Some((_, det)) if cfg.detector.lr > 0.0 => Some(crate::detection::DetectorAdam::new(det, &cfg.detector)?),
-        _ => None,
-    };
-    // A colour adapter in P (`detector.adapter`) is also fitted to undo the camera, one step
-    // per protector step at `detector.adapter_lr`.
-    let mut fitter = match &utility {
-        Some((_, det)) if cfg.detector.adapter_lr > 0.0 => {
-            crate::detection::AdapterFit::new(det, cfg.detector.adapter_lr)?
-        }
-        _ => None,
-    };
-    let (mut person_order, all_people): (Vec<usize>, Vec<usize>) = (Vec::new(), (0..people - set_aside).collect());
+    let mut opt = Optimisers::new(&game)?;
     // Reseeded from the round on resume (see `checkpoint`).
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ ((first_round as u64 - 1) << 32));
-    let mut order: Vec<usize> = Vec::new();
-    let mut next_batch = |rng: &mut rand_chacha::ChaCha8Rng| draw(&mut order, &train, cfg.data.batch, rng);
-    let check_accuracy = |through_camera: bool| -> candle_core::Result<f64> {
-        let mut hits = 0.0;
-        for chunk in check.chunks(64) {
-            let (x, y) = faces.batch(chunk, &dev)?;
-            let x = if through_camera { cam.forward(&x)? } else { x };
-            hits += accuracy(&head.logits(&embed(&x, false)?, None)?, &y)? * chunk.len() as f64;
-        }
-        Ok(hits / check.len().max(1) as f64)
+    let mut draws = Draws {
+        rng: rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ ((first_round as u64 - 1) << 32)),
+        faces: Vec::new(),
+        people: Vec::new(),
     };
-    // The raw class means as rows, for the validation's nearest classifier (once).
-    let mean_rows: Vec<Vec<f32>> = if v.every > 0 { means.to_vec2()? } else { Vec::new() };
-    // One validation of the current camera (and detector): see `crate::validation`.
-    let validate = || -> Result<crate::validation::Scores, TrainError> {
-        let net = pretrained.as_ref().expect("validating loads the pretrained model");
-        let (mut emb, mut labels) = (Vec::new(), Vec::new());
-        for chunk in check.chunks(64) {
-            let (x, _) = faces.batch(chunk, &dev)?;
-            let e: Vec<Vec<f32>> = net.forward_t(&normalise_unit(&cam.forward(&x)?.detach())?, false)?.to_vec2()?;
-            emb.extend(e);
-            labels.extend(chunk.iter().map(|&i| faces.labels[i]));
-        }
-        let top1 = crate::validation::nearest_top1(&emb, &labels, &mean_rows);
-        let ap = match &utility {
-            Some((set, det)) if set_aside > 0 => {
-                let (mut heads, mut boxes) = (Vec::new(), Vec::new());
-                let idx: Vec<usize> = (people - set_aside..people).collect();
-                for chunk in idx.chunks(cfg.detector.batch) {
-                    let pb = set.batch(chunk, &dev)?;
-                    let out = cam.forward(&pb.x)?.detach();
-                    let head = det.forward(&crate::persons::detector_input(&out, &pb.mask)?)?.detach();
-                    heads.extend(head.flatten_from(1)?.to_vec2::<f32>()?);
-                    boxes.extend(pb.boxes);
-                }
-                Some(crate::validation::person_ap(&heads, cfg.detector.size, &boxes)?)
-            }
-            _ => None,
-        };
-        Ok(crate::validation::Scores { top1, ap })
-    };
-    // Validates the camera of `round` and keeps it (and the detector) if it is the new best.
-    let judge = |round: usize,
-                 best: &mut Option<crate::validation::Best>,
-                 best_tensors: &mut Option<HashMap<String, Tensor>>|
-     -> Result<crate::validation::Scores, TrainError> {
-        let s = validate()?;
-        if crate::validation::offer(best, round, s, v.max_top1) {
-            *best_tensors = Some(snapshot()?);
-        }
-        Ok(s)
-    };
-    let attacker_step =
-        |x: &Tensor, y: &Tensor, sgd: &mut SGD, sgd_backbone: &mut SGD| -> Result<(f64, f64), TrainError> {
-            let logits = head.logits(&embed(x, cfg.attacker.train_batch_norm)?, Some(y))?;
-            let ce = candle_nn::loss::cross_entropy(&logits, y)?;
-            let loss = ce.to_scalar::<f32>()? as f64;
-            finite("attacker cross-entropy", loss)?;
-            let grads = ce.backward()?;
-            sgd.step(&grads)?;
-            sgd_backbone.step(&grads)?;
-            Ok((loss, accuracy(&logits, y)?))
-        };
+    let validating = cfg.validation.every > 0;
+
     // Pretraining on raw faces until the head reaches the threshold (or the step budget).
     let (mut ce, mut acc) = (f64::NAN, 0.0);
     let pretrain = if first_round == 1 { cfg.attacker.pretrain_steps } else { 0 };
     for _ in 0..pretrain {
-        let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
-        (ce, acc) = attacker_step(&x, &y, &mut sgd, &mut sgd_backbone)?;
+        let (x, y) = game.faces.batch(&draws.faces(&game), &game.dev)?;
+        (ce, acc) = game.attacker_step(&x, &y, &mut opt)?;
         if acc >= cfg.attacker.pretrain_accuracy {
             break;
         }
@@ -539,7 +383,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     // Round 0, or the resumed camera's check (logged only when the checkpoint had no log).
     // A fresh run validates the camera it starts from, so a run that never improves on it
     // keeps it.
-    let first = if v.every > 0 && first_round == 1 { Some(judge(0, &mut best, &mut best_tensors)?) } else { None };
+    let first = if validating && first_round == 1 { Some(game.judge(0, &mut kept)?) } else { None };
     let row = LogRow {
         round: first_round - 1,
         seconds: seconds(),
@@ -547,7 +391,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         attacker_accuracy: acc,
         privacy_loss: f64::NAN,
         detection_loss: f64::NAN,
-        check_accuracy: Some(check_accuracy(first_round > 1)?),
+        check_accuracy: Some(game.check_accuracy(first_round > 1)?),
         validation_top1: first.map(|s| s.top1),
         validation_ap: first.and_then(|s| s.ap),
     };
@@ -559,47 +403,23 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let mut stopped_early = false;
     for round in first_round..=cfg.budget.rounds {
         for _ in 0..m {
-            let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
-            (ce, acc) = attacker_step(&cam.forward(&x)?.detach(), &y, &mut sgd, &mut sgd_backbone)?;
+            let (x, y) = game.faces.batch(&draws.faces(&game), &game.dev)?;
+            (ce, acc) = game.attacker_step(&game.cam.forward(&x)?.detach(), &y, &mut opt)?;
         }
         let (mut lns, mut ldet) = (f64::NAN, f64::NAN);
         for _ in 0..cfg.protector.steps_per_round {
-            let (x, y) = faces.batch(&next_batch(&mut rng), &dev)?;
-            let logits = head.logits(&embed_frozen(&cam.forward(&x)?)?, None)?;
-            let mut loss = non_saturating_loss(&logits, &y)?;
-            lns = loss.to_scalar::<f32>()? as f64;
-            finite("privacy loss", lns)?;
-            let mut seen = None;
-            if let Some((set, det)) = &utility {
-                let pb = set.batch(&draw(&mut person_order, &all_people, cfg.detector.batch, &mut rng), &dev)?;
-                let out = cam.forward(&pb.x)?;
-                let (l, _) = crate::detection::utility_loss(det, teacher.as_ref(), &cfg.detector, &out, &pb)?;
-                ldet = l.to_scalar::<f32>()? as f64;
-                finite("detection loss", ldet)?;
-                loss = (loss + (l * cfg.protector.omega)?)?;
-                seen = Some((out.detach(), pb));
-            }
-            let grads = loss.backward()?;
-            adam.step(&grads)?;
-            if let Some(a) = adam_det.as_mut() {
-                a.step(&grads)?;
-            }
-            // The adapter follows the camera: one fit step on the same people.
-            if let (Some(f), Some((_, det)), Some((out, pb))) = (fitter.as_mut(), &utility, &seen) {
-                f.step(det, out, pb)?;
-            }
-            cam.project()?;
+            (lns, ldet) = game.protector_step(&mut draws, &mut opt)?;
         }
         let spent = round == cfg.budget.rounds || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
-        let validated = if v.every > 0 && (round % v.every == 0 || spent) {
-            Some(judge(round, &mut best, &mut best_tensors)?)
+        let validated = if validating && (round % cfg.validation.every == 0 || spent) {
+            Some(game.judge(round, &mut kept)?)
         } else {
             None
         };
-        stopped_early = !spent && crate::validation::should_stop(&best, v.patience);
+        stopped_early = !spent && crate::validation::should_stop(&kept.best, cfg.validation.patience);
         let last = spent || stopped_early;
         let checkpoint = round % cfg.budget.checkpoint_every == 0 || last;
-        let check_acc = if checkpoint { Some(check_accuracy(true)?) } else { None };
+        let check_acc = if checkpoint { Some(game.check_accuracy(true)?) } else { None };
         let row = LogRow {
             round,
             seconds: seconds(),
@@ -613,41 +433,346 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
         };
         on_row(&row);
         log.push(row);
-        if checkpoint {
-            save(round, &log, &best, &best_tensors)?;
+        if let (true, Some(dir)) = (checkpoint, &opts.checkpoints) {
+            game.save(dir, round, &log, &kept)?;
         }
         if last {
             break;
         }
     }
-    // The parameter set (and detector) written is the best validated one.
-    if let Some(b) = &best_tensors {
-        for (name, var) in named() {
-            if let Some(t) = b.get(&name) {
-                var.set(t)?;
+    game.finish(opts, kept, stopped_early, log, seconds())
+}
+
+/// The best validated camera (and detector) so far: its round and scores, and its tensors by
+/// name (without the `best.` prefix), what the parameter set and detector are written from.
+struct Kept {
+    best: Option<crate::validation::Best>,
+    tensors: Option<HashMap<String, Tensor>>,
+}
+
+/// The optimisers of one run: SGD for the attacker's head H (at `attacker.lr`) and backbone F
+/// (at `attacker.backbone_lr`), Adam for the camera C and the detector P, and the colour
+/// adapter's fit (`detector.adapter_lr`).
+struct Optimisers {
+    head: SGD,
+    backbone: SGD,
+    camera: AdamW,
+    detector: Option<crate::detection::DetectorAdam>,
+    adapter: Option<crate::detection::AdapterFit>,
+}
+
+impl Optimisers {
+    fn new(game: &Game) -> Result<Self, TrainError> {
+        let cfg = game.cfg;
+        let head = SGD::new(game.head.vars(), cfg.attacker.lr)?;
+        let backbone = SGD::new(MobileFaceNet::trainable(&game.net_vars), cfg.attacker.backbone_lr)?;
+        let camera =
+            AdamW::new(game.cam.vars(), ParamsAdamW { lr: cfg.camera.lr, weight_decay: 0.0, ..Default::default() })?;
+        let detector = match &game.utility {
+            Some((_, det)) if cfg.detector.lr > 0.0 => Some(crate::detection::DetectorAdam::new(det, &cfg.detector)?),
+            _ => None,
+        };
+        // A colour adapter in P (`detector.adapter`) is fitted to undo the camera, one step
+        // per protector step.
+        let adapter = match &game.utility {
+            Some((_, det)) if cfg.detector.adapter_lr > 0.0 => {
+                crate::detection::AdapterFit::new(det, cfg.detector.adapter_lr)?
+            }
+            _ => None,
+        };
+        Ok(Self { head, backbone, camera, detector, adapter })
+    }
+}
+
+/// The run's draws: the seeded stream and what is left of the current shuffled epochs of the
+/// training faces and of the people (see [`draw`]).
+struct Draws {
+    rng: rand_chacha::ChaCha8Rng,
+    faces: Vec<usize>,
+    people: Vec<usize>,
+}
+
+impl Draws {
+    /// The next batch of training faces.
+    fn faces(&mut self, game: &Game) -> Vec<usize> {
+        draw(&mut self.faces, &game.train, game.cfg.data.batch, &mut self.rng)
+    }
+
+    /// The next batch of people (those not set aside for validation).
+    fn people(&mut self, game: &Game) -> Vec<usize> {
+        draw(&mut self.people, &game.drawn_people, game.cfg.detector.batch, &mut self.rng)
+    }
+}
+
+/// The players of one run and the data they play on: the attacker (F and H), the camera C,
+/// the utility player (COCO people and the detector P), and the validation's pretrained model.
+struct Game<'a> {
+    cfg: &'a Config,
+    dev: candle_core::Device,
+    faces: FaceSet,
+    /// Indices into `faces`: trained on, and the check set.
+    train: Vec<usize>,
+    check: Vec<usize>,
+    /// The attacker's backbone F (trained) and its variables by name.
+    net: MobileFaceNet,
+    net_vars: candle_nn::VarMap,
+    /// The protector's view of the attacker: the same weights, no gradient computed for them.
+    frozen: MobileFaceNet,
+    head: ProxyHead,
+    cam: Camera,
+    /// COCO people and the detector P, when ω > 0.
+    utility: Option<(PersonSet, Yolox)>,
+    /// The unchanged detector the distillation term learns from (`detector.distill`).
+    teacher: Option<Yolox>,
+    /// People 0..people − set_aside are drawn; the last `set_aside` validate.
+    people: usize,
+    set_aside: usize,
+    drawn_people: Vec<usize>,
+    /// The validation-driven stop (`crate::validation`): the pretrained face model scores
+    /// privacy with the nearest of the raw class means (as rows).
+    pretrained: Option<MobileFaceNet>,
+    mean_rows: Vec<Vec<f32>>,
+}
+
+impl<'a> Game<'a> {
+    fn new(cfg: &'a Config, opts: &RunOptions) -> Result<Self, TrainError> {
+        let dev = opts.ctx.device.clone();
+        let sel = Selection {
+            lfw: cfg.data.lfw.clone(),
+            min_images: cfg.data.min_images,
+            validation_identities: cfg.data.validation_identities,
+            max_identities: cfg.data.max_identities,
+            seed: cfg.seed,
+            exclude: Vec::new(),
+        };
+        let faces = FaceSet::load_or_build(&sel, &cfg.data.models, &cfg.data.cache)?;
+        let (train, check) = faces.split();
+        let (net, net_vars) = MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?;
+        let frozen = net.frozen();
+        let cam = start_camera(cfg, opts.init.as_ref(), &dev)?;
+        let utility = utility_player(cfg, &dev)?;
+        let teacher = if utility.is_some() { crate::detection::teacher(&cfg.detector, &dev)? } else { None };
+        let v = &cfg.validation;
+        let people = utility.as_ref().map_or(0, |(set, _)| set.len());
+        let set_aside = people_set_aside(v, people, utility.is_some())?;
+        let pretrained =
+            if v.every > 0 { Some(MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?.0) } else { None };
+        // H from the class means of the raw training embeddings.
+        let embed = |x: &Tensor| l2_normalise(&net.forward_t(&normalise_unit(x)?, false)?);
+        let means = faces.class_means(&train, &sel, &cfg.attacker.checkpoint, &cfg.data.cache, embed, &dev)?;
+        let head = ProxyHead::from_means(&means, cfg.attacker.head)?;
+        let mean_rows: Vec<Vec<f32>> = if v.every > 0 { means.to_vec2()? } else { Vec::new() };
+        Ok(Self {
+            cfg,
+            dev,
+            faces,
+            train,
+            check,
+            net,
+            net_vars,
+            frozen,
+            head,
+            cam,
+            utility,
+            teacher,
+            people,
+            set_aside,
+            drawn_people: (0..people - set_aside).collect(),
+            pretrained,
+            mean_rows,
+        })
+    }
+
+    /// F's L2-normalised embeddings of sRGB faces in [0, 1]; `train_bn`: batch statistics.
+    fn embed(&self, x: &Tensor, train_bn: bool) -> candle_core::Result<Tensor> {
+        l2_normalise(&self.net.forward_t(&normalise_unit(x)?, train_bn)?)
+    }
+
+    /// Everything a checkpoint holds, by name.
+    fn named(&self) -> Vec<(String, Var)> {
+        let mut v: Vec<(String, Var)> = self
+            .net_vars
+            .data()
+            .lock()
+            .expect("var map lock")
+            .iter()
+            .map(|(k, v)| (format!("attacker.{k}"), v.clone()))
+            .collect();
+        v.push(("camera.ccm".into(), self.cam.ccm.clone()));
+        v.push(("camera.curve".into(), self.cam.curve.clone()));
+        v.push(("head.w".into(), self.head.w.clone()));
+        v.extend(self.head.b.clone().map(|b| ("head.b".to_string(), b)));
+        if let Some((_, det)) = &self.utility {
+            v.extend(det.named_vars().into_iter().map(|(k, var)| (format!("detector.{k}"), var)));
+        }
+        v
+    }
+
+    /// The variables a [`Kept`] holds: the camera's and the detector's.
+    fn kept(&self) -> impl Iterator<Item = (String, Var)> {
+        self.named().into_iter().filter(|(k, _)| k.starts_with("camera.") || k.starts_with("detector."))
+    }
+
+    fn kept_names(&self) -> Vec<String> {
+        self.kept().map(|(k, _)| k).collect()
+    }
+
+    /// Writes the checkpoint of `round` to `dir`; the best validated camera travels in the
+    /// same tensor file, as `best.NAME`.
+    fn save(&self, dir: &std::path::Path, round: usize, log: &[LogRow], kept: &Kept) -> Result<(), TrainError> {
+        let mut tensors: HashMap<String, Tensor> =
+            self.named().into_iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
+        if let Some(b) = &kept.tensors {
+            tensors.extend(b.iter().map(|(k, t)| (format!("best.{k}"), t.clone())));
+        }
+        crate::checkpoint::save(
+            dir,
+            &tensors,
+            &crate::checkpoint::State {
+                round,
+                seed: self.cfg.seed,
+                classes: self.faces.classes.clone(),
+                log: log.to_vec(),
+                best: kept.best,
+            },
+        )?;
+        Ok(())
+    }
+
+    /// The attacker's top-1 on the check faces, raw or through the camera.
+    fn check_accuracy(&self, through_camera: bool) -> candle_core::Result<f64> {
+        let mut hits = 0.0;
+        for chunk in self.check.chunks(64) {
+            let (x, y) = self.faces.batch(chunk, &self.dev)?;
+            let x = if through_camera { self.cam.forward(&x)? } else { x };
+            hits += accuracy(&self.head.logits(&self.embed(&x, false)?, None)?, &y)? * chunk.len() as f64;
+        }
+        Ok(hits / self.check.len().max(1) as f64)
+    }
+
+    /// One validation of the current camera (and detector): see `crate::validation`.
+    fn validate(&self) -> Result<crate::validation::Scores, TrainError> {
+        let net = self.pretrained.as_ref().expect("validating loads the pretrained model");
+        let (mut emb, mut labels) = (Vec::new(), Vec::new());
+        for chunk in self.check.chunks(64) {
+            let (x, _) = self.faces.batch(chunk, &self.dev)?;
+            let e: Vec<Vec<f32>> =
+                net.forward_t(&normalise_unit(&self.cam.forward(&x)?.detach())?, false)?.to_vec2()?;
+            emb.extend(e);
+            labels.extend(chunk.iter().map(|&i| self.faces.labels[i]));
+        }
+        let top1 = crate::validation::nearest_top1(&emb, &labels, &self.mean_rows);
+        let ap = match &self.utility {
+            Some((set, det)) if self.set_aside > 0 => {
+                let (mut heads, mut boxes) = (Vec::new(), Vec::new());
+                let idx: Vec<usize> = (self.people - self.set_aside..self.people).collect();
+                for chunk in idx.chunks(self.cfg.detector.batch) {
+                    let pb = set.batch(chunk, &self.dev)?;
+                    let out = self.cam.forward(&pb.x)?.detach();
+                    let head = det.forward(&crate::persons::detector_input(&out, &pb.mask)?)?.detach();
+                    heads.extend(head.flatten_from(1)?.to_vec2::<f32>()?);
+                    boxes.extend(pb.boxes);
+                }
+                Some(crate::validation::person_ap(&heads, self.cfg.detector.size, &boxes)?)
+            }
+            _ => None,
+        };
+        Ok(crate::validation::Scores { top1, ap })
+    }
+
+    /// Validates the camera of `round` and keeps it (and the detector) if it is the new best.
+    fn judge(&self, round: usize, kept: &mut Kept) -> Result<crate::validation::Scores, TrainError> {
+        let s = self.validate()?;
+        if crate::validation::offer(&mut kept.best, round, s, self.cfg.validation.max_top1) {
+            kept.tensors =
+                Some(self.kept().map(|(k, v)| Ok((k, v.as_tensor().copy()?))).collect::<candle_core::Result<_>>()?);
+        }
+        Ok(s)
+    }
+
+    /// One attacker step on faces `x` with labels `y`: cross-entropy into H and F by SGD.
+    /// Returns the loss and the batch's accuracy.
+    fn attacker_step(&self, x: &Tensor, y: &Tensor, opt: &mut Optimisers) -> Result<(f64, f64), TrainError> {
+        let logits = self.head.logits(&self.embed(x, self.cfg.attacker.train_batch_norm)?, Some(y))?;
+        let ce = candle_nn::loss::cross_entropy(&logits, y)?;
+        let loss = ce.to_scalar::<f32>()? as f64;
+        finite("attacker cross-entropy", loss)?;
+        let grads = ce.backward()?;
+        opt.head.step(&grads)?;
+        opt.backbone.step(&grads)?;
+        Ok((loss, accuracy(&logits, y)?))
+    }
+
+    /// One protector step: `L_ns` through the frozen attacker on a batch of faces, plus
+    /// ω·`L_det` on a batch of people when P plays, into the camera (then projected) and P;
+    /// the adapter follows on the same people. Returns the two losses (NaN when absent).
+    fn protector_step(&self, draws: &mut Draws, opt: &mut Optimisers) -> Result<(f64, f64), TrainError> {
+        let cfg = self.cfg;
+        let (x, y) = self.faces.batch(&draws.faces(self), &self.dev)?;
+        let e = l2_normalise(&self.frozen.forward_t(&normalise_unit(&self.cam.forward(&x)?)?, false)?)?;
+        let logits = self.head.logits(&e, None)?;
+        let mut loss = non_saturating_loss(&logits, &y)?;
+        let lns = loss.to_scalar::<f32>()? as f64;
+        finite("privacy loss", lns)?;
+        let (mut ldet, mut seen) = (f64::NAN, None);
+        if let Some((set, det)) = &self.utility {
+            let pb = set.batch(&draws.people(self), &self.dev)?;
+            let out = self.cam.forward(&pb.x)?;
+            let (l, _) = crate::detection::utility_loss(det, self.teacher.as_ref(), &cfg.detector, &out, &pb)?;
+            ldet = l.to_scalar::<f32>()? as f64;
+            finite("detection loss", ldet)?;
+            loss = (loss + (l * cfg.protector.omega)?)?;
+            seen = Some((out.detach(), pb));
+        }
+        let grads = loss.backward()?;
+        opt.camera.step(&grads)?;
+        if let Some(a) = opt.detector.as_mut() {
+            a.step(&grads)?;
+        }
+        if let (Some(f), Some((_, det)), Some((out, pb))) = (opt.adapter.as_mut(), &self.utility, &seen) {
+            f.step(det, out, pb)?;
+        }
+        self.cam.project()?;
+        Ok((lns, ldet))
+    }
+
+    /// The outcome: the best validated camera (and detector) loaded back, or the last.
+    fn finish(
+        self,
+        opts: &RunOptions,
+        kept: Kept,
+        stopped_early: bool,
+        log: Vec<LogRow>,
+        seconds: f64,
+    ) -> Result<Outcome, TrainError> {
+        if let Some(b) = &kept.tensors {
+            for (name, var) in self.named() {
+                if let Some(t) = b.get(&name) {
+                    var.set(t)?;
+                }
             }
         }
+        let provenance = provenance(
+            self.cfg,
+            opts,
+            &self.faces,
+            (self.train.len(), self.check.len()),
+            self.utility.as_ref().map(|(set, _)| set.len()),
+            (kept.best, stopped_early, self.set_aside),
+            &log,
+            seconds,
+        );
+        Ok(Outcome {
+            ccm: self.cam.ccm_values()?,
+            curve: self.cam.curve_values()?,
+            gamma: self.cfg.camera.gamma,
+            provenance,
+            log,
+            seconds,
+            classes: self.faces.classes.len(),
+            train_faces: self.train.len(),
+            check_faces: self.check.len(),
+            detector: self.utility.map(|(_, d)| d),
+        })
     }
-    let provenance = provenance(
-        cfg,
-        opts,
-        &faces,
-        (train.len(), check.len()),
-        utility.as_ref().map(|(set, _)| set.len()),
-        (best, stopped_early, set_aside),
-        &log,
-        seconds(),
-    );
-    Ok(Outcome {
-        ccm: cam.ccm_values()?,
-        curve: cam.curve_values()?,
-        gamma: cfg.camera.gamma,
-        provenance,
-        log,
-        seconds: seconds(),
-        classes,
-        train_faces: train.len(),
-        check_faces: check.len(),
-        detector: utility.map(|(_, d)| d),
-    })
 }

@@ -12,6 +12,7 @@ use campro::pipeline::{Depth, Prepared};
 use campro::targets::camera2::Camera2Loop;
 use campro::targets::camera2::{convert, Options, RationalMode};
 use campro::Params;
+use campro_eval::table::{Cell, Column, Table};
 use rayon::prelude::*;
 use std::hint::black_box;
 use std::time::Instant;
@@ -358,14 +359,22 @@ pub fn run(params: &Params, quick: bool) -> Vec<Row> {
     rows
 }
 
-/// The rows as a Markdown table.
-pub fn markdown(rows: &[Row]) -> Vec<String> {
-    let mut lines = vec![
-        "| group | path / setting | median time | max err (LSB8) | mean err (LSB8) | note |".to_string(),
-        "|---|---|---|---|---|---|".to_string(),
-    ];
-    let f = |v: f64| {
-        if v.is_nan() {
+/// The rows as one table: people read each time with its unit (`2.00 ms/frame (0.96
+/// ms/Mpx)`) and small errors in scientific notation; CSV and JSON carry `seconds` per
+/// `per` (`frame` of 1920x1080, `update`, or null when untimed) and errors in 8-bit LSB
+/// (null when not measured).
+pub fn table(rows: &[Row]) -> Table {
+    let mut t = Table::new([
+        Column::new("group", "group", 0),
+        Column::new("path / setting", "name", 0),
+        Column::new("median time", "seconds", 0),
+        Column::machine("per"),
+        Column::new("max err (LSB8)", "max_lsb", 0),
+        Column::new("mean err (LSB8)", "mean_lsb", 0),
+        Column::new("note", "note", 0),
+    ]);
+    let lsb = |v: f64| {
+        let shown = if v.is_nan() {
             "-".to_string()
         } else if v == 0.0 {
             "0".into()
@@ -373,42 +382,31 @@ pub fn markdown(rows: &[Row]) -> Vec<String> {
             format!("{v:.1e}")
         } else {
             format!("{v:.3}")
-        }
+        };
+        Cell::Shown { value: v, shown }
     };
     for r in rows {
-        lines.push(format!(
-            "| {} | {} | {} | {} | {} | {} |",
-            r.group,
-            r.name,
-            r.time,
-            f(r.max_lsb),
-            f(r.mean_lsb),
-            r.note
-        ));
+        let (seconds, per) = match r.time {
+            Time::Frame(s) => (s, Cell::text("frame")),
+            Time::Update(s) => (s, Cell::text("update")),
+            Time::None => (f64::NAN, Cell::Missing),
+        };
+        t.push(vec![
+            r.group.into(),
+            r.name.clone().into(),
+            Cell::Shown { value: seconds, shown: r.time.to_string() },
+            per,
+            lsb(r.max_lsb),
+            lsb(r.mean_lsb),
+            r.note.clone().into(),
+        ]);
     }
-    lines
+    t
 }
 
-/// The rows as one JSON object: `rows`, each with `seconds` per `per` (`frame` of 1920x1080,
-/// `update`, or null when untimed) and errors in 8-bit LSB (null when not measured).
+/// The table as one JSON object: the frame size and the rows.
 pub fn json(rows: &[Row]) -> serde_json::Value {
-    let num = |v: f64| if v.is_finite() { serde_json::json!(v) } else { serde_json::Value::Null };
-    let rows: Vec<_> = rows
-        .iter()
-        .map(|r| {
-            let (seconds, per) = match r.time {
-                Time::Frame(s) => (num(s), "frame"),
-                Time::Update(s) => (num(s), "update"),
-                Time::None => (serde_json::Value::Null, ""),
-            };
-            serde_json::json!({
-                "group": r.group, "name": r.name, "seconds": seconds,
-                "per": if per.is_empty() { serde_json::Value::Null } else { per.into() },
-                "max_lsb": num(r.max_lsb), "mean_lsb": num(r.mean_lsb), "note": r.note,
-            })
-        })
-        .collect();
-    serde_json::json!({ "frame": [1920, 1080], "rows": rows })
+    serde_json::json!({ "frame": [1920, 1080], "rows": table(rows).json() })
 }
 
 /// `campro bench` (without a subcommand): the table for `--params` or, by default, a set
@@ -420,7 +418,7 @@ pub fn run_command(a: &BenchArgs) -> anyhow::Result<()> {
     };
     let rows = run(&p, a.quick);
     match a.format {
-        Report::Text => markdown(&rows).iter().for_each(|line| crate::say!("{line}")),
+        Report::Text => crate::say!("{}", table(&rows).markdown().trim_end()),
         Report::Json => crate::say!("{}", json(&rows)),
     }
     Ok(())
@@ -441,7 +439,9 @@ mod tests {
             note: "n".into(),
         };
         let rows = [row(Time::Frame(0.002), 0.5), row(Time::Update(2e-6), 0.004), row(Time::None, 0.0)];
-        let md = markdown(&rows);
+        let md = table(&rows).markdown();
+        let md: Vec<&str> = md.lines().collect();
+        assert_eq!(md[0], "| group | path / setting | median time | max err (LSB8) | mean err (LSB8) | note |");
         assert_eq!(md[2], "| image | x | 2.00 ms/frame (0.96 ms/Mpx) | 0.500 | - | n |");
         assert_eq!(md[3], "| image | x | 2.000 us/update | 4.0e-3 | - | n |");
         assert_eq!(md[4], "| image | x | - | 0 | - | n |");

@@ -6,6 +6,7 @@ use crate::args::{
 };
 use crate::{eval, load_params, write_atomic};
 use anyhow::{bail, Result};
+use campro_eval::table::{Cell, Column, Table};
 use campro_nn::yolox::Yolox;
 use std::path::{Path, PathBuf};
 
@@ -364,15 +365,17 @@ pub fn bench_train(a: &BenchTrainArgs) -> Result<()> {
     match a.format {
         crate::args::Report::Json => crate::say!("{}", serde_json::Value::Object(json)),
         crate::args::Report::Text => {
-            crate::say!("| step ({threads} threads) | campro-train | PyTorch | ratio |");
-            crate::say!("|---|---|---|---|");
+            let mut t = Table::new([
+                Column::new(format!("step ({threads} threads)"), "step", 0),
+                Column::new("campro-train (ms)", "ms", 0),
+                Column::new("PyTorch (ms)", "torch_ms", 0),
+                Column::new("ratio", "ratio", 2),
+            ]);
             for (s, ms) in &times {
                 let base = torch.as_ref().and_then(|t| t.get(s.key())).and_then(|v| v.as_f64());
-                match base {
-                    Some(b) => crate::say!("| {} | {ms:.0} ms | {b:.0} ms | {:.2}x |", s.key(), ms / b),
-                    None => crate::say!("| {} | {ms:.0} ms | - | - |", s.key()),
-                }
+                t.push(vec![s.key().into(), (*ms).into(), Cell::opt(base), Cell::opt(base.map(|b| ms / b))]);
             }
+            crate::say!("{}", t.markdown().trim_end());
         }
     }
     Ok(())
@@ -437,10 +440,26 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
             })
         })
         .collect();
-    let mut rows = Vec::new();
+    let mut t = Table::new([
+        Column::new("widths", "widths", 0),
+        Column::new("stem", "stem", 0),
+        Column::new("restorer", "restorer", 0),
+        Column::new("parameters", "parameters", 0),
+        Column::new("MACs/pixel", "macs_per_pixel", 0),
+        Column::new("ONNX", "onnx_bytes", 0),
+        Column::new("tract 640x480, 1 thread (ms)", "tract_640x480_ms", 0),
+        Column::new("tract fps", "tract_fps", 1),
+        Column::new(
+            format!("training step ({} x {}², {threads} threads) (ms)", cfg.data.batch, cfg.data.crop),
+            "train_step_ms",
+            0,
+        ),
+        Column::machine("batch"),
+        Column::machine("crop"),
+        Column::machine("threads"),
+    ]);
     for shape in &shapes {
-        let w = &shape.widths;
-        let unet = campro_train::unet::Unet::new(shape, 1, &campro_train::Device::Cpu)?;
+        let unet = campro_train::unet::Unet::new(shape, 1, &ctx.device)?;
         // A restoration stage costs its lookup whatever the table holds: the identity's.
         let table = shape.restorer.then(|| {
             let one = image::RgbImage::new(1, 1);
@@ -456,36 +475,25 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
         })?;
         let step_cfg = campro_train::config::EnhancerConfig { model: shape.clone(), ..cfg.clone() };
         let step = ctx.install(|| campro_train::bench::enhancer_step(&ctx, &step_cfg, a.timing.runs as usize))?;
-        rows.push(serde_json::json!({
-            "widths": w, "stem": shape.stem, "restorer": shape.restorer, "parameters": campro_train::unet::parameter_count(shape),
-            "macs_per_pixel": campro_train::unet::macs_per_pixel(shape), "onnx_bytes": bytes,
-            "tract_640x480_ms": infer * 1e3, "tract_fps": 1.0 / infer,
-            "train_step_ms": step * 1e3, "batch": cfg.data.batch, "crop": cfg.data.crop, "threads": threads,
-        }));
+        let widths: Vec<String> = shape.widths.iter().map(|w| w.to_string()).collect();
+        t.push(vec![
+            widths.join(",").into(),
+            shape.stem.into(),
+            shape.restorer.to_string().into(),
+            campro_train::unet::parameter_count(shape).into(),
+            campro_train::unet::macs_per_pixel(shape).into(),
+            Cell::Shown { value: bytes as f64, shown: format!("{:.2} MB", bytes as f64 / 1e6) },
+            (infer * 1e3).into(),
+            (1.0 / infer).into(),
+            (step * 1e3).into(),
+            cfg.data.batch.into(),
+            cfg.data.crop.into(),
+            threads.into(),
+        ]);
     }
     match a.format {
-        crate::args::Report::Json => crate::say!("{}", serde_json::Value::Array(rows)),
-        crate::args::Report::Text => {
-            crate::say!(
-                "| widths | stem | parameters | MACs/pixel | ONNX | tract 640x480, 1 thread | training step ({} x {}², {threads} threads) |",
-                cfg.data.batch,
-                cfg.data.crop
-            );
-            crate::say!("|---|---|---|---|---|---|---|");
-            for r in &rows {
-                crate::say!(
-                    "| {} | {} | {} | {:.0} | {:.2} MB | {:.0} ms ({:.1} fps) | {:.0} ms |",
-                    r["widths"],
-                    r["stem"],
-                    r["parameters"],
-                    r["macs_per_pixel"].as_f64().unwrap_or(0.0),
-                    r["onnx_bytes"].as_f64().unwrap_or(0.0) / 1e6,
-                    r["tract_640x480_ms"].as_f64().unwrap_or(0.0),
-                    r["tract_fps"].as_f64().unwrap_or(0.0),
-                    r["train_step_ms"].as_f64().unwrap_or(0.0)
-                );
-            }
-        }
+        crate::args::Report::Json => crate::say!("{}", t.json()),
+        crate::args::Report::Text => crate::say!("{}", t.markdown().trim_end()),
     }
     Ok(())
 }

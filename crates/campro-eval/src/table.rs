@@ -16,12 +16,20 @@ pub struct Column {
     pub key: String,
     /// Decimals of numbers in Markdown and text.
     pub digits: usize,
+    /// Shown in Markdown and text; `false` for a column only machines need (a unit that
+    /// people read inside another cell).
+    pub for_people: bool,
 }
 
 impl Column {
     /// A column headed `header`, keyed `key`, numbers shown with `digits` decimals.
     pub fn new(header: impl Into<String>, key: impl Into<String>, digits: usize) -> Self {
-        Column { header: header.into(), key: key.into(), digits }
+        Column { header: header.into(), key: key.into(), digits, for_people: true }
+    }
+
+    /// A column only CSV and JSON carry, keyed `key`.
+    pub fn machine(key: impl Into<String>) -> Self {
+        Column { header: String::new(), key: key.into(), digits: 0, for_people: false }
     }
 }
 
@@ -40,6 +48,14 @@ pub enum Cell {
     Int(i64),
     /// A number (non-finite: `-` for people, `NaN` in CSV, null in JSON).
     Num(f64),
+    /// A number people read as `shown` (with its unit, or in a notation of its own) and
+    /// machines as `value` (non-finite: null in JSON, `NaN` in CSV).
+    Shown {
+        /// The number, in the unit the column's key names.
+        value: f64,
+        /// What people see.
+        shown: String,
+    },
     /// A mean and its standard deviation: `m ± s` for people, the mean in CSV,
     /// `{"mean", "std"}` in JSON.
     MeanStd(f64, f64),
@@ -68,6 +84,7 @@ impl Cell {
             }
             Cell::Int(v) => v.to_string(),
             Cell::Num(v) => num(*v),
+            Cell::Shown { shown, .. } => campro::file::escape(shown),
             Cell::MeanStd(m, s) => format!("{} ± {}", num(*m), num(*s)),
             Cell::Missing => "-".into(),
         }
@@ -78,7 +95,7 @@ impl Cell {
         match self {
             Cell::Text { text, .. } => csv_field(text),
             Cell::Int(v) => v.to_string(),
-            Cell::Num(v) | Cell::MeanStd(v, _) => v.to_string(),
+            Cell::Num(v) | Cell::MeanStd(v, _) | Cell::Shown { value: v, .. } => v.to_string(),
             Cell::Missing => String::new(),
         }
     }
@@ -88,7 +105,7 @@ impl Cell {
         match self {
             Cell::Text { text, .. } => text.clone().into(),
             Cell::Int(v) => (*v).into(),
-            Cell::Num(v) => num(*v),
+            Cell::Num(v) | Cell::Shown { value: v, .. } => num(*v),
             Cell::MeanStd(m, s) => serde_json::json!({ "mean": num(*m), "std": num(*s) }),
             Cell::Missing => serde_json::Value::Null,
         }
@@ -147,15 +164,26 @@ impl Table {
         &self.rows
     }
 
+    /// The columns people see, with their indices.
+    fn for_people(&self) -> Vec<(usize, &Column)> {
+        self.columns.iter().enumerate().filter(|(_, c)| c.for_people).collect()
+    }
+
+    /// Each row's cells as people read them, people's columns only.
+    fn readable_rows(&self) -> Vec<Vec<String>> {
+        let cols = self.for_people();
+        self.rows.iter().map(|r| cols.iter().map(|&(i, col)| r[i].readable(col.digits)).collect()).collect()
+    }
+
     /// A Markdown table (a `|` in a cell escaped).
     pub fn markdown(&self) -> String {
         let mut s = String::new();
-        let cells: Vec<String> = self.columns.iter().map(|c| md_cell(&c.header)).collect();
+        let cols = self.for_people();
+        let cells: Vec<String> = cols.iter().map(|(_, c)| md_cell(&c.header)).collect();
         let _ = writeln!(s, "| {} |", cells.join(" | "));
-        let _ = writeln!(s, "|{}", "---|".repeat(self.columns.len()));
-        for row in &self.rows {
-            let cells: Vec<String> =
-                row.iter().zip(&self.columns).map(|(c, col)| c.readable(col.digits).replace('|', "\\|")).collect();
+        let _ = writeln!(s, "|{}", "---|".repeat(cols.len()));
+        for row in self.readable_rows() {
+            let cells: Vec<String> = row.iter().map(|c| c.replace('|', "\\|")).collect();
             let _ = writeln!(s, "| {} |", cells.join(" | "));
         }
         s
@@ -163,18 +191,14 @@ impl Table {
 
     /// Aligned columns for a terminal: text left, numbers right, two spaces between.
     pub fn text(&self) -> String {
-        let body: Vec<Vec<String>> = self
-            .rows
-            .iter()
-            .map(|r| r.iter().zip(&self.columns).map(|(c, col)| c.readable(col.digits)).collect())
-            .collect();
-        let width = |i: usize| {
-            body.iter().map(|r| r[i].chars().count()).chain([self.columns[i].header.chars().count()]).max().unwrap_or(0)
+        let cols = self.for_people();
+        let body = self.readable_rows();
+        let width = |k: usize| {
+            body.iter().map(|r| r[k].chars().count()).chain([cols[k].1.header.chars().count()]).max().unwrap_or(0)
         };
-        let widths: Vec<usize> = (0..self.columns.len()).map(width).collect();
+        let widths: Vec<usize> = (0..cols.len()).map(width).collect();
         // A column is left-aligned when its first row holds text.
-        let left: Vec<bool> =
-            (0..self.columns.len()).map(|i| self.rows.first().is_none_or(|r| r[i].is_text())).collect();
+        let left: Vec<bool> = cols.iter().map(|&(i, _)| self.rows.first().is_none_or(|r| r[i].is_text())).collect();
         let line = |cells: &[String]| {
             let parts: Vec<String> = cells
                 .iter()
@@ -191,7 +215,7 @@ impl Table {
                 .collect();
             parts.join("  ").trim_end().to_string() + "\n"
         };
-        let header: Vec<String> = self.columns.iter().map(|c| campro::file::escape(&c.header)).collect();
+        let header: Vec<String> = cols.iter().map(|(_, c)| campro::file::escape(&c.header)).collect();
         let mut s = line(&header);
         for r in &body {
             s += &line(r);
@@ -277,6 +301,19 @@ mod tests {
         t.push(vec!["grey".into(), 1.0.into()]);
         t.push(vec!["random pixels".into(), f64::INFINITY.into()]);
         assert_eq!(t.text(), "set            max LSB\ngrey              1.00\nrandom pixels        -\n");
+    }
+
+    #[test]
+    fn shown_numbers_and_machine_columns() {
+        let mut t =
+            Table::new([Column::new("time", "seconds", 0), Column::machine("per"), Column::new("err", "err", 3)]);
+        t.push(vec![Cell::Shown { value: 0.002, shown: "2.00 ms/frame".into() }, "frame".into(), 0.5.into()]);
+        t.push(vec![Cell::Shown { value: f64::NAN, shown: "-".into() }, Cell::Missing, Cell::Missing]);
+        assert_eq!(t.markdown(), "| time | err |\n|---|---|\n| 2.00 ms/frame | 0.500 |\n| - | - |\n");
+        assert_eq!(t.text(), "         time    err\n2.00 ms/frame  0.500\n            -      -\n");
+        assert_eq!(t.csv(), "seconds,per,err\n0.002,frame,0.5\nNaN,,\n");
+        assert_eq!(t.json()[0], serde_json::json!({"seconds": 0.002, "per": "frame", "err": 0.5}));
+        assert_eq!(t.json()[1], serde_json::json!({"seconds": null, "per": null, "err": null}));
     }
 
     #[test]

@@ -342,28 +342,34 @@ pub fn bench_train(a: &BenchTrainArgs) -> Result<()> {
     let models = shared.join("models");
     let ctx = campro_nn::Context::cpu().with_threads(threads);
     let times = ctx.install(|| campro_train::bench::run(&ctx, &models, &cfg, &steps, a.timing.runs as usize))?;
-    let mut json = serde_json::Map::new();
-    json.insert("threads".into(), threads.into());
-    json.insert("face_batch".into(), cfg.data.batch.into());
-    json.insert("person_batch".into(), cfg.detector.batch.into());
-    json.insert("person_size".into(), cfg.detector.size.into());
-    for (s, ms) in &times {
-        json.insert(s.key().into(), (*ms).into());
-    }
     let torch = match &a.anchor {
         Some(py) => Some(run_anchor(py, &shared, threads)?),
         None => None,
     };
-    if let Some(t) = &torch {
-        json.insert("torch".into(), t.clone());
-        for (s, ms) in &times {
-            if let Some(base) = t.get(s.key()).and_then(|v| v.as_f64()) {
-                json.insert(s.key().replace("_ms", "_ratio"), (ms / base).into());
-            }
-        }
-    }
+    // Each step's key, its time and PyTorch's (when the anchor ran and timed it), in ms.
+    let rows: Vec<(&str, f64, Option<f64>)> = times
+        .iter()
+        .map(|(s, ms)| (s.key(), *ms, torch.as_ref().and_then(|t| t.get(s.key())).and_then(|v| v.as_f64())))
+        .collect();
     match a.format {
-        crate::args::Report::Json => crate::say!("{}", serde_json::Value::Object(json)),
+        // PyTorch's anchor's own shape (`anchors/torch_step.py --json`), with the ratios.
+        crate::args::Report::Json => {
+            let mut json = serde_json::Map::new();
+            json.insert("threads".into(), threads.into());
+            json.insert("face_batch".into(), cfg.data.batch.into());
+            json.insert("person_batch".into(), cfg.detector.batch.into());
+            json.insert("person_size".into(), cfg.detector.size.into());
+            for &(key, ms, base) in &rows {
+                json.insert(key.into(), ms.into());
+                if let Some(b) = base {
+                    json.insert(key.replace("_ms", "_ratio"), (ms / b).into());
+                }
+            }
+            if let Some(t) = torch {
+                json.insert("torch".into(), t);
+            }
+            crate::say!("{}", serde_json::Value::Object(json))
+        }
         crate::args::Report::Text => {
             let mut t = Table::new([
                 Column::new(format!("step ({threads} threads)"), "step", 0),
@@ -371,9 +377,8 @@ pub fn bench_train(a: &BenchTrainArgs) -> Result<()> {
                 Column::new("PyTorch (ms)", "torch_ms", 0),
                 Column::new("ratio", "ratio", 2),
             ]);
-            for (s, ms) in &times {
-                let base = torch.as_ref().and_then(|t| t.get(s.key())).and_then(|v| v.as_f64());
-                t.push(vec![s.key().into(), (*ms).into(), Cell::opt(base), Cell::opt(base.map(|b| ms / b))]);
+            for &(key, ms, base) in &rows {
+                t.push(vec![key.into(), ms.into(), Cell::opt(base), Cell::opt(base.map(|b| ms / b))]);
             }
             crate::say!("{}", t.markdown().trim_end());
         }

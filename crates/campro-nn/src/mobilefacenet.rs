@@ -235,6 +235,12 @@ impl MobileFaceNet {
         x = self.linear1.forward(&x, train)?;
         x.flatten_from(1)
     }
+
+    /// Unit-length embeddings (B, 128) of sRGB faces (B, 3, 112, 96) in [0, 1]:
+    /// [`normalise_unit`], [`MobileFaceNet::forward_t`], [`l2_normalise`].
+    pub fn embed(&self, x: &Tensor, train: bool) -> Result<Tensor> {
+        l2_normalise(&self.forward_t(&normalise_unit(x)?, train)?)
+    }
 }
 
 /// `(x − 127.5) / 128` for x in 0..255, or `(255·x − 127.5) / 128` for x in [0, 1].

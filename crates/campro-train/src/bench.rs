@@ -7,7 +7,7 @@ use crate::camera::Camera;
 use crate::config::Config;
 use crate::detection::yolox_loss;
 use crate::persons::detector_input;
-use campro_nn::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet, EMBEDDING};
+use campro_nn::mobilefacenet::{normalise_unit, MobileFaceNet, EMBEDDING};
 use campro_nn::yolox::Yolox;
 use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::{linear, loss, AdamW, Optimizer, ParamsAdamW, VarBuilder, VarMap, SGD};
@@ -108,7 +108,7 @@ pub fn run(
                         all.extend(head_vm.all_vars());
                         let mut sgd = SGD::new(all, 1e-4)?;
                         median_secs(runs, || {
-                            let e = l2_normalise(&net.forward_t(&normalise_unit(&cam.forward(&x)?.detach())?, false)?)?;
+                            let e = net.embed(&cam.forward(&x)?.detach(), false)?;
                             sgd.step(&loss::cross_entropy(&head.forward(&e)?, &y)?.backward()?)?;
                             Ok(())
                         })?
@@ -117,7 +117,7 @@ pub fn run(
                         let mut adam =
                             AdamW::new(cam.vars(), ParamsAdamW { lr: 1e-6, weight_decay: 0.0, ..Default::default() })?;
                         median_secs(runs, || {
-                            let e = l2_normalise(&net.forward_t(&normalise_unit(&cam.forward(&x)?)?, false)?)?;
+                            let e = net.embed(&cam.forward(&x)?, false)?;
                             adam.step(&crate::train::non_saturating_loss(&head.forward(&e)?, &y)?.backward()?)?;
                             Ok(())
                         })?

@@ -20,7 +20,7 @@ use crate::error::TrainError;
 use crate::faces::{FaceSet, Selection, CROP};
 use crate::unet::Unet;
 use campro::pipeline::fast::Exact8;
-use campro_nn::mobilefacenet::{l2_normalise, normalise_unit, MobileFaceNet};
+use campro_nn::mobilefacenet::{l2_normalise, MobileFaceNet};
 use candle_core::{Device, Tensor};
 use image::RgbImage;
 use rand::Rng;
@@ -87,8 +87,14 @@ impl<'a> FacePrivacy<'a> {
         check.truncate(cfg.validation_faces);
         let (net, _) = MobileFaceNet::from_checkpoint(&cfg.checkpoint, dev)?;
         let net = net.frozen();
-        let means =
-            l2_normalise(&faces.class_means(&train, &sel, &cfg.checkpoint, src.cache, |x| embed(&net, x), dev)?)?;
+        let means = l2_normalise(&faces.class_means(
+            &train,
+            &sel,
+            &cfg.checkpoint,
+            src.cache,
+            |x| net.embed(x, false),
+            dev,
+        )?)?;
         Ok(Self { cfg: cfg.clone(), faces, train, check, net, means, camera: Exact8::new(params), table })
     }
 
@@ -130,7 +136,7 @@ impl<'a> FacePrivacy<'a> {
     /// Cosines (B, classes) to the class means of (B, 3, 112, 96) images in [0, 1] (clamped
     /// first, as 8-bit output is), and the crops' labels (B,).
     fn logits(&self, x: &Tensor, idx: &[usize], dev: &Device) -> candle_core::Result<(Tensor, Tensor)> {
-        let e = embed(&self.net, &x.clamp(0f32, 1f32)?)?;
+        let e = self.net.embed(&x.clamp(0f32, 1f32)?, false)?;
         let y = Tensor::from_vec(idx.iter().map(|&i| self.faces.labels[i]).collect::<Vec<u32>>(), idx.len(), dev)?;
         Ok((e.matmul(&self.means.t()?)?, y))
     }
@@ -170,11 +176,6 @@ impl<'a> FacePrivacy<'a> {
         let n = self.check.len() as f64;
         Ok(Some((enhanced as f64 / n, input as f64 / n)))
     }
-}
-
-/// Unit embeddings by the frozen model of (B, 3, 112, 96) images in [0, 1].
-fn embed(net: &MobileFaceNet, x: &Tensor) -> candle_core::Result<Tensor> {
-    l2_normalise(&net.forward_t(&normalise_unit(x)?, false)?)
 }
 
 /// `mean(max(0, cos[i, y_i] − max_{c ≠ y_i} cos[i, c] + margin))` over the rows of `cos`

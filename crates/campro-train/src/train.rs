@@ -524,8 +524,7 @@ struct Game<'a> {
     utility: Option<(PersonSet, Yolox)>,
     /// The unchanged detector the distillation term learns from (`detector.distill`).
     teacher: Option<Yolox>,
-    /// People 0..people − set_aside are drawn; the last `set_aside` validate.
-    people: usize,
+    /// The last `set_aside` people validate; the others (`drawn_people`) are drawn.
     set_aside: usize,
     drawn_people: Vec<usize>,
     /// The validation-driven stop (`crate::validation`): the pretrained face model scores
@@ -558,7 +557,7 @@ impl<'a> Game<'a> {
         let pretrained =
             if v.every > 0 { Some(MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?.0) } else { None };
         // H from the class means of the raw training embeddings.
-        let embed = |x: &Tensor| l2_normalise(&net.forward_t(&normalise_unit(x)?, false)?);
+        let embed = |x: &Tensor| net.embed(x, false);
         let means = faces.class_means(&train, &sel, &cfg.attacker.checkpoint, &cfg.data.cache, embed, &dev)?;
         let head = ProxyHead::from_means(&means, cfg.attacker.head)?;
         let mean_rows: Vec<Vec<f32>> = if v.every > 0 { means.to_vec2()? } else { Vec::new() };
@@ -575,17 +574,11 @@ impl<'a> Game<'a> {
             cam,
             utility,
             teacher,
-            people,
             set_aside,
             drawn_people: (0..people - set_aside).collect(),
             pretrained,
             mean_rows,
         })
-    }
-
-    /// F's L2-normalised embeddings of sRGB faces in [0, 1]; `train_bn`: batch statistics.
-    fn embed(&self, x: &Tensor, train_bn: bool) -> candle_core::Result<Tensor> {
-        l2_normalise(&self.net.forward_t(&normalise_unit(x)?, train_bn)?)
     }
 
     /// Everything a checkpoint holds, by name.
@@ -645,7 +638,7 @@ impl<'a> Game<'a> {
         for chunk in self.check.chunks(64) {
             let (x, y) = self.faces.batch(chunk, &self.dev)?;
             let x = if through_camera { self.cam.forward(&x)? } else { x };
-            hits += accuracy(&self.head.logits(&self.embed(&x, false)?, None)?, &y)? * chunk.len() as f64;
+            hits += accuracy(&self.head.logits(&self.net.embed(&x, false)?, None)?, &y)? * chunk.len() as f64;
         }
         Ok(hits / self.check.len().max(1) as f64)
     }
@@ -665,7 +658,7 @@ impl<'a> Game<'a> {
         let ap = match &self.utility {
             Some((set, det)) if self.set_aside > 0 => {
                 let (mut heads, mut boxes) = (Vec::new(), Vec::new());
-                let idx: Vec<usize> = (self.people - self.set_aside..self.people).collect();
+                let idx: Vec<usize> = (set.len() - self.set_aside..set.len()).collect();
                 for chunk in idx.chunks(self.cfg.detector.batch) {
                     let pb = set.batch(chunk, &self.dev)?;
                     let out = self.cam.forward(&pb.x)?.detach();
@@ -693,7 +686,7 @@ impl<'a> Game<'a> {
     /// One attacker step on faces `x` with labels `y`: cross-entropy into H and F by SGD.
     /// Returns the loss and the batch's accuracy.
     fn attacker_step(&self, x: &Tensor, y: &Tensor, opt: &mut Optimisers) -> Result<(f64, f64), TrainError> {
-        let logits = self.head.logits(&self.embed(x, self.cfg.attacker.train_batch_norm)?, Some(y))?;
+        let logits = self.head.logits(&self.net.embed(x, self.cfg.attacker.train_batch_norm)?, Some(y))?;
         let ce = candle_nn::loss::cross_entropy(&logits, y)?;
         let loss = ce.to_scalar::<f32>()? as f64;
         finite("attacker cross-entropy", loss)?;
@@ -709,8 +702,7 @@ impl<'a> Game<'a> {
     fn protector_step(&self, draws: &mut Draws, opt: &mut Optimisers) -> Result<(f64, f64), TrainError> {
         let cfg = self.cfg;
         let (x, y) = self.faces.batch(&draws.faces(self), &self.dev)?;
-        let e = l2_normalise(&self.frozen.forward_t(&normalise_unit(&self.cam.forward(&x)?)?, false)?)?;
-        let logits = self.head.logits(&e, None)?;
+        let logits = self.head.logits(&self.frozen.embed(&self.cam.forward(&x)?, false)?, None)?;
         let mut loss = non_saturating_loss(&logits, &y)?;
         let lns = loss.to_scalar::<f32>()? as f64;
         finite("privacy loss", lns)?;

@@ -24,6 +24,7 @@
 
 pub mod ccm;
 pub mod chart;
+pub mod chroma;
 pub mod color_temp;
 pub mod compare;
 pub mod emulate;

@@ -258,4 +258,14 @@ impl Params {
         s.push('\n');
         s
     }
+
+    /// Whether the set is rated for grey input ([`crate::chroma`]): its provenance holds
+    /// `"grey": {"rated": true, ...}` ([`GREY_RATING`]), written with the figures that rate
+    /// it. Without it, tools do not call a grey image protected.
+    pub fn rated_for_grey(&self) -> bool {
+        self.provenance.get(GREY_RATING).and_then(|g| g.get("rated")).and_then(|r| r.as_bool()) == Some(true)
+    }
 }
+
+/// The provenance key of a set's rating for grey input ([`Params::rated_for_grey`]).
+pub const GREY_RATING: &str = "grey";

@@ -3,11 +3,12 @@
 //! enhancer, an attacker's restoration network). Shared by `simulate` (images and video),
 //! `inspect` and `eval`.
 
-use crate::args::ScaleArg;
+use crate::args::EnhanceArgs;
 use anyhow::{anyhow, bail, Result};
 use campro::pipeline::fast::Exact8;
 use campro::pipeline::{Depth, Prepared};
 use campro::Params;
+use campro_eval::guard::{FaceGuard, GuardedEnhancer, Hide};
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -24,8 +25,72 @@ pub(crate) struct Capture<'a, 'p> {
     pub p8: &'a Prepared<'p>,
     /// The same for 16-bit input: its 65,536-entry degamma table is built on first use.
     pub p16: &'a std::sync::OnceLock<Prepared<'p>>,
-    pub enhancer: Option<&'a campro_eval::enhance::Enhancer>,
+    pub enhancer: Option<&'a GuardedEnhancer>,
+    /// What happens to grey input.
+    pub grey: &'a GreyPolicy,
 }
+
+/// What `simulate` does with a grey or near-grey picture ([`campro::chroma`]), where a
+/// global matrix and curve protect little: refused unless the preset is rated for grey or
+/// the user allowed it (`--allow-grey`), in which case it is counted and said.
+#[derive(Debug, Default)]
+pub struct GreyPolicy {
+    /// The preset is rated for grey input ([`Params::rated_for_grey`]): nothing to check.
+    pub rated: bool,
+    /// `--allow-grey`: process grey input anyway, with a warning.
+    pub allow: bool,
+    /// Grey frames and images processed under `allow`.
+    pub allowed: std::sync::atomic::AtomicU64,
+}
+
+impl GreyPolicy {
+    /// The policy for `p` and the `--allow-grey` flag.
+    pub fn new(p: &Params, allow: bool) -> Self {
+        Self { rated: p.rated_for_grey(), allow, allowed: Default::default() }
+    }
+
+    /// Ok(true) for a grey picture let through (`allow`), Ok(false) for a colour one or a
+    /// preset rated for grey, an error for a grey one otherwise. `rgb`: 8-bit RGB pixels.
+    pub fn check(&self, rgb: &[u8]) -> Result<bool> {
+        if self.rated {
+            return Ok(false);
+        }
+        let m = campro::chroma::measure(rgb);
+        if !m.is_grey() {
+            return Ok(false);
+        }
+        if !self.allow {
+            bail!("{}", grey_message(m.spread));
+        }
+        self.allowed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        Ok(true)
+    }
+}
+
+impl GreyPolicy {
+    /// [`Self::check`] on 16-bit RGB pixels (their high bytes, sampled).
+    pub fn check16(&self, rgb: &[u16]) -> Result<bool> {
+        if self.rated {
+            return Ok(false);
+        }
+        let step = (rgb.len() / 3).div_ceil(campro::chroma::MAX_SAMPLES).max(1);
+        let sample: Vec<u8> =
+            rgb.chunks_exact(3).step_by(step).flat_map(|p| [p[0], p[1], p[2]].map(|v| (v >> 8) as u8)).collect();
+        self.check(&sample)
+    }
+}
+
+/// Why a grey picture is refused (colour `spread` in 8-bit codes).
+pub fn grey_message(spread: f64) -> String {
+    format!(
+        "the picture is grey or near grey (colour spread {spread:.1} < {} codes) and this preset is not rated for grey input: a restoration that knows the camera gives grey faces back (--allow-grey writes it anyway, not protected)",
+        campro::chroma::GREY_SPREAD
+    )
+}
+
+/// The warning for grey pictures written under `--allow-grey`.
+pub const GREY_ALLOWED: &str =
+    "--allow-grey: grey input written; this preset is not rated for grey, so the output is not protected against a restoration that knows the camera";
 
 impl<'p> Capture<'_, 'p> {
     /// The reference path for 16-bit input.
@@ -35,14 +100,19 @@ impl<'p> Capture<'_, 'p> {
 
     /// `dst` = the 16-bit capture of the `w`-pixel-wide 16-bit RGB frame `src` (the exact
     /// reference path on every core; no enhancer: it takes 8 bits).
-    pub fn run16(&self, src: &[u16], dst: &mut [u16], w: u32) {
+    /// Returns whether the frame was grey and let through ([`GreyPolicy::check`]).
+    pub fn run16(&self, src: &[u16], dst: &mut [u16], w: u32) -> Result<bool> {
+        let grey = self.grey.check16(src)?;
         let prep = self.prepared16();
         let row = 3 * w as usize;
         src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| prep.run(s, d, Depth::Sixteen));
+        Ok(grey)
     }
 
-    /// `dst` = the capture of the `w` x `h` RGB frame `src`.
-    pub fn run(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32) -> Result<()> {
+    /// `dst` = the capture of the `w` x `h` RGB frame `src`; returns whether the frame was
+    /// grey and let through ([`GreyPolicy::check`]).
+    pub fn run(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32) -> Result<bool> {
+        let grey = self.grey.check(src)?;
         let row = 3 * w as usize;
         src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| {
             self.fast8.run(s, d);
@@ -51,12 +121,13 @@ impl<'p> Capture<'_, 'p> {
             let captured = image::RgbImage::from_raw(w, h, dst.to_vec()).expect("a whole frame");
             dst.copy_from_slice(enhance(e, &captured)?.as_raw());
         }
-        Ok(())
+        Ok(grey)
     }
 }
 
-/// The enhancer `e` on a captured image, refused over [`MAX_ENHANCE_PIXELS`].
-pub fn enhance(e: &campro_eval::enhance::Enhancer, captured: &image::RgbImage) -> Result<image::RgbImage> {
+/// The guarded enhancer `e` on a captured image (every face its guard finds hidden),
+/// refused over [`MAX_ENHANCE_PIXELS`].
+pub fn enhance(e: &GuardedEnhancer, captured: &image::RgbImage) -> Result<image::RgbImage> {
     let (w, h) = captured.dimensions();
     if w as u64 * h as u64 > MAX_ENHANCE_PIXELS {
         bail!("--enhance: the image is {w} x {h}; the enhancer runs on at most 3840 x 2160 pixels");
@@ -84,9 +155,21 @@ impl Network {
 }
 
 /// The enhancer a parameter set names (`provenance.enhancer.onnx`, beside the file at
-/// `params_path`).
-pub fn enhancer_of(params_path: &Path, p: &Params, scale: ScaleArg) -> Result<campro_eval::enhance::Enhancer> {
-    Ok(network_of(params_path, p, Network::Enhancer)?.with_scale(scale.enhance_scale))
+/// `params_path`), behind the face guard whose detector is YuNet from `models`: what a
+/// person is shown. Without the detector nothing is enhanced (an error).
+pub fn enhancer_of(params_path: &Path, p: &Params, args: EnhanceArgs, models: &Path) -> Result<GuardedEnhancer> {
+    let enhancer = network_of(params_path, p, Network::Enhancer)?.with_scale(args.enhance_scale);
+    Ok(GuardedEnhancer { enhancer, guard: face_guard(models, args.faces.into())? })
+}
+
+/// The enhanced view's face guard, its detector YuNet from `models`.
+pub fn face_guard(models: &Path, hide: Hide) -> Result<FaceGuard> {
+    let detector = crate::eval::load("yunet", models).map_err(|e| {
+        anyhow!(
+            "--enhance: the enhanced view hides every face it finds, and its face detector could not be loaded ({e:#}); pass --shared DIR or set CAMPRO_SHARED, or --models DIR: nothing is enhanced without it"
+        )
+    })?;
+    Ok(FaceGuard::new(campro_eval::face::FaceDetector::new(detector)?, hide))
 }
 
 /// The network `which` a parameter set names (`provenance.KEY.onnx`, a file name beside the

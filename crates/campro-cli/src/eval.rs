@@ -11,6 +11,7 @@ use campro_eval::manifest::Manifest;
 use campro_eval::model::Model;
 use campro_eval::person::PersonDetector;
 use campro_eval::privacy::{Enrolment, FaceModels, PrivacyOptions};
+use campro_eval::scene::Scene;
 use campro_eval::utility::UtilityOptions;
 use campro_eval::{data, privacy, quality, report, utility, Condition};
 use image::RgbImage;
@@ -198,13 +199,6 @@ fn run_privacy(
     }
 
     let fm = face_models(a, &c.models_dir())?;
-    let restored;
-    let conds = if a.restore {
-        restored = with_restorations(c, a, conds)?;
-        &restored[..]
-    } else {
-        conds
-    };
     let o = PrivacyOptions {
         runs: a.runs as usize,
         seed: a.seed,
@@ -220,23 +214,52 @@ fn run_privacy(
         },
         ..Default::default()
     };
-    let mut r = privacy::evaluate(&lfw, &fm, conds, &o)?;
-    if let (true, Some(probed)) = (retrain, &o.identities) {
-        let models = c.models_dir();
-        let manifests = a.face_models.iter().map(|n| manifest(n, &models)).collect::<Result<Vec<_>>>()?;
-        let sets: Vec<String> = c.params.iter().map(|p| set_name(p)).collect();
-        let detector = || face_detector(a, &models);
-        let rows = crate::retrain::attack(&lfw, probed, conds, &sets, &manifests, detector, &a.retrain, &o, &c.output)?;
-        r.identification.extend(rows);
-        r.seconds = start.elapsed().as_secs_f64();
+    let mut scenes: Vec<Scene> = a.conditions.iter().map(|&c| c.into()).collect();
+    if scenes.is_empty() {
+        scenes = Scene::ALL.to_vec();
     }
-    report::write_privacy(&r, &c.output)?;
-    eprintln!(
-        "privacy: {} identities, {:.0} s -> {}",
-        r.identities,
-        r.seconds,
-        crate::shown(&c.output.join("privacy.md"))
-    );
+    scenes.sort_by_key(|s| Scene::ALL.iter().position(|x| x == s));
+    scenes.dedup();
+    let mut reports = Vec::with_capacity(scenes.len());
+    for scene in scenes {
+        let o = PrivacyOptions { scene, ..o.clone() };
+        // The restoration attacker fits its table on the scene it attacks (a grey camera's
+        // attacker knows it is grey).
+        let restored;
+        let conds = if a.restore {
+            restored = with_restorations(c, a, conds, scene)?;
+            &restored[..]
+        } else {
+            conds
+        };
+        let mut r = privacy::evaluate(&lfw, &fm, conds, &o)?;
+        // Re-training attacks the colour scene (its cost is a training run).
+        if let (true, Some(probed), Scene::Colour) = (retrain, &o.identities, scene) {
+            let models = c.models_dir();
+            let manifests = a.face_models.iter().map(|n| manifest(n, &models)).collect::<Result<Vec<_>>>()?;
+            let sets: Vec<String> = c.params.iter().map(|p| set_name(p)).collect();
+            let detector = || face_detector(a, &models);
+            let rows =
+                crate::retrain::attack(&lfw, probed, conds, &sets, &manifests, detector, &a.retrain, &o, &c.output)?;
+            r.identification.extend(rows);
+            r.seconds = start.elapsed().as_secs_f64();
+        }
+        let dir = if scene == Scene::Colour { c.output.clone() } else { c.output.join(scene.name()) };
+        std::fs::create_dir_all(&dir).with_context(|| crate::shown(&dir))?;
+        report::write_privacy(&r, &dir)?;
+        eprintln!(
+            "privacy ({}): {} identities, {:.0} s -> {}",
+            scene.name(),
+            r.identities,
+            r.seconds,
+            crate::shown(&dir.join("privacy.md"))
+        );
+        reports.push(r);
+    }
+    if reports.len() > 1 {
+        report::write_conditions(&reports, &c.output)?;
+    }
+    let r = reports.into_iter().next().expect("one scene at least");
     Ok(r)
 }
 
@@ -256,11 +279,22 @@ fn with_networks(
         let Some(protect) = x.protect.clone() else { continue };
         let net =
             crate::capture::network_of(path, &crate::load_params(path)?, which)?.with_scale(c.scale.enhance_scale);
+        // What a person is shown passes the face guard; the attacker's restorer does not.
+        let net: Box<dyn Fn(&RgbImage) -> campro_eval::Result<RgbImage> + Send + Sync> = match which {
+            crate::capture::Network::Enhancer => {
+                let guarded = campro_eval::guard::GuardedEnhancer {
+                    enhancer: net,
+                    guard: crate::capture::face_guard(&c.models_dir(), c.scale.faces.into())?,
+                };
+                Box::new(move |i| guarded.enhance(i))
+            }
+            crate::capture::Network::Restorer => Box::new(move |i| net.enhance(i)),
+        };
         let (f, shown) = (failures.clone(), path.display().to_string());
         let key = which.key();
         out.push(Condition::new(format!("{} {suffix}", x.name), move |img: &RgbImage| {
             let captured = protect(img);
-            net.enhance(&captured).unwrap_or_else(|err| {
+            net(&captured).unwrap_or_else(|err| {
                 f.record(format!("{shown}: the {key}: {err}"));
                 captured
             })
@@ -270,11 +304,12 @@ fn with_networks(
 }
 
 /// `conds` with a "NAME restored" condition after each parameter set's (`--restore`).
-fn with_restorations(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result<Vec<Condition>> {
+fn with_restorations(c: &Common, a: &PrivacyArgs, conds: &[Condition], scene: Scene) -> Result<Vec<Condition>> {
     let dir = a.restore_prior.clone().unwrap_or_else(|| c.shared().join("data/coco-person/images"));
     let mut paths = list_images(&dir).context("--restore-prior")?;
     paths.truncate(200);
-    let prior = paths.iter().map(|p| data::read_rgb8(p)).collect::<campro_eval::Result<Vec<_>>>()?;
+    let prior =
+        paths.iter().map(|p| data::read_rgb8(p).map(|i| scene.apply(i))).collect::<campro_eval::Result<Vec<_>>>()?;
     let sets: Vec<String> = c.params.iter().map(|p| set_name(p)).collect();
     let mut out = Vec::with_capacity(conds.len() * 2);
     for x in conds {
@@ -285,7 +320,7 @@ fn with_restorations(c: &Common, a: &PrivacyArgs, conds: &[Condition]) -> Result
             out.push(Condition::new(format!("{} restored", x.name), move |img: &RgbImage| r.apply(&p(img))));
         }
     }
-    eprintln!("restoration prior: {} images from {}", prior.len(), crate::shown(&dir));
+    eprintln!("restoration prior: {} {} images from {}", prior.len(), scene.name(), crate::shown(&dir));
     Ok(out)
 }
 

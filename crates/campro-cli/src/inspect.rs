@@ -154,7 +154,7 @@ fn one(
     input: &Path,
     picture: &Path,
     fast: &Exact8,
-    enhancer: Option<&campro_eval::enhance::Enhancer>,
+    enhancer: Option<&campro_eval::guard::GuardedEnhancer>,
     det: &Detectors,
     budget: &Budget,
     warn: &dyn Fn(&str),
@@ -269,9 +269,9 @@ pub fn run(a: InspectArgs) -> Result<()> {
     } = a;
     let p = crate::load_params(&params)?;
     crate::check_output_folder(&output, force, "--output")?;
-    let enhancer = if enhance { Some(crate::capture::enhancer_of(&params, &p, scale)?) } else { None };
     let given = data.models.is_some();
     let models = data.models_dir();
+    let enhancer = if enhance { Some(crate::capture::enhancer_of(&params, &p, scale, &models)?) } else { None };
     if !models.is_dir() {
         bail!(
             "{} {}: no such folder; inspect runs the face and person models of the shared data folder: pass --shared DIR or set CAMPRO_SHARED (default ../shared), or --models DIR",
@@ -308,7 +308,7 @@ pub fn inspect(
     inputs: &[PathBuf],
     out: &Path,
     det: &Detectors,
-    enhancer: Option<&campro_eval::enhance::Enhancer>,
+    enhancer: Option<&campro_eval::guard::GuardedEnhancer>,
     json_out: bool,
 ) -> Result<()> {
     let found = simulate::collect_inputs(inputs, out, &|p| p.with_extension("png"))?;

@@ -177,7 +177,7 @@ pub struct Options<'a> {
     /// Worker threads (all cores when `None`).
     pub jobs: Option<usize>,
     pub enc: &'a Encoding,
-    pub enhancer: Option<&'a campro_eval::enhance::Enhancer>,
+    pub enhancer: Option<&'a campro_eval::guard::GuardedEnhancer>,
     /// Print one JSON object on stdout at the end.
     pub json: bool,
     /// JPEG quality, 1..=100.
@@ -188,6 +188,8 @@ pub struct Options<'a> {
     pub frames: FrameFormat,
     /// Stop every video after this many frames.
     pub max_frames: Option<u64>,
+    /// Write grey input although the preset is not rated for it (`--allow-grey`).
+    pub allow_grey: bool,
 }
 
 /// What `-` and device paths mean among the inputs and for the output: one video stream.
@@ -368,12 +370,15 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         preset,
         enhance,
         scale,
+        data,
+        allow_grey,
         skip_existing,
         format,
     } = a;
     let enc = video::Encoding { codec, crf: Some(crf), bitrate, preset };
     let p = crate::load_params(&params)?;
-    let enhancer = if enhance { Some(crate::capture::enhancer_of(&params, &p, scale)?) } else { None };
+    let enhancer =
+        if enhance { Some(crate::capture::enhancer_of(&params, &p, scale, &data.models_dir())?) } else { None };
     let options = Options {
         depth: match bit_depth {
             BitDepth::Eight => Depth::Eight,
@@ -392,6 +397,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         image_format,
         frames: video::FrameFormat { size, rate },
         max_frames: frames,
+        allow_grey,
     };
     simulate(&p, &inputs, &output, &options)
 }
@@ -418,7 +424,8 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
     let prepared8 = Prepared::new(p, Depth::Eight);
     let fast8 = Exact8::new(p);
     let prepared16 = std::sync::OnceLock::new();
-    let capture = Capture { fast8: &fast8, p8: &prepared8, p16: &prepared16, enhancer: o.enhancer };
+    let grey = crate::capture::GreyPolicy::new(p, o.allow_grey);
+    let capture = Capture { fast8: &fast8, p8: &prepared8, p16: &prepared16, enhancer: o.enhancer, grey: &grey };
     if let Some((source, sink)) = stream_job(inputs, out, o)? {
         return stream(&capture, &source, &sink, o, &pool);
     }
@@ -483,7 +490,13 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
                 paths.one(i, out, &|w| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(i))))
             };
             match r {
-                Ok(()) => note(record(i, out, "written", started, None)),
+                Ok(grey) => {
+                    let mut r = record(i, out, "written", started, None);
+                    if grey {
+                        r["warnings"] = serde_json::json!([crate::capture::GREY_ALLOWED]);
+                    }
+                    note(r)
+                }
                 Err(e) => {
                     let line = crate::about(i, &e);
                     bar.suspend(|| eprintln!("error: {line}"));
@@ -567,7 +580,8 @@ struct Paths<'a, 'p> {
 }
 
 impl Paths<'_, '_> {
-    fn one(&self, input: &Path, output: &Path, warn: &dyn Fn(&str)) -> Result<()> {
+    /// Simulates one image; Ok(true) when it was grey and let through (`--allow-grey`).
+    fn one(&self, input: &Path, output: &Path, warn: &dyn Fn(&str)) -> Result<bool> {
         let (img, _lease) = campro_eval::image_file::read(input, self.budget, warn)?;
         let (w, h) = (img.width(), img.height());
         let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
@@ -581,15 +595,26 @@ impl Paths<'_, '_> {
             }
             let src = img.into_rgb8().into_raw();
             let mut dst = vec![0u8; src.len()];
-            self.capture.run(&src, &mut dst, w, h)?;
+            let grey = self.capture.run(&src, &mut dst, w, h)?;
+            if grey {
+                warn(crate::capture::GREY_ALLOWED);
+            }
             drop(src);
-            return write_atomic(output, &encode(format, Samples::Eight(&dst), w, h, self.quality)?, self.force);
+            write_atomic(output, &encode(format, Samples::Eight(&dst), w, h, self.quality)?, self.force)?;
+            return Ok(grey);
         }
-        let (src, prep): (Vec<u16>, &Prepared) = if sixteen {
-            (img.into_rgb16().into_raw(), self.capture.prepared16())
+        let (src, prep, grey): (Vec<u16>, &Prepared, bool) = if sixteen {
+            let src = img.into_rgb16().into_raw();
+            let grey = self.capture.grey.check16(&src)?;
+            (src, self.capture.prepared16(), grey)
         } else {
-            (img.into_rgb8().into_raw().into_iter().map(u16::from).collect(), self.capture.p8)
+            let src = img.into_rgb8().into_raw();
+            let grey = self.capture.grey.check(&src)?;
+            (src.into_iter().map(u16::from).collect(), self.capture.p8, grey)
         };
+        if grey {
+            warn(crate::capture::GREY_ALLOWED);
+        }
         let mut dst = vec![0u16; src.len()];
         src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| prep.run(s, d, self.depth));
         drop(src);
@@ -597,10 +622,12 @@ impl Paths<'_, '_> {
             Depth::Sixteen => Samples::Sixteen(&dst),
             Depth::Eight => {
                 let eight: Vec<u8> = dst.iter().map(|&v| v as u8).collect();
-                return write_atomic(output, &encode(format, Samples::Eight(&eight), w, h, self.quality)?, self.force);
+                write_atomic(output, &encode(format, Samples::Eight(&eight), w, h, self.quality)?, self.force)?;
+                return Ok(grey);
             }
         };
-        write_atomic(output, &encode(format, samples, w, h, self.quality)?, self.force)
+        write_atomic(output, &encode(format, samples, w, h, self.quality)?, self.force)?;
+        Ok(grey)
     }
 }
 

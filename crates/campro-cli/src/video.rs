@@ -523,6 +523,7 @@ struct Frame {
 
 /// Simulates the camera on `source` into `sink` (an output file the caller checked).
 pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) -> Result<Outcome> {
+    let grey_before = job.capture.grey.allowed.load(std::sync::atomic::Ordering::Relaxed);
     let probe = match source {
         Source::File(path) => Some(probe(path)?),
         _ => None,
@@ -703,20 +704,20 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
                 for (v, b) in s16.iter_mut().zip(src.data.chunks_exact(2)) {
                     *v = u16::from_le_bytes([b[0], b[1]]);
                 }
-                job.capture.run16(&s16, &mut d16, width);
-                for (b, v) in out.chunks_exact_mut(2).zip(&d16) {
-                    b.copy_from_slice(&v.to_le_bytes());
-                }
-                Ok(())
+                job.capture.run16(&s16, &mut d16, width).map(|_| {
+                    for (b, v) in out.chunks_exact_mut(2).zip(&d16) {
+                        b.copy_from_slice(&v.to_le_bytes());
+                    }
+                })
             } else if batch.len() == 1 {
                 // One frame: the enhancer spreads it over the pool's cores as it can.
                 let threads = rayon::current_num_threads();
                 let (src, out) = (&batch[0], &mut outs[0]);
-                campro_eval::enhance::with_threads(threads, || job.capture.run(&src.data, out, width, height))
+                campro_eval::enhance::with_threads(threads, || job.capture.run(&src.data, out, width, height).map(drop))
             } else {
                 use rayon::prelude::*;
                 batch.par_iter().zip(outs.par_iter_mut()).try_for_each(|(src, out)| {
-                    campro_eval::enhance::with_threads(1, || job.capture.run(&src.data, out, width, height))
+                    campro_eval::enhance::with_threads(1, || job.capture.run(&src.data, out, width, height).map(drop))
                 })
             };
             busy += began.elapsed();
@@ -787,6 +788,10 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
             "the camera stage does {capacity:.1} frames a second, slower than the source's {:.1}: a live source drops frames",
             source_fps.unwrap_or(0.0)
         ));
+    }
+    let grey = job.capture.grey.allowed.load(std::sync::atomic::Ordering::Relaxed) - grey_before;
+    if grey > 0 {
+        warn(&format!("{grey} of {frames} frames grey: {}", crate::capture::GREY_ALLOWED));
     }
     if let (Sink::File(output), Some(tmp)) = (sink, tmp) {
         let tmp = match probe.as_ref().and_then(|p| p.rotation).filter(|&r| r.rem_euclid(360) != 0) {

@@ -29,6 +29,13 @@ fn shared_data() -> Option<(std::path::PathBuf, std::path::PathBuf, std::path::P
     ))
 }
 
+/// YuNet from the shared models folder holding `file` (its ONNX file).
+fn yunet(file: &Path) -> campro_eval::face::FaceDetector {
+    let manifest = campro_testkit::workspace_root().join("crates/campro-eval/models/yunet.json");
+    let m = campro_eval::manifest::Manifest::load(&manifest, file.parent().unwrap()).unwrap();
+    campro_eval::face::FaceDetector::new(campro_eval::model::Model::load(m).unwrap()).unwrap()
+}
+
 /// The `[data]` keys naming the folders of [`shared_data`]'s files.
 fn data_keys(models: &Path, lfw: &Path, coco: &Path) -> String {
     let q = |p: &Path| format!("{:?}", p.parent().unwrap().to_str().unwrap());
@@ -116,15 +123,20 @@ fn train_enhancer_restores_the_scene_but_not_the_faces() {
     let img = coco.parent().unwrap().join("images/000000000139.jpg");
     // (A JPEG stays JPEG in a folder; a named PNG output keeps every bit.)
     campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("cap.png")).assert().success();
-    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("enh.png")).arg("--enhance").assert().success();
+    let shared = models.parent().unwrap().parent().unwrap();
+    let mut enhance = campro();
+    enhance.arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("enh.png")).arg("--enhance");
+    enhance.arg("--shared").arg(shared).assert().success();
     let captured = image::open(d.join("cap.png")).unwrap().to_rgb8();
     let enhanced = image::open(d.join("enh.png")).unwrap().to_rgb8();
-    let e = campro_eval::enhance::Enhancer::load(&d.join("p.enhancer.onnx")).unwrap();
+    let e = campro_eval::guard::GuardedEnhancer {
+        enhancer: campro_eval::enhance::Enhancer::load(&d.join("p.enhancer.onnx")).unwrap(),
+        guard: campro_eval::guard::FaceGuard::new(yunet(&models), campro_eval::guard::Hide::Pixelate),
+    };
     assert_eq!(e.enhance(&captured).unwrap(), enhanced);
     assert_ne!(captured, enhanced);
 
     // inspect --enhance: raw | protected | enhanced, detections counted per panel.
-    let shared = models.parent().unwrap().parent().unwrap();
     campro()
         .arg("inspect")
         .arg(&p)
@@ -330,7 +342,9 @@ fn the_face_gate_learns_where_faces_are_and_leaves_them_as_captured() {
     let img = coco.parent().unwrap().join("images/000000000139.jpg");
     // (A JPEG stays JPEG in a folder; a named PNG output keeps every bit.)
     campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("cap.png")).assert().success();
-    campro().arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("enh.png")).arg("--enhance").assert().success();
+    let mut enhance = campro();
+    enhance.arg("simulate").arg(&p).arg(&img).arg("-o").arg(d.join("enh.png")).arg("--enhance");
+    enhance.arg("--models").arg(models.parent().unwrap()).assert().success();
     let captured = image::open(d.join("cap.png")).unwrap().to_rgb8();
     let enhanced = image::open(d.join("enh.png")).unwrap().to_rgb8();
     assert_ne!(captured, enhanced);

@@ -25,9 +25,13 @@ fn a_bundled_preset_works_by_name_from_an_empty_folder() {
     let by_file = run(&[bundled("campro-omega-0.5.json").to_str().unwrap()], "c");
     assert_eq!(by_name, by_file);
     assert_eq!(by_json_name, by_file);
-    // --enhance finds the bundled preset's enhancer, and gives what the file beside it gives.
-    let enhanced = run(&["campro-omega-0.5", "--enhance"], "d");
-    let enhanced_file = run(&[bundled("campro-omega-0.5.json").to_str().unwrap(), "--enhance"], "e");
+    // --enhance finds the bundled preset's enhancer, and gives what the file beside it gives
+    // (its face guard's detector is in the shared models).
+    let Some(models) = campro_testkit::shared("models/yunet_s_640_640.onnx") else { return };
+    let models = models.parent().unwrap().to_str().unwrap();
+    let enhanced = run(&["campro-omega-0.5", "--enhance", "--models", models], "d");
+    let enhanced_file =
+        run(&[bundled("campro-omega-0.5.json").to_str().unwrap(), "--enhance", "--models", models], "e");
     assert_eq!(enhanced, enhanced_file);
     assert_ne!(enhanced, by_name);
 }
@@ -39,9 +43,11 @@ fn a_copied_preset_with_its_enhancer_beside_it_still_works_and_a_local_file_wins
     std::fs::copy(bundled("campro-omega-0.5.json"), dir.path().join("mine.json")).unwrap();
     std::fs::copy(bundled("campro-omega-0.5.enhancer.onnx"), dir.path().join("campro-omega-0.5.enhancer.onnx"))
         .unwrap();
+    let Some(models) = campro_testkit::shared("models/yunet_s_640_640.onnx") else { return };
     campro()
         .current_dir(dir.path())
-        .args(["simulate", "mine.json", "--enhance"])
+        .args(["simulate", "mine.json", "--enhance", "--models"])
+        .arg(models.parent().unwrap())
         .arg(&input)
         .args(["-o", "o"])
         .assert()

@@ -67,8 +67,27 @@ impl FaceDetector {
     /// All faces above the threshold, after NMS, in image pixels, best first. The image is
     /// scaled down to fit the input (never up) and padded with black at the bottom/right.
     pub fn detect(&self, img: &RgbImage) -> Result<Vec<Face>> {
-        let (iw, ih) = (self.model.manifest.input.width, self.model.manifest.input.height);
+        let (iw, ih) = self.input_size();
         let scale = (iw as f64 / img.width() as f64).min(ih as f64 / img.height() as f64).min(1.0);
+        let faces = self.detect_scaled(img, scale, self.threshold)?;
+        Ok(self.suppressed(faces))
+    }
+
+    /// The model's input (width, height), pixels.
+    pub fn input_size(&self) -> (usize, usize) {
+        (self.model.manifest.input.width, self.model.manifest.input.height)
+    }
+
+    /// The manifest's score threshold.
+    pub fn threshold(&self) -> f32 {
+        self.threshold
+    }
+
+    /// Every face scoring at least `threshold` in `img` scaled by `scale` (which must fit
+    /// the input: the scaled image is placed top-left, black below and right), in `img`'s
+    /// pixels, before NMS.
+    pub fn detect_scaled(&self, img: &RgbImage, scale: f64, threshold: f32) -> Result<Vec<Face>> {
+        let (iw, ih) = self.input_size();
         let canvas = letterbox(img, iw as u32, ih as u32, scale, 0);
         let out = self.model.run(&canvas)?;
         let mut faces = Vec::new();
@@ -82,24 +101,26 @@ impl FaceDetector {
                 out.get(&format!("obj_{s}"), n)?,
                 out.get(&format!("bbox_{s}"), 4 * n)?,
                 out.get(&format!("kps_{s}"), 10 * n)?,
-                self.threshold,
+                threshold,
                 &mut faces,
             );
         }
-        let boxes: Vec<[f32; 4]> = faces.iter().map(|f| f.bbox).collect();
-        let scores: Vec<f32> = faces.iter().map(|f| f.score).collect();
         let inv = (1.0 / scale) as f32;
-        Ok(nms(&boxes, &scores, self.nms_iou)
+        Ok(faces
             .into_iter()
-            .map(|i| {
-                let f = faces[i];
-                Face {
-                    bbox: f.bbox.map(|v| v * inv),
-                    score: f.score,
-                    landmarks: f.landmarks.map(|p| [p[0] * inv, p[1] * inv]),
-                }
+            .map(|f| Face {
+                bbox: f.bbox.map(|v| v * inv),
+                score: f.score,
+                landmarks: f.landmarks.map(|p| [p[0] * inv, p[1] * inv]),
             })
             .collect())
+    }
+
+    /// `faces` after non-maximum suppression at the manifest's IoU, best first.
+    pub fn suppressed(&self, faces: Vec<Face>) -> Vec<Face> {
+        let boxes: Vec<[f32; 4]> = faces.iter().map(|f| f.bbox).collect();
+        let scores: Vec<f32> = faces.iter().map(|f| f.score).collect();
+        nms(&boxes, &scores, self.nms_iou).into_iter().map(|i| faces[i]).collect()
     }
 }
 

@@ -19,6 +19,7 @@ pub mod error;
 pub mod face;
 pub mod frontier;
 pub mod geometry;
+pub mod guard;
 pub mod image_file;
 pub mod linear;
 pub mod manifest;
@@ -29,6 +30,7 @@ pub mod privacy;
 pub mod quality;
 pub mod report;
 pub mod restore;
+pub mod scene;
 pub mod table;
 pub mod utility;
 

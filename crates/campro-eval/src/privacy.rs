@@ -30,6 +30,7 @@ use crate::data::{read_rgb8, Lfw};
 use crate::error::{EvalError, Result};
 use crate::face::{central_face, cosine, Embedder, Face, FaceDetector};
 use crate::linear::{self, LinearOptions};
+use crate::scene::Scene;
 use crate::Condition;
 use indicatif::{ProgressBar, ProgressStyle};
 use ndarray::Array2;
@@ -70,6 +71,9 @@ pub struct PrivacyOptions {
     pub pairs_per_fold: Option<usize>,
     /// How the adversary's gallery and classifier photos were taken.
     pub enrolment: Enrolment,
+    /// What the camera is pointed at: every photo (gallery, probes, pairs) is first made
+    /// this scene.
+    pub scene: Scene,
 }
 
 /// How the adversary enrolled its gallery (module docs).
@@ -97,6 +101,7 @@ impl Default for PrivacyOptions {
             verification: true,
             pairs_per_fold: None,
             enrolment: Enrolment::Raw,
+            scene: Scene::Colour,
         }
     }
 }
@@ -208,13 +213,13 @@ enum Need {
 
 /// Embeds one photo raw and, unless only the raw embedding is needed, under every
 /// condition. Returns None when the raw photo has no face.
-fn embed_photo(path: &Path, m: &FaceModels, conds: &[Condition], need: Need) -> Result<Option<Record>> {
+fn embed_photo(path: &Path, m: &FaceModels, conds: &[Condition], need: Need, scene: Scene) -> Result<Option<Record>> {
     let (conds, e2e) = match need {
         Need::Raw => (&[][..], false),
         Need::Paper => (conds, false),
         Need::EndToEnd => (conds, true),
     };
-    let img = read_rgb8(path)?;
+    let img = scene.apply(read_rgb8(path)?);
     let Some(face) = central_face(&m.detector.detect(&img)?, img.width(), img.height()) else { return Ok(None) };
     let crops: Vec<_> = m.embedders.iter().map(|e| e.align(&img, &face.landmarks)).collect();
     let raw: Vec<Vec<f32>> = m.embedders.iter().zip(&crops).map(|(e, c)| e.embed(c)).collect::<Result<_>>()?;
@@ -346,7 +351,7 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     let pb = progress(todo.len(), "privacy: embedding faces");
     let records: Mutex<HashMap<PathBuf, Record>> = Mutex::new(HashMap::new());
     todo.par_iter().try_for_each(|(path, need)| -> Result<()> {
-        if let Some(r) = embed_photo(path, models, conds, *need)? {
+        if let Some(r) = embed_photo(path, models, conds, *need, o.scene)? {
             records.lock().unwrap().insert(path.clone(), r);
         }
         pb.inc(1);

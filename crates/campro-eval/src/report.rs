@@ -85,7 +85,7 @@ pub fn privacy_table(r: &PrivacyReport) -> Table {
                     .and_then(|x| x.detection_rate)
                     .map(|d| format!("faces found: {:.1}%", 100.0 * d));
                 let mut cells = vec![
-                    Cell::text("LFW"),
+                    Cell::text(dataset(r)),
                     Cell::text(order.name()),
                     Cell::Text { text: cond.clone(), note },
                     Cell::text(cls),
@@ -117,7 +117,7 @@ pub fn verification_table(r: &PrivacyReport) -> Table {
     ]);
     for x in &r.verification {
         t.push(vec![
-            "LFW".into(),
+            dataset(r).into(),
             x.condition.as_str().into(),
             x.model.as_str().into(),
             x.accuracy_mean.into(),
@@ -127,6 +127,59 @@ pub fn verification_table(r: &PrivacyReport) -> Table {
         ]);
     }
     t
+}
+
+/// The worst top-1 (%) of each image type in each report (one a scene, as measured):
+/// the highest mean over models, classifiers and protection orders, and the worst over
+/// the scenes.
+pub fn conditions_table(reports: &[PrivacyReport]) -> Table {
+    let mut t = Table::new(
+        [Column::new("image type", "image_type", 0)]
+            .into_iter()
+            .chain(reports.iter().map(|r| Column::new(r.options.scene.name(), r.options.scene.name(), 2)))
+            .chain([Column::new("worst", "worst", 2)]),
+    );
+    let names = conditions_of(reports.iter().flat_map(|r| r.identification.iter().map(|x| &x.condition)));
+    for cond in names {
+        let worst_in = |r: &PrivacyReport| {
+            r.identification
+                .iter()
+                .filter(|x| x.condition == cond)
+                .map(|x| 100.0 * x.top1_mean)
+                .fold(f64::NAN, f64::max)
+        };
+        let per: Vec<f64> = reports.iter().map(worst_in).collect();
+        let mut cells = vec![Cell::text(cond.as_str())];
+        cells.extend(per.iter().map(|&v| Cell::Num(v)));
+        cells.push(Cell::Num(per.iter().copied().fold(f64::NAN, f64::max)));
+        t.push(cells);
+    }
+    t
+}
+
+/// Writes conditions.md and conditions.csv ([`conditions_table`]) into `dir`.
+pub fn write_conditions(reports: &[PrivacyReport], dir: &Path) -> Result<()> {
+    let t = conditions_table(reports);
+    write_atomic(&dir.join("conditions.csv"), t.csv().as_bytes())?;
+    let mut s = String::from(
+        "# Privacy under each condition: the worst top-1
+
+",
+    );
+    let _ = writeln!(
+        s,
+        "Top-1 identification in % on LFW, each condition's highest mean over face models, classifiers (nearest, linear) and orders (paper, end-to-end); each condition's full report is privacy.md in its folder (colour's beside this file). Lower is better protection.\n"
+    );
+    s += &t.markdown();
+    write_atomic(&dir.join("conditions.md"), s.as_bytes())
+}
+
+/// The dataset column: LFW, and its scene unless colour.
+fn dataset(r: &PrivacyReport) -> String {
+    match r.options.scene {
+        crate::scene::Scene::Colour => "LFW".into(),
+        s => format!("LFW {}", s.name()),
+    }
 }
 
 /// Writes privacy.json, privacy.csv, verification.csv, cmc.svg and privacy.md into `dir`.
@@ -159,7 +212,7 @@ pub fn write_privacy(r: &PrivacyReport, dir: &Path) -> Result<()> {
 
 /// The privacy report as Markdown.
 pub fn privacy_markdown(r: &PrivacyReport) -> String {
-    let mut s = String::from("# Privacy: face identification on LFW\n\n");
+    let mut s = format!("# Privacy: face identification on {}\n\n", dataset(r));
     let camera = r.options.enrolment == Enrolment::Camera;
     let gallery = if r.gallery > r.identities {
         format!(

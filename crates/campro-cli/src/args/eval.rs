@@ -1,7 +1,7 @@
 //! Arguments of `eval privacy|utility|quality|all|frontier`, with the adaptive attacks'
 //! settings (`--attack retrain`'s `--retrain-*`).
 
-use super::ScaleArg;
+use super::EnhanceArgs;
 use campro_eval::baselines::Baseline;
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
@@ -85,7 +85,7 @@ pub struct Common {
     #[arg(long)]
     pub enhanced: bool,
     #[command(flatten)]
-    pub scale: ScaleArg,
+    pub scale: EnhanceArgs,
 }
 
 /// `--limit`: at least 1 (an empty selection has nothing to score).
@@ -163,6 +163,28 @@ pub struct PrivacyArgs {
     /// attacker, who matches protected to protected).
     #[arg(long, value_enum, default_value = "raw")]
     pub enrol: EnrolArg,
+    /// What the camera is pointed at (repeatable; default: every one): colour (LFW as it
+    /// is) or grey (every photo made black-and-white first, as a night, infrared or
+    /// monochrome camera sees it). Colour's report is written into --output, each other's
+    /// into a folder of its name there, and conditions.md gives the worst over them.
+    #[arg(long = "condition", value_enum)]
+    pub conditions: Vec<ConditionArg>,
+}
+
+/// `--condition` (campro_eval::scene::Scene).
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ConditionArg {
+    Colour,
+    Grey,
+}
+
+impl From<ConditionArg> for campro_eval::scene::Scene {
+    fn from(c: ConditionArg) -> Self {
+        match c {
+            ConditionArg::Colour => Self::Colour,
+            ConditionArg::Grey => Self::Grey,
+        }
+    }
 }
 
 /// `--attack`.

@@ -1,6 +1,6 @@
 //! Arguments of `inspect`.
 
-use super::{Report, ScaleArg, PARAMS_HELP};
+use super::{EnhanceArgs, Report, PARAMS_HELP};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -38,5 +38,5 @@ pub struct InspectArgs {
     #[arg(long)]
     pub enhance: bool,
     #[command(flatten)]
-    pub scale: ScaleArg,
+    pub scale: EnhanceArgs,
 }

@@ -15,7 +15,7 @@ pub use convert::{CompareArgs, ConvertArgs, DeviceArgs, FileTargetArgs, Format};
 pub use eval::{AttackArg, Common, EnrolArg, EvalCmd, LossArg, PrivacyArgs, RetrainArgs, UtilityArgs};
 pub use inspect::InspectArgs;
 pub use params::{DemoArgs, ImportPtArgs, ManArgs, PresetsArgs, ValidateArgs};
-pub use simulate::{BitDepth, ScaleArg, SimulateArgs};
+pub use simulate::{BitDepth, EnhanceArgs, SimulateArgs};
 pub use train::{FinetuneDetectorArgs, RunFiles, TrainArgs, TrainEnhancerArgs};
 
 use clap::{Parser, Subcommand, ValueEnum};

@@ -62,7 +62,17 @@ pub struct SimulateArgs {
     #[arg(long, conflicts_with = "bit_depth")]
     pub enhance: bool,
     #[command(flatten)]
-    pub scale: ScaleArg,
+    pub scale: EnhanceArgs,
+    /// Where the enhancer's face guard finds its face detector (--enhance).
+    #[command(flatten)]
+    pub data: super::DataArgs,
+    /// Write grey and near-grey pictures (black-and-white, infrared, one-coloured light)
+    /// although the preset is not rated for grey input. Such pictures are refused by
+    /// default: a global matrix and curve cannot fold a single line of colours, so a
+    /// restoration that knows the camera gives their faces back. What is let through is
+    /// said on stderr and in the JSON record, and is not protected.
+    #[arg(long)]
+    pub allow_grey: bool,
     /// Leave outputs that exist and skip their inputs (re-runs do only what is missing).
     #[arg(long, conflicts_with = "force")]
     pub skip_existing: bool,
@@ -120,15 +130,37 @@ fn parse_rate(s: &str) -> Result<String, String> {
     }
 }
 
-/// `--enhance-scale`: the resolution the enhancer's network runs at (shared by simulate,
-/// inspect and eval).
+/// How the enhancer runs (shared by simulate, inspect and eval): the resolution of its
+/// network and how its face guard hides the faces it finds.
 #[derive(clap::Args, Debug, Clone, Copy)]
-pub struct ScaleArg {
+pub struct EnhanceArgs {
     /// The enhancer's network at full resolution (1), at half or a quarter of it (2, 4:
     /// colours stay per-pixel, the network's correction is upsampled; about 4 and 16 times
     /// less work), or auto: 1 below 1280x720, 2 from there, 4 from 2560x1440.
     #[arg(long = "enhance-scale", default_value = "auto", value_parser = parse_scale)]
     pub enhance_scale: campro_eval::enhance::Scale,
+    /// How the enhanced view hides every face its guard finds (a face detector run on the
+    /// enhanced and the captured image at every scale down to 10-pixel faces; needs the
+    /// YuNet model of --models or the shared folder, and nothing is enhanced without it):
+    /// pixelate (blocks of a sixth of the face's width) or solid (one colour).
+    #[arg(long, value_enum, default_value_t = FacesArg::Pixelate)]
+    pub faces: FacesArg,
+}
+
+/// `--faces`.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum FacesArg {
+    Pixelate,
+    Solid,
+}
+
+impl From<FacesArg> for campro_eval::guard::Hide {
+    fn from(f: FacesArg) -> Self {
+        match f {
+            FacesArg::Pixelate => Self::Pixelate,
+            FacesArg::Solid => Self::Solid,
+        }
+    }
 }
 
 fn parse_scale(s: &str) -> Result<campro_eval::enhance::Scale, String> {

@@ -1,0 +1,66 @@
+//! What the camera is pointed at, for the privacy evaluation: LFW's photos as they are
+//! (colour), or as a black-and-white, infrared or night camera sees them (grey). A scene
+//! changes the photos before anything else, so the adversary's gallery, the probes and the
+//! verification pairs all see it; the protections ([`crate::Condition`]) then run on it.
+
+use image::{Rgb, RgbImage};
+use serde::Serialize;
+
+/// A scene of the privacy evaluation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Scene {
+    /// The photos as they are.
+    #[default]
+    Colour,
+    /// Each pixel replaced by its BT.601 luma, `(77 R + 150 G + 29 B) >> 8`, in all three
+    /// channels (the luma [`campro::chroma`] bins by).
+    Grey,
+}
+
+impl Scene {
+    /// Every scene, in report order.
+    pub const ALL: [Scene; 2] = [Scene::Colour, Scene::Grey];
+
+    /// The name in flags, folders and reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Scene::Colour => "colour",
+            Scene::Grey => "grey",
+        }
+    }
+
+    /// `img` as this scene shows it.
+    pub fn apply(self, img: RgbImage) -> RgbImage {
+        match self {
+            Scene::Colour => img,
+            Scene::Grey => {
+                let mut img = img;
+                for p in img.pixels_mut() {
+                    let [r, g, b] = p.0.map(u32::from);
+                    let v = ((77 * r + 150 * g + 29 * b) >> 8) as u8;
+                    *p = Rgb([v; 3]);
+                }
+                img
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grey_is_the_integer_luma_in_every_channel() {
+        let img = RgbImage::from_vec(3, 1, vec![255, 0, 0, 0, 255, 0, 10, 20, 30]).unwrap();
+        let g = Scene::Grey.apply(img.clone());
+        // 77·255 >> 8 = 76; 150·255 >> 8 = 149; (770 + 3000 + 870) >> 8 = 18.
+        assert_eq!(g.into_raw(), vec![76, 76, 76, 149, 149, 149, 18, 18, 18]);
+        assert_eq!(Scene::Colour.apply(img.clone()), img);
+        // What the chroma measure calls grey.
+        let photo = RgbImage::from_fn(40, 30, |x, y| Rgb([(x * 6) as u8, (y * 8) as u8, ((x + y) * 3) as u8]));
+        assert!(!campro::chroma::measure(photo.as_raw()).is_grey());
+        assert!(campro::chroma::measure(Scene::Grey.apply(photo).as_raw()).is_grey());
+    }
+}

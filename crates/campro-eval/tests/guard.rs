@@ -1,0 +1,166 @@
+//! The enhanced view's face guard with the learnt part switched off: the "enhancer" gives
+//! the raw scene back whole (the worst a learnt enhancer could do), and the detector gate
+//! alone must still hide every face of a group photo, from 12 to 160 pixels wide. Checked
+//! by where the hidden regions fall and, independently of the detector, by two face
+//! recognition models: no guarded face is nearer its raw self than different people's
+//! raw faces are to each other. Real models and photos from `../shared` (skipped with a
+//! message when it is absent; required under CI=true).
+
+use campro_eval::data::read_rgb8;
+use campro_eval::face::{central_face, cosine, Embedder, FaceDetector};
+use campro_eval::guard::{FaceGuard, Hide};
+use campro_eval::manifest::Manifest;
+use campro_eval::model::Model;
+use image::RgbImage;
+use std::path::{Path, PathBuf};
+
+/// Pasted people, one a face width.
+const PASTED: [(&str, u32); 8] = [
+    ("George_W_Bush", 12),
+    ("Colin_Powell", 16),
+    ("Donald_Rumsfeld", 20),
+    ("Gerhard_Schroeder", 28),
+    ("Ariel_Sharon", 40),
+    ("Hugo_Chavez", 64),
+    ("Junichiro_Koizumi", 96),
+    ("Serena_Williams", 160),
+];
+
+/// Other people, whose raw faces set how alike two different people's faces can be.
+const OTHERS: [&str; 14] = [
+    "John_Ashcroft",
+    "Jacques_Chirac",
+    "Vladimir_Putin",
+    "Luiz_Inacio_Lula_da_Silva",
+    "Gloria_Macapagal_Arroyo",
+    "Lleyton_Hewitt",
+    "Alejandro_Toledo",
+    "Andre_Agassi",
+    "Tom_Ridge",
+    "Kofi_Annan",
+    "Roh_Moo-hyun",
+    "Silvio_Berlusconi",
+    "Juan_Carlos_Ferrero",
+    "Bill_Clinton",
+];
+
+fn load(name: &str, models: &Path) -> Model {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("models").join(format!("{name}.json"));
+    Model::load(Manifest::load(&path, models).unwrap()).unwrap()
+}
+
+fn lfw(root: &Path, person: &str) -> PathBuf {
+    root.join(format!("images_deepfunneled/{person}/{person}_0001.jpg"))
+}
+
+/// A face pasted into the group photo: its box and landmarks there.
+struct Pasted {
+    bbox: [f32; 4],
+    landmarks: [[f32; 2]; 5],
+}
+
+#[test]
+fn the_detector_gate_alone_hides_every_face_of_a_group_photo() {
+    let Some(shared) = campro_testkit::shared_root(&[
+        "models/yunet_s_640_640.onnx",
+        "models/faceplugin_fr_feature.onnx",
+        "models/mobilefacenet_casia.onnx",
+        "data/lfw/pairs.txt",
+        "data/coco-person/images/000000000802.jpg",
+    ]) else {
+        return;
+    };
+    let models = shared.join("models");
+    let lfw_root = shared.join("data/lfw");
+    let detector = FaceDetector::new(load("yunet", &models)).unwrap();
+    let embedders = [
+        Embedder::new(load("faceplugin", &models)).unwrap(),
+        Embedder::new(load("mobilefacenet_casia", &models)).unwrap(),
+    ];
+
+    // A person-free COCO scene at 1280 x 720, eight LFW faces pasted in a row of cells.
+    let scene = read_rgb8(&shared.join("data/coco-person/images/000000000802.jpg")).unwrap();
+    let mut group = image::imageops::resize(&scene, 1280, 720, image::imageops::FilterType::Triangle);
+    let mut pasted = Vec::new();
+    let mut x = 20u32;
+    for (person, width) in PASTED {
+        let img = read_rgb8(&lfw(&lfw_root, person)).unwrap();
+        let face = central_face(&detector.detect(&img).unwrap(), img.width(), img.height()).unwrap();
+        // The face with its surroundings (1.8 times its box), scaled so the box is `width`.
+        let (bw, cx, cy) =
+            (face.bbox[2] - face.bbox[0], (face.bbox[0] + face.bbox[2]) / 2.0, (face.bbox[1] + face.bbox[3]) / 2.0);
+        let half = (0.9 * bw).min(cx).min(cy).min(250.0 - cx).min(250.0 - cy);
+        let (x0, y0, side) = ((cx - half) as u32, (cy - half) as u32, (2.0 * half) as u32);
+        let crop = image::imageops::crop_imm(&img, x0, y0, side, side).to_image();
+        let k = width as f32 / bw;
+        let out = ((side as f32 * k).round() as u32).max(1);
+        let small = image::imageops::resize(&crop, out, out, image::imageops::FilterType::Triangle);
+        let y = 360 - out / 2;
+        image::imageops::replace(&mut group, &small, x as i64, y as i64);
+        let at = |p: [f32; 2]| [(p[0] - x0 as f32) * k + x as f32, (p[1] - y0 as f32) * k + y as f32];
+        let [a, b] = [at([face.bbox[0], face.bbox[1]]), at([face.bbox[2], face.bbox[3]])];
+        pasted.push(Pasted { bbox: [a[0], a[1], b[0], b[1]], landmarks: face.landmarks.map(at) });
+        x += out + 16;
+    }
+    assert!(x <= 1280, "the faces fit the scene: {x}");
+
+    // The learnt part switched off: the enhanced view is the raw group photo itself.
+    let guard = FaceGuard::new(FaceDetector::new(load("yunet", &models)).unwrap(), Hide::Pixelate);
+    let mut shown = group.clone();
+    let checked = guard.apply(&group, &mut shown).unwrap();
+
+    // 1. Every pasted face's box is covered by the hidden regions (at least 95% of it).
+    let covered = |b: [f32; 4]| {
+        let (mut inside, mut all) = (0u32, 0u32);
+        for y in b[1].floor() as u32..b[3].ceil() as u32 {
+            for x in b[0].floor() as u32..b[2].ceil() as u32 {
+                all += 1;
+                inside += checked.hidden.iter().any(|r| x >= r[0] && x < r[2] && y >= r[1] && y < r[3]) as u32;
+            }
+        }
+        inside as f64 / all as f64
+    };
+    for ((person, width), p) in PASTED.iter().zip(&pasted) {
+        let c = covered(p.bbox);
+        assert!(c >= 0.95, "{person} ({width} px): {:.0}% of the face hidden; regions {:?}", 100.0 * c, checked.hidden);
+    }
+    // Outside the hidden regions the scene is untouched.
+    for (x, y, p) in shown.enumerate_pixels() {
+        if !checked.hidden.iter().any(|r| x >= r[0] && x < r[2] && y >= r[1] && y < r[3]) {
+            assert_eq!(p, group.get_pixel(x, y), "({x}, {y}) changed outside every hidden region");
+        }
+    }
+
+    // 2. Recognition, independent of the detector: each model's embedding of a guarded face
+    // (aligned on its raw landmarks) is less like its raw face than the most alike pair of
+    // different people's raw faces is.
+    for e in &embedders {
+        let raw_of = |img: &RgbImage, lm: &[[f32; 2]; 5]| e.embed(&e.align(img, lm)).unwrap();
+        let mut people: Vec<Vec<f32>> = pasted.iter().map(|p| raw_of(&group, &p.landmarks)).collect();
+        for person in OTHERS {
+            let img = read_rgb8(&lfw(&lfw_root, person)).unwrap();
+            let face = central_face(&detector.detect(&img).unwrap(), img.width(), img.height()).unwrap();
+            people.push(raw_of(&img, &face.landmarks));
+        }
+        let mut different = f32::MIN;
+        for i in 0..people.len() {
+            for j in i + 1..people.len() {
+                different = different.max(cosine(&people[i], &people[j]));
+            }
+        }
+        for (k, ((person, width), p)) in PASTED.iter().zip(&pasted).enumerate() {
+            let guarded = raw_of(&shown, &p.landmarks);
+            let same = cosine(&guarded, &people[k]);
+            eprintln!(
+                "{} {person} ({width} px): guarded vs raw {same:.3}, different people up to {different:.3}",
+                e.name()
+            );
+            // The large faces (from 28 px), where a raw face is recognisable at all.
+            if *width >= 28 {
+                assert!(same < different, "{} {person} ({width} px): {same} >= {different}", e.name());
+            }
+        }
+    }
+    // The faces found: at least the eight pasted (the scene has none of its own).
+    assert!(checked.faces >= PASTED.len(), "{} faces", checked.faces);
+}

@@ -12,9 +12,11 @@ use campro_eval::guard::{FaceGuard, GuardedEnhancer, Hide};
 use rayon::prelude::*;
 use std::path::Path;
 
-/// Largest image the enhancer runs on (pixels, 3840 x 2160): its activations take about
-/// 200 bytes a pixel at the recommended size.
-pub const MAX_ENHANCE_PIXELS: u64 = 3840 * 2160;
+/// Largest image the enhancer runs on (pixels, 4096 x 3072: a 12-megapixel phone photo,
+/// 4032 x 3024, fits): at [`campro_eval::enhance::Scale::Auto`] its network runs at a
+/// quarter of the resolution there, and what it holds at full resolution is
+/// [`campro_eval::enhance::WORK_BYTES_PER_PIXEL`].
+pub const MAX_ENHANCE_PIXELS: u64 = 4096 * 3072;
 
 /// What `simulate` does to a frame: the camera (exact, on every core), then, with
 /// `--enhance`, the preset's enhancer (tract, one thread a frame).
@@ -93,6 +95,16 @@ pub const GREY_ALLOWED: &str =
     "--allow-grey: grey input written; this preset is not rated for grey, so the output is not protected against a restoration that knows the camera";
 
 impl<'p> Capture<'_, 'p> {
+    /// Bytes a pixel this capture holds besides the pipeline's (the enhancer's), for the
+    /// memory budget images are read under.
+    pub fn work_per_pixel(&self) -> u64 {
+        if self.enhancer.is_some() {
+            campro_eval::enhance::WORK_BYTES_PER_PIXEL
+        } else {
+            0
+        }
+    }
+
     /// The reference path for 16-bit input.
     pub fn prepared16(&self) -> &Prepared<'p> {
         self.p16.get_or_init(|| Prepared::new(self.p8.params(), Depth::Sixteen))
@@ -130,7 +142,7 @@ impl<'p> Capture<'_, 'p> {
 pub fn enhance(e: &GuardedEnhancer, captured: &image::RgbImage) -> Result<image::RgbImage> {
     let (w, h) = captured.dimensions();
     if w as u64 * h as u64 > MAX_ENHANCE_PIXELS {
-        bail!("--enhance: the image is {w} x {h}; the enhancer runs on at most 3840 x 2160 pixels");
+        bail!("--enhance: the image is {w} x {h}; the enhancer runs on at most 4096 x 3072 pixels (12.6 megapixels)");
     }
     Ok(e.enhance(captured)?)
 }

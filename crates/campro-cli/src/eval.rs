@@ -263,6 +263,9 @@ fn run_privacy(
     Ok(r)
 }
 
+/// A parameter set's network on a captured image.
+type NetworkFn = dyn Fn(&RgbImage) -> campro_eval::Result<RgbImage> + Send + Sync;
+
 /// `conds` with a "NAME SUFFIX" condition after each parameter set's: its network `which`
 /// on the set's captured images (errors recorded in `failures`).
 fn with_networks(
@@ -280,7 +283,7 @@ fn with_networks(
         let net =
             crate::capture::network_of(path, &crate::load_params(path)?, which)?.with_scale(c.scale.enhance_scale);
         // What a person is shown passes the face guard; the attacker's restorer does not.
-        let net: Box<dyn Fn(&RgbImage) -> campro_eval::Result<RgbImage> + Send + Sync> = match which {
+        let net: Box<NetworkFn> = match which {
             crate::capture::Network::Enhancer => {
                 let guarded = campro_eval::guard::GuardedEnhancer {
                     enhancer: net,

@@ -160,7 +160,7 @@ fn one(
     warn: &dyn Fn(&str),
 ) -> Result<Value> {
     let raw = {
-        let (img, _lease) = campro_eval::image_file::read(input, budget, warn)?;
+        let (img, _lease) = campro_eval::image_file::read(input, budget, 0, warn)?;
         img.into_rgb8()
     };
     let mut protected = RgbImage::new(raw.width(), raw.height());

@@ -18,6 +18,14 @@ pub const INPUT: &str = "captured";
 pub const OUTPUT: &str = "enhanced";
 /// ONNX metadata key: height and width must be multiples of its value (a power of two).
 pub const MULTIPLE_KEY: &str = "campro.multiple";
+/// Bytes a pixel an enhancement holds at full resolution at [`Scale::Auto`] on images
+/// from 2560 x 1440 (the network at a quarter of each side), the face guard included,
+/// beyond what the memory budget already counts for the pipeline and the decoded image
+/// (21 bytes a pixel for 8-bit RGB): `simulate --enhance --jobs 1` on one 4032 x 3024
+/// photo peaked at 582 MB resident (47.7 bytes a pixel all told; 83 MB without
+/// `--enhance`), so 30 more counts 621 MB for it. Images are read under the budget with
+/// it ([`crate::image_file::read`]): two such photos are not enhanced at once.
+pub const WORK_BYTES_PER_PIXEL: u64 = 30;
 /// Largest enhancer file read (bytes): the recommended ones are at most 2 MB.
 pub const MAX_FILE: u64 = 64 << 20;
 

@@ -88,17 +88,29 @@ fn image_error(path: &Path, message: impl Into<String>) -> EvalError {
     EvalError::Image { path: path.into(), message: message.into() }
 }
 
-/// Peak bytes decoding a `w` x `h` image of `decoded` bytes holds (checked, saturating).
-pub fn peak_bytes(w: u32, h: u32, decoded: u64) -> u64 {
-    (w as u64).saturating_mul(h as u64).saturating_mul(PEAK_BYTES_PER_PIXEL).saturating_add(decoded).max(1)
+/// Peak bytes a `w` x `h` image of `decoded` bytes holds while it is processed: the
+/// pipeline's [`PEAK_BYTES_PER_PIXEL`] and the caller's own `work` bytes a pixel (the
+/// enhancer's, [`crate::enhance::WORK_BYTES_PER_PIXEL`]), checked, saturating.
+pub fn peak_bytes(w: u32, h: u32, decoded: u64, work: u64) -> u64 {
+    (w as u64)
+        .saturating_mul(h as u64)
+        .saturating_mul(PEAK_BYTES_PER_PIXEL.saturating_add(work))
+        .saturating_add(decoded)
+        .max(1)
 }
 
-/// Reads and decodes the image file at `path`, its memory taken from `budget` and held
-/// until the returned lease drops. `warn` hears what is kept from the user: frames past the
-/// first, a dropped alpha channel, a truncated JPEG.
-pub fn read<'b>(path: &Path, budget: &'b Budget, warn: &dyn Fn(&str)) -> Result<(image::DynamicImage, Lease<'b>)> {
+/// Reads and decodes the image file at `path`, its memory (with `work` bytes a pixel
+/// that the caller will hold besides the pipeline) taken from `budget` and held until the
+/// returned lease drops. `warn` hears what is kept from the user: frames past the first, a
+/// dropped alpha channel, a truncated JPEG.
+pub fn read<'b>(
+    path: &Path,
+    budget: &'b Budget,
+    work: u64,
+    warn: &dyn Fn(&str),
+) -> Result<(image::DynamicImage, Lease<'b>)> {
     let bytes = campro::file::read_capped(path, MAX_FILE_BYTES, "an image")?;
-    decode(path, &bytes, budget, warn)
+    decode(path, &bytes, budget, work, warn)
 }
 
 /// [`read`] on bytes already read (`path` names them in errors).
@@ -106,6 +118,7 @@ pub fn decode<'b>(
     path: &Path,
     bytes: &[u8],
     budget: &'b Budget,
+    work: u64,
     warn: &dyn Fn(&str),
 ) -> Result<(image::DynamicImage, Lease<'b>)> {
     use image::ImageDecoder;
@@ -123,7 +136,7 @@ pub fn decode<'b>(
     reader.limits(header_limits);
     let mut decoder = reader.into_decoder().map_err(|e| image_error(path, header_message(&e)))?;
     let (w, h) = decoder.dimensions();
-    let need = peak_bytes(w, h, decoder.total_bytes());
+    let need = peak_bytes(w, h, decoder.total_bytes(), work);
     if need > budget.total() {
         return Err(image_error(
             path,
@@ -249,7 +262,7 @@ mod tests {
     fn a_small_image_is_read_and_its_memory_given_back() {
         let b = Budget::new(1 << 20);
         let bytes = png(16, 8, 2, 8, &[], None);
-        let (img, lease) = decode(Path::new("t.png"), &bytes, &b, &no_warn).unwrap();
+        let (img, lease) = decode(Path::new("t.png"), &bytes, &b, 0, &no_warn).unwrap();
         assert_eq!((img.width(), img.height()), (16, 8));
         // 16 x 8 pixels: 18 bytes each plus the 384 decoded bytes.
         assert_eq!(lease.bytes(), 16 * 8 * 18 + 384);
@@ -263,12 +276,12 @@ mod tests {
         // A 1-byte-per-pixel grey image and an 8-byte RGBA16 one of the same size: both hold
         // the pipeline's RGB16 buffers, so both cost 18 bytes a pixel beside their own.
         let b = Budget::new(64 << 20);
-        let (_, grey) = decode(Path::new("g.png"), &png(100, 10, 0, 8, &[], None), &b, &no_warn).unwrap();
+        let (_, grey) = decode(Path::new("g.png"), &png(100, 10, 0, 8, &[], None), &b, 0, &no_warn).unwrap();
         assert_eq!(grey.bytes(), 1000 * 18 + 1000);
         drop(grey);
         let warned = std::cell::RefCell::new(Vec::new());
         let w = |m: &str| warned.borrow_mut().push(m.to_string());
-        let (_, deep) = decode(Path::new("d.png"), &png(100, 10, 6, 16, &[], None), &b, &w).unwrap();
+        let (_, deep) = decode(Path::new("d.png"), &png(100, 10, 6, 16, &[], None), &b, 0, &w).unwrap();
         assert_eq!(deep.bytes(), 1000 * 18 + 8000);
         assert!(warned.borrow()[0].contains("alpha"), "{:?}", warned.borrow());
     }
@@ -279,12 +292,12 @@ mod tests {
         let bytes = png(14000, 14000, 0, 8, &[], Some(1));
         assert!(bytes.len() < 100_000);
         let b = Budget::new(DECODE_BUDGET);
-        let e = decode(Path::new("bomb.png"), &bytes, &b, &no_warn).err().unwrap().to_string();
+        let e = decode(Path::new("bomb.png"), &bytes, &b, 0, &no_warn).err().unwrap().to_string();
         assert!(e.contains("14000 x 14000") && e.contains("limit is 768 MiB"), "{e}");
         assert_eq!(b.free(), DECODE_BUDGET, "nothing taken");
         // The PNG's own limit: 2^31 - 1 on each side, refused with a plain line, no abort.
         let bytes = png(i32::MAX as u32, i32::MAX as u32, 2, 8, &[], Some(0));
-        let e = decode(Path::new("huge.png"), &bytes, &b, &no_warn).err().unwrap().to_string();
+        let e = decode(Path::new("huge.png"), &bytes, &b, 0, &no_warn).err().unwrap().to_string();
         assert!(e.starts_with("image huge.png: ") && !e.contains("panicked"), "{e}");
     }
 
@@ -309,7 +322,7 @@ mod tests {
         assert!(bytes.len() < 4_000_000, "{}", bytes.len());
         let before = peak_kib();
         let budget = Budget::new(DECODE_BUDGET);
-        let r = decode(Path::new("icc.png"), &bytes, &budget, &no_warn);
+        let r = decode(Path::new("icc.png"), &bytes, &budget, 0, &no_warn);
         if let Err(e) = &r {
             assert!(e.to_string().starts_with("image icc.png: "), "{e}");
         }
@@ -326,10 +339,10 @@ mod tests {
         let warned = std::cell::RefCell::new(Vec::<String>::new());
         let w = |m: &str| warned.borrow_mut().push(m.to_string());
         let b = Budget::new(DECODE_BUDGET);
-        decode(Path::new("ok.jpg"), &jpg, &b, &w).unwrap();
+        decode(Path::new("ok.jpg"), &jpg, &b, 0, &w).unwrap();
         assert!(warned.borrow().is_empty());
         let cut = &jpg[..jpg.len() * 2 / 3];
-        let _ = decode(Path::new("cut.jpg"), cut, &b, &w);
+        let _ = decode(Path::new("cut.jpg"), cut, &b, 0, &w);
         assert!(warned.borrow().iter().any(|m| m.contains("truncated")), "{:?}", warned.borrow());
     }
 
@@ -339,11 +352,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let fifo = dir.path().join("x.png");
         assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
-        let e = read(&fifo, Budget::global(), &no_warn).err().unwrap().to_string();
+        let e = read(&fifo, Budget::global(), 0, &no_warn).err().unwrap().to_string();
         assert!(e.ends_with("is a FIFO; only regular files are read"), "{e}");
         let link = dir.path().join("random.png");
         std::os::unix::fs::symlink("/dev/urandom", &link).unwrap();
-        let e = read(&link, Budget::global(), &no_warn).err().unwrap().to_string();
+        let e = read(&link, Budget::global(), 0, &no_warn).err().unwrap().to_string();
         assert!(e.ends_with("is a device; only regular files are read"), "{e}");
     }
 
@@ -355,5 +368,15 @@ mod tests {
         assert_eq!(b.free(), 4);
         drop(a);
         assert_eq!(b.free(), 10);
+    }
+
+    #[test]
+    fn a_phone_photo_is_enhanced_under_the_budget_one_at_a_time() {
+        // A 12-megapixel 8-bit photo with the enhancer's work fits the budget, two do not:
+        // they wait for each other instead of adding up.
+        let one = peak_bytes(4032, 3024, 4032 * 3024 * 3, crate::enhance::WORK_BYTES_PER_PIXEL);
+        assert!(one <= DECODE_BUDGET && 2 * one > DECODE_BUDGET, "{one}");
+        // Each pixel counts the pipeline's bytes and the caller's.
+        assert_eq!(peak_bytes(10, 10, 300, 30), 10 * 10 * (PEAK_BYTES_PER_PIXEL + 30) + 300);
     }
 }

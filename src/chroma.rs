@@ -10,10 +10,14 @@
 //!
 //! [`measure`]: pixels are put in 64 bins of BT.601 luma (`(77 R + 150 G + 29 B) >> 8`, four
 //! codes a bin); the spread is the root-mean-square distance, in 8-bit codes, of each
-//! pixel's (R, G, B) from the mean colour of its bin. A grey image has at most
-//! `sqrt(3 · 1.25)` = 1.94 (the codes within a bin), a tinted monochrome one about as
+//! pixel's (R, G, B) from the mean colour of its bin, the squares summed over the bins
+//! and divided by the pixels less the bins used (the pooled within-bin variance, unbiased:
+//! a bin of one pixel says nothing about the spread). A grey image spread evenly over its
+//! codes has `sqrt(5)` = 2.24 (four codes a bin: squared deviations 5 a channel, over pooled over
+//! 256 − 64 degrees of freedom: 3 · 5 · 64 / 192), a tinted monochrome one about as
 //! much; colour photos measured 6.9 to 40 (200 LFW photos, 1st percentile 8.2; 300 COCO
-//! scenes, 5th percentile 3.1: COCO holds black-and-white photos).
+//! scenes, 5th percentile 3.1: COCO holds black-and-white photos). Under [`MIN_PIXELS`]
+//! pixels a picture is too small to hold a face and is not called grey.
 
 /// Spread (8-bit codes, RMS) below which an image counts as grey ([`is_grey`]): twice a
 /// pure grey image's most, under every colour photo of LFW measured (6.9 and up).
@@ -22,7 +26,10 @@ pub const GREY_SPREAD: f64 = 4.0;
 /// Most pixels [`spread`] reads: larger images are read at an even stride.
 pub const MAX_SAMPLES: usize = 1 << 18;
 
-/// Luma bins of [`spread`].
+/// Fewest pixels a picture must have to be called grey ([`Chroma::is_grey`]).
+pub const MIN_PIXELS: usize = 256;
+
+/// Luma bins of [`measure`].
 const BINS: usize = 64;
 
 /// Standard deviation of luma (8-bit codes) under which a picture is flat: it shows no
@@ -36,13 +43,16 @@ pub struct Chroma {
     pub spread: f64,
     /// The standard deviation of luma, 8-bit codes: how much scene there is.
     pub detail: f64,
+    /// Pixels read.
+    pub pixels: usize,
 }
 
 impl Chroma {
-    /// Grey or near grey: a scene ([`Chroma::detail`] at least [`FLAT_DETAIL`]) whose
-    /// colours spread less than [`GREY_SPREAD`] from a function of brightness.
+    /// Grey or near grey: a scene (at least [`MIN_PIXELS`] pixels, [`Chroma::detail`] at
+    /// least [`FLAT_DETAIL`]) whose colours spread less than [`GREY_SPREAD`] from a
+    /// function of brightness.
     pub fn is_grey(&self) -> bool {
-        self.spread < GREY_SPREAD && self.detail >= FLAT_DETAIL
+        self.pixels >= MIN_PIXELS && self.spread < GREY_SPREAD && self.detail >= FLAT_DETAIL
     }
 }
 
@@ -52,7 +62,7 @@ impl Chroma {
 pub fn measure(rgb: &[u8]) -> Chroma {
     let n = rgb.len() / 3;
     if n == 0 {
-        return Chroma { spread: 0.0, detail: 0.0 };
+        return Chroma { spread: 0.0, detail: 0.0, pixels: 0 };
     }
     let stride = n.div_ceil(MAX_SAMPLES);
     let mut count = [0u64; BINS];
@@ -72,12 +82,17 @@ pub fn measure(rgb: &[u8]) -> Chroma {
         }
     }
     let total = count.iter().sum::<u64>() as f64;
+    let used = count.iter().filter(|&&c| c > 0).count() as f64;
     let within: f64 = (0..BINS)
         .filter(|&b| count[b] > 0)
         .map(|b| (0..3).map(|c| squares[b][c] - sum[b][c] * sum[b][c] / count[b] as f64).sum::<f64>())
         .sum();
     let mean = luma_sum / total;
-    Chroma { spread: (within.max(0.0) / total).sqrt(), detail: (luma_squares / total - mean * mean).max(0.0).sqrt() }
+    Chroma {
+        spread: (within.max(0.0) / (total - used).max(1.0)).sqrt(),
+        detail: (luma_squares / total - mean * mean).max(0.0).sqrt(),
+        pixels: total as usize,
+    }
 }
 
 #[cfg(test)]
@@ -86,11 +101,12 @@ mod tests {
 
     #[test]
     fn every_grey_code_once_has_the_bins_own_spread() {
-        // Each bin holds four consecutive grey codes: per channel the variance of
-        // {0, 1, 2, 3} is 1.25, over three channels 3.75.
+        // Each bin holds four consecutive grey codes: per channel the squared deviations of
+        // {0, 1, 2, 3} from 1.5 sum to 5; 3 channels x 64 bins over 256 - 64 degrees of
+        // freedom: 5.
         let rgb: Vec<u8> = (0..=255u8).flat_map(|v| [v, v, v]).collect();
         let m = measure(&rgb);
-        assert!((m.spread - 3.75f64.sqrt()).abs() < 1e-12, "{m:?}");
+        assert!((m.spread - 5f64.sqrt()).abs() < 1e-12, "{m:?}");
         assert!(m.is_grey());
     }
 
@@ -102,19 +118,20 @@ mod tests {
     }
 
     #[test]
-    fn two_colours_of_one_brightness_are_half_their_distance_apart() {
-        // Luma 115 and 113 (bin 28): each pixel is |A - B| / 2 from their mean.
+    fn two_colours_of_one_brightness_spread_by_their_distance() {
+        // Luma 115 and 113 (bin 28), 128 pixels of each: each pixel is |A - B| / 2 from
+        // their mean; 256 squares of d² / 4 over 256 - 1 degrees of freedom.
         let (a, b) = ([150u8, 100, 100], [255u8, 62, 0]);
         let d2: f64 = (0..3).map(|c| (a[c] as f64 - b[c] as f64).powi(2)).sum();
-        let rgb = [a, b].concat();
-        assert!((measure(&rgb).spread - d2.sqrt() / 2.0).abs() < 1e-9);
+        let rgb = [a, b].concat().repeat(128);
+        assert!((measure(&rgb).spread - (256.0 * d2 / 4.0 / 255.0).sqrt()).abs() < 1e-9);
         assert!(!measure(&rgb).is_grey());
     }
 
     #[test]
     fn large_images_are_sampled_and_empty_ones_are_zero() {
-        assert_eq!(measure(&[]), Chroma { spread: 0.0, detail: 0.0 });
-        assert_eq!(measure(&[1, 2]), Chroma { spread: 0.0, detail: 0.0 });
+        assert_eq!(measure(&[]), Chroma { spread: 0.0, detail: 0.0, pixels: 0 });
+        assert_eq!(measure(&[1, 2]), Chroma { spread: 0.0, detail: 0.0, pixels: 0 });
         // 4 × MAX_SAMPLES pixels alternating two colours of one bin: the stride (4) reads
         // only the even ones, all of the first colour.
         let rgb: Vec<u8> =
@@ -125,12 +142,20 @@ mod tests {
     #[test]
     fn a_flat_fill_is_no_scene_whatever_its_colour() {
         // One colour: spread and detail 0, so not grey (nothing to protect or restore).
-        let flat = [[100u8, 150, 200]; 64].concat();
-        assert_eq!(measure(&flat), Chroma { spread: 0.0, detail: 0.0 });
+        let flat = [[100u8, 150, 200]; 512].concat();
+        assert_eq!(measure(&flat), Chroma { spread: 0.0, detail: 0.0, pixels: 512 });
         assert!(!measure(&flat).is_grey());
         // Two grey levels, 0 and 255, half each: luma 0 and 255, standard deviation 127.5.
-        let two = [[0u8; 3], [255u8; 3]].concat().repeat(8);
+        let two = [[0u8; 3], [255u8; 3]].concat().repeat(128);
         assert!((measure(&two).detail - 127.5).abs() < 1e-9);
         assert!(measure(&two).is_grey());
+    }
+
+    #[test]
+    fn a_few_pixels_are_not_called_grey() {
+        // Twelve pixels along a tinted line: too few to hold a face.
+        let line: Vec<u8> = (0..36).map(|i| (i * 7 % 256) as u8).collect();
+        assert_eq!(measure(&line).pixels, 12);
+        assert!(!measure(&line).is_grey());
     }
 }

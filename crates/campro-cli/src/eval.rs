@@ -2,13 +2,12 @@
 //! (campro-eval), with CamPro parameter sets run through the exact 8-bit pipeline.
 
 use crate::args::{AttackArg, Common, EnrolArg, EvalCmd, PrivacyArgs, UtilityArgs};
+use crate::models::{load, manifest};
 use anyhow::{anyhow, bail, Context, Result};
 use campro::pipeline::fast::Exact8;
 use campro::Params;
 use campro_eval::baselines::Baseline;
 use campro_eval::face::{Embedder, FaceDetector};
-use campro_eval::manifest::Manifest;
-use campro_eval::model::Model;
 use campro_eval::person::PersonDetector;
 use campro_eval::privacy::{Enrolment, FaceModels, PrivacyOptions};
 use campro_eval::scene::Scene;
@@ -17,17 +16,6 @@ use campro_eval::{data, privacy, quality, report, utility, Condition};
 use image::RgbImage;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-
-/// The shipped manifests (files resolved against `--models`).
-/// The bundled YOLOX-Nano manifest (also the template of a fine-tuned detector's).
-pub const YOLOX_MANIFEST: &str = include_str!("../../../crates/campro-eval/models/yolox_nano.json");
-
-const BUNDLED: [(&str, &str); 4] = [
-    ("yunet", include_str!("../../../crates/campro-eval/models/yunet.json")),
-    ("yolox-nano", YOLOX_MANIFEST),
-    ("faceplugin", include_str!("../../../crates/campro-eval/models/faceplugin.json")),
-    ("mobilefacenet-casia", include_str!("../../../crates/campro-eval/models/mobilefacenet_casia.json")),
-];
 
 /// The first error an enhancer met inside an evaluation (protections cannot fail, so an
 /// enhanced condition records it here and passes the captured image on; the evaluation is
@@ -112,23 +100,6 @@ pub fn params_condition(name: String, p: Params) -> Condition {
         fast.run(img.as_raw(), &mut out);
         out
     })
-}
-
-fn manifest(name_or_path: &str, models: &Path) -> Result<Manifest> {
-    if let Some((n, text)) = BUNDLED.iter().find(|(n, _)| *n == name_or_path) {
-        return Ok(Manifest::parse(text, Path::new(&format!("bundled manifest {n}")), models)?);
-    }
-    let p = Path::new(name_or_path);
-    if !p.is_file() {
-        bail!("{name_or_path:?} is neither a bundled model ({}) nor a manifest file", BUNDLED.map(|b| b.0).join(", "));
-    }
-    Ok(Manifest::load(p, models)?)
-}
-
-pub(crate) fn load(name: &str, models: &Path) -> Result<Model> {
-    let m = manifest(name, models)?;
-    eprintln!("loading {} ({})", m.name, crate::shown(&m.file));
-    Ok(Model::load(m)?)
 }
 
 fn face_detector(a: &PrivacyArgs, models: &Path) -> Result<FaceDetector> {

@@ -279,19 +279,19 @@ pub fn run(a: InspectArgs) -> Result<()> {
             crate::shown(&models)
         );
     }
-    let people = crate::eval::load(&person_detector, &models)?;
+    let people = crate::models::load(&person_detector, &models)?;
     let own = if own_detector {
         let own = crate::eval::own_detectors(std::slice::from_ref(&params))?;
         let manifest = own.values().next().ok_or_else(|| {
             anyhow!("--own-detector: {} names no fine-tuned detector (provenance.detector)", crate::shown(&params))
         })?;
-        let m = crate::eval::load(&manifest.to_string_lossy(), &models)?;
+        let m = crate::models::load(&manifest.to_string_lossy(), &models)?;
         Some((m.manifest.name.clone(), campro_eval::person::PersonDetector::new(m)?))
     } else {
         None
     };
     let det = Detectors {
-        faces: campro_eval::face::FaceDetector::new(crate::eval::load("yunet", &models)?)?,
+        faces: campro_eval::face::FaceDetector::new(crate::models::load("yunet", &models)?)?,
         people: (people.manifest.name.clone(), campro_eval::person::PersonDetector::new(people)?),
         own,
         confidence: confidence as f32,

@@ -10,6 +10,7 @@ mod demo;
 mod eval;
 mod inspect;
 mod man;
+mod models;
 mod output;
 mod params;
 mod presets;

@@ -4,7 +4,7 @@
 use crate::args::{
     BenchEnhancerArgs, BenchTrainArgs, FinetuneDetectorArgs, RunFiles, StepArg, TrainArgs, TrainEnhancerArgs,
 };
-use crate::{eval, load_params, write_atomic};
+use crate::{load_params, write_atomic};
 use anyhow::{bail, Result};
 use campro_eval::table::{Cell, Column, Table};
 use campro_nn::yolox::Yolox;
@@ -134,7 +134,7 @@ fn write_detector(det: &Yolox, params_path: &Path, name: &str, force: bool) -> R
         }
     }
     det.save_onnx(&onnx)?;
-    let mut m: serde_json::Value = serde_json::from_str(eval::YOLOX_MANIFEST)?;
+    let mut m: serde_json::Value = serde_json::from_str(crate::models::YOLOX_MANIFEST)?;
     let file = onnx.file_name().expect("a file name").to_string_lossy().into_owned();
     m["name"] = format!("yolox-nano fine-tuned ({name})").into();
     m["file"] = file.clone().into();

@@ -148,7 +148,7 @@ fn run_privacy(
     a: &PrivacyArgs,
     conds: &[Condition],
     failures: &Failures,
-) -> Result<privacy::PrivacyReport> {
+) -> Result<Vec<privacy::PrivacyReport>> {
     let start = std::time::Instant::now();
     let retrain = a.attacks.contains(&AttackArg::Retrain);
     if retrain && a.identities.is_none() {
@@ -230,8 +230,7 @@ fn run_privacy(
     if reports.len() > 1 {
         report::write_conditions(&reports, &c.output)?;
     }
-    let r = reports.into_iter().next().expect("one scene at least");
-    Ok(r)
+    Ok(reports)
 }
 
 /// A parameter set's network on a captured image.
@@ -411,7 +410,9 @@ pub fn run(cmd: EvalCmd) -> Result<()> {
     common.check_output()?;
     let f = Failures::default();
     match cmd {
-        EvalCmd::Privacy { common, p } => run_privacy(&common, &p, &common.conditions(&f)?, &f).and(f.check()),
+        EvalCmd::Privacy { common, p } => {
+            run_privacy(&common, &p, &common.conditions(&f)?, &f).map(drop).and(f.check())
+        }
         EvalCmd::Utility { common, u } => run_utility(&common, &u, &common.conditions(&f)?).and(f.check()),
         EvalCmd::Quality { common, images, held_out } => {
             run_quality(&common, images.as_deref(), held_out, &common.conditions(&f)?).and(f.check())

@@ -360,8 +360,10 @@ pub fn tradeoff(p: &PrivacyReport, u: &UtilityReport) -> Vec<(String, f64, f64)>
 }
 
 /// Writes report.md (all three evaluations, rendered from the reports themselves) and
-/// tradeoff.svg.
-pub fn write_summary(p: &PrivacyReport, u: &UtilityReport, q: &QualityReport, dir: &Path) -> Result<()> {
+/// tradeoff.svg. `privacy` holds one report a condition (colour first): the trade-off and
+/// the privacy section are the first's; with more, each image type's worst over them follows.
+pub fn write_summary(privacy: &[PrivacyReport], u: &UtilityReport, q: &QualityReport, dir: &Path) -> Result<()> {
+    let p = privacy.first().ok_or_else(|| EvalError::Invalid("report: no privacy report".into()))?;
     let points = tradeoff(p, u);
     let series: Vec<Series> =
         points.iter().map(|(n, x, y)| Series { name: n.clone(), points: vec![(100.0 * x, *y)] }).collect();
@@ -385,6 +387,13 @@ pub fn write_summary(p: &PrivacyReport, u: &UtilityReport, q: &QualityReport, di
     }
     let mut s = format!("# campro evaluation\n\n## Privacy vs utility\n\n{}", t.markdown());
     s.push_str("\n![trade-off](tradeoff.svg)\n\n");
+    if privacy.len() > 1 {
+        let _ = writeln!(
+            s,
+            "## Privacy under each condition\n\nEach image type's worst top-1 (%) over models, classifiers and orders ([conditions.md](conditions.md)).\n\n{}",
+            conditions_table(privacy).markdown()
+        );
+    }
     for part in [privacy_markdown(p), utility_markdown(u), quality_markdown(q)] {
         s.push_str(&part.replacen("# ", "## ", 1).replace("\n## Verification", "\n### Verification"));
         s.push('\n');

@@ -13,7 +13,9 @@
 //! [`NATIVE_MIN_FACE`]-pixel one, then halved level after level until the whole image fits
 //! one input. Each level is cut into input-sized tiles overlapping by [`OVERLAP`] pixels,
 //! so every face up to that size lies whole in one tile, and larger ones are whole at a
-//! later level (where they are half as big). Edges: tiles are placed inside the level
+//! later level (where they are half as big); so a level keeps only its finds up to that
+//! size (the last level, the whole image, keeps every size): larger finds at the fine
+//! levels were textures, not faces. Edges: tiles are placed inside the level
 //! image; the last tile of a row or column is aligned to its far edge, and a level smaller
 //! than the input is padded with black (the detector's own letterbox).
 
@@ -124,10 +126,16 @@ impl FaceGuard {
                 )
                 .to_image();
                 let inv = (1.0 / s) as f32;
+                // A level answers for faces up to OVERLAP pixels (whole in one of its
+                // tiles); bigger ones are the next level's, where they are half as big, and
+                // bigger finds here were textures (300-pixel "faces" on enhanced walls).
+                // The last level, the whole image, answers for every size.
+                let last = l + 1 == levels.len();
                 Ok(self
                     .detector
                     .detect_scaled(&tile, 1.0, THRESHOLD)?
                     .into_iter()
+                    .filter(|f| last || (f.bbox[2] - f.bbox[0]).max(f.bbox[3] - f.bbox[1]) <= OVERLAP as f32)
                     .map(|f| Face {
                         bbox: [
                             (f.bbox[0] + x as f32) * inv,

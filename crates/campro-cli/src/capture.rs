@@ -67,9 +67,7 @@ impl GreyPolicy {
         self.allowed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         Ok(true)
     }
-}
 
-impl GreyPolicy {
     /// [`Self::check`] on 16-bit RGB pixels (their high bytes, sampled).
     pub fn check16(&self, rgb: &[u16]) -> Result<bool> {
         if self.rated {

@@ -66,15 +66,19 @@ pub fn list(json: bool) -> Result<()> {
     let mut rows = Vec::new();
     for p in PRESETS {
         let params = campro::Params::from_json(p.json)?;
-        rows.push((p.name, p.enhancer.is_some(), params.description));
+        rows.push((p.name, p.enhancer.is_some(), params.rated_for_grey(), params.description));
     }
     if json {
-        let v: Vec<_> =
-            rows.iter().map(|(n, e, d)| serde_json::json!({ "name": n, "enhancer": e, "description": d })).collect();
+        let v: Vec<_> = rows
+            .iter()
+            .map(|(n, e, g, d)| serde_json::json!({ "name": n, "enhancer": e, "ratedForGrey": g, "description": d }))
+            .collect();
         crate::say!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        for (n, e, d) in rows {
-            crate::say!("{n}{}\n    {}", if e { " (with enhancer)" } else { "" }, crate::escape(&d));
+        for (n, e, g, d) in rows {
+            let grey =
+                if g { "" } else { "\n    Not rated for grey input: simulate refuses grey pictures (--allow-grey)." };
+            crate::say!("{n}{}\n    {}{grey}", if e { " (with enhancer)" } else { "" }, crate::escape(&d));
         }
     }
     Ok(())

@@ -87,6 +87,9 @@ fn presets_are_listed_with_their_line_and_unknown_names_list_them() {
     let v: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
     assert_eq!(v.as_array().unwrap().len(), 8);
     assert!(v[0]["description"].as_str().is_some_and(|d| !d.is_empty()));
+    // No bundled preset is rated for grey input yet, and each says so.
+    assert!(v.as_array().unwrap().iter().all(|p| p["ratedForGrey"] == false), "{v}");
+    assert_eq!(text.matches("Not rated for grey input").count(), 8, "{text}");
     fails_with(
         campro().args(["validate", "campro-omega-9"]),
         "not a bundled preset (campro presets lists them: campro-omega-0.5",

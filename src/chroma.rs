@@ -27,6 +27,13 @@ pub const GREY_SPREAD: f64 = 4.0;
 /// frame, measured on every frame, at every 32nd pixel).
 pub const MAX_SAMPLES: usize = 1 << 16;
 
+/// BT.601 luma of an 8-bit RGB pixel in integers, `(77 R + 150 G + 29 B) >> 8` (0..=255):
+/// what [`measure`] bins by, and the grey a monochrome camera would record.
+#[inline]
+pub fn luma(p: [u8; 3]) -> u8 {
+    ((77 * p[0] as u32 + 150 * p[1] as u32 + 29 * p[2] as u32) >> 8) as u8
+}
+
 /// Fewest pixels a picture must have to be called grey ([`Chroma::is_grey`]).
 pub const MIN_PIXELS: usize = 256;
 
@@ -71,7 +78,7 @@ pub fn measure(rgb: &[u8]) -> Chroma {
     let mut squares = [[0f64; 3]; BINS];
     let (mut luma_sum, mut luma_squares) = (0f64, 0f64);
     for p in rgb.chunks_exact(3).step_by(stride) {
-        let luma = (77 * p[0] as u32 + 150 * p[1] as u32 + 29 * p[2] as u32) >> 8;
+        let luma = luma([p[0], p[1], p[2]]) as u32;
         luma_sum += luma as f64;
         luma_squares += (luma * luma) as f64;
         let b = luma as usize / (256 / BINS);

@@ -17,6 +17,13 @@ fn grey(dir: &Path) -> std::path::PathBuf {
     p
 }
 
+/// A colour gradient (red across, green down).
+fn colour(dir: &Path) -> std::path::PathBuf {
+    let p = dir.join("c.png");
+    image::RgbImage::from_fn(32, 24, |x, y| image::Rgb([(x * 7) as u8, (y * 9) as u8, 90])).save(&p).unwrap();
+    p
+}
+
 #[test]
 fn a_grey_picture_is_refused_by_a_preset_not_rated_for_grey() {
     let dir = tempfile::tempdir().unwrap();
@@ -75,16 +82,14 @@ fn a_grey_video_frame_is_refused_too() {
 #[test]
 fn a_colour_picture_is_not_called_grey() {
     let dir = tempfile::tempdir().unwrap();
-    let img = dir.path().join("c.png");
-    image::RgbImage::from_fn(32, 24, |x, y| image::Rgb([(x * 7) as u8, (y * 9) as u8, 90])).save(&img).unwrap();
+    let img = colour(dir.path());
     campro().arg("simulate").arg("campro-omega-0.5").arg(&img).arg("-o").arg(dir.path().join("out")).assert().success();
 }
 
 #[test]
 fn the_enhanced_view_is_not_shown_without_its_face_guard() {
     let dir = tempfile::tempdir().unwrap();
-    let img = dir.path().join("c.png");
-    image::RgbImage::from_fn(32, 24, |x, y| image::Rgb([(x * 7) as u8, (y * 9) as u8, 90])).save(&img).unwrap();
+    let img = colour(dir.path());
     std::fs::create_dir(dir.path().join("empty")).unwrap();
     let mut c = campro();
     c.arg("simulate").arg("campro-omega-0.5").arg(&img).arg("-o").arg(dir.path().join("out")).arg("--enhance");

@@ -13,8 +13,8 @@ pub enum Scene {
     /// The photos as they are.
     #[default]
     Colour,
-    /// Each pixel replaced by its BT.601 luma, `(77 R + 150 G + 29 B) >> 8`, in all three
-    /// channels (the luma [`campro::chroma`] bins by).
+    /// Each pixel replaced by its BT.601 luma ([`campro::chroma::luma`]) in all three
+    /// channels.
     Grey,
 }
 
@@ -37,9 +37,7 @@ impl Scene {
             Scene::Grey => {
                 let mut img = img;
                 for p in img.pixels_mut() {
-                    let [r, g, b] = p.0.map(u32::from);
-                    let v = ((77 * r + 150 * g + 29 * b) >> 8) as u8;
-                    *p = Rgb([v; 3]);
+                    *p = Rgb([campro::chroma::luma(p.0); 3]);
                 }
                 img
             }

@@ -183,6 +183,7 @@ fn run_privacy(
             EnrolArg::Raw => Enrolment::Raw,
             EnrolArg::Camera => Enrolment::Camera,
         },
+        backdrops: Some(a.backdrops.clone().unwrap_or_else(|| c.shared().join("data/coco-person"))),
         ..Default::default()
     };
     let mut scenes: Vec<Scene> = a.conditions.iter().map(|&c| c.into()).collect();

@@ -25,6 +25,7 @@ pub mod linear;
 pub mod manifest;
 pub mod model;
 pub mod person;
+pub mod place;
 pub mod plot;
 pub mod privacy;
 pub mod quality;

@@ -30,7 +30,9 @@ use crate::data::{read_rgb8, Lfw};
 use crate::error::{EvalError, Result};
 use crate::face::{central_face, cosine, Embedder, Face, FaceDetector};
 use crate::linear::{self, LinearOptions};
+use crate::place::Stage;
 use crate::scene::Scene;
+use image::RgbImage;
 use crate::Condition;
 use indicatif::{ProgressBar, ProgressStyle};
 use ndarray::Array2;
@@ -71,9 +73,11 @@ pub struct PrivacyOptions {
     pub pairs_per_fold: Option<usize>,
     /// How the adversary's gallery and classifier photos were taken.
     pub enrolment: Enrolment,
-    /// What the camera is pointed at: every photo (gallery, probes, pairs) is first made
-    /// this scene.
+    /// What the camera is pointed at ([`Scene`]).
     pub scene: Scene,
+    /// The COCO person folder whose held-out images the small and group scenes paste faces
+    /// into ([`crate::place::Stage`]); needed by those scenes only.
+    pub backdrops: Option<PathBuf>,
 }
 
 /// How the adversary enrolled its gallery (module docs).
@@ -102,6 +106,7 @@ impl Default for PrivacyOptions {
             pairs_per_fold: None,
             enrolment: Enrolment::Raw,
             scene: Scene::Colour,
+            backdrops: None,
         }
     }
 }
@@ -167,6 +172,9 @@ pub struct PrivacyReport {
     pub pairs_skipped_undetected: usize,
     pub identification: Vec<IdentRow>,
     pub verification: Vec<VerifRow>,
+    /// Pose only: the median turn of the probe photos ([`crate::place::turn`]: yaw in eye
+    /// distances, or twice the pitch ratio's offset; 0 frontal, about 0.5 in profile).
+    pub probe_turn: Option<f64>,
     pub seconds: f64,
 }
 
@@ -213,7 +221,21 @@ enum Need {
 
 /// Embeds one photo raw and, unless only the raw embedding is needed, under every
 /// condition. Returns None when the raw photo has no face.
-fn embed_photo(path: &Path, m: &FaceModels, conds: &[Condition], need: Need, scene: Scene) -> Result<Option<Record>> {
+///
+/// In a placed scene (`stage`: small, group) the camera sees the probe's face placed in
+/// another picture ([`crate::place`]): the raw condition is that picture unprotected, and
+/// the paper order aligns the protected picture on the placed face's raw landmarks (the
+/// attacker knows where the face is, as a tracker would), while end-to-end detects faces
+/// in the protected picture and takes the one on the placed face (box IoU ≥
+/// [`PLACED_IOU`]).
+fn embed_photo(
+    path: &Path,
+    m: &FaceModels,
+    conds: &[Condition],
+    need: Need,
+    scene: Scene,
+    stage: Option<&Stage>,
+) -> Result<Option<Record>> {
     let (conds, e2e) = match need {
         Need::Raw => (&[][..], false),
         Need::Paper => (conds, false),
@@ -223,8 +245,28 @@ fn embed_photo(path: &Path, m: &FaceModels, conds: &[Condition], need: Need, sce
     let Some(face) = central_face(&m.detector.detect(&img)?, img.width(), img.height()) else { return Ok(None) };
     let crops: Vec<_> = m.embedders.iter().map(|e| e.align(&img, &face.landmarks)).collect();
     let raw: Vec<Vec<f32>> = m.embedders.iter().zip(&crops).map(|(e, c)| e.embed(c)).collect::<Result<_>>()?;
+    let placed = match (stage, scene) {
+        (_, _) if conds.is_empty() => None,
+        (Some(st), Scene::Small) => Some(st.small(path, &img, &face)?),
+        (Some(st), Scene::Group) => Some(st.group(path, &img, &face, &m.detector)?),
+        (None, s) if s.placed() => {
+            return Err(EvalError::Invalid(format!("privacy: the {} condition needs its scenes", s.name())))
+        }
+        _ => None,
+    };
+    let embed_at = |pic: &RgbImage, lm: &[[f32; 2]; 5]| -> Result<Vec<Vec<f32>>> {
+        m.embedders.iter().map(|e| e.embed(&e.align(pic, lm))).collect()
+    };
     let mut prot = Vec::with_capacity(conds.len());
     for c in conds {
+        if let Some(pl) = &placed {
+            let pic = c.apply(&pl.image);
+            let paper = embed_at(&pic, &pl.face.landmarks)?;
+            let found = if e2e { on_placed(&m.detector.detect(&pic)?, &pl.face.bbox) } else { None };
+            let e2e = found.map(|f| embed_at(&pic, &f.landmarks)).transpose()?;
+            prot.push(Protected { paper, e2e });
+            continue;
+        }
         let Some(p) = &c.protect else {
             prot.push(Protected { paper: raw.clone(), e2e: Some(raw.clone()) });
             continue;
@@ -233,18 +275,28 @@ fn embed_photo(path: &Path, m: &FaceModels, conds: &[Condition], need: Need, sce
         let e2e = if e2e {
             let pimg = p(&img);
             let found: Option<Face> = central_face(&m.detector.detect(&pimg)?, pimg.width(), pimg.height());
-            match found {
-                Some(f) => {
-                    Some(m.embedders.iter().map(|e| e.embed(&e.align(&pimg, &f.landmarks))).collect::<Result<_>>()?)
-                }
-                None => None,
-            }
+            found.map(|f| embed_at(&pimg, &f.landmarks)).transpose()?
         } else {
             None
         };
         prot.push(Protected { paper, e2e });
     }
     Ok(Some(Record { raw, prot }))
+}
+
+/// The least box IoU with the placed face at which an end-to-end attacker's detection is
+/// taken to be that face.
+pub const PLACED_IOU: f32 = 0.3;
+
+/// Of `faces` found in a picture, the one that overlaps the placed face's box `at` most,
+/// if that is at least [`PLACED_IOU`].
+fn on_placed(faces: &[Face], at: &[f32; 4]) -> Option<Face> {
+    faces
+        .iter()
+        .map(|f| (crate::geometry::iou(f.bbox, *at), f))
+        .filter(|(o, _)| *o >= PLACED_IOU)
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, f)| *f)
 }
 
 /// A photo's embedding by model `mi` as the adversary enrolled it: raw (`None`) or through
@@ -311,8 +363,26 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
         ids.truncate(l);
         ids.sort();
     }
-    let pools: Vec<Vec<PathBuf>> =
-        ids.iter().map(|(_, v)| v.choose_multiple(&mut rng, o.pool.min(v.len())).cloned().collect()).collect();
+    // Pose: each identity's most frontal photo first (always the gallery), then its most
+    // turned ones (the probes); otherwise a seeded draw.
+    let mut probe_turn = None;
+    let pools: Vec<Vec<PathBuf>> = if o.scene == Scene::Pose {
+        let (pools, turn) = pose_pools(&ids, &models.detector, o.pool, &mut rng)?;
+        probe_turn = Some(turn);
+        pools
+    } else {
+        ids.iter().map(|(_, v)| v.choose_multiple(&mut rng, o.pool.min(v.len())).cloned().collect()).collect()
+    };
+    let stage = match (o.scene.placed(), &o.backdrops) {
+        (true, Some(dir)) => Some(Stage::new(dir, lfw, o.seed)?),
+        (true, None) => {
+            return Err(EvalError::Invalid(format!(
+                "privacy: the {} condition needs the COCO scenes (--backdrops or --shared)",
+                o.scene.name()
+            )))
+        }
+        (false, _) => None,
+    };
     // Distractors, drawn after the probed identities' pools so that those stay the same.
     let mut others: Vec<&Vec<PathBuf>> =
         lfw.people.iter().filter(|(n, v)| v.len() >= 2 && !ids.iter().any(|(m, _)| m == n)).map(|(_, v)| v).collect();
@@ -324,7 +394,9 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     let other_pools: Vec<Vec<PathBuf>> =
         others.iter().map(|v| v.choose_multiple(&mut rng, o.pool.min(v.len())).cloned().collect()).collect();
     // Verification pairs (optionally capped per fold and kind).
-    let (mut pairs, absent) = if o.verification { lfw.pairs()? } else { (Vec::new(), 0) };
+    // Pose changes which photos are probed, not the pairs: its verification would be colour's.
+    let verifying = o.verification && o.scene != Scene::Pose;
+    let (mut pairs, absent) = if verifying { lfw.pairs()? } else { (Vec::new(), 0) };
     if let Some(cap) = o.pairs_per_fold {
         let mut seen: HashMap<(usize, bool), usize> = HashMap::new();
         pairs.retain(|p| {
@@ -351,7 +423,7 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     let pb = progress(todo.len(), "privacy: embedding faces");
     let records: Mutex<HashMap<PathBuf, Record>> = Mutex::new(HashMap::new());
     todo.par_iter().try_for_each(|(path, need)| -> Result<()> {
-        if let Some(r) = embed_photo(path, models, conds, *need, o.scene)? {
+        if let Some(r) = embed_photo(path, models, conds, *need, o.scene, stage.as_ref())? {
             records.lock().unwrap().insert(path.clone(), r);
         }
         pb.inc(1);
@@ -389,6 +461,9 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
         let picks: Vec<(usize, usize)> = usable
             .iter()
             .map(|v| {
+                if o.scene == Scene::Pose {
+                    return (0, rand::Rng::random_range(&mut rng, 1..v.len()));
+                }
                 let g = rand::Rng::random_range(&mut rng, 0..v.len());
                 let mut p = rand::Rng::random_range(&mut rng, 0..v.len() - 1);
                 if p >= g {
@@ -452,7 +527,8 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
                     }
                     for (k, r) in ranks.iter().enumerate() {
                         let cmc: Vec<f64> = (1..=o.cmc_ranks)
-                            .map(|n| r.iter().flatten().map(|x| x.within(n)).sum::<f64>() / classes as f64)
+                            // `+ 0.0`: an empty float sum is -0.0 (no probe found), shown as "-0.00".
+                            .map(|n| r.iter().flatten().map(|x| x.within(n)).sum::<f64>() / classes as f64 + 0.0)
                             .collect();
                         per_run.entry((ci, oi, mi, k)).or_default().push((cmc[0], cmc, found as f64 / classes as f64));
                     }
@@ -491,7 +567,7 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
     let mut verification = Vec::new();
     let usable_pairs: Vec<_> =
         pairs.iter().filter(|p| records.contains_key(&p.a) && records.contains_key(&p.b)).collect();
-    if o.verification {
+    if verifying {
         for (ci, c) in conds.iter().enumerate() {
             for (mi, e) in models.embedders.iter().enumerate() {
                 let scored: Vec<(usize, bool, f32)> = usable_pairs
@@ -526,8 +602,73 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
         pairs_skipped_undetected: pairs.len() - usable_pairs.len(),
         identification,
         verification,
+        probe_turn,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Photos of an identity scored for pose, at most this many (a seeded draw).
+const POSE_CANDIDATES: usize = 40;
+
+/// The least turn ([`crate::place::turn`]) of a pose probe: a fifth of the eye distance of
+/// yaw (about 20 degrees) or the pitch that moves the nose as far. LFW's photos are mostly
+/// frontal: the median of 648 photos of 100 identities turns by 0.10, one in ten by
+/// more than 0.23.
+pub const MIN_TURN: f32 = 0.2;
+
+/// The pose scene's pools: per identity, its most frontal photo, then its `pool - 1` most
+/// turned ([`crate::place::turn`], the frontal pitch being the median over every photo
+/// scored) of those turned by at least [`MIN_TURN`]; identities without such a photo are
+/// left out. Also returns the median turn of the probes.
+fn pose_pools(
+    ids: &[(&String, &Vec<PathBuf>)],
+    detector: &FaceDetector,
+    pool: usize,
+    rng: &mut ChaCha8Rng,
+) -> Result<(Vec<Vec<PathBuf>>, f64)> {
+    let candidates: Vec<Vec<PathBuf>> = ids
+        .iter()
+        .map(|(_, v)| v.choose_multiple(rng, POSE_CANDIDATES.min(v.len())).cloned().collect::<Vec<_>>())
+        .collect();
+    let all: Vec<&PathBuf> = candidates.iter().flatten().collect();
+    let pb = progress(all.len(), "privacy: scoring poses");
+    let found: Vec<Option<[[f32; 2]; 5]>> = all
+        .par_iter()
+        .map(|p| {
+            let img = read_rgb8(p)?;
+            pb.inc(1);
+            Ok(central_face(&detector.detect(&img)?, img.width(), img.height()).map(|f| f.landmarks))
+        })
+        .collect::<Result<_>>()?;
+    pb.finish_and_clear();
+    let landmarks: HashMap<&PathBuf, [[f32; 2]; 5]> =
+        all.iter().zip(&found).filter_map(|(p, l)| l.map(|l| (*p, l))).collect();
+    let mut pitches: Vec<f32> = landmarks.values().filter_map(|l| crate::place::pose(l)).map(|p| p.1).collect();
+    pitches.sort_by(f32::total_cmp);
+    let frontal = pitches.get(pitches.len() / 2).copied().unwrap_or(0.5);
+    let mut probes = Vec::new();
+    let pools = candidates
+        .iter()
+        .filter_map(|c| {
+            let mut scored: Vec<(f32, &PathBuf)> =
+                c.iter().filter_map(|p| landmarks.get(p).map(|l| (crate::place::turn(l, frontal), p))).collect();
+            if scored.len() < 2 {
+                return None;
+            }
+            scored.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(b.1)));
+            let front = scored.remove(0);
+            scored.reverse();
+            scored.retain(|s| s.0 >= MIN_TURN);
+            scored.truncate(pool - 1);
+            if scored.is_empty() {
+                return None;
+            }
+            probes.extend(scored.iter().map(|s| s.0 as f64));
+            Some(std::iter::once(front.1).chain(scored.iter().map(|s| s.1)).cloned().collect())
+        })
+        .collect();
+    probes.sort_by(f64::total_cmp);
+    Ok((pools, probes.get(probes.len() / 2).copied().unwrap_or(f64::NAN)))
 }
 
 /// Accuracy of "same iff score > t" on `pairs`.

@@ -6,6 +6,7 @@
 use crate::error::{EvalError, Result};
 use crate::plot::{chart, Series, Style};
 use crate::privacy::{Enrolment, Order, PrivacyReport};
+use crate::scene::Scene;
 use crate::quality::QualityReport;
 use crate::table::{Cell, Column, Table};
 use crate::utility::UtilityReport;
@@ -177,8 +178,31 @@ pub fn write_conditions(reports: &[PrivacyReport], dir: &Path) -> Result<()> {
 /// The dataset column: LFW, and its scene unless colour.
 fn dataset(r: &PrivacyReport) -> String {
     match r.options.scene {
-        crate::scene::Scene::Colour => "LFW".into(),
+        Scene::Colour => "LFW".into(),
         s => format!("LFW {}", s.name()),
+    }
+}
+
+/// What the scene did to the probes, for the report (empty for colour).
+fn scene_note(r: &PrivacyReport) -> String {
+    use crate::place::{GROUP_CANVAS, GROUP_WIDTHS, SMALL_CANVAS, SMALL_WIDTHS};
+    let placed = "The gallery is the raw photos; the camera sees the whole picture and the attacker crops, aligns and upsamples the face after it: in the paper order on the face's raw landmarks (it knows where the face is), end to end where its detector finds a face on the placed one (box IoU ≥ 0.3).";
+    match r.options.scene {
+        Scene::Colour => String::new(),
+        Scene::Grey => "Grey: every photo (gallery, probes, pairs) made black-and-white (BT.601 luma) before the camera.\n\n".into(),
+        Scene::Small => format!(
+            "Small: each probe's face {}–{} px wide, pasted into a {} x {} held-out COCO scene. {placed}\n\n",
+            SMALL_WIDTHS.0, SMALL_WIDTHS.1, SMALL_CANVAS.0, SMALL_CANVAS.1
+        ),
+        Scene::Group => format!(
+            "Group: each probe's face beside {} other people's (LFW people with one photo), {}–{} px wide, in a {} x {} held-out COCO scene. {placed}\n\n",
+            crate::place::COMPANIONS, GROUP_WIDTHS.0, GROUP_WIDTHS.1, GROUP_CANVAS.0, GROUP_CANVAS.1
+        ),
+        Scene::Pose => format!(
+            "Pose: each identity's most frontal photo is its gallery photo and its most turned ones (turn ≥ {}: yaw in eye distances, or twice the pitch ratio's offset) the probes; identities without such a photo are left out. Median probe turn {:.2}. No verification (the pairs are colour's).\n\n",
+            crate::privacy::MIN_TURN,
+            r.probe_turn.unwrap_or(f64::NAN)
+        ),
     }
 }
 
@@ -239,6 +263,7 @@ pub fn privacy_markdown(r: &PrivacyReport) -> String {
         r.options.seed,
         100.0 / r.gallery as f64
     );
+    s += &scene_note(r);
     s += &privacy_table(r).markdown();
     if !r.verification.is_empty() {
         let _ = writeln!(

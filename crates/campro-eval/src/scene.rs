@@ -1,7 +1,13 @@
 //! What the camera is pointed at, for the privacy evaluation: LFW's photos as they are
-//! (colour), or as a black-and-white, infrared or night camera sees them (grey). A scene
-//! changes the photos before anything else, so the adversary's gallery, the probes and the
-//! verification pairs all see it; the protections ([`crate::Condition`]) then run on it.
+//! (colour); as a black-and-white, infrared or night camera sees them (grey); each probe's
+//! face small in a held-out scene, as CCTV sees a passer-by (small), or beside other
+//! people's faces (group) ([`crate::place`]); or LFW's most turned faces (pose).
+//!
+//! Grey changes the photos before anything else, so the adversary's gallery, the probes
+//! and the verification pairs all see it. Small and group change only what the camera sees
+//! of a probe (the gallery stays the raw photos: the adversary enrolled people from their
+//! ordinary pictures); pose changes which photos are probed. The protections
+//! ([`crate::Condition`]) then run on what the camera sees.
 
 use image::{Rgb, RgbImage};
 use serde::Serialize;
@@ -16,24 +22,40 @@ pub enum Scene {
     /// Each pixel replaced by its BT.601 luma ([`campro::chroma::luma`]) in all three
     /// channels.
     Grey,
+    /// Each probe's face 12–48 px wide in a held-out scene ([`crate::place::Stage::small`]).
+    Small,
+    /// Each probe's face beside three other people's ([`crate::place::Stage::group`]).
+    Group,
+    /// Each identity's most frontal photo enrolled, its most turned ones probed
+    /// ([`crate::place::turn`]).
+    Pose,
 }
 
 impl Scene {
     /// Every scene, in report order.
-    pub const ALL: [Scene; 2] = [Scene::Colour, Scene::Grey];
+    pub const ALL: [Scene; 5] = [Scene::Colour, Scene::Grey, Scene::Small, Scene::Group, Scene::Pose];
 
     /// The name in flags, folders and reports.
     pub fn name(self) -> &'static str {
         match self {
             Scene::Colour => "colour",
             Scene::Grey => "grey",
+            Scene::Small => "small",
+            Scene::Group => "group",
+            Scene::Pose => "pose",
         }
     }
 
-    /// `img` as this scene shows it.
+    /// Whether the probe's face is placed in another picture ([`crate::place`]).
+    pub fn placed(self) -> bool {
+        matches!(self, Scene::Small | Scene::Group)
+    }
+
+    /// Every photo (gallery, probe, pair) as this scene shows it: grey makes it grey; the
+    /// others leave it (they place or choose probes instead).
     pub fn apply(self, img: RgbImage) -> RgbImage {
         match self {
-            Scene::Colour => img,
+            Scene::Colour | Scene::Small | Scene::Group | Scene::Pose => img,
             Scene::Grey => {
                 let mut img = img;
                 for p in img.pixels_mut() {

@@ -11,6 +11,7 @@ use campro_eval::face::{central_face, cosine, Embedder, FaceDetector};
 use campro_eval::guard::{FaceGuard, Hide};
 use campro_eval::manifest::Manifest;
 use campro_eval::model::Model;
+use campro_eval::place::{paste, pasted_side};
 use image::RgbImage;
 use std::path::{Path, PathBuf};
 
@@ -53,12 +54,6 @@ fn lfw(root: &Path, person: &str) -> PathBuf {
     root.join(format!("images_deepfunneled/{person}/{person}_0001.jpg"))
 }
 
-/// A face pasted into the group photo: its box and landmarks there.
-struct Pasted {
-    bbox: [f32; 4],
-    landmarks: [[f32; 2]; 5],
-}
-
 #[test]
 fn the_detector_gate_alone_hides_every_face_of_a_group_photo() {
     let Some(shared) = campro_testkit::shared_root(&[
@@ -86,20 +81,8 @@ fn the_detector_gate_alone_hides_every_face_of_a_group_photo() {
     for (person, width) in PASTED {
         let img = read_rgb8(&lfw(&lfw_root, person)).unwrap();
         let face = central_face(&detector.detect(&img).unwrap(), img.width(), img.height()).unwrap();
-        // The face with its surroundings (1.8 times its box), scaled so the box is `width`.
-        let (bw, cx, cy) =
-            (face.bbox[2] - face.bbox[0], (face.bbox[0] + face.bbox[2]) / 2.0, (face.bbox[1] + face.bbox[3]) / 2.0);
-        let half = (0.9 * bw).min(cx).min(cy).min(250.0 - cx).min(250.0 - cy);
-        let (x0, y0, side) = ((cx - half) as u32, (cy - half) as u32, (2.0 * half) as u32);
-        let crop = image::imageops::crop_imm(&img, x0, y0, side, side).to_image();
-        let k = width as f32 / bw;
-        let out = ((side as f32 * k).round() as u32).max(1);
-        let small = image::imageops::resize(&crop, out, out, image::imageops::FilterType::Triangle);
-        let y = 360 - out / 2;
-        image::imageops::replace(&mut group, &small, x as i64, y as i64);
-        let at = |p: [f32; 2]| [(p[0] - x0 as f32) * k + x as f32, (p[1] - y0 as f32) * k + y as f32];
-        let [a, b] = [at([face.bbox[0], face.bbox[1]]), at([face.bbox[2], face.bbox[3]])];
-        pasted.push(Pasted { bbox: [a[0], a[1], b[0], b[1]], landmarks: face.landmarks.map(at) });
+        let out = pasted_side(width);
+        pasted.push(paste(&mut group, &img, &face, width as f32, x as i64, (360 - out / 2) as i64));
         x += out + 16;
     }
     assert!(x <= 1280, "the faces fit the scene: {x}");

@@ -78,6 +78,10 @@ pub struct ProtectorConfig {
     pub omega: f64,
     /// The paper's ablation: no attacker steps after pretraining.
     pub protector_only: bool,
+    /// Weight (0..=10) of the grey term: each face batch is also made grey (BT.601 luma,
+    /// [`crate::faces::grey`]) and its privacy loss, times this weight, joins the colour
+    /// one; the attacker trains on both. 0 (the default) leaves the grey axis to chance.
+    pub grey: f64,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -199,7 +203,7 @@ impl Default for AttackerConfig {
 }
 impl Default for ProtectorConfig {
     fn default() -> Self {
-        Self { steps_per_round: 1, omega: 0.2, protector_only: false }
+        Self { steps_per_round: 1, omega: 0.2, protector_only: false, grey: 0.0 }
     }
 }
 impl Default for DataConfig {
@@ -285,7 +289,7 @@ impl Rules for Config {
     /// Every rule, first broken one reported.
     fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let finite_pos = |v: f64| v.is_finite() && v > 0.0;
-        let checks: [(bool, &str, &str); 24] = [
+        let checks: [(bool, &str, &str); 25] = [
             ((2..=1024).contains(&self.camera.knots), "camera.knots", "must be in 2..=1024"),
             (
                 self.camera.gamma.is_finite() && (0.2..=5.0).contains(&self.camera.gamma),
@@ -306,6 +310,7 @@ impl Rules for Config {
                 "protector.omega",
                 "must be finite and ≥ 0",
             ),
+            ((0.0..=10.0).contains(&self.protector.grey), "protector.grey", "must be in [0, 10]"),
             (
                 self.protector.protector_only || self.attacker.steps_per_round >= 1,
                 "attacker.steps_per_round",

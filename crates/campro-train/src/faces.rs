@@ -20,6 +20,17 @@ use std::path::{Path, PathBuf};
 
 /// Crop size (height, width) of MobileFaceNet.
 pub const CROP: (usize, usize) = (112, 96);
+
+/// The BT.601 luma weights of [`campro::chroma::luma`], in its integer form over 256.
+const LUMA: [f32; 3] = [77.0 / 256.0, 150.0 / 256.0, 29.0 / 256.0];
+
+/// A batch of faces `x` (B, 3, H, W) in [0, 1] as a black-and-white camera sees them: each
+/// pixel's luma in all three channels. The float form of [`campro::chroma::luma`] (the
+/// evaluation's grey scene), which floors to 8 bits; the two differ by under 1/255.
+pub fn grey(x: &Tensor) -> candle_core::Result<Tensor> {
+    let w = Tensor::new(&LUMA, x.device())?.reshape((1, 3, 1, 1))?;
+    x.broadcast_mul(&w)?.sum_keepdim(1)?.repeat((1, 3, 1, 1))
+}
 const YUNET: &str = include_str!("../../campro-eval/models/yunet.json");
 const MOBILEFACENET: &str = include_str!("../../campro-eval/models/mobilefacenet_casia.json");
 
@@ -244,4 +255,27 @@ impl FaceSet {
 /// FNV-1a, 64 bits: names the cache file of a selection.
 pub(crate) fn fnv(s: &str) -> u64 {
     s.bytes().fold(0xcbf29ce484222325, |h, b| (h ^ b as u64).wrapping_mul(0x100000001b3))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grey_is_the_evaluations_luma_before_flooring() {
+        // Two pixels: pure red and (10, 20, 30); channels first.
+        let px = [[255u8, 0, 0], [10, 20, 30]];
+        let data: Vec<f32> = (0..3).flat_map(|c| px.iter().map(move |p| p[c] as f32 / 255.0)).collect();
+        let x = Tensor::from_vec(data, (1, 3, 1, 2), &Device::Cpu).unwrap();
+        let g = grey(&x).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        // By hand: 77·255/256 = 76.70 (the integer luma floors to 76); (770 + 3000 + 870)
+        // / 256 = 18.125 (18). Every channel the same.
+        let want = [76.699_22f32, 18.125];
+        for c in 0..3 {
+            for (k, w) in want.iter().enumerate() {
+                assert!((g[c * 2 + k] * 255.0 - w).abs() < 1e-3, "channel {c}, pixel {k}: {}", g[c * 2 + k] * 255.0);
+                assert_eq!((g[c * 2 + k] * 255.0 + 1e-3).floor() as u8, campro::chroma::luma(px[k]));
+            }
+        }
+    }
 }

@@ -97,13 +97,14 @@ impl Outcome {
         let mut params = campro::Params::new(self.ccm, curve, self.gamma).map_err(invalid)?;
         params.name = name.into();
         params.description = format!(
-            "learnt by campro train from {config_name} ({}{})",
+            "learnt by campro train from {config_name} ({}{}{})",
             if cfg.protector.omega > 0.0 {
                 format!("privacy and utility players, omega {}", cfg.protector.omega)
             } else {
                 "privacy player".into()
             },
-            if cfg.protector.protector_only { ", protector only" } else { "" }
+            if cfg.protector.protector_only { ", protector only" } else { "" },
+            if cfg.protector.grey > 0.0 { format!(", grey term {}", cfg.protector.grey) } else { String::new() }
         );
         params.provenance = self.provenance.clone();
         Ok(params)
@@ -404,6 +405,7 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     for round in first_round..=cfg.budget.rounds {
         for _ in 0..m {
             let (x, y) = game.faces.batch(&draws.faces(&game), &game.dev)?;
+            let (x, y) = game.with_grey(x, y)?;
             (ce, acc) = game.attacker_step(&game.cam.forward(&x)?.detach(), &y, &mut opt)?;
         }
         let (mut lns, mut ldet) = (f64::NAN, f64::NAN);
@@ -683,6 +685,16 @@ impl<'a> Game<'a> {
         Ok(s)
     }
 
+    /// The faces `x` (labels `y`) and, with the grey term on, the same faces grey after them.
+    fn with_grey(&self, x: Tensor, y: Tensor) -> candle_core::Result<(Tensor, Tensor)> {
+        if self.cfg.protector.grey > 0.0 {
+            let g = crate::faces::grey(&x)?;
+            Ok((Tensor::cat(&[&x, &g], 0)?, Tensor::cat(&[&y, &y], 0)?))
+        } else {
+            Ok((x, y))
+        }
+    }
+
     /// One attacker step on faces `x` with labels `y`: cross-entropy into H and F by SGD.
     /// Returns the loss and the batch's accuracy.
     fn attacker_step(&self, x: &Tensor, y: &Tensor, opt: &mut Optimisers) -> Result<(f64, f64), TrainError> {
@@ -704,6 +716,11 @@ impl<'a> Game<'a> {
         let (x, y) = self.faces.batch(&draws.faces(self), &self.dev)?;
         let logits = self.head.logits(&self.frozen.embed(&self.cam.forward(&x)?, false)?, None)?;
         let mut loss = non_saturating_loss(&logits, &y)?;
+        if cfg.protector.grey > 0.0 {
+            let g = crate::faces::grey(&x)?;
+            let logits = self.head.logits(&self.frozen.embed(&self.cam.forward(&g)?, false)?, None)?;
+            loss = (loss + (non_saturating_loss(&logits, &y)? * cfg.protector.grey)?)?;
+        }
         let lns = loss.to_scalar::<f32>()? as f64;
         finite("privacy loss", lns)?;
         let (mut ldet, mut seen) = (f64::NAN, None);

@@ -109,6 +109,10 @@ pub struct PrivacyArgs {
     /// LFW folder (default: SHARED/data/lfw).
     #[arg(long)]
     pub lfw: Option<PathBuf>,
+    /// The COCO person folder whose held-out images the small and group conditions paste
+    /// faces into (default: SHARED/data/coco-person).
+    #[arg(long, value_name = "DIR")]
+    pub backdrops: Option<PathBuf>,
     /// Face detector: a bundled name or a manifest file.
     #[arg(long, default_value = "yunet")]
     pub face_detector: String,
@@ -164,9 +168,13 @@ pub struct PrivacyArgs {
     #[arg(long, value_enum, default_value = "raw")]
     pub enrol: EnrolArg,
     /// What the camera is pointed at (repeatable; default: every one): colour (LFW as it
-    /// is) or grey (every photo made black-and-white first, as a night, infrared or
-    /// monochrome camera sees it). Colour's report is written into --output, each other's
-    /// into a folder of its name there, and conditions.md gives the worst over them.
+    /// is), grey (every photo made black-and-white first, as a night, infrared or
+    /// monochrome camera sees it), small (each probe's face 12-48 px wide in a held-out
+    /// COCO scene, cropped, aligned and upsampled after the camera, as CCTV would), group
+    /// (each probe's face beside three other people's in one scene) or pose (each person's
+    /// most frontal photo enrolled, the most turned probed). Colour's report is written into
+    /// --output, each other's into a folder of its name there, and conditions.md gives the
+    /// worst over them.
     #[arg(long = "condition", value_enum)]
     pub conditions: Vec<ConditionArg>,
 }
@@ -176,6 +184,9 @@ pub struct PrivacyArgs {
 pub enum ConditionArg {
     Colour,
     Grey,
+    Small,
+    Group,
+    Pose,
 }
 
 impl From<ConditionArg> for campro_eval::scene::Scene {
@@ -183,6 +194,9 @@ impl From<ConditionArg> for campro_eval::scene::Scene {
         match c {
             ConditionArg::Colour => Self::Colour,
             ConditionArg::Grey => Self::Grey,
+            ConditionArg::Small => Self::Small,
+            ConditionArg::Group => Self::Group,
+            ConditionArg::Pose => Self::Pose,
         }
     }
 }

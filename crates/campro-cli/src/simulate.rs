@@ -410,15 +410,7 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
     let records = std::sync::Mutex::new(Vec::new());
     let note = |v: serde_json::Value| records.lock().unwrap_or_else(|p| p.into_inner()).push(v);
     let skipped = AtomicUsize::new(0);
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let threads = match o.jobs {
-        Some(j) if j > cores => {
-            eprintln!("warning: --jobs {j} is more than the {cores} cores; using {cores}");
-            cores
-        }
-        Some(j) => j,
-        None => cores,
-    };
+    let threads = crate::args::cores_for("--jobs", o.jobs);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
     // The 16-bit degamma table (65536 powers) is built only if a 16-bit image turns up.
     let prepared8 = Prepared::new(p, Depth::Eight);

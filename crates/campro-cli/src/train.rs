@@ -147,10 +147,8 @@ fn write_detector(det: &Yolox, params_path: &Path, name: &str, force: bool) -> R
 
 /// Fine-tunes YOLOX-Nano behind the camera of `params_path` and records it in that file.
 pub fn finetune_detector(a: &FinetuneDetectorArgs) -> Result<()> {
-    let (params_path, steps, seconds, log, force) = (a.params.as_path(), a.steps, a.seconds, a.log.as_deref(), a.force);
-    if steps == 0 {
-        bail!("--steps: must be at least 1");
-    }
+    let (params_path, steps, seconds, log, force) =
+        (a.params.as_path(), a.steps as usize, a.seconds, a.log.as_deref(), a.force);
     if seconds.is_nan() || seconds <= 0.0 {
         bail!("--seconds: must be > 0 (inf for no limit), got {seconds}");
     }

@@ -189,6 +189,10 @@ fn size_like_options_have_named_caps() {
     fails_with(campro().arg("compare").arg(&id).args(["--matrix-frac-bits", "64"]), "--matrix-frac-bits");
     fails_with(campro().arg("convert").arg(&id).args(["--max-curve-points", "1"]), "--max-curve-points");
     fails_with(campro().arg("convert").arg(&id).args(["--target", "cube", "--cube-size", "100000"]), "--cube-size");
+    // Class F of the third pass: a step count is checked before anything is reserved for it.
+    for steps in ["0", "100000000", "18446744073709551615"] {
+        fails_with(campro().args(["finetune-detector"]).arg(&id).args(["--steps", steps]), "--steps");
+    }
 }
 
 // ---- Files damaged -------------------------------------------------------------------
@@ -405,4 +409,46 @@ fn messages_name_the_flag_once_on_one_line() {
     let err = String::from_utf8_lossy(&out.stderr);
     let first = err.lines().next().unwrap_or_default();
     assert_eq!(first.matches("bad.png").count(), 1, "{err}");
+}
+
+// ---- Third pass (issue 59): reports and metrics ----------------------------------------
+
+/// Class G: an image smaller than SSIM's window is one line naming the file, not a panic.
+#[test]
+fn eval_quality_names_an_image_too_small_to_measure() {
+    let dir = tempfile::tempdir().unwrap();
+    let images = dir.path().join("images");
+    std::fs::create_dir(&images).unwrap();
+    image::RgbImage::from_pixel(8, 8, image::Rgb([90, 120, 30])).save(images.join("tiny.png")).unwrap();
+    fails_with(
+        campro()
+            .args(["eval", "quality"])
+            .arg(bundled("identity.json"))
+            .arg("--images")
+            .arg(&images)
+            .arg("-o")
+            .arg(dir.path().join("out"))
+            .timeout(LIMIT),
+        "tiny.png: 8 x 8 px; image quality needs at least 11 x 11",
+    );
+}
+
+/// Class K: a name that holds HTML reaches the Markdown report escaped, never as markup.
+#[test]
+fn markdown_reports_escape_names_they_did_not_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let images = dir.path().join("images");
+    std::fs::create_dir(&images).unwrap();
+    image::RgbImage::from_fn(32, 24, |x, y| image::Rgb([(x * 7) as u8, (y * 9) as u8, 60]))
+        .save(images.join("a.png"))
+        .unwrap();
+    let set = dir.path().join("<script>alert(1)<").with_extension("json");
+    std::fs::copy(bundled("identity.json"), &set).unwrap();
+    let out = dir.path().join("out");
+    let run =
+        campro().args(["eval", "quality"]).arg(&set).arg("--images").arg(&images).arg("-o").arg(&out).output().unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let md = std::fs::read_to_string(out.join("quality.md")).unwrap();
+    assert!(!md.contains("<script>"), "{md}");
+    assert!(md.contains("&lt;script&gt;alert(1)&lt;"), "{md}");
 }

@@ -8,7 +8,7 @@
 //! is dropped); per channel, then averaged. It needs both sides ≥ 176 px (11 px at the fifth scale).
 
 use crate::data::read_rgb8;
-use crate::error::Result;
+use crate::error::{EvalError, Result};
 use crate::Condition;
 use image::RgbImage;
 use std::path::PathBuf;
@@ -118,7 +118,11 @@ fn halve(p: &Plane) -> Plane {
     Plane { w, h, v }
 }
 
-/// SSIM (mean over channels). Both sides must be ≥ 11 px.
+/// The least side of an image [`ssim`] and [`quality`] measure: SSIM's Gaussian window.
+pub const MIN_SIDE: u32 = 11;
+
+/// SSIM (mean over channels). Both sides must be ≥ [`MIN_SIDE`] px (callers check; smaller
+/// panics).
 pub fn ssim(a: &RgbImage, b: &RgbImage) -> f64 {
     ssim_and_ms_ssim(a, b).0
 }
@@ -192,6 +196,14 @@ pub fn evaluate(paths: &[PathBuf], conds: &[Condition], limit: Option<usize>) ->
     let conds: Vec<&Condition> = conds.iter().filter(|c| c.protect.is_some()).collect();
     let per: Vec<Vec<Quality>> = crate::par_map_progress(paths, "quality", |p| {
         let img = read_rgb8(p)?;
+        if img.width() < MIN_SIDE || img.height() < MIN_SIDE {
+            return Err(EvalError::Invalid(format!(
+                "{}: {} x {} px; image quality needs at least {MIN_SIDE} x {MIN_SIDE} (SSIM's window)",
+                campro::file::shown(p),
+                img.width(),
+                img.height()
+            )));
+        }
         Ok(conds.iter().map(|c| quality(&img, &c.apply(&img))).collect())
     })?;
     let rows = conds

@@ -6,8 +6,8 @@
 use crate::error::{EvalError, Result};
 use crate::plot::{chart, Series, Style};
 use crate::privacy::{Enrolment, Order, PrivacyReport};
-use crate::scene::Scene;
 use crate::quality::QualityReport;
+use crate::scene::Scene;
 use crate::table::{Cell, Column, Table};
 use crate::utility::UtilityReport;
 use std::fmt::Write as _;
@@ -315,7 +315,7 @@ pub fn utility_table(r: &UtilityReport) -> Table {
 pub fn utility_markdown(r: &UtilityReport) -> String {
     format!(
         "# Utility: person detection ({}) on COCO\n\n{} images{}; precision, recall and F1 at confidence {} and IoU 0.5.\n\n{}\nRun time: {:.0} s.\n",
-        r.detector,
+        crate::table::md_text(&r.detector),
         r.images,
         if r.options.held_out { format!(" (those held out of detector fine-tuning: COCO id % {} == 0)", crate::data::HOLDOUT_EVERY) } else { String::new() },
         r.options.confidence,

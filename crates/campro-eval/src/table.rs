@@ -175,7 +175,8 @@ impl Table {
         self.rows.iter().map(|r| cols.iter().map(|&(i, col)| r[i].readable(col.digits)).collect()).collect()
     }
 
-    /// A Markdown table (a `|` in a cell escaped).
+    /// A Markdown table, every cell through [`md_cell`] (`|`, control characters and HTML
+    /// escaped).
     pub fn markdown(&self) -> String {
         let mut s = String::new();
         let cols = self.for_people();
@@ -183,7 +184,7 @@ impl Table {
         let _ = writeln!(s, "| {} |", cells.join(" | "));
         let _ = writeln!(s, "|{}", "---|".repeat(cols.len()));
         for row in self.readable_rows() {
-            let cells: Vec<String> = row.iter().map(|c| c.replace('|', "\\|")).collect();
+            let cells: Vec<String> = row.iter().map(|c| md_cell(c)).collect();
             let _ = writeln!(s, "| {} |", cells.join(" | "));
         }
         s
@@ -248,7 +249,15 @@ impl Table {
 /// Text as one Markdown table cell: `|` escaped, line breaks and other control characters
 /// written out.
 pub fn md_cell(text: &str) -> String {
-    campro::file::escape(text).replace('|', "\\|")
+    md_text(text).replace('|', "\\|")
+}
+
+/// Text that came from outside (a set's name, a file name, a manifest's model name) as
+/// Markdown prose: control characters escaped ([`campro::file::escape`]) and `&`, `<`, `>`
+/// as HTML entities, so that a `<script>` in a name is shown, never run, wherever the
+/// report is rendered.
+pub fn md_text(text: &str) -> String {
+    campro::file::escape(text).replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
 /// Text as one CSV field: quoted (quotes doubled) when it holds a comma, a quote or a line
@@ -279,6 +288,13 @@ mod tests {
             sample().markdown(),
             "| image type | AP |\n|---|---|\n| raw | 0.512 |\n| a\\|b,\"c\"\\nd (x) | - |\n| m | 12.345 ± 0.500 |\n"
         );
+    }
+
+    #[test]
+    fn markdown_shows_html_in_names_and_never_runs_it() {
+        let mut t = Table::new([Column::new("set <b>", "set", 0)]);
+        t.push(vec![Cell::text("<script>alert(1)</script> & co")]);
+        assert_eq!(t.markdown(), "| set &lt;b&gt; |\n|---|\n| &lt;script&gt;alert(1)&lt;/script&gt; &amp; co |\n");
     }
 
     #[test]

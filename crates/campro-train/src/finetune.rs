@@ -111,7 +111,8 @@ pub fn run(
     }
     let mut adam = crate::detection::DetectorAdam::new(&det, cfg)?;
     let start = std::time::Instant::now();
-    let mut log = Vec::with_capacity(o.steps);
+    // The log grows as the steps run (a step is ~0.5 s): never reserved from the flag.
+    let mut log = Vec::new();
     for step in 1..=o.steps {
         if start.elapsed().as_secs_f64() >= o.seconds {
             break;

@@ -57,7 +57,8 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
 /// How a training-step timing runs: its threads and how many timed runs.
 #[derive(Args)]
 pub struct Timing {
-    /// Threads of the training steps (default: all cores; tract's inference runs on one).
+    /// Threads of the training steps (default: all cores; more than the cores is clamped,
+    /// with a warning; tract's inference runs on one).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
     pub threads: Option<u32>,
     /// Timed runs of each measurement (the median is reported, after one warm-up).
@@ -66,9 +67,9 @@ pub struct Timing {
 }
 
 impl Timing {
-    /// The threads asked for, else every core.
+    /// The threads asked for (at most the cores, [`super::cores_for`]), else every core.
     pub fn threads(&self) -> usize {
-        self.threads.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |t| t as usize)
+        super::cores_for("--threads", self.threads.map(|t| t as usize))
     }
 }
 

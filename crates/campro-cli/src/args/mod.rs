@@ -116,6 +116,21 @@ impl DataArgs {
 }
 
 /// The shared data folder: `given`, else $CAMPRO_SHARED, else `../shared`.
+/// Worker threads for a flag (`--jobs`, `--threads`): the number asked, at most the cores
+/// (more is clamped, with a warning naming the flag: a thousand threads on two cores only
+/// cost memory), or every core when none was asked.
+pub fn cores_for(flag: &str, asked: Option<usize>) -> usize {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    match asked {
+        Some(j) if j > cores => {
+            eprintln!("warning: {flag} {j} is more than the {cores} cores; using {cores}");
+            cores
+        }
+        Some(j) => j.max(1),
+        None => cores,
+    }
+}
+
 pub fn shared_dir(given: Option<&Path>) -> PathBuf {
     given
         .map(Path::to_path_buf)

@@ -47,9 +47,9 @@ pub struct FinetuneDetectorArgs {
     /// TOML configuration whose `[detector]` and `seed` are used (default: the paper's).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Detector steps of `detector.batch` images.
-    #[arg(long, default_value_t = 500)]
-    pub steps: usize,
+    /// Detector steps of `detector.batch` images (1 to 10,000,000).
+    #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
+    pub steps: u32,
     /// Stop after this many seconds even if steps remain.
     #[arg(long, default_value_t = f64::INFINITY)]
     pub seconds: f64,

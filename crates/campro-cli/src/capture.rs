@@ -18,6 +18,10 @@ use std::path::Path;
 /// [`campro_eval::enhance::WORK_BYTES_PER_PIXEL`].
 pub const MAX_ENHANCE_PIXELS: u64 = 4096 * 3072;
 
+/// Longest side the enhancer runs on (pixels): a phone's panorama at 12 megapixels
+/// (8192 x 1536) fits; a strip of 1 x 1,000,000 does not.
+pub const MAX_ENHANCE_SIDE: u32 = 8192;
+
 /// What `simulate` does to a frame: the camera (exact, on every core), then, with
 /// `--enhance`, the preset's enhancer (tract, one thread a frame).
 pub(crate) struct Capture<'a, 'p> {
@@ -93,14 +97,11 @@ pub const GREY_ALLOWED: &str =
     "--allow-grey: grey input written; this preset is not rated for grey, so the output is not protected against a restoration that knows the camera";
 
 impl<'p> Capture<'_, 'p> {
-    /// Bytes a pixel this capture holds besides the pipeline's (the enhancer's), for the
-    /// memory budget images are read under.
-    pub fn work_per_pixel(&self) -> u64 {
-        if self.enhancer.is_some() {
-            campro_eval::enhance::WORK_BYTES_PER_PIXEL
-        } else {
-            0
-        }
+    /// Bytes this capture holds for a `w` x `h` image besides the pipeline's (the
+    /// enhancer's, [`campro_eval::enhance::Enhancer::work_bytes`]), for the memory budget
+    /// images are read under.
+    pub fn work(&self, w: u32, h: u32) -> u64 {
+        self.enhancer.map_or(0, |e| e.enhancer.work_bytes(w, h))
     }
 
     /// The reference path for 16-bit input.
@@ -136,11 +137,27 @@ impl<'p> Capture<'_, 'p> {
 }
 
 /// The guarded enhancer `e` on a captured image (every face its guard finds hidden),
-/// refused over [`MAX_ENHANCE_PIXELS`].
+/// refused over [`MAX_ENHANCE_PIXELS`] (padded) or [`MAX_ENHANCE_SIDE`].
 pub fn enhance(e: &GuardedEnhancer, captured: &image::RgbImage) -> Result<image::RgbImage> {
     let (w, h) = captured.dimensions();
-    if w as u64 * h as u64 > MAX_ENHANCE_PIXELS {
-        bail!("--enhance: the image is {w} x {h}; the enhancer runs on at most 4096 x 3072 pixels (12.6 megapixels)");
+    // What the network holds is the padded image's (a thin picture is padded to the
+    // network's multiple: 1 x 1,000,000 becomes 16 x 1,000,000), and the face guard's work
+    // grows with the longer side (its tiles): both are bounded before anything runs.
+    let m = e.enhancer.multiple() as u64;
+    let padded = (w as u64).div_ceil(m) * m * ((h as u64).div_ceil(m) * m);
+    if padded > MAX_ENHANCE_PIXELS || w.max(h) > MAX_ENHANCE_SIDE {
+        bail!(
+            "--enhance: the image is {w} x {h} ({padded} pixels padded to the network's multiple of {m}); the enhancer runs on at most 4096 x 3072 pixels (12.6 megapixels) and {MAX_ENHANCE_SIDE} a side"
+        );
+    }
+    // A frame of a video does not come through the image reader's budget: its own check.
+    let work = e.enhancer.work_bytes(w, h);
+    if work > campro_eval::image_file::DECODE_BUDGET {
+        bail!(
+            "--enhance: the image is {w} x {h}; at this --enhance-scale the enhancer would hold {} MiB for it (at most {} MiB): use --enhance-scale auto, 2 or 4",
+            work >> 20,
+            campro_eval::image_file::DECODE_BUDGET >> 20
+        );
     }
     Ok(e.enhance(captured)?)
 }

@@ -159,10 +159,10 @@ fn one(
     budget: &Budget,
     warn: &dyn Fn(&str),
 ) -> Result<Value> {
-    let raw = {
-        let (img, _lease) = campro_eval::image_file::read(input, budget, 0, warn)?;
-        img.into_rgb8()
-    };
+    // The lease holds the image's memory and the enhancer's work until this picture is done.
+    let work = |w, h| enhancer.map_or(0, |e| e.enhancer.work_bytes(w, h));
+    let (img, _lease) = campro_eval::image_file::read(input, budget, &work, warn)?;
+    let raw = img.into_rgb8();
     let mut protected = RgbImage::new(raw.width(), raw.height());
     fast.run(raw.as_raw(), &mut protected);
     let enhanced = enhancer.map(|e| crate::capture::enhance(e, &protected)).transpose()?;

@@ -574,7 +574,7 @@ struct Paths<'a, 'p> {
 impl Paths<'_, '_> {
     /// Simulates one image; Ok(true) when it was grey and let through (`--allow-grey`).
     fn one(&self, input: &Path, output: &Path, warn: &dyn Fn(&str)) -> Result<bool> {
-        let (img, _lease) = campro_eval::image_file::read(input, self.budget, self.capture.work_per_pixel(), warn)?;
+        let (img, _lease) = campro_eval::image_file::read(input, self.budget, &|w, h| self.capture.work(w, h), warn)?;
         let (w, h) = (img.width(), img.height());
         let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
         let row = 3 * w as usize;

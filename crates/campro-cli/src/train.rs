@@ -11,14 +11,10 @@ use campro_nn::yolox::Yolox;
 use std::path::{Path, PathBuf};
 
 impl RunFiles {
-    /// Refuses to start a run that would replace `outputs` or the log without --force, or
-    /// write into a checkpoint folder holding an earlier run (unless resuming from it).
-    fn check(&self, outputs: &[&Path]) -> Result<()> {
-        for p in outputs.iter().copied().chain(self.log.as_deref()) {
-            if p.exists() && !self.force {
-                bail!("{} exists (use --force to replace it)", crate::shown(p));
-            }
-        }
+    /// Refuses to start a run whose files collide ([`check_run_files`]), or that would write
+    /// into a checkpoint folder holding an earlier run (unless resuming from it).
+    fn check(&self, inputs: &[&Path], outputs: &[(&str, &Path)], charts: &[&str]) -> Result<()> {
+        check_run_files(inputs, outputs, self.log.as_deref(), charts, self.force)?;
         if let Some(c) = &self.checkpoints {
             if self.resume.as_deref() != Some(c.as_path()) {
                 crate::check_output_folder(c, self.force, "--checkpoints")?;
@@ -28,6 +24,68 @@ impl RunFiles {
     }
 }
 
+/// A path as it names a file, for comparing outputs that may not exist yet: the folder
+/// resolved (links, `..`), the name kept.
+fn file_key(p: &Path) -> PathBuf {
+    if let Ok(c) = std::fs::canonicalize(p) {
+        return c;
+    }
+    let parent = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    match (std::fs::canonicalize(parent), p.file_name()) {
+        (Ok(d), Some(n)) => d.join(n),
+        _ => std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf()),
+    }
+}
+
+/// The chart `name` of the log `log`: `LOG-NAME.svg` beside it.
+fn chart_path(log: &Path, name: &str) -> PathBuf {
+    let mut stem = log.with_extension("").into_os_string();
+    stem.push(format!("-{name}.svg"));
+    PathBuf::from(stem)
+}
+
+/// Checks every file a training run will write before round one, so that no work is lost
+/// at its end: the `outputs` (each with the flag that names it), the log and its `charts`.
+/// None may be one of the `inputs` (--force or not), no two may be one file, and none may
+/// exist unless `force`.
+fn check_run_files(
+    inputs: &[&Path],
+    outputs: &[(&str, &Path)],
+    log: Option<&Path>,
+    charts: &[&str],
+    force: bool,
+) -> Result<()> {
+    let mut all: Vec<(String, PathBuf)> = outputs.iter().map(|(f, p)| (f.to_string(), p.to_path_buf())).collect();
+    if let Some(l) = log {
+        all.push(("--log".into(), l.to_path_buf()));
+        all.extend(charts.iter().map(|c| (format!("--log's {c} chart"), chart_path(l, c))));
+    }
+    for (i, (flag, p)) in all.iter().enumerate() {
+        crate::output::not_an_input(flag, p, inputs)?;
+        if let Some((other, _)) = all[..i].iter().find(|(_, q)| file_key(q) == file_key(p)) {
+            bail!("{flag} {}: is also where {other} goes; give each its own file", crate::shown(p));
+        }
+        if p.exists() && !force {
+            bail!("{} exists (use --force to replace it)", crate::shown(p));
+        }
+    }
+    Ok(())
+}
+
+/// A parameter argument of a command that writes beside the parameter file and into it:
+/// it must be a file, not a bundled preset's name (whose outputs would land, mangled, in
+/// the working folder).
+fn writable_params(flag: &str, p: &Path) -> Result<()> {
+    if let Some(preset) = crate::presets::named(p) {
+        bail!(
+            "{flag} {}: is a bundled preset, and this command writes its results beside the parameter file and into it; copy the preset to a file of yours first (its JSON is params/{}.json in campro's source)",
+            crate::shown(p),
+            preset.name
+        );
+    }
+    Ok(())
+}
+
 pub fn train(a: &TrainArgs) -> Result<()> {
     let (config, output, files) = (a.config.as_path(), a.output.as_path(), &a.files);
     let cfg = campro_train::config::Config::load(config)?;
@@ -35,7 +93,14 @@ pub fn train(a: &TrainArgs) -> Result<()> {
         Some(p) => Some(campro_train::train::Initial::from_params(&load_params(p)?, &p.display().to_string())?),
         None => None,
     };
-    files.check(&[output])?;
+    // The detector's files are written when the utility player plays.
+    let (onnx, manifest) = (output.with_extension("detector.onnx"), output.with_extension("detector.json"));
+    let mut outputs = vec![("-o", output)];
+    if cfg.protector.omega > 0.0 {
+        outputs.extend([("-o's detector", onnx.as_path()), ("-o's detector manifest", manifest.as_path())]);
+    }
+    let inputs: Vec<&Path> = [Some(config), a.init.as_deref()].into_iter().flatten().collect();
+    files.check(&inputs, &outputs, &["losses", "accuracy"])?;
     let opts = &campro_train::train::RunOptions {
         checkpoints: files.checkpoints.clone(),
         resume: files.resume.clone(),
@@ -111,13 +176,12 @@ fn checkpoint_line(pb: &indicatif::ProgressBar, line: String) {
     }
 }
 
-/// Writes a training log `l` (CSV; replaced only with `force`) and its charts beside it as
-/// `LOG-NAME.svg`.
+/// Writes a training log `l` and its charts beside it ([`chart_path`]), each replaced only
+/// with `force`.
 fn write_log<const N: usize>(l: &Path, csv: &str, charts: [(&str, String); N], force: bool) -> Result<()> {
     write_atomic(l, csv.as_bytes(), force)?;
-    let stem = l.with_extension("");
     for (name, svg) in charts {
-        write_atomic(&PathBuf::from(format!("{}-{name}.svg", crate::shown(&stem))), svg.as_bytes(), true)?;
+        write_atomic(&chart_path(l, name), svg.as_bytes(), force)?;
     }
     Ok(())
 }
@@ -156,11 +220,16 @@ pub fn finetune_detector(a: &FinetuneDetectorArgs) -> Result<()> {
         Some(c) => campro_train::config::Config::load(c)?,
         None => campro_train::config::Config::default(),
     };
-    if let Some(l) = log {
-        if l.exists() && !force {
-            bail!("{} exists (use --force to replace it)", crate::shown(l));
-        }
-    }
+    writable_params("PARAMS", params_path)?;
+    let (onnx, manifest) = (params_path.with_extension("detector.onnx"), params_path.with_extension("detector.json"));
+    let inputs: Vec<&Path> = [Some(params_path), a.config.as_deref()].into_iter().flatten().collect();
+    check_run_files(
+        &inputs,
+        &[("PARAMS's detector", &onnx), ("PARAMS's detector manifest", &manifest)],
+        log,
+        &[],
+        force,
+    )?;
     let mut params = load_params(params_path)?;
     let campro_train::train::Initial { ccm, curve, gamma, .. } =
         campro_train::train::Initial::from_params(&params, &params_path.display().to_string())?;
@@ -219,6 +288,7 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
         Some(c) => campro_train::config::load(c)?,
         None => Default::default(),
     };
+    writable_params("PARAMS", &a.params)?;
     let mut params = load_params(&a.params)?;
     let held_out = match held_out_identities(&params) {
         Some(h) => h,
@@ -237,7 +307,13 @@ pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {
     let key = which.key();
     let onnx = a.params.with_extension(format!("{key}.onnx"));
     let manifest = a.params.with_extension(format!("{key}.json"));
-    a.files.check(&[&onnx, &manifest])?;
+    let inputs: Vec<&Path> =
+        [Some(a.params.as_path()), a.config.as_deref(), a.init.as_deref()].into_iter().flatten().collect();
+    a.files.check(
+        &inputs,
+        &[("PARAMS's network", &onnx), ("PARAMS's network manifest", &manifest)],
+        &["losses", "psnr"],
+    )?;
     let opts = campro_train::enhancer::EnhancerOptions {
         checkpoints: a.files.checkpoints.clone(),
         resume: a.files.resume.clone(),

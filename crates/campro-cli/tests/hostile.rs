@@ -452,3 +452,75 @@ fn markdown_reports_escape_names_they_did_not_write() {
     assert!(!md.contains("<script>"), "{md}");
     assert!(md.contains("&lt;script&gt;alert(1)&lt;"), "{md}");
 }
+
+/// Class H: a training run checks every file it will write before round one: never its own
+/// configuration, never one file twice, no chart replaced without --force, and never a
+/// file named after a preset in the working folder.
+#[test]
+fn training_outputs_are_checked_before_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("run.toml");
+    std::fs::write(&cfg, "seed = 0\n").unwrap();
+    let train = || {
+        let mut c = campro();
+        c.arg("train").arg(&cfg).current_dir(dir.path()).timeout(LIMIT);
+        c
+    };
+    fails_with(train().args(["-o", "run.toml", "--force"]), "is an input of this command");
+    fails_with(train().args(["-o", "out.json", "--log", "out.json"]), "--log out.json: is also where -o goes");
+    std::fs::write(dir.path().join("log-losses.svg"), "<svg/>").unwrap();
+    fails_with(train().args(["-o", "out.json", "--log", "log.csv"]), "log-losses.svg exists (use --force");
+    assert!(!dir.path().join("out.json").exists() && !dir.path().join("log.csv").exists());
+    for cmd in ["finetune-detector", "train-enhancer"] {
+        fails_with(
+            campro().arg(cmd).arg("campro-omega-0.5").current_dir(dir.path()).timeout(LIMIT),
+            "campro-omega-0.5: is a bundled preset",
+        );
+    }
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left.len(), 2, "nothing written: {left:?}");
+}
+
+/// Class D: the enhancer's memory is bounded by the pixels it works on, padding and scale
+/// included: a strip of 1 x 100,000 (16 x 100,000 once padded, and a face guard tiling its
+/// length), a picture just under 12.6 megapixels that padding takes over it, and UHD with
+/// the network at full resolution are refused by size, before the network or the guard runs.
+#[test]
+fn enhance_bounds_the_padded_picture_and_its_longest_side() {
+    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx"]) else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let colour = |w: u32, h: u32, name: &str| {
+        let p = dir.path().join(name);
+        image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(x % 251) as u8, (y % 241) as u8, 90])).save(&p).unwrap();
+        p
+    };
+    for (img, size) in
+        [(colour(1, 100_000, "strip.png"), "1 x 100000"), (colour(4097, 3070, "wide.png"), "4097 x 3070")]
+    {
+        fails_with(
+            campro()
+                .args(["simulate", "campro-omega-0.5"])
+                .arg(&img)
+                .arg("-o")
+                .arg(dir.path().join("out"))
+                .args(["--enhance", "--allow-grey", "--shared"])
+                .arg(&shared)
+                .timeout(LIMIT),
+            &format!("the image is {size}"),
+        );
+    }
+    // UHD with the network at full resolution would hold 1.4 GB: refused by the budget it
+    // is read under, before it is decoded (at the automatic scale it runs in about 0.5 GB).
+    fails_with(
+        campro()
+            .args(["simulate", "campro-omega-0.5"])
+            .arg(colour(3840, 2160, "uhd.png"))
+            .arg("-o")
+            .arg(dir.path().join("out"))
+            .args(["--enhance", "--enhance-scale", "1", "--shared"])
+            .arg(&shared)
+            .timeout(LIMIT),
+        "the limit is 768 MiB",
+    );
+    assert!(!dir.path().join("out/uhd.png").exists());
+}

@@ -12,7 +12,8 @@ use std::path::{Path, PathBuf};
 /// stderr with the path.
 pub fn read_rgb8(path: &Path) -> Result<RgbImage> {
     let warn = |m: &str| eprintln!("warning: {}: {m}", campro::file::shown(path));
-    let (img, _lease) = crate::image_file::read(path, crate::image_file::Budget::global(), 0, &warn)?;
+    let (img, _lease) =
+        crate::image_file::read(path, crate::image_file::Budget::global(), &crate::image_file::no_work, &warn)?;
     Ok(img.to_rgb8())
 }
 

@@ -26,6 +26,12 @@ pub const MULTIPLE_KEY: &str = "campro.multiple";
 /// `--enhance`), so 30 more counts 621 MB for it. Images are read under the budget with
 /// it ([`crate::image_file::read`]): two such photos are not enhanced at once.
 pub const WORK_BYTES_PER_PIXEL: u64 = 30;
+
+/// Bytes the network holds a pixel it runs on (padded, at its working resolution): a
+/// 960 x 540 and a 1920 x 1080 frame at `--enhance-scale 1` peaked at 209 and 471 MB
+/// resident, 168 bytes a pixel between them. So 3840 x 2160 at full resolution (1.4 GB)
+/// is refused; at [`Scale::Auto`] (a quarter) it needs 0.5 GB.
+pub const NET_BYTES_PER_PIXEL: u64 = 170;
 /// Largest enhancer file read (bytes): the recommended ones are at most 2 MB.
 pub const MAX_FILE: u64 = 64 << 20;
 
@@ -266,6 +272,26 @@ impl Enhancer {
     /// Height and width multiple the network needs (images are padded to it).
     pub fn multiple(&self) -> usize {
         self.multiple
+    }
+
+    /// Bytes [`Self::enhance`] holds for a `w` x `h` image besides the image itself: the
+    /// network's pixels (padded to the multiple, at its working scale) at
+    /// [`NET_BYTES_PER_PIXEL`], and at a reduced scale the full-resolution planes at
+    /// [`WORK_BYTES_PER_PIXEL`]. Saturating.
+    pub fn work_bytes(&self, w: u32, h: u32) -> u64 {
+        let (w, h) = (w as usize, h as usize);
+        let m = self.multiple as u64;
+        let padded = |w: usize, h: usize| {
+            (w as u64).div_ceil(m).saturating_mul(m).saturating_mul((h as u64).div_ceil(m).saturating_mul(m))
+        };
+        let f = self.scale.factor(w, h);
+        if f > 1 && w >= f * self.multiple && h >= f * self.multiple && self.unet.is_some() {
+            padded(w.div_ceil(f), h.div_ceil(f))
+                .saturating_mul(NET_BYTES_PER_PIXEL)
+                .saturating_add(padded(w, h).saturating_mul(WORK_BYTES_PER_PIXEL))
+        } else {
+            padded(w, h).saturating_mul(NET_BYTES_PER_PIXEL)
+        }
     }
 
     /// The enhanced image of a captured 8-bit image (same size).

@@ -19,6 +19,10 @@ pub enum EvalError {
     Data { path: PathBuf, line: usize, message: String },
     #[error("{0}")]
     Invalid(String),
+    /// Nothing to measure: no identity met a condition's rule (e.g. pose on a few
+    /// identities, none of them turned).
+    #[error("{0}")]
+    NoIdentities(String),
     /// An input file could not be read (not a regular file, over its size cap, ...).
     #[error(transparent)]
     File(#[from] campro::file::FileError),

@@ -89,24 +89,34 @@ fn image_error(path: &Path, message: impl Into<String>) -> EvalError {
 }
 
 /// Peak bytes a `w` x `h` image of `decoded` bytes holds while it is processed: the
-/// pipeline's [`PEAK_BYTES_PER_PIXEL`] and the caller's own `work` bytes a pixel (the
-/// enhancer's, [`crate::enhance::WORK_BYTES_PER_PIXEL`]), checked, saturating.
+/// pipeline's [`PEAK_BYTES_PER_PIXEL`] and the caller's own `work` bytes for an image of
+/// that size (the enhancer's, [`crate::enhance::Enhancer::work_bytes`]), saturating.
 pub fn peak_bytes(w: u32, h: u32, decoded: u64, work: u64) -> u64 {
     (w as u64)
         .saturating_mul(h as u64)
-        .saturating_mul(PEAK_BYTES_PER_PIXEL.saturating_add(work))
+        .saturating_mul(PEAK_BYTES_PER_PIXEL)
+        .saturating_add(work)
         .saturating_add(decoded)
         .max(1)
 }
 
-/// Reads and decodes the image file at `path`, its memory (with `work` bytes a pixel
-/// that the caller will hold besides the pipeline) taken from `budget` and held until the
+/// What a caller holds for an image besides the pipeline, bytes, by its size (read from
+/// the header before anything is decoded).
+pub type Work<'a> = &'a (dyn Fn(u32, u32) -> u64 + Sync);
+
+/// No work beside the pipeline.
+pub fn no_work(_: u32, _: u32) -> u64 {
+    0
+}
+
+/// Reads and decodes the image file at `path`, its memory (with the `work` bytes that the
+/// caller will hold for it besides the pipeline) taken from `budget` and held until the
 /// returned lease drops. `warn` hears what is kept from the user: frames past the first, a
 /// dropped alpha channel, a truncated JPEG.
 pub fn read<'b>(
     path: &Path,
     budget: &'b Budget,
-    work: u64,
+    work: Work,
     warn: &dyn Fn(&str),
 ) -> Result<(image::DynamicImage, Lease<'b>)> {
     let bytes = campro::file::read_capped(path, MAX_FILE_BYTES, "an image")?;
@@ -118,7 +128,7 @@ pub fn decode<'b>(
     path: &Path,
     bytes: &[u8],
     budget: &'b Budget,
-    work: u64,
+    work: Work,
     warn: &dyn Fn(&str),
 ) -> Result<(image::DynamicImage, Lease<'b>)> {
     use image::ImageDecoder;
@@ -136,7 +146,7 @@ pub fn decode<'b>(
     reader.limits(header_limits);
     let mut decoder = reader.into_decoder().map_err(|e| image_error(path, header_message(&e)))?;
     let (w, h) = decoder.dimensions();
-    let need = peak_bytes(w, h, decoder.total_bytes(), work);
+    let need = peak_bytes(w, h, decoder.total_bytes(), work(w, h));
     if need > budget.total() {
         return Err(image_error(
             path,
@@ -262,7 +272,7 @@ mod tests {
     fn a_small_image_is_read_and_its_memory_given_back() {
         let b = Budget::new(1 << 20);
         let bytes = png(16, 8, 2, 8, &[], None);
-        let (img, lease) = decode(Path::new("t.png"), &bytes, &b, 0, &no_warn).unwrap();
+        let (img, lease) = decode(Path::new("t.png"), &bytes, &b, &no_work, &no_warn).unwrap();
         assert_eq!((img.width(), img.height()), (16, 8));
         // 16 x 8 pixels: 18 bytes each plus the 384 decoded bytes.
         assert_eq!(lease.bytes(), 16 * 8 * 18 + 384);
@@ -276,12 +286,12 @@ mod tests {
         // A 1-byte-per-pixel grey image and an 8-byte RGBA16 one of the same size: both hold
         // the pipeline's RGB16 buffers, so both cost 18 bytes a pixel beside their own.
         let b = Budget::new(64 << 20);
-        let (_, grey) = decode(Path::new("g.png"), &png(100, 10, 0, 8, &[], None), &b, 0, &no_warn).unwrap();
+        let (_, grey) = decode(Path::new("g.png"), &png(100, 10, 0, 8, &[], None), &b, &no_work, &no_warn).unwrap();
         assert_eq!(grey.bytes(), 1000 * 18 + 1000);
         drop(grey);
         let warned = std::cell::RefCell::new(Vec::new());
         let w = |m: &str| warned.borrow_mut().push(m.to_string());
-        let (_, deep) = decode(Path::new("d.png"), &png(100, 10, 6, 16, &[], None), &b, 0, &w).unwrap();
+        let (_, deep) = decode(Path::new("d.png"), &png(100, 10, 6, 16, &[], None), &b, &no_work, &w).unwrap();
         assert_eq!(deep.bytes(), 1000 * 18 + 8000);
         assert!(warned.borrow()[0].contains("alpha"), "{:?}", warned.borrow());
     }
@@ -292,12 +302,12 @@ mod tests {
         let bytes = png(14000, 14000, 0, 8, &[], Some(1));
         assert!(bytes.len() < 100_000);
         let b = Budget::new(DECODE_BUDGET);
-        let e = decode(Path::new("bomb.png"), &bytes, &b, 0, &no_warn).err().unwrap().to_string();
+        let e = decode(Path::new("bomb.png"), &bytes, &b, &no_work, &no_warn).err().unwrap().to_string();
         assert!(e.contains("14000 x 14000") && e.contains("limit is 768 MiB"), "{e}");
         assert_eq!(b.free(), DECODE_BUDGET, "nothing taken");
         // The PNG's own limit: 2^31 - 1 on each side, refused with a plain line, no abort.
         let bytes = png(i32::MAX as u32, i32::MAX as u32, 2, 8, &[], Some(0));
-        let e = decode(Path::new("huge.png"), &bytes, &b, 0, &no_warn).err().unwrap().to_string();
+        let e = decode(Path::new("huge.png"), &bytes, &b, &no_work, &no_warn).err().unwrap().to_string();
         assert!(e.starts_with("image huge.png: ") && !e.contains("panicked"), "{e}");
     }
 
@@ -322,7 +332,7 @@ mod tests {
         assert!(bytes.len() < 4_000_000, "{}", bytes.len());
         let before = peak_kib();
         let budget = Budget::new(DECODE_BUDGET);
-        let r = decode(Path::new("icc.png"), &bytes, &budget, 0, &no_warn);
+        let r = decode(Path::new("icc.png"), &bytes, &budget, &no_work, &no_warn);
         if let Err(e) = &r {
             assert!(e.to_string().starts_with("image icc.png: "), "{e}");
         }
@@ -339,10 +349,10 @@ mod tests {
         let warned = std::cell::RefCell::new(Vec::<String>::new());
         let w = |m: &str| warned.borrow_mut().push(m.to_string());
         let b = Budget::new(DECODE_BUDGET);
-        decode(Path::new("ok.jpg"), &jpg, &b, 0, &w).unwrap();
+        decode(Path::new("ok.jpg"), &jpg, &b, &no_work, &w).unwrap();
         assert!(warned.borrow().is_empty());
         let cut = &jpg[..jpg.len() * 2 / 3];
-        let _ = decode(Path::new("cut.jpg"), cut, &b, 0, &w);
+        let _ = decode(Path::new("cut.jpg"), cut, &b, &no_work, &w);
         assert!(warned.borrow().iter().any(|m| m.contains("truncated")), "{:?}", warned.borrow());
     }
 
@@ -352,11 +362,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let fifo = dir.path().join("x.png");
         assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
-        let e = read(&fifo, Budget::global(), 0, &no_warn).err().unwrap().to_string();
+        let e = read(&fifo, Budget::global(), &no_work, &no_warn).err().unwrap().to_string();
         assert!(e.ends_with("is a FIFO; only regular files are read"), "{e}");
         let link = dir.path().join("random.png");
         std::os::unix::fs::symlink("/dev/urandom", &link).unwrap();
-        let e = read(&link, Budget::global(), 0, &no_warn).err().unwrap().to_string();
+        let e = read(&link, Budget::global(), &no_work, &no_warn).err().unwrap().to_string();
         assert!(e.ends_with("is a device; only regular files are read"), "{e}");
     }
 
@@ -374,9 +384,15 @@ mod tests {
     fn a_phone_photo_is_enhanced_under_the_budget_one_at_a_time() {
         // A 12-megapixel 8-bit photo with the enhancer's work fits the budget, two do not:
         // they wait for each other instead of adding up.
-        let one = peak_bytes(4032, 3024, 4032 * 3024 * 3, crate::enhance::WORK_BYTES_PER_PIXEL);
+        // Its enhancer work at the automatic scale (a quarter a side, padded to 16):
+        // the network on 1008 x 768 pixels, the full-resolution planes on 4032 x 3024.
+        use crate::enhance::{NET_BYTES_PER_PIXEL, WORK_BYTES_PER_PIXEL};
+        let work = 1008 * 768 * NET_BYTES_PER_PIXEL + 4032 * 3024 * WORK_BYTES_PER_PIXEL;
+        let one = peak_bytes(4032, 3024, 4032 * 3024 * 3, work);
         assert!(one <= DECODE_BUDGET && 2 * one > DECODE_BUDGET, "{one}");
-        // Each pixel counts the pipeline's bytes and the caller's.
-        assert_eq!(peak_bytes(10, 10, 300, 30), 10 * 10 * (PEAK_BYTES_PER_PIXEL + 30) + 300);
+        // A UHD frame with the network at full resolution (3840 x 2160 x 170 bytes) does not.
+        assert!(peak_bytes(3840, 2160, 3840 * 2160 * 3, 3840 * 2160 * NET_BYTES_PER_PIXEL) > DECODE_BUDGET);
+        // The pipeline's bytes a pixel, the caller's work and the decoded image.
+        assert_eq!(peak_bytes(10, 10, 300, 30), 10 * 10 * PEAK_BYTES_PER_PIXEL + 30 + 300);
     }
 }

@@ -439,6 +439,13 @@ pub fn evaluate(lfw: &Lfw, models: &FaceModels, conds: &[Condition], o: &Privacy
         .filter(|v| v.len() >= 2)
         .collect();
     let classes = usable.len();
+    if classes == 0 {
+        return Err(EvalError::NoIdentities(format!(
+            "privacy ({}): no identity has two photos with a face{}; use more identities (--limit)",
+            o.scene.name(),
+            if o.scene == Scene::Pose { ", one of them turned by 0.2 or more" } else { "" }
+        )));
+    }
     // Distractors usable by the same rule; gallery rows and classifier classes after the
     // probed identities'.
     let extra: Vec<Vec<&Record>> = other_pools

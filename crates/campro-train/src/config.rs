@@ -143,6 +143,10 @@ pub struct DetectorConfig {
     pub adapter_fit: usize,
 }
 
+/// The most rounds (camera training) or steps (the enhancer) a budget may ask: far beyond
+/// any run (a round takes seconds), so that a counter can never wrap.
+pub const MAX_ROUNDS: usize = 10_000_000;
+
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct BudgetConfig {
@@ -289,7 +293,7 @@ impl Rules for Config {
     /// Every rule, first broken one reported.
     fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let finite_pos = |v: f64| v.is_finite() && v > 0.0;
-        let checks: [(bool, &str, &str); 25] = [
+        let checks: [(bool, &str, &str); 26] = [
             ((2..=1024).contains(&self.camera.knots), "camera.knots", "must be in 2..=1024"),
             (
                 self.camera.gamma.is_finite() && (0.2..=5.0).contains(&self.camera.gamma),
@@ -347,6 +351,7 @@ impl Rules for Config {
                 "must be finite and ≥ 0 (0 freezes the adapter)",
             ),
             (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
+            ((1..=MAX_ROUNDS).contains(&self.budget.rounds), "budget.rounds", "must be in 1..=10000000"),
             (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
             (
                 self.validation.every == 0 || (1..=100_000).contains(&self.validation.images),
@@ -625,7 +630,7 @@ impl Rules for EnhancerConfig {
         let multiple = self.model.multiple();
         let p = &self.privacy;
         let gate = self.model.face_gate;
-        let checks: [(bool, &str, &str); 25] = [
+        let checks: [(bool, &str, &str); 26] = [
             (
                 self.ssim_weight.is_finite() && (0.0..=100.0).contains(&self.ssim_weight),
                 "ssim_weight",
@@ -706,6 +711,7 @@ impl Rules for EnhancerConfig {
                 "must be finite and ≥ 0",
             ),
             (self.budget.seconds.is_finite() && self.budget.seconds > 0.0, "budget.seconds", "must be finite and > 0"),
+            ((1..=MAX_ROUNDS).contains(&self.budget.steps), "budget.steps", "must be in 1..=10000000"),
             (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
         ];
         first_broken(&checks)

@@ -288,9 +288,12 @@ pub fn run(
     let privacy = privacy.as_ref();
     let (mut first, mut log, mut earlier) = (1, Vec::new(), 0.0);
     let mut init = None;
+    // What a checkpoint of this U-Net may hold (its variables, by name and shape).
+    let expected: crate::checkpoint::Expected =
+        unet.named_vars().into_iter().map(|(n, v)| (n, v.dims().to_vec())).collect();
     if let Some(from) = &opts.init {
         let (tensors, step) = if from.is_dir() {
-            let (tensors, state) = crate::checkpoint::load::<EnhancerState>(from, &dev)?;
+            let (tensors, state) = crate::checkpoint::load::<EnhancerState>(from, &expected, &dev)?;
             if state.model.widths != cfg.model.widths || state.model.stem != cfg.model.stem {
                 return Err(TrainError::Unsupported(format!(
                     "--init {}: widths {:?} and stem {}, but model.widths is {:?} and model.stem {}",
@@ -317,7 +320,16 @@ pub fn run(
         init = Some(serde_json::json!({ "checkpoint": from.display().to_string(), "step": step, "fresh": fresh }));
     }
     if let Some(dir) = &opts.resume {
-        let (tensors, state) = crate::checkpoint::load::<EnhancerState>(dir, &dev)?;
+        let (tensors, state) = crate::checkpoint::load::<EnhancerState>(dir, &expected, &dev)?;
+        if state.step > cfg.budget.steps {
+            return Err(TrainError::Unsupported(format!(
+                "{}: a checkpoint of step {}, past budget.steps {} (at most {}): nothing to resume",
+                dir.display(),
+                state.step,
+                cfg.budget.steps,
+                crate::config::MAX_ROUNDS
+            )));
+        }
         if state.seed != cfg.seed || state.model != cfg.model {
             return Err(TrainError::Unsupported(format!(
                 "{}: checkpoint of another seed or [model]: resume with its own configuration",

@@ -21,6 +21,10 @@ use std::path::{Path, PathBuf};
 /// Crop size (height, width) of MobileFaceNet.
 pub const CROP: (usize, usize) = (112, 96);
 
+/// The most bytes a face cache may hold: a crop of every LFW photo (13,233) and 64 MiB of
+/// index.
+const MAX_CACHE_BYTES: u64 = 13_233 * (CROP.0 * CROP.1 * 3) as u64 + (64 << 20);
+
 /// The BT.601 luma weights of [`campro::chroma::luma`], in its integer form over 256.
 const LUMA: [f32; 3] = [77.0 / 256.0, 150.0 / 256.0, 29.0 / 256.0];
 
@@ -118,10 +122,10 @@ impl FaceSet {
             checkpoint.display()
         ));
         let name = format!("means-{key:016x}.safetensors");
-        let cached = candle_core::safetensors::load(cache.join(&name), device)
+        let expected = [("means".to_string(), vec![classes, EMBEDDING])].into();
+        let cached = crate::checkpoint::read_tensors(&cache.join(&name), &expected, device)
             .ok()
-            .and_then(|mut t| t.remove("means"))
-            .filter(|m| m.dims() == [classes, EMBEDDING]);
+            .and_then(|mut t| t.remove("means"));
         if let Some(m) = cached {
             return Ok(m);
         }
@@ -144,7 +148,9 @@ impl FaceSet {
     pub fn load_or_build(sel: &Selection, models: &Path, cache: &Path) -> Result<Self, FacesError> {
         let key = fnv(&serde_json::to_string(sel).expect("selection serialises"));
         let file = cache.join(format!("faces-{key:016x}.bin"));
-        if let Ok(bytes) = std::fs::read(&file) {
+        // A regular file of at most every LFW photo's crop and its index; anything else
+        // (a FIFO, a link to a device, a sparse giant) is not read and the set is rebuilt.
+        if let Ok(bytes) = campro::file::read_capped(&file, MAX_CACHE_BYTES, "a face cache") {
             if let Some(set) = Self::decode(&bytes, sel) {
                 return Ok(set);
             }

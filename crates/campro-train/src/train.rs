@@ -244,7 +244,23 @@ fn resume(
     best_names: &[String],
     dev: &candle_core::Device,
 ) -> Result<Resumed, TrainError> {
-    let (tensors, state) = crate::checkpoint::load::<crate::checkpoint::State>(dir, dev)?;
+    // The tensors this run's checkpoint may hold: its variables, and the best camera's.
+    let mut expected: crate::checkpoint::Expected = named.iter().map(|(n, v)| (n.clone(), v.dims().to_vec())).collect();
+    for name in best_names {
+        if let Some((_, v)) = named.iter().find(|(n, _)| n == name) {
+            expected.insert(format!("best.{name}"), v.dims().to_vec());
+        }
+    }
+    let (tensors, state) = crate::checkpoint::load::<crate::checkpoint::State>(dir, &expected, dev)?;
+    if state.round > cfg.budget.rounds {
+        return Err(TrainError::Unsupported(format!(
+            "{}: a checkpoint of round {}, past budget.rounds {} (at most {}): nothing to resume",
+            dir.display(),
+            state.round,
+            cfg.budget.rounds,
+            crate::config::MAX_ROUNDS
+        )));
+    }
     if state.classes != classes || state.seed != cfg.seed {
         return Err(TrainError::Unsupported(format!(
             "{}: checkpoint of another face set or seed: resume with its own configuration",
@@ -558,8 +574,10 @@ impl<'a> Game<'a> {
         let set_aside = people_set_aside(v, people, utility.is_some())?;
         let pretrained =
             if v.every > 0 { Some(MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?.0) } else { None };
-        // H from the class means of the raw training embeddings.
-        let embed = |x: &Tensor| net.embed(x, false);
+        // H from the class means of the raw training embeddings, through the frozen copy (the
+        // same weights, no graph: the variables' graph kept every activation of a 64-face
+        // batch, 1 GB and more).
+        let embed = |x: &Tensor| frozen.embed(x, false);
         let means = faces.class_means(&train, &sel, &cfg.attacker.checkpoint, &cfg.data.cache, embed, &dev)?;
         let head = ProxyHead::from_means(&means, cfg.attacker.head)?;
         let mean_rows: Vec<Vec<f32>> = if v.every > 0 { means.to_vec2()? } else { Vec::new() };
@@ -639,8 +657,10 @@ impl<'a> Game<'a> {
         let mut hits = 0.0;
         for chunk in self.check.chunks(64) {
             let (x, y) = self.faces.batch(chunk, &self.dev)?;
-            let x = if through_camera { self.cam.forward(&x)? } else { x };
-            hits += accuracy(&self.head.logits(&self.net.embed(&x, false)?, None)?, &y)? * chunk.len() as f64;
+            // Detached camera and frozen backbone: no graph is kept for a measurement.
+            let x = if through_camera { self.cam.forward(&x)?.detach() } else { x };
+            let e = self.frozen.embed(&x, false)?.detach();
+            hits += accuracy(&self.head.logits(&e, None)?, &y)? * chunk.len() as f64;
         }
         Ok(hits / self.check.len().max(1) as f64)
     }

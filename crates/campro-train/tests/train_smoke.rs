@@ -125,7 +125,8 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     assert!(resumed.log.windows(2).all(|w| w[1].seconds >= w[0].seconds));
     assert!(resumed.seconds >= out.seconds && resumed.provenance["rounds"] == 12);
     // A checkpoint of another seed is refused.
-    c.seed = 2;
+    let seed0 = c.seed;
+    c.seed = seed0 + 1;
     let err = campro_train::train::run(
         &c,
         &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts), init: None, ..Default::default() },
@@ -135,6 +136,45 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     .unwrap()
     .to_string();
     assert!(err.contains("another face set or seed"), "{err}");
+    c.seed = seed0;
+    let resume_err = |dir: &Path| {
+        campro_train::train::run(
+            &c,
+            &campro_train::train::RunOptions { resume: Some(dir.to_path_buf()), ..Default::default() },
+            |_| {},
+        )
+        .err()
+        .unwrap()
+        .to_string()
+    };
+    // Hostile checkpoints (issue 59, classes B and I), each a copy of the good one with one
+    // change: a round counter at u64::MAX (it once wrapped to round 0 and restarted), and
+    // a tensor file with one tensor more than the run has (it was read whole and accepted).
+    let copy = |name: &str| {
+        let d = cache.path().join(name);
+        std::fs::create_dir_all(&d).unwrap();
+        for f in ["state.json", "tensors.safetensors"] {
+            std::fs::copy(ckpts.join(f), d.join(f)).unwrap();
+        }
+        d
+    };
+    let wrapped = copy("wrapped");
+    let mut state: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(wrapped.join("state.json")).unwrap()).unwrap();
+    state["round"] = serde_json::json!(u64::MAX);
+    std::fs::write(wrapped.join("state.json"), serde_json::to_vec(&state).unwrap()).unwrap();
+    let err = resume_err(&wrapped);
+    assert!(err.contains("round 18446744073709551615, past budget.rounds 12"), "{err}");
+    let extra = copy("extra");
+    let mut tensors =
+        candle_core::safetensors::load(extra.join("tensors.safetensors"), &candle_core::Device::Cpu).unwrap();
+    tensors.insert(
+        "smuggled".into(),
+        candle_core::Tensor::zeros(1000, candle_core::DType::F32, &candle_core::Device::Cpu).unwrap(),
+    );
+    candle_core::safetensors::save(&tensors, extra.join("tensors.safetensors")).unwrap();
+    let err = resume_err(&extra);
+    assert!(err.contains("\"smuggled\" is not one this file may hold"), "{err}");
     let (losses, acc) = campro_train::log::plot_log(&out.log);
     assert!(losses.starts_with("<svg") && losses.contains("privacy") && acc.contains("held-aside"));
     assert_eq!((a.classes.len(), a.validation.len()), (4, 1));

@@ -182,7 +182,7 @@ pub fn pose(landmarks: &[[f32; 2]; 5]) -> Option<(f32, f32)> {
     let [e0, e1, n, m0, m1] = landmarks.map(|p| [p[0] as f64, p[1] as f64]);
     let u = [e1[0] - e0[0], e1[1] - e0[1]];
     let d = u[0].hypot(u[1]);
-    if !(d > 1e-6) {
+    if d.is_nan() || d <= 1e-6 {
         return None;
     }
     let (u, v) = ([u[0] / d, u[1] / d], [-u[1] / d, u[0] / d]);
@@ -190,7 +190,7 @@ pub fn pose(landmarks: &[[f32; 2]; 5]) -> Option<(f32, f32)> {
     let mouth = [(m0[0] + m1[0]) / 2.0, (m0[1] + m1[1]) / 2.0];
     let dot = |a: [f64; 2], b: [f64; 2]| (a[0] - mid[0]) * b[0] + (a[1] - mid[1]) * b[1];
     let down = dot(mouth, v);
-    if !(down.abs() > 1e-6) {
+    if down.is_nan() || down.abs() <= 1e-6 {
         return None;
     }
     Some(((dot(n, u) / d) as f32, (dot(n, v) / down) as f32))

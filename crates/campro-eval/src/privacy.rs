@@ -650,7 +650,7 @@ fn pose_pools(
     pb.finish_and_clear();
     let landmarks: HashMap<&PathBuf, [[f32; 2]; 5]> =
         all.iter().zip(&found).filter_map(|(p, l)| l.map(|l| (*p, l))).collect();
-    let mut pitches: Vec<f32> = landmarks.values().filter_map(|l| crate::place::pose(l)).map(|p| p.1).collect();
+    let mut pitches: Vec<f32> = landmarks.values().filter_map(crate::place::pose).map(|p| p.1).collect();
     pitches.sort_by(f32::total_cmp);
     let frontal = pitches.get(pitches.len() / 2).copied().unwrap_or(0.5);
     let mut probes = Vec::new();

@@ -101,6 +101,26 @@ pub fn read_tensors(
         .collect()
 }
 
+/// Refuses a checkpoint whose counter (`"round"` or `"step"`, its value) is past the run's
+/// budget (its field, its value; budgets are at most [`crate::config::MAX_ROUNDS`]): a
+/// counter of u64::MAX once wrapped to 0 and restarted the run.
+pub fn within_budget(
+    dir: &Path,
+    (what, at): (&str, usize),
+    (field, budget): (&str, usize),
+) -> Result<(), CheckpointError> {
+    if at > budget {
+        return Err(CheckpointError::Format {
+            path: dir.to_path_buf(),
+            message: format!(
+                "a checkpoint of {what} {at}, past {field} {budget} (at most {}): nothing to resume",
+                crate::config::MAX_ROUNDS
+            ),
+        });
+    }
+    Ok(())
+}
+
 /// Reads a checkpoint written by [`save`]: its state (capped JSON) and its tensors, read
 /// only if they are among `expected` ([`read_tensors`]).
 pub fn load<S: serde::de::DeserializeOwned>(

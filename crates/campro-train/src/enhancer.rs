@@ -321,15 +321,7 @@ pub fn run(
     }
     if let Some(dir) = &opts.resume {
         let (tensors, state) = crate::checkpoint::load::<EnhancerState>(dir, &expected, &dev)?;
-        if state.step > cfg.budget.steps {
-            return Err(TrainError::Unsupported(format!(
-                "{}: a checkpoint of step {}, past budget.steps {} (at most {}): nothing to resume",
-                dir.display(),
-                state.step,
-                cfg.budget.steps,
-                crate::config::MAX_ROUNDS
-            )));
-        }
+        crate::checkpoint::within_budget(dir, ("step", state.step), ("budget.steps", cfg.budget.steps))?;
         if state.seed != cfg.seed || state.model != cfg.model {
             return Err(TrainError::Unsupported(format!(
                 "{}: checkpoint of another seed or [model]: resume with its own configuration",

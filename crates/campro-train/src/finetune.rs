@@ -101,16 +101,20 @@ pub fn run(
             None => Ok(x.clone()),
         }
     };
+    // The time budget counts from here: the adapter's fit spends it too.
+    let start = std::time::Instant::now();
     let mut fit = Vec::new();
     let fitter = if cfg.adapter_fit > 0 { crate::detection::AdapterFit::new(&det, FIT_LR)? } else { None };
     if let Some(mut fitter) = fitter {
         for _ in 0..cfg.adapter_fit {
+            if start.elapsed().as_secs_f64() >= o.seconds {
+                break;
+            }
             let b = set.batch(&draw(&mut order, &pool, cfg.batch, &mut rng), &dev)?;
             fit.push(fitter.step(&det, &through(&b.x)?, &b)?);
         }
     }
     let mut adam = crate::detection::DetectorAdam::new(&det, cfg)?;
-    let start = std::time::Instant::now();
     // The log grows as the steps run (a step is ~0.5 s): never reserved from the flag.
     let mut log = Vec::new();
     for step in 1..=o.steps {

@@ -252,15 +252,7 @@ fn resume(
         }
     }
     let (tensors, state) = crate::checkpoint::load::<crate::checkpoint::State>(dir, &expected, dev)?;
-    if state.round > cfg.budget.rounds {
-        return Err(TrainError::Unsupported(format!(
-            "{}: a checkpoint of round {}, past budget.rounds {} (at most {}): nothing to resume",
-            dir.display(),
-            state.round,
-            cfg.budget.rounds,
-            crate::config::MAX_ROUNDS
-        )));
-    }
+    crate::checkpoint::within_budget(dir, ("round", state.round), ("budget.rounds", cfg.budget.rounds))?;
     if state.classes != classes || state.seed != cfg.seed {
         return Err(TrainError::Unsupported(format!(
             "{}: checkpoint of another face set or seed: resume with its own configuration",
@@ -419,13 +411,23 @@ pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> 
     let m = if cfg.protector.protector_only { 0 } else { cfg.attacker.steps_per_round };
     let mut stopped_early = false;
     for round in first_round..=cfg.budget.rounds {
+        // The time budget is checked inside the round too: a round of many steps
+        // (`attacker.steps_per_round`, `protector.steps_per_round`) stops at it.
+        let over = || start.elapsed().as_secs_f64() >= cfg.budget.seconds;
         for _ in 0..m {
+            if over() {
+                break;
+            }
             let (x, y) = game.faces.batch(&draws.faces(&game), &game.dev)?;
             let (x, y) = game.with_grey(x, y)?;
             (ce, acc) = game.attacker_step(&game.cam.forward(&x)?.detach(), &y, &mut opt)?;
         }
         let (mut lns, mut ldet) = (f64::NAN, f64::NAN);
-        for _ in 0..cfg.protector.steps_per_round {
+        for k in 0..cfg.protector.steps_per_round {
+            // At least one protector step a round, so that a round always moves the camera.
+            if k > 0 && over() {
+                break;
+            }
             (lns, ldet) = game.protector_step(&mut draws, &mut opt)?;
         }
         let spent = round == cfg.budget.rounds || start.elapsed().as_secs_f64() >= cfg.budget.seconds;

@@ -9,6 +9,16 @@ use std::path::Path;
 
 /// Five LFW identities (four classes, one held out), batch 8, no utility player, caching in
 /// `cache`; None (skipped) without ../shared.
+/// A checkpoint this test wrote, read back whole for inspection (the run itself reads it
+/// through `checkpoint::load`, against its expected tensors).
+fn read_checkpoint(
+    dir: &Path,
+) -> (std::collections::HashMap<String, candle_core::Tensor>, campro_train::checkpoint::State) {
+    let t = candle_core::safetensors::load(dir.join("tensors.safetensors"), &candle_core::Device::Cpu).unwrap();
+    let s = serde_json::from_slice(&std::fs::read(dir.join("state.json")).unwrap()).unwrap();
+    (t, s)
+}
+
 fn tiny(cache: &Path) -> Option<Config> {
     let ckpt = shared::shared("models/mobilefacenet_casia_068.ckpt")?;
     let lfw = shared::shared("data/lfw/pairs.txt")?;
@@ -129,7 +139,12 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     c.seed = seed0 + 1;
     let err = campro_train::train::run(
         &c,
-        &campro_train::train::RunOptions { checkpoints: None, resume: Some(ckpts), init: None, ..Default::default() },
+        &campro_train::train::RunOptions {
+            checkpoints: None,
+            resume: Some(ckpts.clone()),
+            init: None,
+            ..Default::default()
+        },
         |_| {},
     )
     .err()
@@ -212,8 +227,7 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     assert!(out.log[0].detection_loss.is_nan(), "no detection loss before round 1");
     assert_eq!(out.provenance["data"]["person_images"], 2);
     let detector = out.detector.expect("the fine-tuned detector");
-    let (tensors, _) =
-        campro_train::checkpoint::load::<campro_train::checkpoint::State>(&ckpts, &campro_train::Device::Cpu).unwrap();
+    let (tensors, _) = read_checkpoint(&ckpts);
     let stored = tensors.keys().filter(|k| k.starts_with("detector.")).count();
     assert_eq!(stored, detector.vars().len());
     // With a colour adapter in P: it trains and follows the camera (its output layer leaves
@@ -237,9 +251,7 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     assert_eq!(adapter.len(), 4);
     let w2: Vec<f32> = adapter[2].as_tensor().flatten_all().unwrap().to_vec1().unwrap();
     assert!(w2.iter().any(|v| v.abs() > 1e-3), "{w2:?}");
-    let (tensors, _) =
-        campro_train::checkpoint::load::<campro_train::checkpoint::State>(&ckpts_a, &campro_train::Device::Cpu)
-            .unwrap();
+    let (tensors, _) = read_checkpoint(&ckpts_a);
     assert_eq!(tensors.keys().filter(|k| k.starts_with("detector.")).count(), detector.vars().len());
     assert!(tensors.contains_key("detector.adapter.w2"));
     // Without a detector weight the detector is never loaded.
@@ -332,8 +344,7 @@ fn the_run_keeps_its_best_validated_camera_and_stops_when_none_is_better() {
     assert_eq!(last, best_round + 6, "{validated:?}");
     // The written camera is the best one, which the checkpoint holds as best.*, beside the
     // last camera (which differs: the camera moved for six more rounds).
-    let (t, state) =
-        campro_train::checkpoint::load::<campro_train::checkpoint::State>(&ckpts, &campro_train::Device::Cpu).unwrap();
+    let (t, state) = read_checkpoint(&ckpts);
     assert_eq!(state.round, last);
     assert_eq!(state.best.map(|b| (b.round, b.stale)), Some((best_round, 3)));
     let flat = |name: &str| -> Vec<f64> {

@@ -583,6 +583,7 @@ fn privacy_distractors_only_enlarge_the_gallery() {
         let out = dir.path().join(out);
         campro()
             .args(["eval", "privacy"])
+            .args(["--condition", "colour"])
             .arg(bundled("color-inversion.json"))
             .args(["--limit", "4", "--runs", "3", "--no-verification", "--shared"])
             .arg(&shared)
@@ -640,6 +641,7 @@ fn privacy_restore_undoes_a_bijective_camera() {
     let out = dir.path().join("r");
     campro()
         .args(["eval", "privacy"])
+        .args(["--condition", "colour"])
         .arg(bundled("color-inversion.json"))
         .args(["--baseline", "lowres-8", "--restore", "--limit", "8", "--runs", "3", "--no-verification", "--shared"])
         .arg(&shared)
@@ -688,6 +690,7 @@ fn privacy_camera_enrolment_matches_protected_to_protected() {
         let out = dir.path().join(enrol);
         campro()
             .args(["eval", "privacy"])
+            .args(["--condition", "colour"])
             .arg(bundled("color-inversion.json"))
             .arg(&flat_path)
             .args(["--limit", "8", "--runs", "3", "--no-verification", "--enrol", enrol, "--shared"])
@@ -750,6 +753,7 @@ fn privacy_retrain_attack_fine_tunes_each_model_on_unprobed_identities() {
     let out = dir.path().join("ev");
     campro()
         .args(["eval", "privacy"])
+        .args(["--condition", "colour"])
         .arg(bundled("color-inversion.json"))
         .arg("--identities")
         .arg(&list)
@@ -889,6 +893,7 @@ fn train_writes_params_and_detector_that_eval_reads() {
     assert!(rows[0].starts_with("| raw"));
     campro()
         .args(["eval", "privacy"])
+        .args(["--condition", "colour"])
         .arg(&p)
         .arg("--identities")
         .arg(&p)
@@ -968,7 +973,7 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     assert!(std::fs::read_to_string(out.join("utility.md"))
         .unwrap()
         .contains("inv each with its own fine-tuned detector"));
-    fails_with(campro().arg("finetune-detector").arg(&p).args(["--steps", "0"]), "--steps: must be at least 1");
+    fails_with(campro().arg("finetune-detector").arg(&p).args(["--steps", "0"]), "0 is not in 1..=10000000");
     fails_with(campro().arg("finetune-detector").arg(&p).args(["--seconds", "NaN"]), "--seconds: must be > 0");
     // A curve with uneven knots cannot drive the optimiser's camera.
     let uneven = dir.path().join("uneven.json");

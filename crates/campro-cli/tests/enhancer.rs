@@ -177,6 +177,7 @@ fn train_enhancer_restores_the_scene_but_not_the_faces() {
     // eval privacy --attack restore-net: the learnt restoration attack on the captured faces.
     campro()
         .args(["eval", "privacy"])
+        .args(["--condition", "colour"])
         .arg(&r)
         .args(["--attack", "restore-net", "--limit", "3", "--runs", "1", "--no-verification", "--shared"])
         .arg(shared)

@@ -217,7 +217,7 @@ fn a_presets_name_gives_its_held_out_identities() {
             .current_dir(dir.path())
             .args(["eval", "privacy", "campro-omega-0.5", "--identities"])
             .arg(identities)
-            .args(["--limit", "3", "--runs", "1", "--no-verification", "--shared"])
+            .args(["--condition", "colour", "--limit", "3", "--runs", "1", "--no-verification", "--shared"])
             .arg(shared)
             .arg("-o")
             .arg(&out)

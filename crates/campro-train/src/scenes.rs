@@ -225,6 +225,27 @@ impl SceneSet {
     }
 }
 
+/// The most face boxes kept for one image (the highest scored): a training scene of 256
+/// pixels holds far fewer faces, and [`Scene::keep`]'s work is boxes x box area.
+pub const MAX_BOXES: usize = 64;
+
+/// Bytes a face-box cache may take for `n` images: [`MAX_BOXES`] boxes of four floats as
+/// JSON (at most 96 characters a box) an image.
+fn cache_cap(n: usize) -> u64 {
+    64 + n as u64 * (MAX_BOXES as u64 * 96 + 8)
+}
+
+/// The face boxes cached in `file` for `n` images, if the file is a regular file within
+/// [`cache_cap`] (so that even empty lists, 3 bytes each in JSON and 24 parsed, stay within
+/// 8 times that) holding exactly `n` lists of at most [`MAX_BOXES`] finite boxes; None (and
+/// the boxes are found again) otherwise.
+fn cached_boxes(file: &Path, n: usize) -> Option<Vec<Vec<[f32; 4]>>> {
+    let bytes = campro::file::read_capped(file, cache_cap(n), "a face-box cache").ok()?;
+    let b: Vec<Vec<[f32; 4]>> = serde_json::from_slice(&bytes).ok()?;
+    let sound = b.len() == n && b.iter().all(|v| v.len() <= MAX_BOXES && v.iter().flatten().all(|c| c.is_finite()));
+    sound.then_some(b)
+}
+
 /// YuNet's face boxes `[x0, y0, x1, y1]` (pixels) on each image of `paths`, read from
 /// `cache` when an earlier run found them for the same list and models, else found and
 /// cached (temporary file + rename; a cache that cannot be written only costs the next run).
@@ -236,18 +257,14 @@ fn face_boxes(
     let list: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
     let key = crate::faces::fnv(&format!("{}|{}|{YUNET}", list.join("\n"), models.display()));
     let file = cache.join(format!("face-boxes-{key:016x}.json"));
-    if let Ok(bytes) = campro::file::read_capped(&file, 256 << 20, "a face-box cache") {
-        if let Ok(b) = serde_json::from_slice::<Vec<Vec<[f32; 4]>>>(&bytes) {
-            if b.len() == paths.len() {
-                return Ok(b);
-            }
-        }
+    if let Some(b) = cached_boxes(&file, paths.len()) {
+        return Ok(b);
     }
     let det = FaceDetector::new(Model::load(Manifest::parse(YUNET, Path::new("bundled yunet.json"), models)?)?)?;
     let boxes: Vec<Vec<[f32; 4]>> = paths
         .par_iter()
         .map(|p| -> campro_eval::Result<Vec<[f32; 4]>> {
-            Ok(det.detect(&read_rgb8(p)?)?.iter().map(|f| f.bbox).collect())
+            Ok(det.detect(&read_rgb8(p)?)?.iter().take(MAX_BOXES).map(|f| f.bbox).collect())
         })
         .collect::<campro_eval::Result<_>>()?;
     let _ = campro_eval::atomic::write(&file, &serde_json::to_vec(&boxes).expect("boxes serialise"), true);
@@ -260,4 +277,29 @@ pub fn enlarge(b: [f32; 4], m: f32, w: u32, h: u32) -> [u32; 4] {
     let (bw, bh) = (b[2] - b[0], b[3] - b[1]);
     let clip = |v: f32, hi: u32| v.round().clamp(0.0, hi as f32) as u32;
     [clip(b[0] - m * bw, w), clip(b[1] - 2.0 * m * bh, h), clip(b[2] + m * bw, w), clip(b[3] + m * bh, h)]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_face_box_cache_is_read_only_when_it_is_what_the_images_need() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("face-boxes.json");
+        let write = |text: &str| std::fs::write(&file, text).unwrap();
+        write("[[[1,2,3,4]],[]]");
+        assert_eq!(cached_boxes(&file, 2), Some(vec![vec![[1.0, 2.0, 3.0, 4.0]], vec![]]));
+        // Another count of images, a non-finite box (JSON cannot say NaN; a huge number
+        // overflows f32 to infinity), too many boxes: found again.
+        assert_eq!(cached_boxes(&file, 3), None);
+        write("[[[1,2,3,1e39]],[]]");
+        assert_eq!(cached_boxes(&file, 2), None);
+        write(&format!("[[{}],[]]", vec!["[0,0,1,1]"; MAX_BOXES + 1].join(",")));
+        assert_eq!(cached_boxes(&file, 2), None);
+        // Empty lists amplify 8 times when parsed: past the cap for 2 images, not read.
+        write(&format!("[{}[]]", "[],".repeat(cache_cap(2) as usize / 3)));
+        assert_eq!(cached_boxes(&file, 2), None);
+        assert_eq!(cache_cap(2), 64 + 2 * (64 * 96 + 8));
+    }
 }

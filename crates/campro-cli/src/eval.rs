@@ -193,8 +193,8 @@ fn run_privacy(
     scenes.sort_by_key(|s| Scene::ALL.iter().position(|x| x == s));
     scenes.dedup();
     let mut reports = Vec::with_capacity(scenes.len());
-    let mut scenes_left = scenes.len();
-    for scene in scenes {
+    let last = scenes.len() - 1;
+    for (i, scene) in scenes.into_iter().enumerate() {
         let o = PrivacyOptions { scene, ..o.clone() };
         // The restoration attacker fits its table on the scene it attacks (a grey camera's
         // attacker knows it is grey).
@@ -206,16 +206,14 @@ fn run_privacy(
             conds
         };
         // A condition with nothing to measure (pose on a few identities, none turned) is
-        // said and left out; the others still run.
+        // said and left out while another condition has measured or still may.
         let mut r = match privacy::evaluate(&lfw, &fm, conds, &o) {
-            Err(campro_eval::EvalError::NoIdentities(why)) if scenes_left > 1 || !reports.is_empty() => {
+            Err(campro_eval::EvalError::NoIdentities(why)) if i < last || !reports.is_empty() => {
                 eprintln!("warning: {why}: the {} condition is left out", scene.name());
-                scenes_left -= 1;
                 continue;
             }
             r => r?,
         };
-        scenes_left -= 1;
         // Re-training attacks the colour scene (its cost is a training run).
         if let (true, Some(probed), Scene::Colour) = (retrain, &o.identities, scene) {
             let models = c.models_dir();

@@ -524,3 +524,31 @@ fn enhance_bounds_the_padded_picture_and_its_longest_side() {
     );
     assert!(!dir.path().join("out/uhd.png").exists());
 }
+
+/// An evaluation condition with nothing to measure (pose on two identities, neither with a
+/// turned photo) is one line naming the rule; beside another condition it is left out with
+/// a warning and the other still reports.
+#[test]
+fn a_condition_with_no_identity_is_named_or_left_out() {
+    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/pairs.txt"]) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let eval = |out: &str| {
+        let mut c = campro();
+        c.args(["eval", "privacy"])
+            .arg(bundled("identity.json"))
+            .args(["--limit", "2", "--runs", "1", "--no-verification", "--shared"])
+            .arg(&shared)
+            .arg("-o")
+            .arg(dir.path().join(out))
+            .timeout(LIMIT);
+        c
+    };
+    fails_with(eval("a").args(["--condition", "pose"]), "privacy (pose): no identity has two photos");
+    let both = eval("b").args(["--condition", "colour", "--condition", "pose"]).output().unwrap();
+    let err = String::from_utf8_lossy(&both.stderr);
+    assert!(both.status.success(), "{err}");
+    assert!(err.contains("the pose condition is left out"), "{err}");
+    assert!(dir.path().join("b/privacy.md").is_file());
+}

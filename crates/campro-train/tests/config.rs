@@ -100,6 +100,7 @@ fn shipped_configs_parse() {
             assert_eq!(c.protector.omega, w.split('-').next().unwrap().parse::<f64>().unwrap(), "{name}");
         }
         assert_eq!(c.protector.protector_only, name == "protector-only", "{name}");
+        assert_eq!(c.protector.grey > 0.0, name.ends_with("grey"), "{name}");
         // Adapter configurations distil too.
         assert_eq!(c.detector.adapter > 0, name.contains("adapter"), "{name}");
         assert_eq!(c.detector.distill > 0.0, name.ends_with("distill") || name.contains("adapter"), "{name}");
@@ -111,5 +112,5 @@ fn shipped_configs_parse() {
         omegas.push(c.protector.omega);
     }
     omegas.sort_by(f64::total_cmp);
-    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
+    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
 }

@@ -143,8 +143,7 @@ pub fn enhance(e: &GuardedEnhancer, captured: &image::RgbImage) -> Result<image:
     // What the network holds is the padded image's (a thin picture is padded to the
     // network's multiple: 1 x 1,000,000 becomes 16 x 1,000,000), and the face guard's work
     // grows with the longer side (its tiles): both are bounded before anything runs.
-    let m = e.enhancer.multiple() as u64;
-    let padded = (w as u64).div_ceil(m) * m * ((h as u64).div_ceil(m) * m);
+    let (m, padded) = (e.enhancer.multiple(), e.enhancer.padded_pixels(w as usize, h as usize));
     if padded > MAX_ENHANCE_PIXELS || w.max(h) > MAX_ENHANCE_SIDE {
         bail!(
             "--enhance: the image is {w} x {h} ({padded} pixels padded to the network's multiple of {m}); the enhancer runs on at most 4096 x 3072 pixels (12.6 megapixels) and {MAX_ENHANCE_SIDE} a side"

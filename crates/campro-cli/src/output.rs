@@ -5,7 +5,7 @@
 use anyhow::{bail, Context, Result};
 pub(crate) use campro::file::{escape, shown};
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// An error chain as one line: each cause's first line (a backtrace some libraries
 /// append with `RUST_BACKTRACE` set never shows), a cause that the text so far already
@@ -99,6 +99,19 @@ pub(crate) fn short(text: &str, max: usize) -> String {
     }
     let head: String = text.chars().take(max).collect();
     format!("{head}... ({} more characters)", n - max)
+}
+
+/// A path as it names a file, for comparing outputs that may not exist yet: the folder
+/// resolved (links, `..`), the name kept.
+pub(crate) fn file_key(p: &Path) -> PathBuf {
+    if let Ok(c) = std::fs::canonicalize(p) {
+        return c;
+    }
+    let parent = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    match (std::fs::canonicalize(parent), p.file_name()) {
+        (Ok(d), Some(n)) => d.join(n),
+        _ => std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf()),
+    }
 }
 
 /// Whether `a` and `b` name the same existing file (the same inode on Unix, through links).

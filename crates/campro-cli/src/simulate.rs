@@ -11,6 +11,7 @@
 
 use crate::args::{BitDepth, Report, SimulateArgs};
 use crate::capture::Capture;
+use crate::output::file_key;
 use crate::video::{self, Encoding, FrameFormat, Sink, Source};
 use crate::write_atomic;
 use anyhow::{anyhow, bail, Result};
@@ -33,25 +34,20 @@ pub(crate) struct Inputs {
     pub skipped: Vec<(PathBuf, &'static str)>,
 }
 
-/// A path made absolute and, where it exists, with links resolved (for comparing).
-fn resolved(p: &Path) -> PathBuf {
-    std::fs::canonicalize(p).or_else(|_| std::path::absolute(p)).unwrap_or_else(|_| p.to_path_buf())
-}
-
 /// Every (input file, output file) pair: folders are walked recursively and mirrored;
 /// `name` turns a mirrored path into its output's (the ending).
 pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path, name: &dyn Fn(&Path) -> PathBuf) -> Result<Inputs> {
-    let out_abs = resolved(out);
+    let out_abs = file_key(out);
     let mut found = Inputs { jobs: Vec::new(), skipped: Vec::new() };
     for input in inputs {
         let meta = std::fs::metadata(input).map_err(|e| anyhow!("{}: {e}", crate::shown(input)))?;
         if meta.is_dir() {
-            if resolved(input) == out_abs {
+            if file_key(input) == out_abs {
                 bail!("--output {}: is the input folder itself; outputs would replace inputs", crate::shown(out));
             }
             // Never descend into the output folder: what this run writes is not an input.
             let walk = walkdir::WalkDir::new(input).sort_by_file_name().into_iter();
-            for entry in walk.filter_entry(|e| !(e.file_type().is_dir() && resolved(e.path()) == out_abs)) {
+            for entry in walk.filter_entry(|e| !(e.file_type().is_dir() && file_key(e.path()) == out_abs)) {
                 let entry = entry?;
                 let t = entry.file_type();
                 if t.is_dir() {
@@ -78,12 +74,12 @@ pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path, name: &dyn Fn(&Path
         }
     }
     let mut seen = std::collections::HashSet::new();
-    let sources: std::collections::HashSet<PathBuf> = found.jobs.iter().map(|(i, _)| resolved(i)).collect();
+    let sources: std::collections::HashSet<PathBuf> = found.jobs.iter().map(|(i, _)| file_key(i)).collect();
     for (i, o) in &found.jobs {
         if !seen.insert(o.clone()) {
             bail!("two inputs would both be written to {} (the second is {})", crate::shown(o), crate::shown(i));
         }
-        if sources.contains(&resolved(o)) {
+        if sources.contains(&file_key(o)) {
             bail!("--output: writing {} would replace an input; choose another output folder", crate::shown(o));
         }
     }
@@ -264,7 +260,7 @@ fn single_file(inputs: &[PathBuf], out: &Path) -> Result<Option<(PathBuf, PathBu
             if video::is_video(input) { "video" } else { "PNG, JPEG or TIFF" }
         );
     }
-    if resolved(input) == resolved(out) {
+    if file_key(input) == file_key(out) {
         bail!("--output: writing {} would replace its input", crate::shown(out));
     }
     Ok(Some((input.clone(), out.to_path_buf())))

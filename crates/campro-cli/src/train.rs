@@ -4,6 +4,7 @@
 use crate::args::{
     BenchEnhancerArgs, BenchTrainArgs, FinetuneDetectorArgs, RunFiles, StepArg, TrainArgs, TrainEnhancerArgs,
 };
+use crate::output::file_key;
 use crate::{load_params, write_atomic};
 use anyhow::{bail, Result};
 use campro_eval::table::{Cell, Column, Table};
@@ -21,19 +22,6 @@ impl RunFiles {
             }
         }
         Ok(())
-    }
-}
-
-/// A path as it names a file, for comparing outputs that may not exist yet: the folder
-/// resolved (links, `..`), the name kept.
-fn file_key(p: &Path) -> PathBuf {
-    if let Ok(c) = std::fs::canonicalize(p) {
-        return c;
-    }
-    let parent = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    match (std::fs::canonicalize(parent), p.file_name()) {
-        (Ok(d), Some(n)) => d.join(n),
-        _ => std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf()),
     }
 }
 

@@ -274,23 +274,25 @@ impl Enhancer {
         self.multiple
     }
 
+    /// Pixels of a `w` x `h` image padded to the network's multiple (saturating).
+    pub fn padded_pixels(&self, w: usize, h: usize) -> u64 {
+        let m = self.multiple as u64;
+        (w as u64).div_ceil(m).saturating_mul(m).saturating_mul((h as u64).div_ceil(m).saturating_mul(m))
+    }
+
     /// Bytes [`Self::enhance`] holds for a `w` x `h` image besides the image itself: the
     /// network's pixels (padded to the multiple, at its working scale) at
     /// [`NET_BYTES_PER_PIXEL`], and at a reduced scale the full-resolution planes at
     /// [`WORK_BYTES_PER_PIXEL`]. Saturating.
     pub fn work_bytes(&self, w: u32, h: u32) -> u64 {
         let (w, h) = (w as usize, h as usize);
-        let m = self.multiple as u64;
-        let padded = |w: usize, h: usize| {
-            (w as u64).div_ceil(m).saturating_mul(m).saturating_mul((h as u64).div_ceil(m).saturating_mul(m))
-        };
         let f = self.scale.factor(w, h);
         if f > 1 && w >= f * self.multiple && h >= f * self.multiple && self.unet.is_some() {
-            padded(w.div_ceil(f), h.div_ceil(f))
+            self.padded_pixels(w.div_ceil(f), h.div_ceil(f))
                 .saturating_mul(NET_BYTES_PER_PIXEL)
-                .saturating_add(padded(w, h).saturating_mul(WORK_BYTES_PER_PIXEL))
+                .saturating_add(self.padded_pixels(w, h).saturating_mul(WORK_BYTES_PER_PIXEL))
         } else {
-            padded(w, h).saturating_mul(NET_BYTES_PER_PIXEL)
+            self.padded_pixels(w, h).saturating_mul(NET_BYTES_PER_PIXEL)
         }
     }
 

@@ -209,7 +209,7 @@ fn stream_job(inputs: &[PathBuf], out: &Path, o: &Options) -> Result<Option<(Sou
         None
     };
     if stream_in.is_none() && o.frames != FrameFormat::default() {
-        bail!("--size and --rate: only for standard input (-) or a camera (/dev/videoN)");
+        bail!("--size, --rate and --stall: only for standard input (-) or a camera (/dev/videoN)");
     }
     if stream_in.is_none() && stream_out.is_none() {
         return Ok(None);
@@ -357,6 +357,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         image_format,
         size,
         rate,
+        stall,
         frames,
         force,
         jobs,
@@ -391,7 +392,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         json: matches!(format, Report::Json),
         quality,
         image_format,
-        frames: video::FrameFormat { size, rate },
+        frames: video::FrameFormat { size, rate, stall },
         max_frames: frames,
         allow_grey,
     };

@@ -167,7 +167,15 @@ pub struct FrameFormat {
     pub size: Option<(u32, u32)>,
     /// Frames a second, as ffmpeg reads it (`30`, `30000/1001`).
     pub rate: Option<String>,
+    /// Seconds a live source may go without a frame before the run stops with an error
+    /// (`--stall`); `None`: a camera gets [`CAMERA_STALL_S`], standard input waits for its
+    /// producer as long as it is open.
+    pub stall: Option<u32>,
 }
+
+/// Seconds a camera may go without a frame (the first one included) before `simulate`
+/// stops: a camera that is busy elsewhere or has stopped never hangs the run.
+pub const CAMERA_STALL_S: u32 = 10;
 
 /// Where frames come from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -192,6 +200,17 @@ impl Source {
 
     fn live(&self) -> bool {
         !matches!(self, Source::File(_))
+    }
+
+    /// How long the run waits for this source's next frame: `--stall`, or a camera's
+    /// [`CAMERA_STALL_S`]; a file and plain standard input wait as long as the decoder runs.
+    fn stall(&self) -> Option<std::time::Duration> {
+        let seconds = match self {
+            Source::File(_) => None,
+            Source::Stdin(f) => f.stall,
+            Source::Camera(_, f) => Some(f.stall.unwrap_or(CAMERA_STALL_S)),
+        };
+        seconds.map(|s| std::time::Duration::from_secs(s.into()))
     }
 }
 
@@ -552,8 +571,18 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
     let dec_err = clock(decode.stderr.take().expect("piped"), clock_tx);
     let mut from = decode.stdout.take().expect("piped");
     // The size and time base arrive with the first decoded frame.
-    let (tb, width, height) = match clock_rx.recv() {
+    let stall = source.stall();
+    let first = match stall {
+        Some(limit) => clock_rx.recv_timeout(limit).map_err(|e| e == mpsc::RecvTimeoutError::Timeout),
+        None => clock_rx.recv().map_err(|_| false),
+    };
+    let (tb, width, height) = match first {
         Ok(Clock::Header { tb, width, height }) => (tb, width, height),
+        Err(true) => {
+            let _ = decode.kill();
+            let _ = wait(&mut decode);
+            bail!("{} gave no frame in {} s (--stall)", source.shown(), stall.unwrap_or_default().as_secs());
+        }
         _ => {
             let _ = decode.kill();
             let _ = wait(&mut decode);
@@ -684,7 +713,25 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         let (mut s16, mut d16) =
             if sixteen { (vec![0u16; frame_bytes / 2], vec![0u16; frame_bytes / 2]) } else { (Vec::new(), Vec::new()) };
         let mut failure = None;
-        'frames: while let Ok(first) = full_rx.recv() {
+        'frames: loop {
+            let first = match stall {
+                Some(limit) => match full_rx.recv_timeout(limit) {
+                    Ok(f) => f,
+                    Err(mpsc::RecvTimeoutError::Timeout) => {
+                        failure = Some(anyhow!(
+                            "{} gave no frame for {} s after frame {frames} (--stall)",
+                            source.shown(),
+                            limit.as_secs()
+                        ));
+                        break;
+                    }
+                    Err(mpsc::RecvTimeoutError::Disconnected) => break,
+                },
+                None => match full_rx.recv() {
+                    Ok(f) => f,
+                    Err(_) => break,
+                },
+            };
             let mut batch = vec![first];
             while batch.len() < batch_max {
                 match full_rx.try_recv() {
@@ -738,8 +785,12 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
             }
         }
         drop(done_tx);
-        // Unblock a reader waiting for a free buffer if the writer quit early or we stopped.
+        // Unblock a reader waiting for a free buffer if the writer quit early or we stopped,
+        // and one waiting on a silent source: a failed run ends the decoder now.
         drop(full_rx);
+        if failure.is_some() || job.max_frames.is_some_and(|m| frames >= m) {
+            let _ = decode.kill();
+        }
         let w = writer.join().unwrap_or_else(|_| Err(anyhow!("the writer thread panicked")));
         let r = reader.join().unwrap_or_else(|_| Err(anyhow!("the reader thread panicked")));
         match failure {

@@ -329,6 +329,52 @@ fn ten_bit_video_goes_through_the_16_bit_path_and_stays_ten_bit() {
     assert!(levels.len() > 256, "{} levels of red", levels.len());
 }
 
+/// How long one piped campro run may take before the test kills it and fails: a stalled
+/// pipe is a failure with its stderr, never a CI run that never ends.
+const PIPED_LIMIT: std::time::Duration = std::time::Duration::from_secs(180);
+
+/// Waits for `child` (stdout and stderr piped) at most [`PIPED_LIMIT`]; past it, kills it
+/// (and `also`, its source) and fails the test with the stderr it printed so far.
+fn finish(mut child: std::process::Child, also: Option<&mut std::process::Child>) -> std::process::Output {
+    use std::io::Read;
+    use std::sync::{Arc, Mutex};
+    // Read as it comes, so that a stopped run still shows what it said.
+    fn drain(r: Option<impl Read + Send + 'static>, into: Arc<Mutex<Vec<u8>>>) -> std::thread::JoinHandle<()> {
+        std::thread::spawn(move || {
+            let Some(mut r) = r else { return };
+            let mut buf = [0u8; 65536];
+            while let Ok(n @ 1..) = r.read(&mut buf) {
+                into.lock().unwrap().extend_from_slice(&buf[..n]);
+            }
+        })
+    }
+    let (out, err) = (Arc::new(Mutex::new(Vec::new())), Arc::new(Mutex::new(Vec::new())));
+    let readers = [drain(child.stdout.take(), out.clone()), drain(child.stderr.take(), err.clone())];
+    let began = std::time::Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if began.elapsed() > PIPED_LIMIT {
+            let _ = child.kill();
+            let _ = child.wait();
+            if let Some(a) = also {
+                let _ = a.kill();
+                let _ = a.wait();
+            }
+            // The pipes may be held by a stalled grandchild: the readers are not waited for.
+            let said = String::from_utf8_lossy(&err.lock().unwrap()).into_owned();
+            panic!("campro ran over {} s and was stopped; its stderr so far:\n{said}", PIPED_LIMIT.as_secs());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    for r in readers {
+        r.join().unwrap();
+    }
+    let take = |v: Arc<Mutex<Vec<u8>>>| std::mem::take(&mut *v.lock().unwrap());
+    std::process::Output { status, stdout: take(out), stderr: take(err) }
+}
+
 /// Runs campro with `stdin` on standard input; returns its stdout and stderr.
 fn piped(args: &[&std::ffi::OsStr], stdin: Vec<u8>) -> (bool, Vec<u8>, String) {
     let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("campro"))
@@ -343,7 +389,7 @@ fn piped(args: &[&std::ffi::OsStr], stdin: Vec<u8>) -> (bool, Vec<u8>, String) {
         use std::io::Write;
         let _ = sin.write_all(&stdin);
     });
-    let out = child.wait_with_output().unwrap();
+    let out = finish(child, None);
     feeder.join().unwrap();
     (out.status.success(), out.stdout, String::from_utf8_lossy(&out.stderr).into_owned())
 }
@@ -452,8 +498,9 @@ fn standard_input_and_output_carry_containers_and_raw_frames() {
 
 /// A live source at its own pace (ffmpeg's `-re` on a generated pattern, piped in as a
 /// camera would stream): the run keeps up and says the rate it sustained. A real V4L2
-/// camera (`/dev/videoN`) goes through the same code with ffmpeg's v4l2 input; it is run
-/// here only where one exists.
+/// camera (`/dev/videoN`) goes through the same code with ffmpeg's v4l2 input; it is not
+/// run here (a machine's device may never deliver a frame: `simulate` then stops at its
+/// first-frame limit, which `a_source_that_gives_no_frame_is_stopped_by_its_limit` tests).
 #[test]
 fn a_live_source_is_processed_at_its_pace_and_the_rate_reported() {
     if !ffmpeg_present() {
@@ -471,9 +518,20 @@ fn a_live_source_is_processed_at_its_pace_and_the_rate_reported() {
         .arg(&preset)
         .args(["-", "-o", "-", "--codec", "rawvideo"])
         .stdin(source.stdout.take().unwrap())
-        .output()
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
         .unwrap();
-    source.wait().unwrap();
+    let run = finish(run, Some(&mut source));
+    // The source ends by itself once campro has read (or dropped) its pipe.
+    let began = std::time::Instant::now();
+    while source.try_wait().unwrap().is_none() {
+        if began.elapsed() > PIPED_LIMIT {
+            let _ = source.kill();
+            panic!("the source ffmpeg did not end");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "{err}");
     assert_eq!(run.stdout.len(), 45 * 320 * 240 * 3, "{err}");
@@ -485,14 +543,72 @@ fn a_live_source_is_processed_at_its_pace_and_the_rate_reported() {
     eprintln!("live 320x240 at 30 fps: the camera stage does {capacity:.1} frames a second");
     assert!(summary.contains("the source's 30.0") && capacity > 0.0, "{err}");
     assert_eq!(capacity < 28.5, err.contains("drops frames"), "{err}");
-    if let Some(cam) = (0..4).map(|i| std::path::PathBuf::from(format!("/dev/video{i}"))).find(|p| p.exists()) {
-        let run = campro()
+}
+
+/// A live source that stops giving frames (its pipe open, nothing on it) ends the run with
+/// one line after `--stall` seconds, before its first frame and after some; the decoder is
+/// stopped with it (no process is left behind holding the pipe).
+#[test]
+fn a_source_that_gives_no_frame_is_stopped_by_its_limit() {
+    if !ffmpeg_present() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let preset = bundled("campro-omega-0.5.json");
+    let clip = dir.path().join("clip.nut");
+    // 40 frames of 320 x 240 (9 MB): past the 5 MB ffmpeg reads of a pipe before its first
+    // frame, so that the frames are given and the silence comes after them.
+    let pattern = "testsrc2=size=320x240:rate=30";
+    let nut = ffmpeg(&[
+        "-f",
+        "lavfi",
+        "-i",
+        pattern,
+        "-frames:v",
+        "40",
+        "-c:v",
+        "rawvideo",
+        "-pix_fmt",
+        "rgb24",
+        "-f",
+        "nut",
+        "-",
+    ]);
+    std::fs::write(&clip, nut).unwrap();
+    for (producer, said) in [
+        ("exec sleep 60".to_string(), "standard input gave no frame in 3 s (--stall)"),
+        (format!("cat '{}'; exec sleep 60", clip.display()), "standard input gave no frame for 3 s after frame "),
+    ] {
+        let mut source =
+            Command::new("sh").args(["-c", &producer]).stdout(std::process::Stdio::piped()).spawn().unwrap();
+        let began = std::time::Instant::now();
+        let run = Command::new(assert_cmd::cargo::cargo_bin("campro"))
             .arg("simulate")
             .arg(&preset)
-            .arg(&cam)
-            .args(["-o", "-", "--codec", "rawvideo", "--frames", "5"])
-            .output()
+            .args(["-", "-o", "-", "--codec", "rawvideo", "--stall", "3"])
+            .stdin(source.stdout.take().unwrap())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
             .unwrap();
-        eprintln!("{}: {}", cam.display(), String::from_utf8_lossy(&run.stderr));
+        let run = finish(run, Some(&mut source));
+        let took = began.elapsed().as_secs_f64();
+        let _ = source.kill();
+        let _ = source.wait();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success() && err.contains(said), "{producer}: {err}");
+        assert_eq!(err.lines().filter(|l| l.starts_with("error")).count(), 1, "{err}");
+        assert!(took < 30.0, "{producer}: stopped after {took:.1} s");
+        // After frames: how many came through (ffmpeg may hold the last few back).
+        if let Some(n) = err.split("after frame ").nth(1) {
+            let n: u64 = n.split(' ').next().unwrap().parse().unwrap();
+            assert!((1..=40).contains(&n), "{err}");
+            assert_eq!(run.stdout.len() as u64, n * 320 * 240 * 3, "the frames before the stall are written");
+        }
     }
+    fails_with(
+        campro().arg("simulate").arg(&preset).arg(&clip).args(["--stall", "5", "-o"]).arg(dir.path().join("o.mkv")),
+        "--stall",
+    );
+    fails_with(campro().arg("simulate").arg(&preset).arg("-").args(["--stall", "0", "-o", "-"]), "--stall");
 }

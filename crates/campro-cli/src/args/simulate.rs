@@ -36,6 +36,10 @@ pub struct SimulateArgs {
     /// (frames a second: 30, 29.97 or 30000/1001).
     #[arg(long, value_parser = parse_rate)]
     pub rate: Option<String>,
+    /// Seconds a live source may go without a frame before the run stops with an error
+    /// (default: 10 for a camera; standard input waits while its producer is open).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=3600))]
+    pub stall: Option<u32>,
     /// Stop each video after this many frames (a live camera runs until Ctrl-C without).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub frames: Option<u64>,

@@ -222,7 +222,13 @@ pub fn finetune_detector(a: &FinetuneDetectorArgs) -> Result<()> {
     let campro_train::train::Initial { ccm, curve, gamma, .. } =
         campro_train::train::Initial::from_params(&params, &params_path.display().to_string())?;
     let imaging = campro_train::finetune::Imaging::Camera { ccm, curve, gamma };
-    let opts = campro_train::finetune::FinetuneOptions { steps, seconds, seed: cfg.seed, ..Default::default() };
+    let opts = campro_train::finetune::FinetuneOptions {
+        steps,
+        seconds,
+        seed: cfg.seed,
+        memory: cfg.budget.memory,
+        ..Default::default()
+    };
     let pb = training_bar("finetune-detector", "step", steps);
     let every = (steps / 20).max(1);
     let done = campro_train::finetune::run(&imaging, &cfg.detector, &opts, |r| {

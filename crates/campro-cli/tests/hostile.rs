@@ -552,3 +552,55 @@ fn a_condition_with_no_identity_is_named_or_left_out() {
     assert!(err.contains("the pose condition is left out"), "{err}");
     assert!(dir.path().join("b/privacy.md").is_file());
 }
+
+/// Class A: each field within its rule, their product over the memory budget. The step's
+/// cost is computed from the fields together and refused before any data is read or any
+/// tensor allocated: one line naming budget.memory and the fields, and the process stays
+/// small (its peak resident memory measured, under 1 GiB and far below what the step
+/// would take).
+#[cfg(target_os = "linux")]
+#[test]
+fn a_step_over_the_memory_budget_is_refused_before_anything_is_allocated() {
+    let dir = tempfile::tempdir().unwrap();
+    let params = dir.path().join("p.json");
+    std::fs::copy(bundled("campro-omega-0.5.json"), &params).unwrap();
+    let cases: [(&str, &str, &str); 7] = [
+        ("train", "[detector]\nsize = 1024\nbatch = 256\n", "detector.size 1024"),
+        ("train", "[detector]\nadapter = 4096\n", "detector.adapter 4096"),
+        ("train", "[data]\nbatch = 64\n", "data.batch 64"),
+        ("finetune-detector", "[detector]\nsize = 1024\nbatch = 64\n", "detector.batch 64"),
+        ("train-enhancer", "[data]\ncrop = 256\nbatch = 256\n", "data.crop 256"),
+        ("train-enhancer", "[model]\nwidths = [512]\n", "model.widths [512]"),
+        ("train-enhancer", "[privacy]\nweight = 1.0\nfaces = 256\n", "privacy.faces 256"),
+    ];
+    for (i, (command, text, field)) in cases.iter().enumerate() {
+        let cfg = dir.path().join(format!("c{i}.toml"));
+        std::fs::write(&cfg, text).unwrap();
+        let mut cmd = std::process::Command::new(assert_cmd::cargo::cargo_bin("campro"));
+        cmd.arg(command).current_dir(dir.path());
+        match *command {
+            "train" => cmd.arg(&cfg).arg("-o").arg(dir.path().join(format!("o{i}.json"))),
+            _ => cmd.arg(&params).arg("--config").arg(&cfg),
+        };
+        let (out, peak_kib) = common::run_with_peak(&mut cmd, LIMIT);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{command} {text:?} ran: {err}");
+        assert!(err.contains("budget.memory: one step needs about") && err.contains(field), "{command} {text:?}: {err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(peak_kib < 256 << 10, "{command} {text:?}: peak {} MiB before refusing", peak_kib >> 10);
+    }
+    // Raising the budget is the way through: the same product is then accepted (and the
+    // run goes on to its data, which is missing here).
+    let cfg = dir.path().join("raised.toml");
+    std::fs::write(&cfg, "[data]\nbatch = 64\nlfw = \"no-lfw-here\"\n[budget]\nmemory = 4096\n").unwrap();
+    let (out, _) = common::run_with_peak(
+        std::process::Command::new(assert_cmd::cargo::cargo_bin("campro"))
+            .arg("train")
+            .arg(&cfg)
+            .arg("-o")
+            .arg(dir.path().join("raised.json")),
+        LIMIT,
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && !err.contains("budget.memory") && err.contains("no-lfw-here"), "{err}");
+}

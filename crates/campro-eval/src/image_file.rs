@@ -123,6 +123,19 @@ pub fn read<'b>(
     decode(path, &bytes, budget, work, warn)
 }
 
+/// The width and height the header of the image file at `path` gives (a regular file of
+/// at most [`MAX_FILE_BYTES`]), nothing decoded: what a caller sizes its memory by first.
+pub fn dimensions(path: &Path) -> Result<(u32, u32)> {
+    let bytes = campro::file::read_capped(path, MAX_FILE_BYTES, "an image")?;
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(HEADER_ALLOC);
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(&bytes))
+        .with_guessed_format()
+        .map_err(|e| image_error(path, e.to_string()))?;
+    reader.limits(limits);
+    reader.into_dimensions().map_err(|e| image_error(path, header_message(&e)))
+}
+
 /// [`read`] on bytes already read (`path` names them in errors).
 pub fn decode<'b>(
     path: &Path,

@@ -11,6 +11,9 @@ pub enum ConfigError {
     Parse { path: String, message: String },
     #[error("{path}: {key}: {rule}")]
     Rule { path: String, key: String, rule: String },
+    /// The fields together cost more than the budget ([`crate::cost`]).
+    #[error("{key}: {rule}")]
+    Budget { key: &'static str, rule: String },
 }
 
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
@@ -157,6 +160,9 @@ pub struct BudgetConfig {
     pub seconds: f64,
     /// Write a checkpoint every this many rounds.
     pub checkpoint_every: usize,
+    /// Peak memory one step may take, MiB (64..=1048576; default 1024): the step's cost
+    /// ([`crate::cost::train_step`]) is checked against it before anything is allocated.
+    pub memory: u64,
 }
 
 /// The validation-driven stop ([`crate::validation`]): every `every` rounds the current
@@ -242,7 +248,7 @@ impl Default for DetectorConfig {
 
 impl Default for BudgetConfig {
     fn default() -> Self {
-        Self { rounds: 2000, seconds: 4.0 * 3600.0, checkpoint_every: 100 }
+        Self { rounds: 2000, seconds: 4.0 * 3600.0, checkpoint_every: 100, memory: DEFAULT_MEMORY_MIB }
     }
 }
 
@@ -253,6 +259,12 @@ fn first_broken(checks: &[(bool, &'static str, &'static str)]) -> Result<(), (&'
         None => Ok(()),
     }
 }
+
+/// `budget.memory` when a configuration leaves it out: 1 GiB, MiB.
+pub const DEFAULT_MEMORY_MIB: u64 = 1024;
+
+/// The range of `budget.memory`, MiB.
+const MEMORY_MIB: std::ops::RangeInclusive<u64> = 64..=1 << 20;
 
 /// A configuration file's rules: the first broken one as (key, rule).
 pub trait Rules {
@@ -293,8 +305,9 @@ impl Rules for Config {
     /// Every rule, first broken one reported.
     fn check(&self) -> Result<(), (&'static str, &'static str)> {
         let finite_pos = |v: f64| v.is_finite() && v > 0.0;
-        let checks: [(bool, &str, &str); 26] = [
+        let checks: [(bool, &str, &str); 27] = [
             ((2..=1024).contains(&self.camera.knots), "camera.knots", "must be in 2..=1024"),
+            (MEMORY_MIB.contains(&self.budget.memory), "budget.memory", "must be in 64..=1048576 (MiB)"),
             (
                 self.camera.gamma.is_finite() && (0.2..=5.0).contains(&self.camera.gamma),
                 "camera.gamma",
@@ -564,6 +577,9 @@ pub struct StepBudget {
     pub seconds: f64,
     /// Checkpoint and validate every this many steps.
     pub checkpoint_every: usize,
+    /// Peak memory one step may take, MiB (64..=1048576; default 1024): the step's cost
+    /// ([`crate::cost::enhancer_step`]) is checked against it before anything is allocated.
+    pub memory: u64,
 }
 
 impl UnetConfig {
@@ -619,7 +635,7 @@ impl Default for AdamWConfig {
 }
 impl Default for StepBudget {
     fn default() -> Self {
-        Self { steps: 20_000, seconds: 4.0 * 3600.0, checkpoint_every: 500 }
+        Self { steps: 20_000, seconds: 4.0 * 3600.0, checkpoint_every: 500, memory: DEFAULT_MEMORY_MIB }
     }
 }
 
@@ -630,7 +646,7 @@ impl Rules for EnhancerConfig {
         let multiple = self.model.multiple();
         let p = &self.privacy;
         let gate = self.model.face_gate;
-        let checks: [(bool, &str, &str); 26] = [
+        let checks: [(bool, &str, &str); 27] = [
             (
                 self.ssim_weight.is_finite() && (0.0..=100.0).contains(&self.ssim_weight),
                 "ssim_weight",
@@ -714,6 +730,7 @@ impl Rules for EnhancerConfig {
             // 0: the restoration table alone (configs/enhancer-table.toml).
             (self.budget.steps <= MAX_ROUNDS, "budget.steps", "must be at most 10000000"),
             (self.budget.checkpoint_every >= 1, "budget.checkpoint_every", "must be ≥ 1"),
+            (MEMORY_MIB.contains(&self.budget.memory), "budget.memory", "must be in 64..=1048576 (MiB)"),
         ];
         first_broken(&checks)
     }

@@ -263,9 +263,12 @@ pub fn run(
     opts: &EnhancerOptions,
     mut on_row: impl FnMut(&EnhancerRow),
 ) -> Result<EnhancerOutcome, TrainError> {
+    let step = crate::cost::enhancer_step(cfg);
+    crate::cost::check(&step, cfg.budget.memory)?;
     let start = std::time::Instant::now();
     let dev = opts.ctx.device.clone();
-    let scenes = SceneSet::load(&cfg.data, params, held_out, cfg.model.restorer, cfg.seed)?;
+    let room = (cfg.budget.memory << 20).saturating_sub(step.bytes as u64);
+    let scenes = SceneSet::load(&cfg.data, params, held_out, cfg.model.restorer, cfg.seed, room)?;
     if scenes.train.is_empty() {
         return Err(TrainError::Unsupported(format!(
             "no training scene of at least {0}x{0} pixels (data.crop)",

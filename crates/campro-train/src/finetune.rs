@@ -30,7 +30,7 @@ pub enum Imaging {
 }
 
 /// How long to fine-tune, and where.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct FinetuneOptions {
     /// Detector steps (each `batch` images).
     pub steps: usize,
@@ -40,6 +40,20 @@ pub struct FinetuneOptions {
     pub seed: u64,
     /// Where it computes (default: the CPU).
     pub ctx: campro_nn::Context,
+    /// Peak memory one step may take, MiB (`budget.memory`).
+    pub memory: u64,
+}
+
+impl Default for FinetuneOptions {
+    fn default() -> Self {
+        Self {
+            steps: 0,
+            seconds: f64::INFINITY,
+            seed: 0,
+            ctx: Default::default(),
+            memory: crate::config::DEFAULT_MEMORY_MIB,
+        }
+    }
 }
 
 /// One step of the log.
@@ -77,6 +91,7 @@ pub fn run(
     if cfg.lr <= 0.0 {
         return Err(TrainError::Unsupported("detector.lr: must be > 0 to fine-tune".into()));
     }
+    crate::cost::check(&crate::cost::detector_step(cfg), o.memory)?;
     let dev = o.ctx.device.clone();
     let set = PersonSet::open(&cfg.data, cfg.size, cfg.max_images)?;
     if set.is_empty() {

@@ -13,6 +13,7 @@ pub mod bench;
 pub mod camera;
 pub mod checkpoint;
 pub mod config;
+pub mod cost;
 pub mod detection;
 pub mod enhancer;
 pub mod error;

@@ -99,13 +99,15 @@ impl SceneSet {
     /// Reads the scenes `cfg` names, captures them through `params` and finds their faces.
     /// `held_out`: LFW identities never to read (the preset's held-out ones).
     /// With `restorer`, fits the restoration table on the training scenes and gives every
-    /// scene its restored `input`.
+    /// scene its restored `input`. `room`: the bytes the decoded scenes may hold (the
+    /// memory budget less one step), checked from the files' headers before decoding.
     pub fn load(
         cfg: &SceneConfig,
         params: &campro::Params,
         held_out: &[String],
         restorer: bool,
         seed: u64,
+        room: u64,
     ) -> Result<Self, crate::TrainError> {
         let mut paths = Vec::new();
         let mut coco = coco_person(&cfg.coco)?;
@@ -133,6 +135,27 @@ impl SceneSet {
                 "{}: no training images (data.max_images, data.lfw_images)",
                 cfg.coco.display()
             )));
+        }
+        // What the decoded scenes will hold (raw, captured and restored planes), from the
+        // files' headers, before any is decoded.
+        let planes = if restorer { 3 } else { 2 };
+        let held: u64 = paths
+            .par_iter()
+            .map(|p| campro_eval::image_file::dimensions(p).map(|(w, h)| u64::from(w) * u64::from(h) * 3 * planes))
+            .sum::<campro_eval::Result<u64>>()?;
+        if held > room {
+            return Err(crate::config::ConfigError::Budget {
+                key: "budget.memory",
+                rule: format!(
+                    "the {} scenes (data.max_images {}, data.lfw_images {}) hold {} MiB decoded, over the {} MiB budget.memory leaves beside one step: lower those fields or raise budget.memory",
+                    paths.len(),
+                    cfg.max_images.map_or("all".to_string(), |m| m.to_string()),
+                    cfg.lfw_images,
+                    held.div_ceil(1 << 20),
+                    room >> 20
+                ),
+            }
+            .into());
         }
         let boxes = face_boxes(&paths, &cfg.models, &cfg.cache)?;
         let camera = Exact8::new(params);

@@ -362,6 +362,7 @@ fn accuracy(logits: &Tensor, y: &Tensor) -> candle_core::Result<f64> {
 
 /// Runs the optimisation described by `cfg`; `on_row` sees every log line as it happens.
 pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, TrainError> {
+    crate::cost::check(&crate::cost::train_step(cfg), cfg.budget.memory)?;
     let start = std::time::Instant::now();
     let game = Game::new(cfg, opts)?;
     let Resumed { first_round, mut log, earlier_seconds, best, best_tensors } = match &opts.resume {
@@ -565,6 +566,12 @@ impl<'a> Game<'a> {
             exclude: Vec::new(),
         };
         let faces = FaceSet::load_or_build(&sel, &cfg.data.models, &cfg.data.cache)?;
+        // The crops are held through the run: with one step they must fit the budget before
+        // any network or batch is allocated.
+        let mut cost = crate::cost::train_step(cfg);
+        cost.bytes += faces.crops.len() as f64;
+        cost.fields.push(format!("{} face crops (data.min_images, data.max_identities)", faces.labels.len()));
+        crate::cost::check(&cost, cfg.budget.memory)?;
         let (train, check) = faces.split();
         let (net, net_vars) = MobileFaceNet::from_checkpoint(&cfg.attacker.checkpoint, &dev)?;
         let frozen = net.frozen();

@@ -81,7 +81,7 @@ fn shipped_configs_parse() {
             // `campro train-enhancer`'s, with its own keys; the name says the loss, and
             // whether faces are restored (the attacker's network) or held to the input.
             let c: campro_train::config::EnhancerConfig = campro_train::config::load(&path).unwrap();
-            assert_eq!((c.model.widths, c.model.restorer), (vec![8, 16, 32, 64], true));
+            assert_eq!((c.model.widths.as_slice(), c.model.restorer), (&[8, 16, 32, 64][..], true));
             assert_eq!(c.loss == campro_train::config::PixelLoss::L2, stem.contains("l2"), "{stem}");
             assert_eq!(c.privacy.weight > 0.0, stem.ends_with("private"), "{stem}");
             assert_eq!(c.model.face_gate, stem.contains("gate"), "{stem}");
@@ -91,6 +91,10 @@ fn shipped_configs_parse() {
             assert_eq!(c.budget.steps == 0, stem == "enhancer-table", "{stem}");
             let restore = c.data.faces == campro_train::config::FaceTarget::Restore;
             assert_eq!(restore, stem == "restorer", "{stem}");
+            // Every shipped run fits its own memory budget.
+            let cost = campro_train::cost::enhancer_step(&c);
+            eprintln!("{stem}: {} MiB, {:.1} s a step (budget.memory {})", cost.mib(), cost.seconds, c.budget.memory);
+            campro_train::cost::check(&cost, c.budget.memory).unwrap();
             continue;
         }
         let c = Config::load(&path).unwrap();
@@ -104,6 +108,12 @@ fn shipped_configs_parse() {
         // Adapter configurations distil too.
         assert_eq!(c.detector.adapter > 0, name.contains("adapter"), "{name}");
         assert_eq!(c.detector.distill > 0.0, name.ends_with("distill") || name.contains("adapter"), "{name}");
+        let cost = match name.starts_with("finetune") {
+            true => campro_train::cost::detector_step(&c.detector),
+            false => campro_train::cost::train_step(&c),
+        };
+        eprintln!("{name}: {} MiB, {:.1} s a step (budget.memory {})", cost.mib(), cost.seconds, c.budget.memory);
+        campro_train::cost::check(&cost, c.budget.memory).unwrap();
         if name.starts_with("finetune") {
             continue; // read for its seed and [detector] only
         }
@@ -113,4 +123,38 @@ fn shipped_configs_parse() {
     }
     omegas.sort_by(f64::total_cmp);
     assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
+}
+
+/// The step's cost by hand, from the coefficients' definitions (docs: campro_train::cost):
+/// the paper's defaults (faces 16, people 4 x 320²) cost BASE 160 MiB plus the larger of the
+/// attacker's 16 x 56 MiB and the protector's 16 x 40 MiB + 4 x 320² x 1,400 bytes
+/// (546.875 MiB): 160 + 1,186.875, 1,347 MiB rounded up; a fine-tuning step is BASE and
+/// the detector's part, 707 MiB; the enhancer's default U-Net (8, 16, 32, 64: 15 channels
+/// at full resolution) on 8 crops of 128² costs 160 + 131,072 x 15 x 84 bytes (157.5 MiB),
+/// 318 MiB. Every field of the product moves it.
+#[test]
+fn a_steps_cost_is_its_fields_together() {
+    use campro_train::cost::{check, detector_step, enhancer_step, train_step};
+    let c = Config::default();
+    assert_eq!(train_step(&c).mib(), 1347);
+    assert_eq!(detector_step(&c.detector).mib(), 707);
+    let e = campro_train::config::EnhancerConfig::default();
+    assert_eq!(enhancer_step(&e).mib(), 318);
+    // The protector-only game has no attacker step; without omega no detector in it.
+    let mut p = Config::default();
+    p.protector.omega = 0.0;
+    assert_eq!(train_step(&p).mib(), 160 + 896, "the attacker's step is then the larger");
+    p.protector.protector_only = true;
+    p.data.batch = 1;
+    assert_eq!(train_step(&p).mib(), 707, "the detector step alone (the adapter's fit and P)");
+    // Within the budget passes; over it names the fields and the figure.
+    let mut big = Config::default();
+    big.detector.size = 1024;
+    big.detector.batch = 256;
+    let cost = train_step(&big);
+    assert!(cost.mib() > 100_000, "{}", cost.mib());
+    let e = check(&cost, 1024).unwrap_err().to_string();
+    assert!(e.starts_with("budget.memory: one step needs about") && e.contains("detector.size 1024"), "{e}");
+    check(&train_step(&c), 1347).unwrap();
+    assert!(check(&train_step(&c), 1346).is_err());
 }

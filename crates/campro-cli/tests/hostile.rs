@@ -585,7 +585,10 @@ fn a_step_over_the_memory_budget_is_refused_before_anything_is_allocated() {
         let (out, peak_kib) = common::run_with_peak(&mut cmd, LIMIT);
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{command} {text:?} ran: {err}");
-        assert!(err.contains("budget.memory: one step needs about") && err.contains(field), "{command} {text:?}: {err}");
+        assert!(
+            err.contains("budget.memory: one step needs about") && err.contains(field),
+            "{command} {text:?}: {err}"
+        );
         assert_eq!(err.lines().count(), 1, "{err}");
         assert!(peak_kib < 256 << 10, "{command} {text:?}: peak {} MiB before refusing", peak_kib >> 10);
     }

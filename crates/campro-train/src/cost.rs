@@ -96,8 +96,8 @@ pub fn train_step(c: &Config) -> StepCost {
 /// privacy term's `privacy.faces` through MobileFaceNet when it is on.
 pub fn enhancer_step(c: &EnhancerConfig) -> StepCost {
     let pixels = (c.data.batch * c.data.crop * c.data.crop) as f64;
-    let channels: f64 =
-        c.model.widths.iter().enumerate().map(|(i, &w)| w as f64 / 4f64.powi(i as i32)).sum::<f64>() + c.model.stem as f64;
+    let channels: f64 = c.model.widths.iter().enumerate().map(|(i, &w)| w as f64 / 4f64.powi(i as i32)).sum::<f64>()
+        + c.model.stem as f64;
     let privacy = if c.privacy.weight > 0.0 { c.privacy.faces as f64 } else { 0.0 };
     let bytes = BASE + pixels * channels * UNET_PER_CHANNEL_PIXEL + privacy * PRIVACY_PER_FACE;
     let seconds =

@@ -117,7 +117,8 @@ pub fn enhancer_step(c: &EnhancerConfig) -> StepCost {
 }
 
 /// A `campro finetune-detector` step: YOLOX-Nano (and its adapter) on `batch` people at
-/// `size`², with the teacher's forward when distilling (counted as one more forward).
+/// `size`² (a distilling teacher's forward keeps no graph and stays inside the step's
+/// figure: `finetune-distill.toml` is within it).
 pub fn detector_step(c: &DetectorConfig) -> StepCost {
     let pixels = (c.batch * c.size * c.size) as f64;
     let bytes = BASE + pixels * (DETECTOR_PER_PIXEL + c.adapter as f64 * ADAPTER_PER_UNIT_PIXEL);

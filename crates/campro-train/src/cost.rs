@@ -117,8 +117,8 @@ pub fn enhancer_step(c: &EnhancerConfig) -> StepCost {
 }
 
 /// A `campro finetune-detector` step: YOLOX-Nano (and its adapter) on `batch` people at
-/// `size`² (a distilling teacher's forward keeps no graph and stays inside the step's
-/// figure: `finetune-distill.toml` is within it).
+/// `size`². A distilling teacher's forward is not counted: it keeps no graph, so each of
+/// its activations is freed once the next layer has read it.
 pub fn detector_step(c: &DetectorConfig) -> StepCost {
     let pixels = (c.batch * c.size * c.size) as f64;
     let bytes = BASE + pixels * (DETECTOR_PER_PIXEL + c.adapter as f64 * ADAPTER_PER_UNIT_PIXEL);

@@ -15,8 +15,10 @@ here="$(cd "$(dirname "$0")" && pwd)"
 root="$(dirname "$here")"
 cd "$root"
 
-# The .so the tests load: the JNI crate alone (no desktop features), as an app builds it.
-cargo build --release --locked --lib -p campro-jni
+# The .so the tests load: the JNI crate alone (no desktop features), as an app builds it,
+# plus its test-exports feature, which only adds functions (the core's emulator and desktop
+# pipeline for the simulated camera of org.campro.hal).
+cargo build --release --locked --lib -p campro-jni --features test-exports
 lib="$root/target/release/libcampro_jni.so"
 test -f "$lib"
 
@@ -54,6 +56,12 @@ for x in sorted(glob.glob(sys.argv[1] + "/TEST-*.xml")):
     print(f"{r.get('name')}: {n} tests, {fl + er} failed")
 print(f"Tests run: {t}, Failures: {f}, Errors: {e}, Skipped: {s}")
 PY
+
+# The simulated camera's scenarios (org.campro.hal.HalScenariosTest): the table and the count.
+hal="$here/jvm-test/target/hal-scenarios.md"
+test -s "$hal"
+cat "$hal"
+echo "hal scenarios: $(grep -c '| yes |$' "$hal")/$(( $(grep -c '^| ' "$hal") - 1 )) held"
 
 # Every .kt under android/ must have become a class file of this build.
 total=0; compiled=0

@@ -520,6 +520,99 @@ pub extern "system" fn Java_org_campro_CamProNative_readback<'local>(
     .resolve::<ThrowJava>()
 }
 
+/// The pixels of `raw` (linear sensor RGB, 3 floats a pixel) as 8-bit codes, through
+/// `f`: what a simulated camera's frame holds. `out` has one byte a float.
+#[cfg(feature = "test-exports")]
+fn render(env: &mut Env, raw: &JFloatArray, out: &JByteArray, f: impl Fn([f64; 3]) -> [f64; 3]) -> Result<()> {
+    non_null("raw", raw)?;
+    let n = raw.len(env)?;
+    if n % 3 != 0 || n > 3 << 20 {
+        return Err(BridgeError::Argument(format!("raw: must hold 3 floats a pixel, at most 2^20 pixels, got {n}")));
+    }
+    check_len(env, "out", out, n, true)?;
+    let v = read_floats(env, "raw", raw, n as jint)?;
+    let codes: Vec<i8> = v
+        .chunks_exact(3)
+        .flat_map(|p| f([p[0] as f64, p[1] as f64, p[2] as f64]))
+        .map(|c| ((c.clamp(0.0, 1.0) * 255.0).round() as u8) as i8)
+        .collect();
+    out.set_region(env, 0, &codes)?;
+    Ok(())
+}
+
+/// White-balance gains `(R, G_even, G_odd, B)` as the per-channel factors a Bayer ISP
+/// applies to RGB: R, the mean of the two greens, B.
+#[cfg(feature = "test-exports")]
+fn rgb_gains(env: &Env, gains: &JFloatArray) -> Result<[f64; 3]> {
+    let g = read_floats(env, "gains", gains, 4)?;
+    if g.len() != 4 || g.iter().any(|v| !v.is_finite()) {
+        return Err(BridgeError::Argument("gains: must hold 4 finite values (R, G_even, G_odd, B)".into()));
+    }
+    Ok([g[0] as f64, (g[1] as f64 + g[2] as f64) / 2.0, g[3] as f64])
+}
+
+/// `org.campro.hal.HalNative.emulate(transform: IntArray(18), curve: FloatArray, curveCount: Int,
+/// gains: FloatArray(4), raw: FloatArray(3n), out: ByteArray(3n))`: what a Camera2 device
+/// applying this transform, curve (on all three channels) and these gains makes of linear
+/// sensor RGB, through the core's emulator ([`campro::emulate::Isp`]): gains, matrix, clip,
+/// curve, 8-bit rounding. Test builds only: the JVM suite's simulated camera renders its
+/// frames with it.
+#[cfg(feature = "test-exports")]
+#[unsafe(no_mangle)]
+#[allow(clippy::too_many_arguments)]
+pub extern "system" fn Java_org_campro_hal_HalNative_emulate<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    transform: JIntArray<'local>,
+    curve: JFloatArray<'local>,
+    curve_count: jint,
+    gains: JFloatArray<'local>,
+    raw: JFloatArray<'local>,
+    out: JByteArray<'local>,
+) {
+    env.with_env(|env| -> Result<()> {
+        use campro::emulate::Emulator;
+        let t: [i32; 18] = read_ints(env, "transform", &transform)?;
+        let matrix = camera2::matrix_from_rationals(&t).map_err(|e| arg(e.within("transform")))?;
+        let pairs = read_floats(env, "curve", &curve, curve_count)?;
+        let curve = camera2::curve_from_pairs(&pairs).map_err(|e| arg(e.within("curve")))?;
+        let g = rgb_gains(env, &gains)?;
+        let isp = campro::emulate::Isp { matrix, curve };
+        render(env, &raw, &out, |p| isp.sensor_to_output([p[0] * g[0], p[1] * g[1], p[2] * g[2]]))
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// `org.campro.hal.HalNative.desktop(handle, deviceTransform: IntArray(18), gains: FloatArray(4),
+/// raw: FloatArray(3n), out: ByteArray(3n))`: what the desktop pipeline makes of the same
+/// scene with the handle's parameter set: the device's own rendering to linear sRGB
+/// (`deviceTransform` on the white-balanced sensor RGB), then CamPro
+/// ([`campro::pipeline::from_linear`]), 8-bit rounding. The reference a protected frame
+/// is held to. Test builds only.
+#[cfg(feature = "test-exports")]
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_hal_HalNative_desktop<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    handle: jlong,
+    device_transform: JIntArray<'local>,
+    gains: JFloatArray<'local>,
+    raw: JFloatArray<'local>,
+    out: JByteArray<'local>,
+) {
+    env.with_env(|env| -> Result<()> {
+        let t: [i32; 18] = read_ints(env, "deviceTransform", &device_transform)?;
+        let device = camera2::matrix_from_rationals(&t).map_err(|e| arg(e.within("deviceTransform")))?;
+        let g = rgb_gains(env, &gains)?;
+        let params = with_loop(handle, |l| Ok(l.params().clone()))?;
+        render(env, &raw, &out, |p| {
+            let lin = campro::ccm::apply(&device, [p[0] * g[0], p[1] * g[1], p[2] * g[2]]);
+            campro::pipeline::from_linear(&params, lin)
+        })
+    })
+    .resolve::<ThrowJava>()
+}
+
 /// `org.campro.TestHooks.selfTestPanic(message: String)`: panics inside a native method,
 /// so the host test can check that the panic arrives as a `RuntimeException` and the
 /// library keeps working. Only in builds with the `test-exports` feature (never in the

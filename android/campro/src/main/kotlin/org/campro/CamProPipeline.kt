@@ -12,6 +12,8 @@ class MeteringReport(
     val transform: IntArray?,
     /** `COLOR_CORRECTION_GAINS` as (R, G_even, G_odd, B). */
     val gains: FloatArray?,
+    /** `LOGICAL_MULTI_CAMERA_ACTIVE_PHYSICAL_ID` (`null`: not a logical camera). */
+    val physicalId: String? = null,
 )
 
 /**
@@ -91,6 +93,8 @@ class CamProPipeline<T>(
 
     private var metering = false
     private var running = false
+    /** The physical camera of the metering result the current values come from (logical cameras). */
+    private var meteredPhysicalId: String? = null
     private var meteringMissing = 0
     private var lastState: ProtectionState? = null
 
@@ -167,14 +171,24 @@ class CamProPipeline<T>(
         meteringMissing = 0
         guarded {
             val rebuild = controller.onMeteringResult(transform, gains)
-            if (rebuild || metering) sendProtected()
+            // Values computed for one physical sensor are never sent for another.
+            val switched = m.physicalId != meteredPhysicalId
+            meteredPhysicalId = m.physicalId
+            if (rebuild || metering || switched) sendProtected()
         }
         publish()
     }
 
-    /** A protected frame's result arrived ([timestampNs]: its `SENSOR_TIMESTAMP`). */
+    /**
+     * A protected frame's result arrived ([timestampNs]: its `SENSOR_TIMESTAMP`). A logical
+     * camera that moved to another physical sensor fails the check (its values were computed
+     * for the other one) and metering starts again.
+     */
     fun onProtectedResult(timestampNs: Long, report: CaptureReport) {
         guarded { gate.onResult(timestampNs, report) }
+        synchronized(this) {
+            if (running && !metering && guard.physicalCameraChanged) guarded { beginMetering() }
+        }
         publish()
     }
 
@@ -219,7 +233,7 @@ class CamProPipeline<T>(
         check(session.curvePoints >= 2) { "no CamPro values yet: the session has not been updated from a metering result" }
         metering = false
         val gains = controller.gains.copyOf()
-        guard.requestChanged(gains)
+        guard.requestChanged(gains, meteredPhysicalId)
         gate.clear()
         camera.protect(session.transform.copyOf(), session.curveForRequest(), gains, perFrameControl, controller.meteringInterval)
     }

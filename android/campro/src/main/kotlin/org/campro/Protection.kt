@@ -45,6 +45,8 @@ class CaptureReport(
     val curves: List<FloatArray>?,
     /** `COLOR_CORRECTION_GAINS` as (R, G_even, G_odd, B); `null` when absent. */
     val gains: FloatArray? = null,
+    /** `LOGICAL_MULTI_CAMERA_ACTIVE_PHYSICAL_ID`: the physical camera this frame came from (`null`: not a logical camera). */
+    val physicalId: String? = null,
 )
 
 /**
@@ -84,11 +86,18 @@ class ProtectionGuard(
     val maxGainRelative: Double = 0.002,
     /** Results in a row missing a value key after which a strict guard gives up: Unsupported (>= 1). */
     val missingKeyLimit: Int = 30,
+    /**
+     * Results in a row whose reported values differ from the request (a HAL that rounds the
+     * matrix or resamples the curve) after which the guard gives up: Unsupported (>= 1).
+     * Such a device never verifies, and saying so beats Violated for ever.
+     */
+    val deviationLimit: Int = 30,
 ) {
     init {
         require(maxDeviationLsb.isFinite() && maxDeviationLsb >= 0.0) { "maxDeviationLsb must be finite and >= 0, got $maxDeviationLsb" }
         require(maxGainRelative.isFinite() && maxGainRelative >= 0.0) { "maxGainRelative must be finite and >= 0, got $maxGainRelative" }
         require(missingKeyLimit >= 1) { "missingKeyLimit must be >= 1, got $missingKeyLimit" }
+        require(deviationLimit >= 1) { "deviationLimit must be >= 1, got $deviationLimit" }
     }
 
     /** The current state. */
@@ -106,7 +115,10 @@ class ProtectionGuard(
 
     private val out = DoubleArray(CamProNative.READBACK_LEN)
     private var requestedGains: FloatArray? = null
+    private var requestedPhysicalId: String? = null
     private var missingInARow = 0
+    private var deviatingInARow = 0
+    private var unmatched: String? = null
 
     /** The camera cannot run CamPro (from [DeviceSupport.check]): final. */
     @Synchronized
@@ -125,23 +137,45 @@ class ProtectionGuard(
      * when the request sets none): nothing is protected until a result of it verifies.
      */
     @Synchronized
-    fun requestChanged(gains: FloatArray? = null) {
+    fun requestChanged(gains: FloatArray? = null, physicalId: String? = null) {
         require(gains == null || gains.size == 4) { "gains must have 4 elements (R, G_even, G_odd, B), got ${gains?.size}" }
         requestedGains = gains?.copyOf()
+        requestedPhysicalId = physicalId
         missingInARow = 0
+        deviatingInARow = 0
+        unmatched = null
         if (state !is ProtectionState.Unsupported) state = ProtectionState.Verifying
     }
+
+    /**
+     * The gate's health ([FrameGate]): [reason] when verified results keep finding no frame
+     * (the images' timestamps are not the results' `SENSOR_TIMESTAMP`: a display or readout
+     * timestamp base), `null` once a frame matched again. While set, no result verifies:
+     * Protected would be a lie with nothing delivered.
+     */
+    @Synchronized
+    fun framesUnmatched(reason: String?) {
+        unmatched = reason
+        if (reason != null && state == ProtectionState.Protected) state = ProtectionState.Violated(reason)
+    }
+
+    /** Whether the last violation was the active physical camera changing (the pipeline meters again). */
+    val physicalCameraChanged: Boolean @Synchronized get() = (state as? ProtectionState.Violated)?.reason?.startsWith(PHYSICAL_CHANGED) == true
 
     /** Checks one protected result; returns the new state. */
     @Synchronized
     fun onProtectedResult(r: CaptureReport): ProtectionState {
         // Unsupported is final; Stopped holds until a new request (late results of a stopped camera change nothing).
         if (state is ProtectionState.Unsupported || state is ProtectionState.Stopped) return state
-        val reason = violation(r)
+        val reason = violation(r) ?: unmatched
+        if (reason != null && reason.startsWith(DIFFERS)) deviatingInARow++ else deviatingInARow = 0
         state = when {
             reason == null -> ProtectionState.Protected
             missingInARow >= missingKeyLimit -> ProtectionState.Unsupported(
                 "$reason in $missingInARow results in a row: this device cannot be verified",
+            )
+            deviatingInARow >= deviationLimit -> ProtectionState.Unsupported(
+                "$reason in $deviatingInARow results in a row: the device does not apply the values as sent (it rounds or resamples them)",
             )
             else -> ProtectionState.Violated(reason)
         }
@@ -160,6 +194,10 @@ class ProtectionGuard(
             r.tonemapMode == null -> return "the result does not report TONEMAP_MODE"
             r.tonemapMode != DeviceSupport.TONEMAP_MODE_CONTRAST_CURVE ->
                 return "tone-map mode ${r.tonemapMode} instead of CONTRAST_CURVE"
+        }
+        val wantPhysical = requestedPhysicalId
+        if (wantPhysical != null && r.physicalId != null && r.physicalId != wantPhysical) {
+            return "$PHYSICAL_CHANGED from $wantPhysical to ${r.physicalId}: the values were computed for the other sensor"
         }
         val transform = r.transform
         val curves = r.curves
@@ -201,7 +239,7 @@ class ProtectionGuard(
             worst = maxOf(worst, bound)
             if (!(bound <= maxDeviationLsb)) {
                 val what = if (out[CamProNative.READBACK_MATRIX_MAX_ABS] * 255.0 > maxDeviationLsb / 2) "transform" else "curve"
-                return "the reported $what differs from the request (channel ${"RGB"[c]}): up to %.3f LSB, more than %.3f".format(bound, maxDeviationLsb)
+                return "$DIFFERS $what differs from the request (channel ${"RGB"[c]}): up to %.3f LSB, more than %.3f".format(bound, maxDeviationLsb)
             }
         }
         worstDeviationLsb = maxOf(worstDeviationLsb, worst)
@@ -212,6 +250,8 @@ class ProtectionGuard(
         /** `CameraMetadata.COLOR_CORRECTION_MODE_TRANSFORM_MATRIX`. */
         const val COLOR_CORRECTION_MODE_TRANSFORM_MATRIX = 0
         private val GAIN_NAMES = listOf("R", "G_even", "G_odd", "B")
+        private const val DIFFERS = "the reported"
+        private const val PHYSICAL_CHANGED = "the active physical camera changed"
     }
 }
 
@@ -251,6 +291,15 @@ class FrameGate<T>(
     private val waiting = LinkedHashMap<Long, T>()
     private val verdicts = LinkedHashMap<Long, Boolean>()
     private var stopped = false
+    /** Passing verdicts in a row that found no frame (the health check; see [unmatchedLimit]). */
+    private var unmatchedInARow = 0
+
+    /**
+     * Passing verdicts in a row forgotten without their frame after which the gate tells the
+     * guard that frames and results do not match ([ProtectionGuard.framesUnmatched]): three
+     * verdict stores' worth, so that lost or late results alone never trip it.
+     */
+    val unmatchedLimit: Int get() = 3 * maxPendingVerdicts
 
     init {
         require(maxWaitingFrames >= 1) { "maxWaitingFrames must be >= 1, got $maxWaitingFrames" }
@@ -275,6 +324,7 @@ class FrameGate<T>(
             } else {
                 val verdict = verdicts.remove(timestampNs)
                 if (verdict != null) {
+                    matched()
                     out += frame to verdict
                 } else {
                     waiting[timestampNs] = frame
@@ -297,14 +347,27 @@ class FrameGate<T>(
             val ok = state == ProtectionState.Protected && !stopped
             val frame = waiting.remove(timestampNs)
             if (frame != null) {
+                matched()
                 out += frame to ok
             } else if (!stopped) {
                 verdicts[timestampNs] = ok
-                while (verdicts.size > maxPendingVerdicts) verdicts.remove(verdicts.keys.first())
+                while (verdicts.size > maxPendingVerdicts) {
+                    if (verdicts.remove(verdicts.keys.first()) == true && ++unmatchedInARow >= unmatchedLimit) {
+                        guard.framesUnmatched(
+                            "$unmatchedInARow verified results in a row matched no frame: the images' timestamps are not the results' SENSOR_TIMESTAMP (the output's timestamp base), so no frame can be shown",
+                        )
+                    }
+                }
             }
         }
         release(out)
         return state
+    }
+
+    /** A frame met its verdict: the gate is healthy. Called under the gate's lock. */
+    private fun matched() {
+        if (unmatchedInARow >= unmatchedLimit) guard.framesUnmatched(null)
+        unmatchedInARow = 0
     }
 
     /** Drops every waiting frame and forgets every verdict (the request changed or the camera stopped). */

@@ -57,6 +57,7 @@ private fun RggbChannelVector.toFloats(): FloatArray = floatArrayOf(red, greenEv
  * three modes, the transform, the three curves and the gains, `null` where a key is absent.
  */
 fun CaptureResult.camproReport(): CaptureReport = CaptureReport(
+    physicalId = activePhysicalId(),
     awbMode = get(CaptureResult.CONTROL_AWB_MODE),
     colorCorrectionMode = get(CaptureResult.COLOR_CORRECTION_MODE),
     tonemapMode = get(CaptureResult.TONEMAP_MODE),
@@ -69,8 +70,13 @@ fun CaptureResult.camproReport(): CaptureReport = CaptureReport(
     gains = get(CaptureResult.COLOR_CORRECTION_GAINS)?.toFloats(),
 )
 
+/** `LOGICAL_MULTI_CAMERA_ACTIVE_PHYSICAL_ID` (API 29): the physical sensor of a logical camera's frame; `null` otherwise. */
+fun CaptureResult.activePhysicalId(): String? =
+    if (android.os.Build.VERSION.SDK_INT >= 29) get(CaptureResult.LOGICAL_MULTI_CAMERA_ACTIVE_PHYSICAL_ID) else null
+
 /** What this auto-mode result reports for metering: AWB mode and state, transform, gains. */
 fun CaptureResult.meteringReport(): MeteringReport = MeteringReport(
+    physicalId = activePhysicalId(),
     awbMode = get(CaptureResult.CONTROL_AWB_MODE),
     awbState = get(CaptureResult.CONTROL_AWB_STATE),
     transform = get(CaptureResult.COLOR_CORRECTION_TRANSFORM)?.toInts(),
@@ -153,8 +159,8 @@ class CamProCamera2(
     /** Whether and why CamPro can run on this camera. */
     val support: DeviceSupport.Result = characteristics.camproSupport()
 
-    /** Protected frames, gated before anyone sees them. */
-    val frames: ImageReader = ImageReader.newInstance(width, height, format, QUEUE_DEPTH, usage)
+    /** Protected frames, gated before anyone sees them: private, so no caller can read around the gate. */
+    private val frames: ImageReader = ImageReader.newInstance(width, height, format, QUEUE_DEPTH, usage)
 
     private val meteringReader: ImageReader = ImageReader.newInstance(METERING_WIDTH, METERING_HEIGHT, ImageFormat.YUV_420_888, 2)
 
@@ -213,8 +219,16 @@ class CamProCamera2(
         meteringReader.setOnImageAvailableListener({ r -> drain(r) }, cameraHandler)
     }
 
-    /** The surfaces to configure the capture session with: protected frames and metering. */
-    fun outputs(): List<OutputConfiguration> = listOf(OutputConfiguration(frames.surface), OutputConfiguration(meteringReader.surface))
+    /**
+     * The surfaces to configure the capture session with: protected frames and metering,
+     * their images stamped with `SENSOR_TIMESTAMP` (API 33+): with the default base, a
+     * reader whose usage looks like a display's gets choreographer-synced or readout
+     * timestamps, which match no result, and the gate would show nothing.
+     */
+    fun outputs(): List<OutputConfiguration> =
+        listOf(OutputConfiguration(frames.surface), OutputConfiguration(meteringReader.surface)).onEach { o ->
+            if (android.os.Build.VERSION.SDK_INT >= 33) o.setTimestampBase(OutputConfiguration.TIMESTAMP_BASE_SENSOR)
+        }
 
     /** The capture session is configured: metering starts (or Unsupported, final). */
     fun onConfigured(device: CameraDevice, session: CameraCaptureSession) {

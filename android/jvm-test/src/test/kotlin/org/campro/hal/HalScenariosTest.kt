@@ -1,0 +1,133 @@
+package org.campro.hal
+
+import org.campro.CamProNative
+import org.campro.CamProPipeline
+import org.campro.Fixtures
+import org.campro.ProtectionState
+import org.junit.Assert.assertEquals
+import org.junit.Assert.assertTrue
+import org.junit.Test
+import java.io.File
+
+/**
+ * The library on simulated cameras that behave as real HALs may (`SimulatedHal`): each
+ * frame's pixels come from the settings the device applied to it, and the assertion is on
+ * pixels. A scenario holds when no frame whose pixels differ from the desktop pipeline's
+ * output for its scene by more than [BOUND_LSB] reaches the app, and the state says the
+ * truth: Protected only while frames are delivered; a camera that can protect ends
+ * Protected with frames; one that cannot be verified ends Unsupported or Violated with
+ * none delivered; a disconnected one ends Stopped.
+ */
+class HalScenariosTest {
+    /** What a scenario must end in, besides "no frame leaked". */
+    enum class Outcome { Protects, Refuses, Stops }
+
+    class Row(val name: String, val frames: Int, val delivered: Int, val leaked: Int, val state: ProtectionState, val held: Boolean, val why: String)
+
+    private val scenarios: List<Pair<Behaviour, Outcome>> = listOf(
+        Behaviour("honest, per-frame control") to Outcome.Protects,
+        Behaviour("settings 2 frames late (SYNC_MAX_LATENCY 2)", latency = 2) to Outcome.Protects,
+        Behaviour("results 3 frames after their images", resultDelay = 3) to Outcome.Protects,
+        Behaviour("results out of order (pairs swapped)", swapResults = true) to Outcome.Protects,
+        Behaviour("one result in 7 lost", loseResultEvery = 7) to Outcome.Protects,
+        Behaviour("AWB converges over 5 frames", awbSettleFrames = 5) to Outcome.Protects,
+        Behaviour("matrices rounded to 1/1024 (Q10)", matrixStep = 1024) to Outcome.Protects,
+        Behaviour("matrices rounded to 1/128 (Q7)", matrixStep = 128) to Outcome.Refuses,
+        Behaviour("curve resampled to 17 points", curvePoints = 17) to Outcome.Refuses,
+        Behaviour("display timestamp base (image 5 ms after the sensor)", imageTimestampOffsetNs = 5_000_000) to Outcome.Refuses,
+        Behaviour("echoing HAL (reports the request, applies its own curve)", echo = true) to Outcome.Refuses,
+        Behaviour("logical camera switches its physical sensor at frame 40", physicalSwitchAt = 40) to Outcome.Protects,
+        Behaviour("disconnected at frame 40", disconnectAt = 40) to Outcome.Stops,
+    )
+
+    /** A scene of 256 linear sensor colours: a grid over the gamut, greys and skin-like tones. */
+    private val scene = FloatArray(3 * 256).also { s ->
+        var k = 0
+        for (r in 0 until 6) for (g in 0 until 6) for (b in 0 until 6) {
+            if (k >= 216) break
+            s[3 * k] = r / 5f * 0.45f; s[3 * k + 1] = g / 5f * 0.9f; s[3 * k + 2] = b / 5f * 0.55f; k++
+        }
+        while (k < 256) { val v = (k - 216) / 40f; s[3 * k] = 0.45f * v; s[3 * k + 1] = 0.8f * v; s[3 * k + 2] = 0.5f * v * (0.6f + 0.4f * (k % 2)); k++ }
+    }
+
+    /** A second physical sensor (a tele module): another transform. */
+    private val tele = intArrayOf(160, 100, -45, 100, -15, 100, -35, 100, 170, 100, -35, 100, 5, 100, -60, 100, 155, 100)
+
+    private fun run(b: Behaviour, outcome: Outcome): Row {
+        Fixtures.load()
+        val session = Fixtures.session()
+        val reference = SimulatedHal.reference(Fixtures.params())
+        try {
+            val hal = SimulatedHal(b, scene, listOf(Fixtures.PHONE, tele), Fixtures.GAINS, reference)
+            var delivered = 0
+            var leaked = 0
+            var lastDelivered = -1
+            var worst = 0
+            val p = CamProPipeline<SimFrame>(
+                session, hal, { it.run() },
+                perFrameControl = b.latency == 0, pipelineDepth = 4 + b.resultDelay, imageQueueDepth = 6 + b.resultDelay,
+                deliver = { f ->
+                    delivered++
+                    lastDelivered = f.index
+                    val d = f.pixels.indices.maxOf { kotlin.math.abs((f.pixels[it].toInt() and 255) - (f.expected[it].toInt() and 255)) }
+                    worst = maxOf(worst, d)
+                    if (d > BOUND_LSB) leaked++
+                },
+                drop = {},
+            )
+            p.start(Fixtures.supported())
+            hal.run(FRAMES, p)
+            val state = p.state
+            val recent = lastDelivered >= FRAMES - 10
+            val why = mutableListOf<String>()
+            if (leaked > 0) why += "$leaked frames off by up to $worst LSB reached the app"
+            if (state == ProtectionState.Protected && !recent) why += "Protected, but no frame delivered in the last 10"
+            when (outcome) {
+                Outcome.Protects -> if (!(state == ProtectionState.Protected && recent)) why += "ends $state with ${delivered} frames"
+                Outcome.Refuses -> if (state == ProtectionState.Protected || (delivered > 0 && leaked > 0)) why += "ends $state"
+                Outcome.Stops -> if (state !is ProtectionState.Stopped) why += "ends $state"
+            }
+            return Row(b.name, FRAMES, delivered, leaked, state, why.isEmpty(), why.joinToString("; "))
+        } finally {
+            CamProNative.close(reference)
+            session.close()
+        }
+    }
+
+    @Test
+    fun everyScenarioHoldsOrIsAKnownGap() {
+        val rows = scenarios.map { (b, o) -> run(b, o) }
+        val table = buildString {
+            appendLine("| scenario | frames | delivered | leaked | final state | held |")
+            appendLine("|---|---|---|---|---|---|")
+            for (r in rows) appendLine("| ${r.name} | ${r.frames} | ${r.delivered} | ${r.leaked} | ${r.state} | ${if (r.held) "yes" else "no: ${r.why}"} |")
+        }
+        File("target").mkdirs()
+        File("target/hal-scenarios.md").writeText(table)
+        val held = rows.count { it.held }
+        println("hal scenarios: $held/${rows.size} held")
+        // A gap is named here until the library closes it; a named gap that holds fails too,
+        // so the list cannot go stale.
+        for (r in rows) {
+            assertEquals("${r.name}: ${r.why}", r.name !in KNOWN_GAPS, r.held)
+        }
+        assertTrue(rows.size >= 13)
+    }
+
+    companion object {
+        const val FRAMES = 90
+        /** Largest difference a protected frame may show from the desktop pipeline: the conversion's bound (< 0.5) plus 8-bit rounding. */
+        const val BOUND_LSB = 1
+
+        /**
+         * Behaviours the library does not hold yet (docs/android.md, "What the simulated
+         * camera shows"): a HAL that rounds to 1/1024 could be served by a request already on
+         * its grid (today it ends Unsupported, nothing shown); an echoing HAL is caught only
+         * by a pixel probe, which the library does not have (its frames reach the app).
+         */
+        val KNOWN_GAPS: Set<String> = setOf(
+            "matrices rounded to 1/1024 (Q10)",
+            "echoing HAL (reports the request, applies its own curve)",
+        )
+    }
+}

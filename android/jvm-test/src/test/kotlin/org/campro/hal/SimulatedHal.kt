@@ -1,0 +1,203 @@
+package org.campro.hal
+
+import org.campro.CamProNative
+import org.campro.CamProPipeline
+import org.campro.CameraRequests
+import org.campro.CaptureReport
+import org.campro.MeteringReport
+
+/**
+ * The core's emulator and desktop pipeline, for the simulated camera (`jni-bridge`, built
+ * with its `test-exports` feature; never in an app's library).
+ */
+object HalNative {
+    /** What a device applying [transform], [curve] (all channels) and [gains] makes of linear sensor RGB [raw]: 8-bit codes. */
+    @JvmStatic external fun emulate(transform: IntArray, curve: FloatArray, curveCount: Int, gains: FloatArray, raw: FloatArray, out: ByteArray)
+
+    /** What the desktop pipeline of [handle]'s parameters makes of the scene the device renders with [deviceTransform] and [gains]. */
+    @JvmStatic external fun desktop(handle: Long, deviceTransform: IntArray, gains: FloatArray, raw: FloatArray, out: ByteArray)
+}
+
+/**
+ * How one simulated HAL departs from a camera that applies every request at once and
+ * reports exactly what it applied; each is a latitude the Camera2 documentation gives or
+ * a fault seen on shipping devices.
+ */
+data class Behaviour(
+    val name: String,
+    /** Frames until a request's settings apply (`SYNC_MAX_LATENCY`; 0: per-frame control). */
+    val latency: Int = 0,
+    /** Matrix entries applied (and reported) rounded to 1/[matrixStep] (0: exact). */
+    val matrixStep: Int = 0,
+    /** The curve applied (and reported) resampled to this many evenly spaced points (0: as sent). */
+    val curvePoints: Int = 0,
+    /** `image.timestamp` minus `SENSOR_TIMESTAMP` (a display or readout timestamp base). */
+    val imageTimestampOffsetNs: Long = 0,
+    /** Results arrive this many frames after their image. */
+    val resultDelay: Int = 0,
+    /** The results of each pair of frames arrive swapped. */
+    val swapResults: Boolean = false,
+    /** Every n-th result never arrives (0: none lost). */
+    val loseResultEvery: Int = 0,
+    /** Reports the requested transform and curve while applying its own default curve. */
+    val echo: Boolean = false,
+    /** The frame from which a logical camera streams from its second physical sensor (-1: never). */
+    val physicalSwitchAt: Int = -1,
+    /** The frame at which the camera is disconnected (-1: never). */
+    val disconnectAt: Int = -1,
+    /** AUTO frames after a switch into AUTO before AWB reports CONVERGED. */
+    val awbSettleFrames: Int = 0,
+)
+
+/** One frame as the app would receive it: its index, its pixels and the pixels CamPro promises. */
+class SimFrame(val index: Int, val pixels: ByteArray, val expected: ByteArray)
+
+/**
+ * A simulated Camera2 device: requests in, frames and results out, the pixels of each frame
+ * computed by the core's emulator from the settings the device *applied* to it (not the
+ * request), on a fixed scene of linear sensor colours. It drives a [CamProPipeline] as the
+ * Android glue does: protected frames to `onFrame`, their results to `onProtectedResult`,
+ * auto-mode results to `onMeteringResult`.
+ */
+class SimulatedHal(
+    private val b: Behaviour,
+    /** Linear sensor RGB of the scene, 3 floats a pixel. */
+    private val scene: FloatArray,
+    /** The two physical sensors' auto-mode transforms (a logical camera switches from the first to the second). */
+    private val sensors: List<IntArray>,
+    private val autoGains: FloatArray,
+    /** A handle of CamProNative with the same parameters as the pipeline's session (the reference). */
+    private val reference: Long,
+) : CameraRequests {
+    private sealed class Req {
+        object Auto : Req()
+        class Protect(val transform: IntArray, val curve: FloatArray, val gains: FloatArray) : Req()
+    }
+
+    private var repeating: List<Req> = emptyList()
+    private var cursor = 0
+    /** Requests submitted for the frames so far, newest last: frame i applies entry i - latency. */
+    private val submitted = ArrayList<Req?>()
+    private var autoRun = 0
+    /** Results not yet delivered: (frame due, frame of origin, delivery). */
+    private val pendingResults = ArrayList<Triple<Int, Int, () -> Unit>>()
+
+    override fun meter() { setRepeating(listOf(Req.Auto)) }
+
+    override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int) {
+        val p = Req.Protect(transform.copyOf(), curve.copyOf(), gains.copyOf())
+        setRepeating(if (interleaveMetering) listOf<Req>(Req.Auto) + List(meteringInterval - 1) { p } else listOf(p))
+    }
+
+    override fun halt() { setRepeating(emptyList()) }
+
+    private fun setRepeating(r: List<Req>) { repeating = r; cursor = 0 }
+
+    /** The sRGB-like curve a device applies when not asked for CamPro's (33 points of x^(1/2.2)). */
+    private val defaultCurve = FloatArray(66).also { c ->
+        for (i in 0..32) { val x = i / 32f; c[2 * i] = x; c[2 * i + 1] = Math.pow(x.toDouble(), 1 / 2.2).toFloat() }
+    }
+
+    private fun resample(curve: FloatArray, n: Int): FloatArray {
+        val out = FloatArray(2 * n)
+        for (i in 0 until n) {
+            val x = i / (n - 1f)
+            var k = 0
+            while (k < curve.size / 2 - 2 && curve[2 * (k + 1)] < x) k++
+            val (x0, y0, x1, y1) = listOf(curve[2 * k], curve[2 * k + 1], curve[2 * k + 2], curve[2 * k + 3])
+            out[2 * i] = x
+            out[2 * i + 1] = if (x1 > x0) y0 + (y1 - y0) * ((x - x0) / (x1 - x0)).coerceIn(0f, 1f) else y1
+        }
+        return out
+    }
+
+    private fun rounded(t: IntArray, step: Int): IntArray = IntArray(18).also { o ->
+        for (i in 0 until 9) {
+            o[2 * i] = Math.round(t[2 * i].toDouble() / t[2 * i + 1] * step).toInt()
+            o[2 * i + 1] = step
+        }
+    }
+
+    private fun render(transform: IntArray, curve: FloatArray, gains: FloatArray): ByteArray =
+        ByteArray(scene.size).also { HalNative.emulate(transform, curve, curve.size, gains, scene, it) }
+
+    /** Runs [frames] frames into [p]; returns the frames that reached the app (through [delivered]). */
+    fun run(frames: Int, p: CamProPipeline<SimFrame>, onFrame: (Int) -> Unit = {}) {
+        for (i in 0 until frames) {
+            if (i == b.disconnectAt) {
+                p.onCameraStopped("the camera was disconnected")
+                repeating = emptyList()
+            }
+            deliverResults(i)
+            if (repeating.isEmpty()) { onFrame(i); continue }
+            val tagged = repeating[cursor % repeating.size]
+            cursor++
+            submitted += tagged
+            val applied = submitted.getOrNull(i - b.latency) ?: Req.Auto
+            val sensor = if (b.physicalSwitchAt in 0..i) 1 else 0
+            val device = sensors[sensor]
+            val physicalId = sensor.toString()
+            val ts = 1_000_000_000L + i * 33_333_333L
+            val expected = ByteArray(scene.size).also { HalNative.desktop(reference, device, autoGains, scene, it) }
+            when (applied) {
+                is Req.Auto -> {
+                    autoRun++
+                    val state = when {
+                        autoRun == 1 -> 0 // INACTIVE: the mode just switched
+                        autoRun <= 1 + b.awbSettleFrames -> 1 // SEARCHING
+                        else -> CamProPipeline.AWB_STATE_CONVERGED
+                    }
+                    val pixels = render(device, defaultCurve, autoGains)
+                    if (tagged is Req.Protect) {
+                        // A protected request whose frame still carries auto settings: its result says so.
+                        schedule(i) { p.onProtectedResult(ts, CaptureReport(1, 1, 2, device.copyOf(), List(3) { defaultCurve.copyOf() }, autoGains.copyOf(), physicalId)) }
+                        p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected))
+                    } else {
+                        schedule(i) { p.onMeteringResult(MeteringReport(1, state, device.copyOf(), autoGains.copyOf(), physicalId)) }
+                    }
+                }
+                is Req.Protect -> {
+                    autoRun = 0
+                    val t = if (b.matrixStep > 0) rounded(applied.transform, b.matrixStep) else applied.transform
+                    val c = when {
+                        b.echo -> defaultCurve
+                        b.curvePoints > 0 -> resample(applied.curve, b.curvePoints)
+                        else -> applied.curve
+                    }
+                    val pixels = render(t, c, applied.gains)
+                    val reportedCurve = if (b.echo) applied.curve else c
+                    val reportedTransform = if (b.echo) applied.transform else t
+                    val report = CaptureReport(0, 0, 0, reportedTransform.copyOf(), List(3) { reportedCurve.copyOf() }, applied.gains.copyOf(), physicalId)
+                    if (tagged is Req.Protect) {
+                        schedule(i) { p.onProtectedResult(ts, report) }
+                        p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected))
+                    } else {
+                        // A metering request whose frame still carries protected settings: AWB reads OFF.
+                        schedule(i) { p.onMeteringResult(MeteringReport(0, 0, t.copyOf(), applied.gains.copyOf(), physicalId)) }
+                    }
+                }
+            }
+            onFrame(i)
+        }
+        deliverResults(Int.MAX_VALUE)
+    }
+
+    private fun schedule(frame: Int, result: () -> Unit) {
+        if (b.loseResultEvery > 0 && frame % b.loseResultEvery == b.loseResultEvery - 1) return
+        // Swapped: each even frame's result waits for the next frame's and comes after it.
+        val at = frame + b.resultDelay + if (b.swapResults && frame % 2 == 0) 1 else 0
+        pendingResults += Triple(at, frame, result)
+    }
+
+    private fun deliverResults(upTo: Int) {
+        val due = pendingResults.filter { it.first <= upTo }
+        pendingResults.removeAll(due)
+        val order = if (b.swapResults) compareBy<Triple<Int, Int, () -> Unit>>({ it.first }, { -it.second }) else compareBy({ it.first }, { it.second })
+        due.sortedWith(order).forEach { it.third() }
+    }
+
+    companion object {
+        /** A reference handle for [HalNative.desktop] with the parameters [json]. */
+        fun reference(json: String): Long = CamProNative.create(json, 64, 65536, 0.0)
+    }
+}

@@ -150,16 +150,26 @@ class CamProPipeline<T>(
     @Synchronized
     fun onMeteringResult(m: MeteringReport) {
         if (!running || !(metering || perFrameControl)) return
-        val converged = m.awbState == null || m.awbState == AWB_STATE_CONVERGED || m.awbState == AWB_STATE_LOCKED
-        if (!converged) {
+        // Only a result of an auto-mode frame carries the device's own transform: one made
+        // with CamPro's settings (a late switch) would compose CamPro onto itself.
+        if (m.awbMode != AWB_MODE_AUTO) {
+            unconvergedMeteringResults++
+            return
+        }
+        val converged = m.awbState == AWB_STATE_CONVERGED || m.awbState == AWB_STATE_LOCKED
+        if (m.awbState != null && !converged) {
             unconvergedMeteringResults++
             return
         }
         val transform = m.transform
         val gains = m.gains
-        if (transform == null || gains == null) {
+        if (transform == null || gains == null || m.awbState == null) {
             if (++meteringMissing >= meteringKeyLimit) {
-                val what = if (transform == null) "COLOR_CORRECTION_TRANSFORM" else "COLOR_CORRECTION_GAINS"
+                val what = when {
+                    transform == null -> "COLOR_CORRECTION_TRANSFORM"
+                    gains == null -> "COLOR_CORRECTION_GAINS"
+                    else -> "CONTROL_AWB_STATE"
+                }
                 guard.unsupported("the device reports no $what in auto mode ($meteringMissing results): CamPro's values cannot follow it")
                 running = false
                 gate.stop()
@@ -264,6 +274,8 @@ class CamProPipeline<T>(
     }
 
     companion object {
+        /** `CameraMetadata.CONTROL_AWB_MODE_AUTO`. */
+        const val AWB_MODE_AUTO = 1
         /** `CameraMetadata.CONTROL_AWB_STATE_CONVERGED`. */
         const val AWB_STATE_CONVERGED = 2
         /** `CameraMetadata.CONTROL_AWB_STATE_LOCKED`. */

@@ -28,12 +28,32 @@ object DeviceSupport {
         data class Unsupported(val reasons: List<String>) : Result()
     }
 
-    /** Arguments are the characteristics' values, `null` where the device reports none. */
-    fun check(capabilities: IntArray?, toneMapModes: IntArray?, maxCurvePoints: Int?, awbModes: IntArray?): Result {
+    /** `CameraMetadata.SYNC_MAX_LATENCY_UNKNOWN`. */
+    const val SYNC_MAX_LATENCY_UNKNOWN = -1
+
+    /**
+     * Arguments are the characteristics' values, `null` where the device reports none.
+     * Strict: without `MANUAL_POST_PROCESSING` nothing promises that the curve and the
+     * matrix are applied as sent, and with `SYNC_MAX_LATENCY` UNKNOWN ("app developers do
+     * not have a way to know when sensor settings have been applied") no frame can be tied
+     * to the settings it was made with: both are Unsupported.
+     */
+    fun check(
+        capabilities: IntArray?,
+        toneMapModes: IntArray?,
+        maxCurvePoints: Int?,
+        awbModes: IntArray?,
+        syncMaxLatency: Int? = CamProPipeline.SYNC_MAX_LATENCY_PER_FRAME_CONTROL,
+    ): Result {
         val reasons = mutableListOf<String>()
         val manualPost = capabilities?.contains(CAPABILITY_MANUAL_POST_PROCESSING) == true
         if (toneMapModes?.contains(TONEMAP_MODE_CONTRAST_CURVE) != true) {
             reasons += "the camera has no CONTRAST_CURVE tone-map mode" + if (manualPost) "" else " (no MANUAL_POST_PROCESSING capability)"
+        } else if (!manualPost) {
+            reasons += "no MANUAL_POST_PROCESSING capability: CONTRAST_CURVE is listed, but nothing promises the curve and matrix are applied as sent"
+        }
+        if (syncMaxLatency == null || syncMaxLatency == SYNC_MAX_LATENCY_UNKNOWN) {
+            reasons += "SYNC_MAX_LATENCY is ${syncMaxLatency ?: "not reported"}: the device does not say when settings apply, so no frame can be tied to its settings"
         }
         if (maxCurvePoints == null || maxCurvePoints < 2) {
             reasons += "the camera reports no usable TONEMAP_MAX_CURVE_POINTS (${maxCurvePoints ?: "none"})"
@@ -43,7 +63,6 @@ object DeviceSupport {
         }
         if (reasons.isNotEmpty()) return Result.Unsupported(reasons)
         val note = when {
-            !manualPost -> "no MANUAL_POST_PROCESSING capability: CONTRAST_CURVE is listed but not guaranteed to be exact"
             maxCurvePoints!! < 64 -> "only $maxCurvePoints curve points: the tone curve is simplified (error reported)"
             else -> null
         }

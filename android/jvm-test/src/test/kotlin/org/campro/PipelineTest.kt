@@ -155,9 +155,9 @@ class PipelineTest {
         assertEquals(listOf("halt"), cam.calls)
         p.onMeteringResult(Fixtures.converged())
         assertEquals(listOf("halt"), cam.calls)
-        // CONTRAST_CURVE listed without the capability: runs, with the note, and still verifies every frame.
+        // CONTRAST_CURVE listed without the capability: nothing promises the values are applied as sent.
         val listed = DeviceSupport.check(intArrayOf(0), intArrayOf(0, 1, 2), 64, intArrayOf(0, 1))
-        assertTrue(listed is DeviceSupport.Result.Supported && listed.note!!.contains("MANUAL_POST_PROCESSING"))
+        assertTrue("$listed", listed is DeviceSupport.Result.Unsupported && listed.reasons.single().contains("MANUAL_POST_PROCESSING"))
     }
 
     @Test

@@ -38,6 +38,7 @@ fun CameraCharacteristics.camproSupport(): DeviceSupport.Result = DeviceSupport.
     toneMapModes = get(CameraCharacteristics.TONEMAP_AVAILABLE_TONE_MAP_MODES),
     maxCurvePoints = get(CameraCharacteristics.TONEMAP_MAX_CURVE_POINTS),
     awbModes = get(CameraCharacteristics.CONTROL_AWB_AVAILABLE_MODES),
+    syncMaxLatency = get(CameraCharacteristics.SYNC_MAX_LATENCY),
 )
 
 /** Whether settings apply on the very frame that asks for them (`SYNC_MAX_LATENCY_PER_FRAME_CONTROL`). */
@@ -100,6 +101,9 @@ fun camproSettings(transform: IntArray, curve: FloatArray, gains: FloatArray): L
         CaptureRequest.COLOR_CORRECTION_TRANSFORM to ColorSpaceTransform(transform),
         CaptureRequest.TONEMAP_MODE to CaptureRequest.TONEMAP_MODE_CONTRAST_CURVE,
         CaptureRequest.TONEMAP_CURVE to TonemapCurve(curve, curve, curve),
+        // The HAL's face detector would put face rectangles and landmarks into every result:
+        // metadata about the faces the picture hides.
+        CaptureRequest.STATISTICS_FACE_DETECT_MODE to CaptureRequest.STATISTICS_FACE_DETECT_MODE_OFF,
     )
 }
 

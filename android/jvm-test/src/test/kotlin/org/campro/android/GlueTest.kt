@@ -100,6 +100,16 @@ class GlueTest {
         assertFalse(d.hasPerFrameControl())
         assertEquals(8, d.pipelineDepth())
         assertTrue(d.camproSupport() is org.campro.DeviceSupport.Result.Unsupported)
+        // Everything else as the supported camera, but SYNC_MAX_LATENCY UNKNOWN: Unsupported.
+        val u = ShadowCameraCharacteristics.newCameraCharacteristics()
+        val su = Shadow.extract<ShadowCameraCharacteristics>(u)
+        su.set(CameraCharacteristics.REQUEST_AVAILABLE_CAPABILITIES, intArrayOf(0, 2))
+        su.set(CameraCharacteristics.TONEMAP_AVAILABLE_TONE_MAP_MODES, intArrayOf(0, 1, 2))
+        su.set(CameraCharacteristics.TONEMAP_MAX_CURVE_POINTS, 32)
+        su.set(CameraCharacteristics.CONTROL_AWB_AVAILABLE_MODES, intArrayOf(0, 1))
+        su.set(CameraCharacteristics.SYNC_MAX_LATENCY, -1)
+        val unknown = u.camproSupport()
+        assertTrue("$unknown", unknown is org.campro.DeviceSupport.Result.Unsupported && unknown.reasons.single().contains("SYNC_MAX_LATENCY is -1"))
     }
 
     @Test
@@ -115,6 +125,8 @@ class GlueTest {
             val got = FloatArray(2 * tc.getPointCount(ch)).also { tc.copyColorCurve(ch, it, 0) }
             assertTrue(curve.contentEquals(got))
         }
+        // The HAL's face statistics are off: results carry no face rectangles or landmarks.
+        assertEquals(CaptureRequest.STATISTICS_FACE_DETECT_MODE_OFF, s[CaptureRequest.STATISTICS_FACE_DETECT_MODE])
         // An empty curve (no update yet) is refused by name, never sent.
         val e = runCatching { camproSettings(session.transform, FloatArray(0), Fixtures.GAINS) }.exceptionOrNull()
         assertTrue("$e", e is IllegalArgumentException && e.message!!.contains("curve"))
@@ -234,6 +246,8 @@ class GlueTest {
         assertEquals(android.hardware.camera2.CameraMetadata.CONTROL_AWB_STATE_CONVERGED, CamProPipeline.AWB_STATE_CONVERGED)
         assertEquals(android.hardware.camera2.CameraMetadata.CONTROL_AWB_STATE_LOCKED, CamProPipeline.AWB_STATE_LOCKED)
         assertEquals(android.hardware.camera2.CameraMetadata.SYNC_MAX_LATENCY_PER_FRAME_CONTROL, CamProPipeline.SYNC_MAX_LATENCY_PER_FRAME_CONTROL)
+        assertEquals(android.hardware.camera2.CameraMetadata.SYNC_MAX_LATENCY_UNKNOWN, org.campro.DeviceSupport.SYNC_MAX_LATENCY_UNKNOWN)
+        assertEquals(android.hardware.camera2.CameraMetadata.CONTROL_AWB_MODE_AUTO, CamProPipeline.AWB_MODE_AUTO)
         assertEquals(android.hardware.camera2.CameraMetadata.CONTROL_AWB_MODE_OFF, org.campro.DeviceSupport.CONTROL_AWB_MODE_OFF)
         assertEquals(android.hardware.camera2.CameraMetadata.TONEMAP_MODE_CONTRAST_CURVE, org.campro.DeviceSupport.TONEMAP_MODE_CONTRAST_CURVE)
         assertEquals(android.hardware.camera2.CameraMetadata.REQUEST_AVAILABLE_CAPABILITIES_MANUAL_POST_PROCESSING, org.campro.DeviceSupport.CAPABILITY_MANUAL_POST_PROCESSING)

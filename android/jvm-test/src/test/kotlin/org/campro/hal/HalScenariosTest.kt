@@ -38,6 +38,11 @@ class HalScenariosTest {
         Behaviour("echoing HAL (reports the request, applies its own curve)", echo = true) to Outcome.Refuses,
         Behaviour("logical camera switches its physical sensor at frame 40", physicalSwitchAt = 40) to Outcome.Protects,
         Behaviour("disconnected at frame 40", disconnectAt = 40) to Outcome.Stops,
+        Behaviour("results without CONTROL_AWB_STATE", awbStateAbsent = true) to Outcome.Refuses,
+        Behaviour(
+            "settings 2 frames late, re-metered at a sensor switch, AWB-off frames reported CONVERGED",
+            latency = 2, physicalSwitchAt = 40, offFrameAwbState = CamProPipeline.AWB_STATE_CONVERGED,
+        ) to Outcome.Protects,
     )
 
     /** A scene of 256 linear sensor colours: a grid over the gamut, greys and skin-like tones. */
@@ -111,7 +116,7 @@ class HalScenariosTest {
         for (r in rows) {
             assertEquals("${r.name}: ${r.why}", r.name !in KNOWN_GAPS, r.held)
         }
-        assertTrue(rows.size >= 13)
+        assertTrue(rows.size >= 15)
     }
 
     companion object {

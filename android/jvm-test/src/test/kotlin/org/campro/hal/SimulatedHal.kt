@@ -47,6 +47,10 @@ data class Behaviour(
     val disconnectAt: Int = -1,
     /** AUTO frames after a switch into AUTO before AWB reports CONVERGED. */
     val awbSettleFrames: Int = 0,
+    /** Results leave out `CONTROL_AWB_STATE`. */
+    val awbStateAbsent: Boolean = false,
+    /** `CONTROL_AWB_STATE` reported for a frame made with AWB off (a conforming HAL says INACTIVE, 0). */
+    val offFrameAwbState: Int = 0,
 )
 
 /** One frame as the app would receive it: its index, its pixels and the pixels CamPro promises. */
@@ -153,7 +157,8 @@ class SimulatedHal(
                         schedule(i) { p.onProtectedResult(ts, CaptureReport(1, 1, 2, device.copyOf(), List(3) { defaultCurve.copyOf() }, autoGains.copyOf(), physicalId)) }
                         p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected))
                     } else {
-                        schedule(i) { p.onMeteringResult(MeteringReport(1, state, device.copyOf(), autoGains.copyOf(), physicalId)) }
+                        val reported = if (b.awbStateAbsent) null else state
+                        schedule(i) { p.onMeteringResult(MeteringReport(1, reported, device.copyOf(), autoGains.copyOf(), physicalId)) }
                     }
                 }
                 is Req.Protect -> {
@@ -173,7 +178,8 @@ class SimulatedHal(
                         p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected))
                     } else {
                         // A metering request whose frame still carries protected settings: AWB reads OFF.
-                        schedule(i) { p.onMeteringResult(MeteringReport(0, 0, t.copyOf(), applied.gains.copyOf(), physicalId)) }
+                        val reported = if (b.awbStateAbsent) null else b.offFrameAwbState
+                        schedule(i) { p.onMeteringResult(MeteringReport(0, reported, t.copyOf(), applied.gains.copyOf(), physicalId)) }
                     }
                 }
             }

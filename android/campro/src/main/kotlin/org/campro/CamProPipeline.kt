@@ -270,7 +270,11 @@ class CamProPipeline<T>(
             if (s == lastState) return
             lastState = s
         }
-        appExecutor.execute { onState(s) }
+        try {
+            appExecutor.execute { onState(s) }
+        } catch (e: java.util.concurrent.RejectedExecutionException) {
+            // The app's executor is shut down: nobody is left to tell; the state still holds.
+        }
     }
 
     companion object {

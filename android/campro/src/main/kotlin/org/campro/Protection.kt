@@ -389,8 +389,14 @@ class FrameGate<T>(
 
     private fun release(frames: List<Pair<T, Boolean>>) {
         for ((frame, ok) in frames) {
-            synchronized(this) { if (ok) delivered++ else dropped++ }
-            if (ok) executor.execute { deliver(frame) } else drop(frame)
+            val sent = ok && try {
+                executor.execute { deliver(frame) }
+                true
+            } catch (e: java.util.concurrent.RejectedExecutionException) {
+                false // the app's executor is shut down: the frame is closed here, never leaked
+            }
+            synchronized(this) { if (sent) delivered++ else dropped++ }
+            if (!sent) drop(frame)
         }
     }
 }

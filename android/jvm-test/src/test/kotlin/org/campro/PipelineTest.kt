@@ -271,5 +271,20 @@ class PipelineTest {
         assertTrue(appThread.awaitTermination(5, TimeUnit.SECONDS))
         assertEquals(listOf(1, 2), seen)
     }
-}
 
+    @Test
+    fun aShutDownAppExecutorGetsNoFrameAndLeaksNone() {
+        val appThread = Executors.newSingleThreadExecutor()
+        appThread.shutdown()
+        val p = CamProPipeline<Int>(session, cam, appThread, true, 4, 4, deliver = { shown += it }, drop = { closed += it })
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        p.onFrame(1, 1)
+        p.onProtectedResult(1, cam.honoured())
+        // The verified frame could not be handed over: it is closed, counted as dropped.
+        assertEquals(listOf(1), closed)
+        assertTrue(shown.isEmpty())
+        assertEquals(0L, p.gate.delivered)
+        assertEquals(1L, p.gate.dropped)
+    }
+}

@@ -271,13 +271,16 @@ class CamProCamera2(
         }
     }
 
+    /** Takes every image the reader holds (one callback may stand for several images). */
     private fun acquire(r: ImageReader) {
-        val image = try {
-            r.acquireNextImage()
-        } catch (e: IllegalStateException) {
-            null // more images acquired than the queue holds: the gate drops them as results come
-        } ?: return
-        pipeline.onFrame(image.timestamp, image)
+        while (true) {
+            val image = try {
+                r.acquireNextImage()
+            } catch (e: IllegalStateException) {
+                null // more images acquired than the queue holds: the gate drops them as results come
+            } ?: return
+            pipeline.onFrame(image.timestamp, image)
+        }
     }
 
     private fun drain(r: ImageReader) {

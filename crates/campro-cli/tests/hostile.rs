@@ -607,3 +607,93 @@ fn a_step_over_the_memory_budget_is_refused_before_anything_is_allocated() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && !err.contains("budget.memory") && err.contains("no-lfw-here"), "{err}");
 }
+
+/// Classes D, F and G under a peak-memory measure (`wait4`'s `ru_maxrss` of each run): the
+/// probe's inputs that took 1.4 to 6.4 GB or aborted are refused or done in little memory.
+/// D: a 1 x 1,000,000 PNG (4 KB) through `simulate --enhance` (4.2 GB before) and UHD with
+/// the network at full resolution (1.4 GB before); F: `--steps` past its cap (6.4 GB
+/// reserved before) and `bench train --threads 1024` (aborted before); G: `eval quality` on
+/// an 8 x 8 image (a panic before).
+#[cfg(target_os = "linux")]
+#[test]
+fn hostile_cases_of_every_class_stay_far_under_a_gigabyte() {
+    let dir = tempfile::tempdir().unwrap();
+    let strip = dir.path().join("strip.png");
+    image::RgbImage::from_pixel(1, 1_000_000, image::Rgb([128, 128, 128])).save(&strip).unwrap();
+    let uhd = dir.path().join("uhd.png");
+    image::RgbImage::from_pixel(3840, 2160, image::Rgb([128, 100, 90])).save(&uhd).unwrap();
+    let images = dir.path().join("images");
+    std::fs::create_dir(&images).unwrap();
+    image::RgbImage::from_pixel(8, 8, image::Rgb([90, 120, 30])).save(images.join("tiny.png")).unwrap();
+    let preset = bundled("campro-omega-0.5.json");
+    let bin = assert_cmd::cargo::cargo_bin("campro");
+    let cases: Vec<(&str, Vec<std::ffi::OsString>, &str)> = vec![
+        (
+            "D strip",
+            vec![
+                "simulate".into(),
+                preset.clone().into(),
+                strip.into(),
+                "-o".into(),
+                dir.path().join("o1.png").into(),
+                "--enhance".into(),
+            ],
+            "1 x 1000000 pixels",
+        ),
+        (
+            "D UHD at scale 1",
+            vec![
+                "simulate".into(),
+                preset.clone().into(),
+                uhd.into(),
+                "-o".into(),
+                dir.path().join("o2.png").into(),
+                "--enhance".into(),
+                "--enhance-scale".into(),
+                "1".into(),
+            ],
+            "3840 x 2160 pixels, needing",
+        ),
+        (
+            "F steps",
+            vec!["finetune-detector".into(), preset.clone().into(), "--steps".into(), "100000000".into()],
+            "--steps",
+        ),
+        (
+            "G tiny",
+            vec![
+                "eval".into(),
+                "quality".into(),
+                bundled("identity.json").into(),
+                "--images".into(),
+                images.into(),
+                "-o".into(),
+                dir.path().join("q").into(),
+            ],
+            "needs at least 11 x 11",
+        ),
+    ];
+    for (name, args, said) in cases {
+        // From the workspace root, where `../shared` (the models) is found.
+        let root = campro_testkit::workspace_root();
+        let (out, peak_kib) =
+            common::run_with_peak(std::process::Command::new(&bin).args(&args).current_dir(&root), LIMIT);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(said), "{name}: {err}");
+        assert!(!err.contains("panicked"), "{name}: {err}");
+        eprintln!("{name}: peak {} MiB", peak_kib >> 10);
+        assert!(peak_kib < 512 << 10, "{name}: peak {} MiB", peak_kib >> 10);
+    }
+    // F: a thread count past the cores is clamped (it aborted at 1024 before) and the run
+    // stays small.
+    let (out, peak_kib) = common::run_with_peak(
+        std::process::Command::new(&bin)
+            .args(["bench", "train", "--threads", "1024", "--runs", "1", "--only", "mobilefacenet"])
+            .current_dir(campro_testkit::workspace_root()),
+        std::time::Duration::from_secs(300),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && err.contains("--threads 1024 is more than the"), "{err}");
+    eprintln!("F threads: peak {} MiB", peak_kib >> 10);
+    assert!(peak_kib < 1 << 20, "bench train: peak {} MiB", peak_kib >> 10);
+}

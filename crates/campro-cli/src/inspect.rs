@@ -311,14 +311,12 @@ pub fn inspect(
     enhancer: Option<&campro_eval::guard::GuardedEnhancer>,
     json_out: bool,
 ) -> Result<()> {
-    let found = simulate::collect_inputs(inputs, out, &|p| p.with_extension("png"))?;
+    let which = simulate::Reads { reads: &simulate::is_image, otherwise: "not a PNG, JPEG or TIFF file" };
+    let found = simulate::collect_inputs(inputs, out, &|p| p.with_extension("png"), &which)?;
     for (i, why) in &found.skipped {
         eprintln!("warning: skipping {}: {why}", crate::shown(i));
     }
-    let (images, others): (Vec<_>, Vec<_>) = found.jobs.into_iter().partition(|(i, _)| simulate::is_image(i));
-    for (i, _) in &others {
-        eprintln!("warning: skipping {} (not a PNG, JPEG or TIFF file)", crate::shown(i));
-    }
+    let images = found.jobs;
     if images.is_empty() {
         bail!("no PNG, JPEG or TIFF file among the inputs: nothing to inspect");
     }

@@ -34,9 +34,23 @@ pub(crate) struct Inputs {
     pub skipped: Vec<(PathBuf, &'static str)>,
 }
 
-/// Every (input file, output file) pair: folders are walked recursively and mirrored;
-/// `name` turns a mirrored path into its output's (the ending).
-pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path, name: &dyn Fn(&Path) -> PathBuf) -> Result<Inputs> {
+/// Which files a command reads, and what it says of the others when it passes them over.
+pub(crate) struct Reads<'a> {
+    pub reads: &'a dyn Fn(&Path) -> bool,
+    /// The skip reason of a file it does not read ("not a PNG, JPEG, TIFF or video file").
+    pub otherwise: &'static str,
+}
+
+/// Every (input file, output file) pair of the files `which` reads: folders are walked
+/// recursively and mirrored; `name` turns a mirrored path into its output's (the ending).
+/// Other files (sidecars such as `IMG_1.xmp` or `a.txt` beside `a.png`) are skipped with
+/// a reason before outputs are compared, so they never collide with what is written.
+pub(crate) fn collect_inputs(
+    inputs: &[PathBuf],
+    out: &Path,
+    name: &dyn Fn(&Path) -> PathBuf,
+    which: &Reads,
+) -> Result<Inputs> {
     let out_abs = file_key(out);
     let mut found = Inputs { jobs: Vec::new(), skipped: Vec::new() };
     for input in inputs {
@@ -63,11 +77,19 @@ pub(crate) fn collect_inputs(inputs: &[PathBuf], out: &Path, name: &dyn Fn(&Path
                     found.skipped.push((entry.path().to_path_buf(), "not a regular file"));
                     continue;
                 }
+                if !(which.reads)(entry.path()) {
+                    found.skipped.push((entry.path().to_path_buf(), which.otherwise));
+                    continue;
+                }
                 let rel = entry.path().strip_prefix(input).expect("walkdir yields paths under its root");
                 found.jobs.push((entry.path().to_path_buf(), name(&out.join(rel))));
             }
         } else if meta.is_file() {
             let file = input.file_name().ok_or_else(|| anyhow!("{}: not a file name", crate::shown(input)))?;
+            if !(which.reads)(input) {
+                found.skipped.push((input.clone(), which.otherwise));
+                continue;
+            }
             found.jobs.push((input.clone(), name(&out.join(Path::new(file)))));
         } else {
             bail!("{}: is not a regular file or folder", crate::shown(input));
@@ -424,16 +446,17 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
     }
     let found = match single_file(inputs, out)? {
         Some(job) => Inputs { jobs: vec![job], skipped: Vec::new() },
-        None => collect_inputs(inputs, out, &|p| output_for(p, o.depth, o.image_format))?,
+        None => collect_inputs(
+            inputs,
+            out,
+            &|p| output_for(p, o.depth, o.image_format),
+            &Reads { reads: &|p| is_image(p) || video::is_video(p), otherwise: "not a PNG, JPEG, TIFF or video file" },
+        )?,
     };
     for (i, why) in &found.skipped {
         eprintln!("warning: skipping {}: {why}", crate::shown(i));
     }
-    let (videos, rest): (Vec<_>, Vec<_>) = found.jobs.into_iter().partition(|(i, _)| video::is_video(i));
-    let (images, others): (Vec<_>, Vec<_>) = rest.into_iter().partition(|(i, _)| is_image(i));
-    for (i, _) in &others {
-        eprintln!("warning: skipping {} (not a PNG, JPEG, TIFF or video file)", crate::shown(i));
-    }
+    let (videos, images): (Vec<_>, Vec<_>) = found.jobs.into_iter().partition(|(i, _)| video::is_video(i));
     if images.is_empty() && videos.is_empty() {
         bail!("no PNG, JPEG, TIFF or video file among the inputs: nothing to do");
     }

@@ -1125,3 +1125,42 @@ fn eval_frontier_plots_the_points_and_refuses_bad_ones() {
     fails_with(&mut frontier(&d.join("bad.csv"), "g"), "line 2: top1_attacked must be a number in [0, 100]");
     fails_with(&mut frontier(d, "h"), "is a directory; only regular files are read");
 }
+
+/// Sidecars beside photos (`a.txt` by `a.png`, Lightroom's `IMG_1.xmp`, a `.webp` copy) are
+/// skipped with a warning each and never collide with the outputs: the photos are written.
+#[test]
+fn sidecars_are_skipped_not_a_collision() {
+    let dir = tempfile::tempdir().unwrap();
+    let photos = dir.path().join("photos");
+    std::fs::create_dir(&photos).unwrap();
+    for name in ["a", "IMG_1", "x"] {
+        image::RgbImage::from_pixel(16, 12, image::Rgb([200, 120, 90]))
+            .save(photos.join(format!("{name}.png")))
+            .unwrap();
+    }
+    for side in ["a.txt", "IMG_1.xmp", "x.webp"] {
+        std::fs::write(photos.join(side), b"sidecar").unwrap();
+    }
+    let out = dir.path().join("out");
+    let run = campro()
+        .arg("simulate")
+        .arg(bundled("campro-omega-0.5.json"))
+        .arg(&photos)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    for name in ["a.png", "IMG_1.png", "x.png"] {
+        assert!(out.join(name).is_file(), "{name} not written: {err}");
+    }
+    for side in ["a.txt", "IMG_1.xmp", "x.webp"] {
+        assert!(
+            err.contains(&format!("skipping {}: not a PNG, JPEG, TIFF or video file", photos.join(side).display())),
+            "{err}"
+        );
+        assert!(!out.join(side).exists());
+    }
+    assert!(!err.contains("would both be written"), "{err}");
+}

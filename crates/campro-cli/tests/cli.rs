@@ -1164,3 +1164,56 @@ fn sidecars_are_skipped_not_a_collision() {
     }
     assert!(!err.contains("would both be written"), "{err}");
 }
+
+/// A phone JPEG stored sideways with EXIF orientation 6 (turn 90° clockwise to show) comes
+/// out turned: the output is as tall as the stored picture is wide, and each pixel is the
+/// untagged copy's pixel at the turned place (the same decoded pixel through the camera).
+#[test]
+fn exif_orientation_turns_the_pixels() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (20u32, 10u32);
+    let img = image::RgbImage::from_fn(w, h, |x, y| {
+        if x < w / 2 {
+            image::Rgb([220, 40, 30])
+        } else {
+            image::Rgb([30, 60, (y * 20) as u8])
+        }
+    });
+    let mut plain = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut plain), image::ImageFormat::Jpeg).unwrap();
+    // APP1 Exif: a little-endian TIFF header and one IFD entry, Orientation (0x0112) = 6.
+    let mut exif = b"Exif\0\0II*\0\x08\0\0\0\x01\0".to_vec();
+    exif.extend_from_slice(&[0x12, 0x01, 3, 0, 1, 0, 0, 0, 6, 0, 0, 0, 0, 0, 0, 0]);
+    let mut tagged = plain[..2].to_vec();
+    tagged.extend_from_slice(&[0xff, 0xe1]);
+    tagged.extend_from_slice(&((exif.len() + 2) as u16).to_be_bytes());
+    tagged.extend_from_slice(&exif);
+    tagged.extend_from_slice(&plain[2..]);
+    let (a, b) = (dir.path().join("plain.jpg"), dir.path().join("turned.jpg"));
+    std::fs::write(&a, &plain).unwrap();
+    std::fs::write(&b, &tagged).unwrap();
+    let out = dir.path().join("out");
+    let preset = bundled("campro-omega-0.5.json");
+    for (input, name) in [(&a, "plain.png"), (&b, "turned.png")] {
+        let run = campro()
+            .arg("simulate")
+            .arg(&preset)
+            .arg(input)
+            .arg("-o")
+            .arg(out.join(name))
+            .args(["--image-format", "png"])
+            .output()
+            .unwrap();
+        assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    }
+    let p = image::open(out.join("plain.png")).unwrap().to_rgb8();
+    let t = image::open(out.join("turned.png")).unwrap().to_rgb8();
+    assert_eq!((p.width(), p.height()), (w, h));
+    assert_eq!((t.width(), t.height()), (h, w), "turned: as tall as the stored picture is wide");
+    // Turning 90° clockwise moves the stored (x, y) to (h - 1 - y, x).
+    for y in 0..h {
+        for x in 0..w {
+            assert_eq!(p.get_pixel(x, y), t.get_pixel(h - 1 - y, x), "stored ({x}, {y})");
+        }
+    }
+}

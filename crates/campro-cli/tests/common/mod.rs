@@ -76,6 +76,7 @@ pub fn ffmpeg_present() -> bool {
 /// Runs `cmd` to its end and returns its output with the child's peak resident memory in
 /// KiB (`ru_maxrss` of that child alone, through `wait4`; Linux). Panics after `limit`.
 #[cfg(target_os = "linux")]
+#[allow(clippy::zombie_processes, reason = "the child is reaped by wait4, which std's Child does not see")]
 pub fn run_with_peak(cmd: &mut std::process::Command, limit: std::time::Duration) -> (std::process::Output, u64) {
     use std::io::Read;
     use std::os::unix::process::ExitStatusExt;
@@ -108,6 +109,7 @@ pub fn run_with_peak(cmd: &mut std::process::Command, limit: std::time::Duration
         }
         if began.elapsed() > limit {
             let _ = child.kill();
+            let _ = child.wait();
             panic!("{cmd:?} ran over {} s", limit.as_secs());
         }
         std::thread::sleep(std::time::Duration::from_millis(10));

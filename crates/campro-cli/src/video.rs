@@ -26,6 +26,12 @@ use std::sync::mpsc;
 
 /// Frames in flight between the decoder, the camera and the encoder (at least).
 const IN_FLIGHT: usize = 4;
+/// The decoder's frames are read off its stdout as they come, whatever else waits, in
+/// chunks of this many bytes, at most [`PUMP_CHUNKS`] of them ahead of the frame loop.
+const PUMP_CHUNK: usize = 1 << 20;
+/// Chunks the pump may hold ahead (64 MiB): ffmpeg may write several frames before the
+/// timestamp lines of its second output, and a full stdout pipe then blocks it for good.
+const PUMP_CHUNKS: usize = 64;
 /// Bytes of an ffmpeg's error output kept (the rest is read and dropped).
 const STDERR_KEPT: usize = 64 << 10;
 /// Longest line read from the decoder's timestamp stream, bytes.
@@ -569,7 +575,9 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
     let mut decode = spawn(&mut decoder(source, sixteen)?, "decode")?;
     let (clock_tx, clock_rx) = mpsc::channel();
     let dec_err = clock(decode.stderr.take().expect("piped"), clock_tx);
-    let mut from = decode.stdout.take().expect("piped");
+    // Stdout is drained from now on, before the first timestamp: see `pump`.
+    let (chunks, pumping) = pump(decode.stdout.take().expect("piped"));
+    let mut from = Pumped { rx: chunks, chunk: Vec::new(), at: 0 };
     // The size and time base arrive with the first decoded frame.
     let stall = source.stall();
     let first = match stall {
@@ -605,7 +613,9 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
     let bytes_per = if sixteen { 6 } else { 3 };
     let frame_bytes = bytes_per * width as usize * height as usize;
     // The frames in flight (the pool, the output frame, 16-bit scratch) come from the budget.
-    let held = (frame_bytes as u64).saturating_mul((in_flight + batch_max) as u64 + if sixteen { 2 } else { 0 });
+    let held = (frame_bytes as u64)
+        .saturating_mul((in_flight + batch_max) as u64 + if sixteen { 2 } else { 0 })
+        .saturating_add((PUMP_CHUNKS * PUMP_CHUNK) as u64);
     let budget = campro_eval::image_file::Budget::global();
     let Some(_lease) = budget.take(held) else {
         let _ = decode.kill();
@@ -811,6 +821,7 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         None => None,
     };
     let dec_stderr = dec_err.join().unwrap_or_default();
+    let _ = pumping.join();
     let enc_stderr = enc_err.join().unwrap_or_default();
     result?;
     if !dec.success() && !stopped_early {
@@ -883,6 +894,58 @@ fn rotated(
 }
 
 /// Fills `buf` with the next frame; false at a clean end of stream.
+/// Drains `from` (the decoder's stdout) on its own thread into chunks of at most
+/// [`PUMP_CHUNK`] bytes, [`PUMP_CHUNKS`] ahead at most; ends at EOF, on an error, or when
+/// the receiver is gone. The decoder writes its frames to stdout and their timestamps to
+/// stderr in an order of its own: reading one pipe only while waiting on the other would
+/// deadlock once the first fills (seen on ffmpeg 5.1 with small frames: several frames
+/// before the timestamp header).
+fn pump(
+    mut from: std::process::ChildStdout,
+) -> (mpsc::Receiver<std::io::Result<Vec<u8>>>, std::thread::JoinHandle<()>) {
+    let (tx, rx) = mpsc::sync_channel(PUMP_CHUNKS);
+    let handle = std::thread::spawn(move || loop {
+        let mut chunk = vec![0u8; PUMP_CHUNK];
+        match from.read(&mut chunk) {
+            Ok(0) => return,
+            Ok(n) => {
+                chunk.truncate(n);
+                if tx.send(Ok(chunk)).is_err() {
+                    return;
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => {
+                let _ = tx.send(Err(e));
+                return;
+            }
+        }
+    });
+    (rx, handle)
+}
+
+/// The pumped chunks as one byte stream.
+struct Pumped {
+    rx: mpsc::Receiver<std::io::Result<Vec<u8>>>,
+    chunk: Vec<u8>,
+    at: usize,
+}
+
+impl Read for Pumped {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        while self.at == self.chunk.len() {
+            match self.rx.recv() {
+                Ok(c) => (self.chunk, self.at) = (c?, 0),
+                Err(_) => return Ok(0),
+            }
+        }
+        let n = buf.len().min(self.chunk.len() - self.at);
+        buf[..n].copy_from_slice(&self.chunk[self.at..self.at + n]);
+        self.at += n;
+        Ok(n)
+    }
+}
+
 fn read_frame(r: &mut impl Read, buf: &mut [u8]) -> Result<bool> {
     let mut got = 0;
     while got < buf.len() {

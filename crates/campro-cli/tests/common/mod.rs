@@ -6,12 +6,17 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// The `campro` binary, with `RUST_BACKTRACE` set so that a backtrace leaking into a
-/// message would show.
+/// message would show, and killed after [`COMMAND_LIMIT`] (a stalled run fails its test
+/// instead of stopping the whole suite).
 pub fn campro() -> Command {
     let mut c = Command::cargo_bin("campro").unwrap();
-    c.env("RUST_BACKTRACE", "1");
+    c.env("RUST_BACKTRACE", "1").timeout(COMMAND_LIMIT);
     c
 }
+
+/// The longest one command of a test may run (the longest, `eval all` on a subset, takes
+/// about two minutes).
+pub const COMMAND_LIMIT: std::time::Duration = std::time::Duration::from_secs(600);
 
 /// A bundled parameter file.
 pub fn bundled(name: &str) -> PathBuf {

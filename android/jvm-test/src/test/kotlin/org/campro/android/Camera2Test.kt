@@ -66,18 +66,7 @@ class Camera2Test {
         override fun close() {}
     }
 
-    private fun characteristics(syncLatency: Int): CameraCharacteristics {
-        val c = ShadowCameraCharacteristics.newCameraCharacteristics()
-        val s = Shadow.extract<ShadowCameraCharacteristics>(c)
-        s.set(CameraCharacteristics.REQUEST_AVAILABLE_CAPABILITIES, intArrayOf(0, 2))
-        s.set(CameraCharacteristics.TONEMAP_AVAILABLE_TONE_MAP_MODES, intArrayOf(0, 1, 2))
-        s.set(CameraCharacteristics.TONEMAP_MAX_CURVE_POINTS, 64)
-        s.set(CameraCharacteristics.CONTROL_AWB_AVAILABLE_MODES, intArrayOf(0, 1))
-        s.set(CameraCharacteristics.SYNC_MAX_LATENCY, syncLatency)
-        s.set(CameraCharacteristics.REQUEST_PIPELINE_MAX_DEPTH, 4.toByte())
-        s.set(CameraCharacteristics.LENS_FACING, CameraCharacteristics.LENS_FACING_BACK)
-        return c
-    }
+    private fun characteristics(syncLatency: Int): CameraCharacteristics = supportedCharacteristics(syncLatency)
 
     private fun openDevice(chars: CameraCharacteristics): CameraDevice {
         val manager = RuntimeEnvironment.getApplication().getSystemService(CameraManager::class.java)

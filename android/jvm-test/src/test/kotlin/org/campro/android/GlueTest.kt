@@ -82,14 +82,7 @@ class GlueTest {
 
     @Test
     fun characteristicsDecideSupportPerFrameControlAndDepth() {
-        val c = ShadowCameraCharacteristics.newCameraCharacteristics()
-        val s = Shadow.extract<ShadowCameraCharacteristics>(c)
-        s.set(CameraCharacteristics.REQUEST_AVAILABLE_CAPABILITIES, intArrayOf(0, 2))
-        s.set(CameraCharacteristics.TONEMAP_AVAILABLE_TONE_MAP_MODES, intArrayOf(0, 1, 2))
-        s.set(CameraCharacteristics.TONEMAP_MAX_CURVE_POINTS, 32)
-        s.set(CameraCharacteristics.CONTROL_AWB_AVAILABLE_MODES, intArrayOf(0, 1))
-        s.set(CameraCharacteristics.SYNC_MAX_LATENCY, 0)
-        s.set(CameraCharacteristics.REQUEST_PIPELINE_MAX_DEPTH, 6.toByte())
+        val c = supportedCharacteristics(syncLatency = 0, points = 32, depth = 6)
         val sup = c.camproSupport()
         assertTrue("$sup", sup is org.campro.DeviceSupport.Result.Supported && sup.maxCurvePoints == 32)
         assertTrue(c.hasPerFrameControl())
@@ -101,14 +94,7 @@ class GlueTest {
         assertEquals(8, d.pipelineDepth())
         assertTrue(d.camproSupport() is org.campro.DeviceSupport.Result.Unsupported)
         // Everything else as the supported camera, but SYNC_MAX_LATENCY UNKNOWN: Unsupported.
-        val u = ShadowCameraCharacteristics.newCameraCharacteristics()
-        val su = Shadow.extract<ShadowCameraCharacteristics>(u)
-        su.set(CameraCharacteristics.REQUEST_AVAILABLE_CAPABILITIES, intArrayOf(0, 2))
-        su.set(CameraCharacteristics.TONEMAP_AVAILABLE_TONE_MAP_MODES, intArrayOf(0, 1, 2))
-        su.set(CameraCharacteristics.TONEMAP_MAX_CURVE_POINTS, 32)
-        su.set(CameraCharacteristics.CONTROL_AWB_AVAILABLE_MODES, intArrayOf(0, 1))
-        su.set(CameraCharacteristics.SYNC_MAX_LATENCY, -1)
-        val unknown = u.camproSupport()
+        val unknown = supportedCharacteristics(syncLatency = -1).camproSupport()
         assertTrue("$unknown", unknown is org.campro.DeviceSupport.Result.Unsupported && unknown.reasons.single().contains("SYNC_MAX_LATENCY is -1"))
     }
 

@@ -120,6 +120,10 @@ class ProtectionGuard(
     private var deviatingInARow = 0
     private var unmatched: String? = null
 
+    /** What the last violation was: the counters and the pipeline read this, never the message. */
+    private enum class Kind { Other, Deviation, PhysicalChange }
+    private var lastKind = Kind.Other
+
     /** The camera cannot run CamPro (from [DeviceSupport.check]): final. */
     @Synchronized
     fun unsupported(reason: String) {
@@ -160,7 +164,7 @@ class ProtectionGuard(
     }
 
     /** Whether the last violation was the active physical camera changing (the pipeline meters again). */
-    val physicalCameraChanged: Boolean @Synchronized get() = (state as? ProtectionState.Violated)?.reason?.startsWith(PHYSICAL_CHANGED) == true
+    val physicalCameraChanged: Boolean @Synchronized get() = state is ProtectionState.Violated && lastKind == Kind.PhysicalChange
 
     /** Checks one protected result; returns the new state. */
     @Synchronized
@@ -168,7 +172,7 @@ class ProtectionGuard(
         // Unsupported is final; Stopped holds until a new request (late results of a stopped camera change nothing).
         if (state is ProtectionState.Unsupported || state is ProtectionState.Stopped) return state
         val reason = violation(r) ?: unmatched
-        if (reason != null && reason.startsWith(DIFFERS)) deviatingInARow++ else deviatingInARow = 0
+        if (reason != null && lastKind == Kind.Deviation) deviatingInARow++ else deviatingInARow = 0
         state = when {
             reason == null -> ProtectionState.Protected
             missingInARow >= missingKeyLimit -> ProtectionState.Unsupported(
@@ -184,6 +188,7 @@ class ProtectionGuard(
 
     /** Why [r] does not show protection, or null when it does. */
     private fun violation(r: CaptureReport): String? {
+        lastKind = Kind.Other
         when {
             r.awbMode == null -> return "the result does not report CONTROL_AWB_MODE"
             r.awbMode != DeviceSupport.CONTROL_AWB_MODE_OFF ->
@@ -197,7 +202,8 @@ class ProtectionGuard(
         }
         val wantPhysical = requestedPhysicalId
         if (wantPhysical != null && r.physicalId != null && r.physicalId != wantPhysical) {
-            return "$PHYSICAL_CHANGED from $wantPhysical to ${r.physicalId}: the values were computed for the other sensor"
+            lastKind = Kind.PhysicalChange
+            return "the active physical camera changed from $wantPhysical to ${r.physicalId}: the values were computed for the other sensor"
         }
         val transform = r.transform
         val curves = r.curves
@@ -219,6 +225,7 @@ class ProtectionGuard(
             for (i in 0 until 4) {
                 val rel = kotlin.math.abs(gains[i] - wantGains[i]).toDouble() / kotlin.math.max(kotlin.math.abs(wantGains[i]).toDouble(), 1e-6)
                 if (!(rel <= maxGainRelative)) {
+                    lastKind = Kind.Deviation
                     return "the reported gain ${GAIN_NAMES[i]} is ${gains[i]}, not the requested ${wantGains[i]}"
                 }
             }
@@ -234,12 +241,14 @@ class ProtectionGuard(
                 }
                 out[CamProNative.READBACK_BOUND] * 255.0
             } catch (e: IllegalArgumentException) {
+                lastKind = Kind.Deviation
                 return "the reported values do not read back (${e.message})"
             }
             worst = maxOf(worst, bound)
             if (!(bound <= maxDeviationLsb)) {
                 val what = if (out[CamProNative.READBACK_MATRIX_MAX_ABS] * 255.0 > maxDeviationLsb / 2) "transform" else "curve"
-                return "$DIFFERS $what differs from the request (channel ${"RGB"[c]}): up to %.3f LSB, more than %.3f".format(bound, maxDeviationLsb)
+                lastKind = Kind.Deviation
+                return "the reported $what differs from the request (channel ${"RGB"[c]}): up to %.3f LSB, more than %.3f".format(bound, maxDeviationLsb)
             }
         }
         worstDeviationLsb = maxOf(worstDeviationLsb, worst)
@@ -250,8 +259,6 @@ class ProtectionGuard(
         /** `CameraMetadata.COLOR_CORRECTION_MODE_TRANSFORM_MATRIX`. */
         const val COLOR_CORRECTION_MODE_TRANSFORM_MATRIX = 0
         private val GAIN_NAMES = listOf("R", "G_even", "G_odd", "B")
-        private const val DIFFERS = "the reported"
-        private const val PHYSICAL_CHANGED = "the active physical camera changed"
     }
 }
 

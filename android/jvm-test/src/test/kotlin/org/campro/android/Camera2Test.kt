@@ -66,7 +66,6 @@ class Camera2Test {
         override fun close() {}
     }
 
-    private fun characteristics(syncLatency: Int): CameraCharacteristics = supportedCharacteristics(syncLatency)
 
     private fun openDevice(chars: CameraCharacteristics): CameraDevice {
         val manager = RuntimeEnvironment.getApplication().getSystemService(CameraManager::class.java)
@@ -104,7 +103,7 @@ class Camera2Test {
 
     @Test
     fun perFrameControlMetersInTheBurstAndVerifiesEveryResult() {
-        val chars = characteristics(syncLatency = 0)
+        val chars = supportedCharacteristics(syncLatency = 0)
         val dev = openDevice(chars)
         val states = mutableListOf<ProtectionState>()
         val cam = camera(chars, states)
@@ -134,7 +133,7 @@ class Camera2Test {
 
     @Test
     fun withoutPerFrameControlNoAutoFramesInterleaveAndAccessErrorsStopClosed() {
-        val chars = characteristics(syncLatency = 2)
+        val chars = supportedCharacteristics(syncLatency = 2)
         val dev = openDevice(chars)
         val states = mutableListOf<ProtectionState>()
         val cam = camera(chars, states)

@@ -127,13 +127,19 @@ pub fn read<'b>(
 /// at most [`MAX_FILE_BYTES`]), nothing decoded: what a caller sizes its memory by first.
 pub fn dimensions(path: &Path) -> Result<(u32, u32)> {
     let bytes = campro::file::read_capped(path, MAX_FILE_BYTES, "an image")?;
+    header_reader(path, &bytes)?.into_dimensions().map_err(|e| image_error(path, header_message(&e)))
+}
+
+/// A reader of `bytes` by their guessed format whose header (ICC profile, text, EXIF) may
+/// allocate [`HEADER_ALLOC`] at most: what is read before any pixel.
+fn header_reader<'a>(path: &Path, bytes: &'a [u8]) -> Result<image::ImageReader<std::io::Cursor<&'a [u8]>>> {
     let mut limits = image::Limits::default();
     limits.max_alloc = Some(HEADER_ALLOC);
-    let mut reader = image::ImageReader::new(std::io::Cursor::new(&bytes))
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| image_error(path, e.to_string()))?;
     reader.limits(limits);
-    reader.into_dimensions().map_err(|e| image_error(path, header_message(&e)))
+    Ok(reader)
 }
 
 /// [`read`] on bytes already read (`path` names them in errors).
@@ -151,13 +157,7 @@ pub fn decode<'b>(
     if bytes.starts_with(b"\xff\xd8") && !jpeg_has_end(bytes) {
         warn("the JPEG is truncated (no end-of-image marker): rows past the end are filled in");
     }
-    let mut header_limits = image::Limits::default();
-    header_limits.max_alloc = Some(HEADER_ALLOC);
-    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
-        .with_guessed_format()
-        .map_err(|e| image_error(path, e.to_string()))?;
-    reader.limits(header_limits);
-    let mut decoder = reader.into_decoder().map_err(|e| image_error(path, header_message(&e)))?;
+    let mut decoder = header_reader(path, bytes)?.into_decoder().map_err(|e| image_error(path, header_message(&e)))?;
     let (w, h) = decoder.dimensions();
     let need = peak_bytes(w, h, decoder.total_bytes(), work(w, h));
     if need > budget.total() {

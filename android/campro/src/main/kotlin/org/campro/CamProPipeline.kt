@@ -33,6 +33,13 @@ interface CameraRequests {
      */
     fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int)
 
+    /**
+     * Repeat probe frames ([PixelProbe]) with these values (AWB off, TRANSFORM_MATRIX,
+     * CONTRAST_CURVE) to the small metering stream, never to the app's: their results go
+     * to [CamProPipeline.onProbeResult] and their luma to [CamProPipeline.onProbeFrame].
+     */
+    fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray)
+
     /** Stop repeating: nothing more is captured. Must not throw. */
     fun halt()
 }
@@ -43,8 +50,10 @@ interface CameraRequests {
  * [CameraRequests] into requests; every decision is here, tested on the host JVM.
  *
  * The loop: [start] meters in auto mode until AWB has CONVERGED (or LOCKED), takes the
- * device's transform and gains from that result, sends CamPro's values ([CameraRequests.protect])
- * and is `Verifying` until a protected result reads back. On a device with per-frame control
+ * device's transform and gains from that result, proves from pixels that the device applies
+ * the transform and curve it is sent ([PixelProbe]: once a start and physical camera;
+ * a device whose pixels do not follow is Unsupported), sends CamPro's values
+ * ([CameraRequests.protect]) and is `Verifying` until a protected result reads back. On a device with per-frame control
  * the repeating burst keeps one metering frame in [CamProController.meteringInterval] and the
  * values follow the light; otherwise (AUTO/OFF switches may land frames late) metering runs
  * again only on [remeter], with the preview closed meanwhile.
@@ -98,6 +107,18 @@ class CamProPipeline<T>(
     private var meteringMissing = 0
     private var lastState: ProtectionState? = null
 
+    /** The probe phase under way (`null`: none). */
+    private var probing: PixelProbe.Step? = null
+    /** [PixelProbe.Step.Curve]'s flat level, once seen. */
+    private var probeCurveLevel: Int? = null
+    /** Physical cameras (`null`: the camera itself) whose pixels the probe has shown to follow, since [start]. */
+    private val probedIds = HashSet<String?>()
+    /** Probe frames' luma and results' verdicts ("shows the step's settings") waiting for each other, by timestamp. */
+    private val probeFrames = LinkedHashMap<Long, ByteArray>()
+    private val probeResults = LinkedHashMap<Long, Boolean>()
+    /** Probe frames of the current step so far. */
+    private var probeFramesSeen = 0
+
     init {
         guard.stopped("not started")
     }
@@ -111,6 +132,9 @@ class CamProPipeline<T>(
 
     /** Whether the loop is metering in auto mode (CameraX routes results by this: no per-request tags). */
     val isMetering: Boolean @Synchronized get() = metering && running
+
+    /** Whether the loop is probing the device's pixels ([PixelProbe]; CameraX routes frames and results by this). */
+    val isProbing: Boolean @Synchronized get() = probing != null && running
 
     /** Whether frames may reach the app now. */
     val framesAllowed: Boolean get() = guard.framesAllowed
@@ -132,6 +156,7 @@ class CamProPipeline<T>(
             is DeviceSupport.Result.Supported -> guarded {
                 session.setMaxCurvePoints(support.maxCurvePoints)
                 running = true
+                probedIds.clear()
                 beginMetering()
             }
         }
@@ -149,7 +174,7 @@ class CamProPipeline<T>(
     /** An auto-mode result arrived. */
     @Synchronized
     fun onMeteringResult(m: MeteringReport) {
-        if (!running || !(metering || perFrameControl)) return
+        if (!running || probing != null || !(metering || perFrameControl)) return
         // Only a result of an auto-mode frame carries the device's own transform: one made
         // with CamPro's settings (a late switch) would compose CamPro onto itself.
         if (m.awbMode != AWB_MODE_AUTO) {
@@ -184,9 +209,74 @@ class CamProPipeline<T>(
             // Values computed for one physical sensor are never sent for another.
             val switched = m.physicalId != meteredPhysicalId
             meteredPhysicalId = m.physicalId
-            if (rebuild || metering || switched) sendProtected()
+            if (rebuild || metering || switched) {
+                if (meteredPhysicalId in probedIds) sendProtected() else beginProbe(PixelProbe.Step.Curve)
+            }
         }
         publish()
+    }
+
+    /** A probe frame's result arrived ([timestampNs]: its `SENSOR_TIMESTAMP`). */
+    @Synchronized
+    fun onProbeResult(timestampNs: Long, report: CaptureReport) {
+        val step = probing ?: return
+        if (!running) return
+        probeResults[timestampNs] = PixelProbe.reportsStep(step, report)
+        trim(probeResults)
+        guarded { judgeProbe(timestampNs) }
+        publish()
+    }
+
+    /** A probe frame arrived: its image's timestamp and luma samples (a YUV image's Y plane, subsampled). */
+    @Synchronized
+    fun onProbeFrame(timestampNs: Long, luma: ByteArray) {
+        if (probing == null || !running) return
+        probeFrames[timestampNs] = luma
+        trim(probeFrames)
+        guarded {
+            if (++probeFramesSeen > PROBE_FRAME_LIMIT) {
+                failProbe("no probe frame in $PROBE_FRAME_LIMIT matched a result that shows the probe's settings (its image timestamps are not SENSOR_TIMESTAMP, or the settings never applied)")
+            } else {
+                judgeProbe(timestampNs)
+            }
+        }
+        publish()
+    }
+
+    private fun <V> trim(m: LinkedHashMap<Long, V>) {
+        while (m.size > PROBE_PENDING) m.remove(m.keys.first())
+    }
+
+    /** Judges the probe frame at [ts] once both its luma and its result are here. */
+    private fun judgeProbe(ts: Long) {
+        val step = probing ?: return
+        val shows = probeResults[ts] ?: return
+        val luma = probeFrames.remove(ts) ?: return
+        probeResults.remove(ts)
+        if (!shows) return // earlier settings (latency): this frame says nothing
+        val level = PixelProbe.flatLevel(luma)
+        when (step) {
+            PixelProbe.Step.Curve -> {
+                if (level == null) return failProbe(PixelProbe.verdict(null, null)!!)
+                probeCurveLevel = level
+                beginProbe(PixelProbe.Step.Matrix)
+            }
+            PixelProbe.Step.Matrix -> {
+                val why = PixelProbe.verdict(probeCurveLevel, level)
+                if (why != null) return failProbe(why)
+                probing = null
+                probedIds += meteredPhysicalId
+                sendProtected()
+            }
+        }
+    }
+
+    private fun failProbe(why: String) {
+        probing = null
+        running = false
+        guard.unsupported("pixel probe: $why")
+        gate.stop()
+        camera.halt()
     }
 
     /**
@@ -212,6 +302,7 @@ class CamProPipeline<T>(
     @Synchronized
     fun onCameraStopped(reason: String) {
         running = false
+        probing = null
         guard.stopped(reason)
         gate.clear()
         publish()
@@ -221,6 +312,7 @@ class CamProPipeline<T>(
     @Synchronized
     fun stop(reason: String = "stopped by the app") {
         running = false
+        probing = null
         try {
             camera.halt()
         } catch (e: RuntimeException) {
@@ -231,7 +323,19 @@ class CamProPipeline<T>(
         publish()
     }
 
+    private fun beginProbe(step: PixelProbe.Step) {
+        metering = false
+        probing = step
+        probeFrames.clear()
+        probeResults.clear()
+        probeFramesSeen = 0
+        guard.requestChanged()
+        gate.clear()
+        camera.probe(PixelProbe.transform(step, session.transform), PixelProbe.curve(step), controller.gains.copyOf())
+    }
+
     private fun beginMetering() {
+        probing = null
         metering = true
         guard.requestChanged()
         gate.clear()
@@ -284,6 +388,10 @@ class CamProPipeline<T>(
         const val AWB_STATE_CONVERGED = 2
         /** `CameraMetadata.CONTROL_AWB_STATE_LOCKED`. */
         const val AWB_STATE_LOCKED = 3
+        /** Probe frames of one step after which a probe that saw no frame with its settings gives up: Unsupported. */
+        const val PROBE_FRAME_LIMIT = 60
+        /** Probe frames (and results) waiting for each other, at most. */
+        const val PROBE_PENDING = 16
         /** `CameraMetadata.SYNC_MAX_LATENCY_PER_FRAME_CONTROL`. */
         const val SYNC_MAX_LATENCY_PER_FRAME_CONTROL = 0
     }

@@ -57,6 +57,19 @@ object Fixtures {
         }
         override fun halt() { calls += "halt" }
 
+        /** Probe requests sent ([PixelProbe]), oldest first: their transform, curve and gains (not in [calls]). */
+        val probes = mutableListOf<Triple<IntArray, FloatArray, FloatArray>>()
+        override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) {
+            failWith?.let { throw it }
+            probes += Triple(transform.copyOf(), curve.copyOf(), gains.copyOf())
+        }
+
+        /** What a device honouring the last probe request reports. */
+        fun honouredProbe(): CaptureReport {
+            val (t, c, g) = probes.last()
+            return CaptureReport(0, 0, 0, t.copyOf(), listOf(c, c.copyOf(), c.copyOf()), g.copyOf())
+        }
+
         /** What a device honouring the last request reports. */
         fun honoured(): CaptureReport {
             val c = lastCurve!!
@@ -72,6 +85,25 @@ object Fixtures {
         curves: List<FloatArray>? = this.curves,
         gains: FloatArray? = this.gains,
     ) = CaptureReport(awbMode, colorCorrectionMode, tonemapMode, transform, curves, gains)
+
+    /** The flat luma an honest device gives for a probe curve (its level at 0, in 8-bit codes): 64 or 128. */
+    fun probeLevel(curve: FloatArray): Int = Math.round(curve[1] * 255f)
+
+    /**
+     * Answers [p]'s pixel probe as an honest device would ([cam]'s last probe request
+     * honoured: its result, and a flat frame at the probe curve's level), until it stops
+     * probing; timestamps from [ts]. Returns how many probe frames it answered.
+     */
+    fun answerProbes(p: CamProPipeline<*>, cam: FakeCamera, ts: Long = -1000): Int {
+        var n = 0
+        while (p.isProbing && n < 4) {
+            val t = ts - n
+            p.onProbeResult(t, cam.honouredProbe())
+            p.onProbeFrame(t, ByteArray(4800) { probeLevel(cam.probes.last().second).toByte() })
+            n++
+        }
+        return n
+    }
 
     fun converged(transform: IntArray = PHONE, gains: FloatArray = GAINS) = MeteringReport(1, CamProPipeline.AWB_STATE_CONVERGED, transform, gains)
 }

@@ -30,6 +30,12 @@ class PipelineTest {
 
     private fun names() = states.map { it.javaClass.simpleName }
 
+    /** A metering result, then the pixel probe answered as an honest device would. */
+    private fun meter(p: CamProPipeline<Int>, m: MeteringReport, camera: FakeCamera = cam) {
+        p.onMeteringResult(m)
+        Fixtures.answerProbes(p, camera)
+    }
+
     @Test
     fun openMeterProtectViolateRecover() {
         val p = pipeline()
@@ -40,7 +46,7 @@ class PipelineTest {
         p.onMeteringResult(MeteringReport(1, 1, intArrayOf(1, 1, 0, 1, 0, 1, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1), Fixtures.GAINS))
         assertEquals(1L, p.unconvergedMeteringResults)
         assertEquals(listOf("meter"), cam.calls)
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         assertEquals(listOf("meter", "protect+meter/15"), cam.calls)
         assertEquals(ProtectionState.Verifying, p.state)
         // What was sent is the session's conversion of the device's own transform.
@@ -69,17 +75,17 @@ class PipelineTest {
     fun withoutPerFrameControlMeteringIsPhased() {
         val p = pipeline(perFrame = false)
         p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         assertEquals(listOf("meter", "protect"), cam.calls)
         // A late auto-mode result changes nothing while protecting.
-        p.onMeteringResult(Fixtures.converged(gains = floatArrayOf(1.5f, 1f, 1f, 2f)))
+        meter(p, Fixtures.converged(gains = floatArrayOf(1.5f, 1f, 1f, 2f)))
         assertEquals(listOf("meter", "protect"), cam.calls)
         p.onProtectedResult(1, cam.honoured())
         assertEquals(ProtectionState.Protected, p.state)
         p.remeter()
         assertEquals(ProtectionState.Verifying, p.state)
         p.onFrame(5, 5)
-        p.onMeteringResult(Fixtures.converged(gains = floatArrayOf(1.5f, 1f, 1f, 2f)))
+        meter(p, Fixtures.converged(gains = floatArrayOf(1.5f, 1f, 1f, 2f)))
         assertEquals(listOf("meter", "protect", "meter", "protect"), cam.calls)
         app.runAll()
         assertEquals(listOf(5), closed)
@@ -90,12 +96,12 @@ class PipelineTest {
     fun interleavedMeteringRebuildsOnlyWhenTheLightMoves() {
         val p = pipeline()
         p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         p.onProtectedResult(1, cam.honoured())
-        p.onMeteringResult(Fixtures.converged()) // same light: no new request, still Protected
+        meter(p, Fixtures.converged()) // same light: no new request, still Protected
         assertEquals(2, cam.calls.size)
         assertEquals(ProtectionState.Protected, p.state)
-        p.onMeteringResult(Fixtures.converged(gains = floatArrayOf(1.5f, 1f, 1f, 2f)))
+        meter(p, Fixtures.converged(gains = floatArrayOf(1.5f, 1f, 1f, 2f)))
         assertEquals(3, cam.calls.size)
         assertEquals("a new request verifies again", ProtectionState.Verifying, p.state)
     }
@@ -104,7 +110,7 @@ class PipelineTest {
     fun disconnectMidStreamDropsEverythingAndLateResultsChangeNothing() {
         val p = pipeline()
         p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         val ok = cam.honoured()
         p.onProtectedResult(1, ok)
         p.onFrame(2, 2)
@@ -123,7 +129,7 @@ class PipelineTest {
         val p = pipeline()
         p.start(Fixtures.supported())
         cam.failWith = IllegalStateException("CameraDevice was already closed")
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         val s = p.state
         assertTrue("$s", s is ProtectionState.Stopped && s.reason.contains("already closed"))
         assertTrue(cam.calls.contains("halt"))
@@ -153,7 +159,7 @@ class PipelineTest {
         val s = p.state
         assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("MANUAL_POST_PROCESSING"))
         assertEquals(listOf("halt"), cam.calls)
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         assertEquals(listOf("halt"), cam.calls)
         // CONTRAST_CURVE listed without the capability: nothing promises the values are applied as sent.
         val listed = DeviceSupport.check(intArrayOf(0), intArrayOf(0, 1, 2), 64, intArrayOf(0, 1))
@@ -168,7 +174,7 @@ class PipelineTest {
                 val c = FakeCamera()
                 val p = CamProPipeline<Int>(s, c, app, true, 4, 4, deliver = {}, drop = {})
                 p.start(Fixtures.supported(n))
-                p.onMeteringResult(Fixtures.converged())
+                meter(p, Fixtures.converged(), c)
                 val pts = c.lastCurve!!.size / 2
                 assertTrue("$n points allowed, $pts sent", pts in 2..n)
                 assertEquals(ProtectionState.Protected, p.onProtectedResult(1, c.honoured()).let { p.state })
@@ -185,7 +191,7 @@ class PipelineTest {
     fun gainsAreReadBack() {
         val p = pipeline()
         p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         val ok = cam.honoured()
         p.onProtectedResult(1, ok.with(gains = floatArrayOf(1f, 1f, 1f, 1f)))
         val s = p.state
@@ -200,7 +206,7 @@ class PipelineTest {
     fun aDeviceThatNeverReportsTheTransformEndsUnsupported() {
         val p = pipeline()
         p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         val ok = cam.honoured()
         repeat(p.guard.missingKeyLimit - 1) { p.onProtectedResult(it.toLong(), ok.with(transform = null)) }
         assertTrue(p.state is ProtectionState.Violated)
@@ -220,7 +226,7 @@ class PipelineTest {
     fun trustNeverCoversMissingModes() {
         val p = pipeline(trust = true)
         p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         val ok = cam.honoured()
         assertEquals(ProtectionState.Protected, p.onProtectedResult(1, ok.with(transform = null, curves = null, gains = null)).let { p.state })
         for (r in listOf(ok.with(awbMode = null), ok.with(colorCorrectionMode = null), ok.with(tonemapMode = null))) {
@@ -234,7 +240,7 @@ class PipelineTest {
         val depth = 8
         val p = pipeline(depth = depth, queue = 6)
         p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         val ok = cam.honoured()
         for (t in 1L..depth) p.onProtectedResult(t, ok) // results first, as a deep pipeline gives them
         for (t in 1L..depth) p.onFrame(t, t.toInt())
@@ -256,7 +262,7 @@ class PipelineTest {
         val seen = mutableListOf<Int>()
         val p = CamProPipeline<Int>(session, cam, appThread, true, 4, 4, deliver = { entered.countDown(); release.await(5, TimeUnit.SECONDS); synchronized(seen) { seen += it } }, drop = {})
         p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         val ok = cam.honoured()
         p.onFrame(1, 1)
         p.onProtectedResult(1, ok)
@@ -278,7 +284,7 @@ class PipelineTest {
         appThread.shutdown()
         val p = CamProPipeline<Int>(session, cam, appThread, true, 4, 4, deliver = { shown += it }, drop = { closed += it })
         p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
+        meter(p, Fixtures.converged())
         p.onFrame(1, 1)
         p.onProtectedResult(1, cam.honoured())
         // The verified frame could not be handed over: it is closed, counted as dropped.
@@ -286,5 +292,122 @@ class PipelineTest {
         assertTrue(shown.isEmpty())
         assertEquals(0L, p.gate.delivered)
         assertEquals(1L, p.gate.dropped)
+    }
+
+    @Test
+    fun theProbeSendsAConstantCurveThenAZeroTransformBeforeAnyProtectedRequest() {
+        val p = pipeline(perFrame = false)
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        assertEquals(listOf("meter"), cam.calls)
+        assertTrue(p.isProbing)
+        val (t1, c1, g1) = cam.probes.single()
+        assertTrue("CamPro's own transform", t1.contentEquals(session.transform))
+        assertTrue(floatArrayOf(0f, 0.25f, 1f, 0.25f).contentEquals(c1))
+        assertTrue(Fixtures.GAINS.contentEquals(g1))
+        // A frame still made with the metering settings (latency) says nothing.
+        p.onProbeResult(1, CaptureReport(1, 1, 2, Fixtures.PHONE, List(3) { floatArrayOf(0f, 0f, 1f, 1f) }, Fixtures.GAINS))
+        p.onProbeFrame(1, ByteArray(4800) { (it % 200).toByte() })
+        assertEquals(1, cam.probes.size)
+        // The curve step's flat frame (its result reports the probe) moves on to the matrix step.
+        p.onProbeFrame(2, ByteArray(4800) { 64 })
+        p.onProbeResult(2, cam.honouredProbe())
+        val (t2, c2, _) = cam.probes[1]
+        assertTrue((0 until 9).all { t2[2 * it] == 0 && t2[2 * it + 1] == 1 })
+        assertTrue(floatArrayOf(0f, 0.5f, 1f, 1f).contentEquals(c2))
+        assertEquals(ProtectionState.Verifying, p.state)
+        p.onProbeResult(3, cam.honouredProbe())
+        p.onProbeFrame(3, ByteArray(4800) { 128.toByte() })
+        assertEquals(listOf("meter", "protect"), cam.calls)
+        assertFalse(p.isProbing)
+        // Probed once a start: the next metering result goes straight to a protected request.
+        p.remeter()
+        p.onMeteringResult(Fixtures.converged())
+        assertEquals(listOf("meter", "protect", "meter", "protect"), cam.calls)
+        assertEquals(2, cam.probes.size)
+    }
+
+    @Test
+    fun aDeviceThatEchoesTheCurveButAppliesItsOwnIsUnsupported() {
+        val p = pipeline()
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        // The result reports the constant curve; the pixels show the scene.
+        p.onProbeResult(5, cam.honouredProbe())
+        p.onProbeFrame(5, ByteArray(4800) { (it * 7 % 256).toByte() })
+        val s = p.state
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("TONEMAP_CURVE"))
+        assertTrue(cam.calls.none { it.startsWith("protect") })
+        assertEquals("halt", cam.calls.last())
+    }
+
+    @Test
+    fun aDeviceThatIgnoresTheTransformIsUnsupported() {
+        val p = pipeline()
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        p.onProbeResult(5, cam.honouredProbe())
+        p.onProbeFrame(5, ByteArray(4800) { 64 })
+        // Zero transform sent and reported; the frame shows the scene through the curve.
+        p.onProbeResult(6, cam.honouredProbe())
+        p.onProbeFrame(6, ByteArray(4800) { (128 + it % 100).toByte() })
+        val s = p.state
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("COLOR_CORRECTION_TRANSFORM"))
+        assertTrue(cam.calls.none { it.startsWith("protect") })
+    }
+
+    @Test
+    fun aDeviceWhoseProbeLevelsDoNotStepIsUnsupported() {
+        // A flat scene through a device that applies neither: the same level twice.
+        val p = pipeline()
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        for (ts in 5L..6L) {
+            p.onProbeResult(ts, cam.honouredProbe())
+            p.onProbeFrame(ts, ByteArray(4800) { 90 })
+        }
+        val s = p.state
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("luma 90 and 90"))
+    }
+
+    @Test
+    fun aProbeThatNeverSeesItsSettingsGivesUp() {
+        val p = pipeline()
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        for (ts in 1L..CamProPipeline.PROBE_FRAME_LIMIT.toLong()) {
+            p.onProbeFrame(ts, ByteArray(4800) { 64 }) // its result never comes (or another timestamp base)
+            assertEquals(ProtectionState.Verifying, p.state)
+        }
+        p.onProbeFrame(1000, ByteArray(4800) { 64 })
+        val s = p.state
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("no probe frame"))
+    }
+
+    @Test
+    fun flatLevelsByHand() {
+        // 98 of 100 samples within 2 codes of 64 (62..66), two outliers: flat at 64.
+        val a = ByteArray(100) { if (it < 49) 63 else if (it < 98) 65 else 200.toByte() }
+        assertEquals(64, PixelProbe.flatLevel(a))
+        // 97 of 100: not flat.
+        val b = ByteArray(100) { if (it < 97) 64 else 10 }
+        assertEquals(null, PixelProbe.flatLevel(b))
+        // Too few samples to say.
+        assertEquals(null, PixelProbe.flatLevel(ByteArray(PixelProbe.MIN_SAMPLES - 1) { 64 }))
+        // Verdicts: the step is measured between the two levels.
+        assertEquals(null, PixelProbe.verdict(64, 128))
+        assertEquals(null, PixelProbe.verdict(70, 70 + PixelProbe.MIN_STEP))
+        assertTrue(PixelProbe.verdict(70, 70 + PixelProbe.MIN_STEP - 1)!!.contains("do not follow"))
+        // Luma of RGB: BT.601 weights, rounded: (299 * 255 + 500) / 1000 = 76.
+        assertTrue(byteArrayOf(76, 150.toByte(), 29).contentEquals(PixelProbe.lumaOfRgb(byteArrayOf(-1, 0, 0, 0, -1, 0, 0, 0, -1))))
+        // A Y plane with row padding and 2-byte pixels, sampled every 2nd pixel of every 2nd row.
+        val plane = java.nio.ByteBuffer.wrap(ByteArray(4 * 10) { it.toByte() }) // 4 rows of 10 bytes: 4 pixels of stride 2 + 2 padding
+        val luma = PixelProbe.lumaOfPlane(plane, 4, 4, 10, 2, 2)
+        assertTrue(luma.contentToString(), byteArrayOf(0, 4, 20, 24).contentEquals(luma))
+        // Resampled probe curves still count (points on the sent line); others do not.
+        val r = CaptureReport(0, 0, 0, IntArray(18) { if (it % 2 == 0) 0 else 1 }, List(3) { floatArrayOf(0f, 0.5f, 0.5f, 0.75f, 1f, 1f) }, null)
+        assertTrue(PixelProbe.reportsStep(PixelProbe.Step.Matrix, r))
+        assertFalse(PixelProbe.reportsStep(PixelProbe.Step.Curve, r))
+        assertFalse(PixelProbe.reportsStep(PixelProbe.Step.Matrix, CaptureReport(0, 0, 0, Fixtures.PHONE, r.curves, null)))
     }
 }

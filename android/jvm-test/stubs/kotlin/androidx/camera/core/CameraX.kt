@@ -15,7 +15,15 @@ interface ImageProxy : AutoCloseable {
     val imageInfo: ImageInfo
     val width: Int
     val height: Int
+    val planes: Array<PlaneProxy>
     override fun close()
+
+    /** Stub of androidx.camera.core.ImageProxy.PlaneProxy. */
+    interface PlaneProxy {
+        val rowStride: Int
+        val pixelStride: Int
+        val buffer: java.nio.ByteBuffer
+    }
 }
 
 /** Stub of androidx.camera.core.ExtendableBuilder. */

@@ -29,6 +29,7 @@ import org.campro.CameraRequests
 import org.campro.CaptureReport
 import org.campro.DeviceSupport
 import org.campro.MeteringReport
+import org.campro.PixelProbe
 import org.campro.ProtectionState
 import java.util.concurrent.Executor
 
@@ -130,7 +131,8 @@ fun openCamProAsset(
  * in the pipeline's [org.campro.FrameGate] until its own `CaptureResult` verified, and only
  * then reaches [deliver] on [appExecutor] (render it with `ImageWriter.queueInputImage` onto
  * a `SurfaceView`, or with GL; the consumer closes it). Metering frames (auto mode) go to a
- * small reader that drops them unread. No display surface is ever a capture target: a
+ * small reader that drops them unread; the pixel probe's frames ([org.campro.PixelProbe]) go
+ * there too, and only their luma is read. No display surface is ever a capture target: a
  * `TextureView`/`SurfaceView` fed straight by the camera would show frames before their
  * results are checked, and is not fail-closed.
  *
@@ -193,6 +195,17 @@ class CamProCamera2(
             } else {
                 s.setRepeatingRequest(protected, callback, cameraHandler)
             }
+        }
+
+        override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) {
+            val s = captureSession ?: error("no capture session")
+            val d = device ?: error("no camera device")
+            val probe = d.createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply {
+                addTarget(meteringReader.surface) // never the app's stream
+                applyCamPro(transform, curve, gains)
+                setTag(PROBE)
+            }.build()
+            s.setRepeatingRequest(probe, callback, cameraHandler)
         }
 
         override fun halt() {
@@ -268,6 +281,7 @@ class CamProCamera2(
             METERING -> pipeline.onMeteringResult(result.meteringReport())
             // A result without a timestamp matches no frame: its frame is dropped.
             PROTECTED -> pipeline.onProtectedResult(result.get(CaptureResult.SENSOR_TIMESTAMP) ?: Long.MIN_VALUE, result.camproReport())
+            PROBE -> pipeline.onProbeResult(result.get(CaptureResult.SENSOR_TIMESTAMP) ?: Long.MIN_VALUE, result.camproReport())
         }
     }
 
@@ -283,9 +297,15 @@ class CamProCamera2(
         }
     }
 
+    /** Metering frames are dropped unread; while the pipeline probes, a frame's luma goes to the probe first. */
     private fun drain(r: ImageReader) {
         try {
-            r.acquireLatestImage()?.close()
+            r.acquireLatestImage()?.use { image ->
+                if (pipeline.isProbing) {
+                    val y = image.planes[0]
+                    pipeline.onProbeFrame(image.timestamp, PixelProbe.lumaOfPlane(y.buffer, image.width, image.height, y.rowStride, y.pixelStride))
+                }
+            }
         } catch (e: IllegalStateException) {
             // closed reader
         }
@@ -304,5 +324,6 @@ class CamProCamera2(
         const val METERING_HEIGHT = 240
         internal const val METERING = "campro-metering"
         internal const val PROTECTED = "campro-protected"
+        internal const val PROBE = "campro-probe"
     }
 }

@@ -30,6 +30,7 @@ import org.campro.CamProPipeline
 import org.campro.CamProSession
 import org.campro.CameraRequests
 import org.campro.DeviceSupport
+import org.campro.PixelProbe
 import org.campro.ProtectionState
 import java.util.concurrent.Executor
 
@@ -67,6 +68,8 @@ class CamProCameraX(
         override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int) =
             send(camproSettings(transform, curve, gains))
 
+        override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) = send(camproSettings(transform, curve, gains))
+
         override fun halt() {
             // CameraX owns the repeating request; the gate is closed by the pipeline.
         }
@@ -100,8 +103,22 @@ class CamProCameraX(
         Camera2Interop.Extender(builder).setSessionCaptureCallback(captureCallback)
     }
 
-    /** The analyzer to set on that use case: frames go through the gate. */
-    val analyzer: ImageAnalysis.Analyzer = ImageAnalysis.Analyzer { image -> pipeline.onFrame(image.imageInfo.timestamp, image) }
+    /**
+     * The analyzer to set on that use case: frames go through the gate; while the pipeline
+     * probes the device ([org.campro.PixelProbe]), their luma goes to the probe and the
+     * frame is closed unseen.
+     */
+    val analyzer: ImageAnalysis.Analyzer = ImageAnalysis.Analyzer { image ->
+        if (pipeline.isProbing) {
+            image.use {
+                val y = it.planes.firstOrNull()
+                val luma = if (y == null) ByteArray(0) else PixelProbe.lumaOfPlane(y.buffer, it.width, it.height, y.rowStride, y.pixelStride)
+                pipeline.onProbeFrame(it.imageInfo.timestamp, luma)
+            }
+        } else {
+            pipeline.onFrame(image.imageInfo.timestamp, image)
+        }
+    }
 
     /** Starts metering on the bound camera ([support] from its characteristics); closed until verified. */
     fun start(control: Camera2CameraControl, support: DeviceSupport.Result) {
@@ -130,10 +147,12 @@ class CamProCameraX(
         override fun onCaptureCompleted(s: CameraCaptureSession, request: CaptureRequest, result: TotalCaptureResult) = onResult(result)
     }
 
-    /** One completed capture: metering while metering, otherwise a protected result (internal: tests feed scripted results). */
+    /** One completed capture: metering while metering, a probe result while probing, otherwise a protected result (internal: tests feed scripted results). */
     internal fun onResult(result: CaptureResult) {
         if (pipeline.isMetering) {
             pipeline.onMeteringResult(result.meteringReport())
+        } else if (pipeline.isProbing) {
+            pipeline.onProbeResult(result.get(CaptureResult.SENSOR_TIMESTAMP) ?: Long.MIN_VALUE, result.camproReport())
         } else {
             pipeline.onProtectedResult(result.get(CaptureResult.SENSOR_TIMESTAMP) ?: Long.MIN_VALUE, result.camproReport())
         }

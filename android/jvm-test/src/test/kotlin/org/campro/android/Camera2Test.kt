@@ -17,6 +17,7 @@ import android.os.Looper
 import android.view.Surface
 import org.robolectric.RuntimeEnvironment
 import org.campro.Fixtures
+import org.campro.PixelProbe
 import org.campro.ProtectionState
 import org.junit.After
 import org.junit.Assert.assertEquals
@@ -96,6 +97,31 @@ class Camera2Test {
         CaptureResult.SENSOR_TIMESTAMP to ts,
     )
 
+    /**
+     * Answers the pixel probe as an honest device: each probe request (to the metering
+     * reader, never the protected one) gets a result reporting its settings and a flat
+     * frame at its level.
+     */
+    private fun passProbe(cam: CamProCamera2, fake: FakeSession) {
+        for ((i, step) in PixelProbe.Step.values().withIndex()) {
+            val req = fake.repeated.last().single()
+            assertEquals(CamProCamera2.PROBE, req.tag)
+            val curve = PixelProbe.curve(step)
+            val ts = 100L + i
+            cam.onResult(
+                CamProCamera2.PROBE,
+                result(
+                    CaptureResult.CONTROL_AWB_MODE to 0, CaptureResult.COLOR_CORRECTION_MODE to 0, CaptureResult.TONEMAP_MODE to 0,
+                    CaptureResult.COLOR_CORRECTION_TRANSFORM to ColorSpaceTransform(PixelProbe.transform(step, session.transform)),
+                    CaptureResult.TONEMAP_CURVE to TonemapCurve(curve, curve, curve),
+                    CaptureResult.COLOR_CORRECTION_GAINS to RggbChannelVector(2f, 1f, 1f, 1.6f),
+                    CaptureResult.SENSOR_TIMESTAMP to ts,
+                ),
+            )
+            cam.pipeline.onProbeFrame(ts, ByteArray(4800) { Fixtures.probeLevel(curve).toByte() })
+        }
+    }
+
     private fun camera(chars: CameraCharacteristics, states: MutableList<ProtectionState>) = CamProCamera2(
         session, chars, Handler(Looper.getMainLooper()), Executor { it.run() }, 640, 480,
         deliver = { it.close() }, onState = { states += it }, format = ImageFormat.YUV_420_888, usage = 0L,
@@ -114,6 +140,7 @@ class Camera2Test {
         cam.onResult(CamProCamera2.METERING, result(CaptureResult.CONTROL_AWB_MODE to 1, CaptureResult.CONTROL_AWB_STATE to 1))
         assertEquals("not converged: still metering", 1, fake.repeated.size)
         cam.onResult(CamProCamera2.METERING, converged())
+        passProbe(cam, fake)
         val burst = fake.repeated.last().map { it.tag }
         assertEquals(15, burst.size)
         assertEquals(listOf(CamProCamera2.METERING) + List(14) { CamProCamera2.PROTECTED }, burst)
@@ -140,6 +167,7 @@ class Camera2Test {
         val fake = FakeSession(dev)
         cam.onConfigured(dev, fake)
         cam.onResult(CamProCamera2.METERING, converged())
+        passProbe(cam, fake)
         assertEquals(listOf(CamProCamera2.PROTECTED), fake.repeated.last().map { it.tag })
         cam.onResult(CamProCamera2.PROTECTED, honoured(1))
         assertEquals(ProtectionState.Protected, cam.pipeline.state)

@@ -14,6 +14,7 @@ import androidx.camera.core.ImageProxy
 import com.google.common.util.concurrent.ListenableFuture
 import org.campro.CamProPipeline
 import org.campro.Fixtures
+import org.campro.PixelProbe
 import org.campro.ProtectionState
 import org.junit.After
 import org.junit.Assert.assertEquals
@@ -118,11 +119,19 @@ class GlueTest {
         assertTrue("$e", e is IllegalArgumentException && e.message!!.contains("curve"))
     }
 
-    private class FakeProxy(val ts: Long) : ImageProxy {
+    /** A 64 x 48 frame whose Y plane holds [luma] everywhere (the probe reads only it). */
+    private class FakeProxy(val ts: Long, val luma: Int = 0) : ImageProxy {
         var closed = false
         override val imageInfo = object : ImageInfo { override val timestamp = ts }
         override val width = 64
         override val height = 48
+        override val planes: Array<ImageProxy.PlaneProxy> = arrayOf(
+            object : ImageProxy.PlaneProxy {
+                override val rowStride = 64
+                override val pixelStride = 1
+                override val buffer: java.nio.ByteBuffer = java.nio.ByteBuffer.wrap(ByteArray(64 * 48) { luma.toByte() })
+            },
+        )
         override fun close() { closed = true }
     }
 
@@ -175,11 +184,29 @@ class GlueTest {
                 CaptureResult.COLOR_CORRECTION_GAINS to RggbChannelVector(2f, 1f, 1f, 1.6f),
             ),
         )
+        // The pixel probe: a constant curve, then a zero transform; its frames' luma is read and
+        // the frames closed unseen; results are routed to it while it runs.
         assertEquals(2, control.sent.size)
-        val sent = control.sent[1]
-        assertEquals(CaptureRequest.CONTROL_AWB_MODE_OFF, sent.getCaptureRequestOption(CaptureRequest.CONTROL_AWB_MODE))
         assertTrue(f1.closed)
+        for ((i, step) in PixelProbe.Step.values().withIndex()) {
+            val probe = control.sent[1 + i]
+            val probeCurve = probe.getCaptureRequestOption(CaptureRequest.TONEMAP_CURVE)!!
+            assertEquals(PixelProbe.curve(step)[1], probeCurve.getPoint(TonemapCurve.CHANNEL_GREEN, 0).y)
+            val ts = 12L + i
+            val pf = FakeProxy(ts, Fixtures.probeLevel(PixelProbe.curve(step)))
+            x.analyzer.analyze(pf)
+            assertTrue(pf.closed)
+            val probeSettings = listOf(
+                CaptureRequest.CONTROL_AWB_MODE, CaptureRequest.COLOR_CORRECTION_MODE, CaptureRequest.TONEMAP_MODE,
+                CaptureRequest.COLOR_CORRECTION_TRANSFORM, CaptureRequest.TONEMAP_CURVE, CaptureRequest.COLOR_CORRECTION_GAINS,
+            ).map { k -> k as CaptureRequest.Key<*> to probe.getCaptureRequestOption(k)!! }
+            x.onResult(honouring(probeSettings, ts))
+        }
+        assertEquals(4, control.sent.size)
+        val sent = control.sent[3]
+        assertEquals(CaptureRequest.CONTROL_AWB_MODE_OFF, sent.getCaptureRequestOption(CaptureRequest.CONTROL_AWB_MODE))
         assertTrue(shown.isEmpty())
+        assertEquals(ProtectionState.Verifying, x.state)
 
         // Protected: each frame shown only after its own result verified.
         val settings = listOf(

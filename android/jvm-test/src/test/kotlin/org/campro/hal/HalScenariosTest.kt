@@ -34,8 +34,12 @@ class HalScenariosTest {
         Behaviour("matrices rounded to 1/1024 (Q10)", matrixStep = 1024) to Outcome.Protects,
         Behaviour("matrices rounded to 1/128 (Q7)", matrixStep = 128) to Outcome.Refuses,
         Behaviour("curve resampled to 17 points", curvePoints = 17) to Outcome.Refuses,
-        Behaviour("display timestamp base (image 5 ms after the sensor)", imageTimestampOffsetNs = 5_000_000) to Outcome.Refuses,
+        Behaviour("display timestamp base on the protected stream (image 5 ms after the sensor)", imageTimestampOffsetNs = 5_000_000) to Outcome.Refuses,
+        Behaviour("display timestamp base on every stream", imageTimestampOffsetNs = 5_000_000, offsetOnEveryStream = true) to Outcome.Refuses,
         Behaviour("echoing HAL (reports the request, applies its own curve)", echo = true) to Outcome.Refuses,
+        Behaviour("echoing HAL (reports the request, applies its own transform)", ignoreTransform = true) to Outcome.Refuses,
+        Behaviour("honest, lens covered (a flat scene)", flatScene = true) to Outcome.Protects,
+        Behaviour("honest, settings 2 frames late, results 3 frames after their images", latency = 2, resultDelay = 3) to Outcome.Protects,
         Behaviour("logical camera switches its physical sensor at frame 40", physicalSwitchAt = 40) to Outcome.Protects,
         Behaviour("disconnected at frame 40", disconnectAt = 40) to Outcome.Stops,
         Behaviour("results without CONTROL_AWB_STATE", awbStateAbsent = true) to Outcome.Refuses,
@@ -55,6 +59,9 @@ class HalScenariosTest {
         while (k < 256) { val v = (k - 216) / 40f; s[3 * k] = 0.45f * v; s[3 * k + 1] = 0.8f * v; s[3 * k + 2] = 0.5f * v * (0.6f + 0.4f * (k % 2)); k++ }
     }
 
+    /** A flat scene: every pixel the same mid-grey sensor colour. */
+    private val flat = FloatArray(3 * 256) { floatArrayOf(0.18f, 0.3f, 0.2f)[it % 3] }
+
     /** A second physical sensor (a tele module): another transform. */
     private val tele = intArrayOf(160, 100, -45, 100, -15, 100, -35, 100, 170, 100, -35, 100, 5, 100, -60, 100, 155, 100)
 
@@ -63,7 +70,7 @@ class HalScenariosTest {
         val session = Fixtures.session()
         val reference = SimulatedHal.reference(Fixtures.params())
         try {
-            val hal = SimulatedHal(b, scene, listOf(Fixtures.PHONE, tele), Fixtures.GAINS, reference)
+            val hal = SimulatedHal(b, if (b.flatScene) flat else scene, listOf(Fixtures.PHONE, tele), Fixtures.GAINS, reference)
             var delivered = 0
             var leaked = 0
             var lastDelivered = -1
@@ -116,7 +123,7 @@ class HalScenariosTest {
         for (r in rows) {
             assertEquals("${r.name}: ${r.why}", r.name !in KNOWN_GAPS, r.held)
         }
-        assertTrue(rows.size >= 15)
+        assertTrue(rows.size >= 19)
     }
 
     companion object {
@@ -127,12 +134,10 @@ class HalScenariosTest {
         /**
          * Behaviours the library does not hold yet (docs/android.md, "What the simulated
          * camera shows"): a HAL that rounds to 1/1024 could be served by a request already on
-         * its grid (today it ends Unsupported, nothing shown); an echoing HAL is caught only
-         * by a pixel probe, which the library does not have (its frames reach the app).
+         * its grid (today it ends Unsupported, nothing shown).
          */
         val KNOWN_GAPS: Set<String> = setOf(
             "matrices rounded to 1/1024 (Q10)",
-            "echoing HAL (reports the request, applies its own curve)",
         )
     }
 }

@@ -31,8 +31,10 @@ data class Behaviour(
     val matrixStep: Int = 0,
     /** The curve applied (and reported) resampled to this many evenly spaced points (0: as sent). */
     val curvePoints: Int = 0,
-    /** `image.timestamp` minus `SENSOR_TIMESTAMP` (a display or readout timestamp base). */
+    /** `image.timestamp` minus `SENSOR_TIMESTAMP` on the protected stream (a display or readout timestamp base). */
     val imageTimestampOffsetNs: Long = 0,
+    /** The small (metering and probe) stream's images are offset by [imageTimestampOffsetNs] too. */
+    val offsetOnEveryStream: Boolean = false,
     /** Results arrive this many frames after their image. */
     val resultDelay: Int = 0,
     /** The results of each pair of frames arrive swapped. */
@@ -41,6 +43,10 @@ data class Behaviour(
     val loseResultEvery: Int = 0,
     /** Reports the requested transform and curve while applying its own default curve. */
     val echo: Boolean = false,
+    /** Reports the requested transform while applying the sensor's own (auto-mode) one. */
+    val ignoreTransform: Boolean = false,
+    /** The scene is one flat colour (a covered lens, a blank wall). */
+    val flatScene: Boolean = false,
     /** The frame from which a logical camera streams from its second physical sensor (-1: never). */
     val physicalSwitchAt: Int = -1,
     /** The frame at which the camera is disconnected (-1: never). */
@@ -75,7 +81,8 @@ class SimulatedHal(
 ) : CameraRequests {
     private sealed class Req {
         object Auto : Req()
-        class Protect(val transform: IntArray, val curve: FloatArray, val gains: FloatArray) : Req()
+        /** CamPro-style settings: a protected request, or a probe ([probe]) when [probe] is set. */
+        class Protect(val transform: IntArray, val curve: FloatArray, val gains: FloatArray, val probe: Boolean = false) : Req()
     }
 
     private var repeating: List<Req> = emptyList()
@@ -91,6 +98,10 @@ class SimulatedHal(
     override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int) {
         val p = Req.Protect(transform.copyOf(), curve.copyOf(), gains.copyOf())
         setRepeating(if (interleaveMetering) listOf<Req>(Req.Auto) + List(meteringInterval - 1) { p } else listOf(p))
+    }
+
+    override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) {
+        setRepeating(listOf(Req.Protect(transform.copyOf(), curve.copyOf(), gains.copyOf(), probe = true)))
     }
 
     override fun halt() { setRepeating(emptyList()) }
@@ -153,9 +164,9 @@ class SimulatedHal(
                     }
                     val pixels = render(device, defaultCurve, autoGains)
                     if (tagged is Req.Protect) {
-                        // A protected request whose frame still carries auto settings: its result says so.
-                        schedule(i) { p.onProtectedResult(ts, CaptureReport(1, 1, 2, device.copyOf(), List(3) { defaultCurve.copyOf() }, autoGains.copyOf(), physicalId)) }
-                        p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected))
+                        // A protected (or probe) request whose frame still carries auto settings: its result says so.
+                        val report = CaptureReport(1, 1, 2, device.copyOf(), List(3) { defaultCurve.copyOf() }, autoGains.copyOf(), physicalId)
+                        deliver(p, tagged, i, ts, report, pixels, expected)
                     } else {
                         val reported = if (b.awbStateAbsent) null else state
                         schedule(i) { p.onMeteringResult(MeteringReport(1, reported, device.copyOf(), autoGains.copyOf(), physicalId)) }
@@ -163,7 +174,11 @@ class SimulatedHal(
                 }
                 is Req.Protect -> {
                     autoRun = 0
-                    val t = if (b.matrixStep > 0) rounded(applied.transform, b.matrixStep) else applied.transform
+                    val t = when {
+                        b.ignoreTransform -> device
+                        b.matrixStep > 0 -> rounded(applied.transform, b.matrixStep)
+                        else -> applied.transform
+                    }
                     val c = when {
                         b.echo -> defaultCurve
                         b.curvePoints > 0 -> resample(applied.curve, b.curvePoints)
@@ -171,11 +186,10 @@ class SimulatedHal(
                     }
                     val pixels = render(t, c, applied.gains)
                     val reportedCurve = if (b.echo) applied.curve else c
-                    val reportedTransform = if (b.echo) applied.transform else t
+                    val reportedTransform = if (b.echo || b.ignoreTransform) applied.transform else t
                     val report = CaptureReport(0, 0, 0, reportedTransform.copyOf(), List(3) { reportedCurve.copyOf() }, applied.gains.copyOf(), physicalId)
                     if (tagged is Req.Protect) {
-                        schedule(i) { p.onProtectedResult(ts, report) }
-                        p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected))
+                        deliver(p, tagged, i, ts, report, pixels, expected)
                     } else {
                         // A metering request whose frame still carries protected settings: AWB reads OFF.
                         val reported = if (b.awbStateAbsent) null else b.offFrameAwbState
@@ -186,6 +200,17 @@ class SimulatedHal(
             onFrame(i)
         }
         deliverResults(Int.MAX_VALUE)
+    }
+
+    /** A frame of a protected or probe request, with its result: to the app's stream or (probe) the metering stream's luma. */
+    private fun deliver(p: CamProPipeline<SimFrame>, tagged: Req.Protect, i: Int, ts: Long, report: CaptureReport, pixels: ByteArray, expected: ByteArray) {
+        if (tagged.probe) {
+            schedule(i) { p.onProbeResult(ts, report) }
+            p.onProbeFrame(ts + if (b.offsetOnEveryStream) b.imageTimestampOffsetNs else 0L, org.campro.PixelProbe.lumaOfRgb(pixels))
+        } else {
+            schedule(i) { p.onProtectedResult(ts, report) }
+            p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected))
+        }
     }
 
     private fun schedule(frame: Int, result: () -> Unit) {

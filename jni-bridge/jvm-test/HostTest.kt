@@ -412,10 +412,14 @@ fun failClosed(paramsJson: String) {
 }
 
 fun main(args: Array<String>) {
-    CamProNative.load(args[0])
     val cases = readCases(args[1])
     val soakUpdates = args[2].toInt()
     val paramsJson = File(cases.first().params).readText()
+    // The library loads itself (from java.library.path, as from an APK) at the first session.
+    expect(!CamProNative.isLoaded) { "loaded before any session" }
+    CamProSession.fromJson(paramsJson).close()
+    expect(CamProNative.isLoaded) { "a session did not load libcampro_jni" }
+    CamProNative.load(args[0]) // a no-op now
     valuesEqualTheCore(cases)
     badInput(paramsJson)
     readbackAndController(paramsJson)

@@ -211,6 +211,7 @@ fn kotlin_wrapper_through_jni_on_the_host_jvm() {
     let soak = std::env::var("CAMPRO_JVM_SOAK").unwrap_or_else(|_| "1000000".into());
     let out = Command::new(&java)
         .arg("-Xmx256m")
+        .arg(format!("-Djava.library.path={}", lib.parent().unwrap().display()))
         .arg("-cp")
         .arg(&jar)
         .arg("HostTestKt")

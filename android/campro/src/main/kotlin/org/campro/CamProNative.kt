@@ -27,11 +27,35 @@ object CamProNative {
     const val READBACK_BOUND = 2
     const val READBACK_LEN = 3
 
-    /** Loads `libcampro_jni.so` from the APK (Android) or `java.library.path`. */
-    fun loadLibrary() = System.loadLibrary("campro_jni")
+    /** Whether the native library is loaded (by [loadLibrary], [load] or [ensureLoaded]). */
+    @Volatile
+    var isLoaded = false
+        private set
 
-    /** Loads the library from an absolute path (host tests). */
-    fun load(path: String) = System.load(path)
+    /** Loads `libcampro_jni.so` from the APK (Android) or `java.library.path`, once. */
+    @Synchronized
+    fun loadLibrary() {
+        if (isLoaded) return
+        System.loadLibrary("campro_jni")
+        isLoaded = true
+    }
+
+    /** Loads the library from an absolute path (host tests), once. */
+    @Synchronized
+    fun load(path: String) {
+        if (isLoaded) return
+        System.load(path)
+        isLoaded = true
+    }
+
+    /**
+     * Loads the library unless it is loaded: every [CamProSession] factory calls it, so an
+     * app never has to (and a missing library is an `UnsatisfiedLinkError` naming it, at
+     * the first session, not a crash at the first native call).
+     */
+    fun ensureLoaded() {
+        if (!isLoaded) loadLibrary()
+    }
 
     @JvmStatic external fun create(paramsJson: String?, maxCurvePoints: Int, maxDenominator: Int, skipTolerance: Double): Long
     @JvmStatic external fun createFromBytes(paramsJson: ByteArray?, maxCurvePoints: Int, maxDenominator: Int, skipTolerance: Double): Long

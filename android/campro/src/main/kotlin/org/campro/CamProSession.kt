@@ -96,14 +96,14 @@ class CamProSession private constructor(
             maxCurvePoints: Int = DEFAULT_MAX_CURVE_POINTS,
             maxDenominator: Int = DEFAULT_MAX_DENOMINATOR,
             skipTolerance: Double = DEFAULT_SKIP_TOLERANCE,
-        ) = CamProSession(CamProNative.create(json, maxCurvePoints, maxDenominator, skipTolerance), maxCurvePoints)
+        ) = CamProSession(CamProNative.ensureLoaded().let { CamProNative.create(json, maxCurvePoints, maxDenominator, skipTolerance) }, maxCurvePoints)
 
         fun fromBytes(
             json: ByteArray,
             maxCurvePoints: Int = DEFAULT_MAX_CURVE_POINTS,
             maxDenominator: Int = DEFAULT_MAX_DENOMINATOR,
             skipTolerance: Double = DEFAULT_SKIP_TOLERANCE,
-        ) = CamProSession(CamProNative.createFromBytes(json, maxCurvePoints, maxDenominator, skipTolerance), maxCurvePoints)
+        ) = CamProSession(CamProNative.ensureLoaded().let { CamProNative.createFromBytes(json, maxCurvePoints, maxDenominator, skipTolerance) }, maxCurvePoints)
 
         /** [assetManager]: an `android.content.res.AssetManager` (Android only). */
         fun fromAsset(
@@ -112,6 +112,6 @@ class CamProSession private constructor(
             maxCurvePoints: Int = DEFAULT_MAX_CURVE_POINTS,
             maxDenominator: Int = DEFAULT_MAX_DENOMINATOR,
             skipTolerance: Double = DEFAULT_SKIP_TOLERANCE,
-        ) = CamProSession(CamProNative.createFromAsset(assetManager, path, maxCurvePoints, maxDenominator, skipTolerance), maxCurvePoints)
+        ) = CamProSession(CamProNative.ensureLoaded().let { CamProNative.createFromAsset(assetManager, path, maxCurvePoints, maxDenominator, skipTolerance) }, maxCurvePoints)
     }
 }

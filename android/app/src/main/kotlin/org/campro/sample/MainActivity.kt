@@ -30,7 +30,6 @@ import android.widget.LinearLayout
 import android.widget.Spinner
 import android.widget.Switch
 import android.widget.TextView
-import org.campro.CamProNative
 import org.campro.ProtectionState
 import org.campro.android.CamProCamera2
 import org.campro.android.camproSupport
@@ -60,7 +59,6 @@ class MainActivity : Activity() {
 
     override fun onCreate(savedInstanceState: Bundle?) {
         super.onCreate(savedInstanceState)
-        CamProNative.loadLibrary()
         preview = SurfaceView(this)
         statusView = TextView(this).apply { setPadding(16, 16, 16, 16); textSize = 12f }
         toggle = Switch(this).apply { text = "CamPro" }

@@ -146,8 +146,8 @@ class CamProCamera2(
     characteristics: CameraCharacteristics,
     /** The camera thread: requests, results and image callbacks run here. */
     private val cameraHandler: Handler,
-    /** The app's executor: frames and states are delivered there. */
-    appExecutor: Executor,
+    /** The app's executor: frames and states are delivered there, in order (the main thread's, or one thread). */
+    private val appExecutor: Executor,
     /** Frame size of the protected stream. */
     width: Int,
     height: Int,
@@ -261,13 +261,34 @@ class CamProCamera2(
         pipeline.onCameraStopped(reason)
     }
 
-    /** Stops requests and releases the readers; the camera device is the app's to close. */
+    /** Whether the protected reader is closed (internal: tests check the close ordering). */
+    @Volatile
+    internal var framesClosed = false
+        private set
+
+    /**
+     * Stops requests and releases the readers; the camera device is the app's to close.
+     * Verified images may still wait in [appExecutor] for [deliver]: closing their reader
+     * now would invalidate them under the consumer (`ImageWriter.queueInputImage` throws on
+     * a closed image). So the protected reader is closed by a task queued on [appExecutor]
+     * behind those deliveries; the gate delivers nothing new once the pipeline stopped. An
+     * executor that no longer takes tasks (shut down) gets the reader closed at once: its
+     * deliveries never run.
+     */
     override fun close() {
         pipeline.stop()
         captureSession = null
         device = null
-        frames.close()
         meteringReader.close()
+        val closeFrames = Runnable {
+            framesClosed = true
+            frames.close()
+        }
+        try {
+            appExecutor.execute(closeFrames)
+        } catch (e: java.util.concurrent.RejectedExecutionException) {
+            closeFrames.run()
+        }
     }
 
     private val callback = object : CameraCaptureSession.CaptureCallback() {

@@ -178,4 +178,29 @@ class Camera2Test {
         assertTrue(fake.stops >= 1)
         cam.close()
     }
+
+    @Test
+    fun closeReleasesTheProtectedReaderOnlyAfterQueuedDeliveries() {
+        val chars = supportedCharacteristics(syncLatency = 0)
+        val dev = openDevice(chars)
+        val app = Fixtures.QueueExecutor()
+        val order = mutableListOf<String>()
+        val cam = CamProCamera2(
+            session, chars, Handler(Looper.getMainLooper()), app, 640, 480,
+            deliver = { order += "delivered"; it.close() }, format = ImageFormat.YUV_420_888, usage = 0L,
+        )
+        cam.onConfigured(dev, FakeSession(dev))
+        // A delivery (a state change here) is queued on the app's executor; close() comes before it runs.
+        app.execute { order += "delivery with the reader " + if (cam.framesClosed) "closed" else "open" }
+        cam.close()
+        assertEquals(false, cam.framesClosed)
+        app.runAll()
+        assertTrue(cam.framesClosed)
+        assertEquals(listOf("delivery with the reader open"), order)
+        // Closing with a shut-down executor closes at once.
+        val shut = java.util.concurrent.Executors.newSingleThreadExecutor().also { it.shutdown() }
+        val cam2 = CamProCamera2(session, chars, Handler(Looper.getMainLooper()), shut, 640, 480, deliver = { it.close() }, format = ImageFormat.YUV_420_888, usage = 0L)
+        cam2.close()
+        assertTrue(cam2.framesClosed)
+    }
 }

@@ -410,4 +410,19 @@ class PipelineTest {
         assertFalse(PixelProbe.reportsStep(PixelProbe.Step.Curve, r))
         assertFalse(PixelProbe.reportsStep(PixelProbe.Step.Matrix, CaptureReport(0, 0, 0, Fixtures.PHONE, r.curves, null)))
     }
+
+    @Test
+    fun streamSizesComeFromTheListByHand() {
+        val listed = listOf(4032 to 3024, 1920 to 1080, 1280 to 720, 1440 to 1080, 1280 to 960, 640 to 480, 320 to 240)
+        // 16:9 within 1280 x 720: 1280 x 720 (1920 x 1080 is over the bound).
+        assertEquals(1280 to 720, StreamSize.choose(listed, 1280, 720))
+        // 4:3 within 1600 x 1200: 1440 x 1080, the largest 4:3 size that fits (1280 x 960, 640 x 480 are smaller).
+        assertEquals(1440 to 1080, StreamSize.choose(listed, 1600, 1200))
+        // No 16:9 size within 1000 x 563: the largest that fits, 640 x 480.
+        assertEquals(640 to 480, StreamSize.choose(listed, 1000, 563))
+        // Nothing fits 100 x 100: the smallest listed.
+        assertEquals(320 to 240, StreamSize.choose(listed, 100, 100))
+        assertEquals(null, StreamSize.choose(emptyList(), 1280, 720))
+        assertEquals(null, StreamSize.choose(listOf(0 to 0, -1 to 5), 1280, 720))
+    }
 }

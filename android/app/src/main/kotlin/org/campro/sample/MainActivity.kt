@@ -9,6 +9,7 @@ package org.campro.sample
 // the Rust core; views are built in code (no resources to compile).
 
 import android.Manifest
+import android.graphics.ImageFormat
 import android.app.Activity
 import android.content.pm.PackageManager
 import android.hardware.camera2.CameraCharacteristics
@@ -32,6 +33,7 @@ import android.widget.Switch
 import android.widget.TextView
 import org.campro.ProtectionState
 import org.campro.android.CamProCamera2
+import org.campro.android.camproStreamSize
 import org.campro.android.camproSupport
 import org.campro.android.openCamProAsset
 import java.util.concurrent.Executor
@@ -161,7 +163,10 @@ class MainActivity : Activity() {
     }
 
     private fun openCamera() {
-        if (device != null) return
+        // One camera at a time: `campro` is set here, on this thread, before the (asynchronous)
+        // open; `device` only once it opened, so it alone would let the permission grant and
+        // the onResume that follows it open twice.
+        if (device != null || campro != null) return
         if (!wantCamPro) return runOnUiThread { show(ProtectionState.Stopped("CamPro is off: the camera is closed")) }
         try {
             val manager = getSystemService(CameraManager::class.java)
@@ -171,25 +176,31 @@ class MainActivity : Activity() {
             val chars = manager.getCameraCharacteristics(id)
             val support = chars.camproSupport()
             val maxPoints = (support as? org.campro.DeviceSupport.Result.Supported)?.maxCurvePoints ?: 64
+            val size = chars.camproStreamSize(ImageFormat.PRIVATE)
+                ?: return runOnUiThread { show(ProtectionState.Unsupported("the camera lists no size for a private stream")) }
             val session = openCamProAsset(assets, "params/$paramFile", maxPoints)
             val c = CamProCamera2(
-                session, chars, camera, mainExecutor, 1280, 720,
+                session, chars, camera, mainExecutor, size.width, size.height,
                 deliver = ::render,
                 onState = ::show,
             )
             campro = c
             manager.openCamera(id, cameraExecutor, object : CameraDevice.StateCallback() {
                 override fun onOpened(d: CameraDevice) {
+                    // Opened after the app paused or switched presets: not ours any more.
+                    if (campro !== c) return d.close()
                     device = d
                     createSession(d, c)
                 }
                 override fun onDisconnected(d: CameraDevice) {
                     c.onCameraStopped("the camera was disconnected")
-                    d.close(); device = null
+                    d.close()
+                    if (device === d) device = null
                 }
                 override fun onError(d: CameraDevice, error: Int) {
                     c.onCameraStopped("camera error $error")
-                    d.close(); device = null
+                    d.close()
+                    if (device === d) device = null
                 }
             })
         } catch (e: Exception) {

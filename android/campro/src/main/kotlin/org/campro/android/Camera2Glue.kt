@@ -46,6 +46,16 @@ fun CameraCharacteristics.camproSupport(): DeviceSupport.Result = DeviceSupport.
 fun CameraCharacteristics.hasPerFrameControl(): Boolean =
     get(CameraCharacteristics.SYNC_MAX_LATENCY) == CamProPipeline.SYNC_MAX_LATENCY_PER_FRAME_CONTROL
 
+/**
+ * The protected stream's size for [format] from the camera's `StreamConfigurationMap`
+ * ([org.campro.StreamSize.choose]: the wanted aspect ratio, the largest within
+ * [maxWidth] x [maxHeight]); `null` when the camera lists no size for the format.
+ */
+fun CameraCharacteristics.camproStreamSize(format: Int, maxWidth: Int = 1280, maxHeight: Int = 720): android.util.Size? {
+    val listed = get(CameraCharacteristics.SCALER_STREAM_CONFIGURATION_MAP)?.getOutputSizes(format) ?: return null
+    return org.campro.StreamSize.choose(listed.map { it.width to it.height }, maxWidth, maxHeight)?.let { (w, h) -> android.util.Size(w, h) }
+}
+
 /** `REQUEST_PIPELINE_MAX_DEPTH` (frames a result may lead its image by); 8 when absent. */
 fun CameraCharacteristics.pipelineDepth(): Int =
     (get(CameraCharacteristics.REQUEST_PIPELINE_MAX_DEPTH)?.toInt() ?: 8).coerceAtLeast(1)

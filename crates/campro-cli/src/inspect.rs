@@ -311,7 +311,7 @@ pub fn inspect(
     enhancer: Option<&campro_eval::guard::GuardedEnhancer>,
     json_out: bool,
 ) -> Result<()> {
-    let which = simulate::Reads { reads: &simulate::is_image, otherwise: "not a PNG, JPEG or TIFF file" };
+    let which = simulate::Reads { reads: &simulate::is_image, otherwise: "not a PNG, JPEG, TIFF or WebP file" };
     let found = simulate::collect_inputs(inputs, out, &|p| p.with_extension("png"), &which)?;
     for (i, why) in &found.skipped {
         eprintln!("warning: skipping {}: {why}", crate::shown(i));

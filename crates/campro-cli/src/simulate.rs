@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// The file endings read as images.
-const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff"];
+const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff", "webp"];
 pub(crate) use campro_eval::image_file::Budget;
 
 /// What a walk over the inputs found.
@@ -78,7 +78,7 @@ pub(crate) fn collect_inputs(
                     continue;
                 }
                 if !(which.reads)(entry.path()) {
-                    found.skipped.push((entry.path().to_path_buf(), which.otherwise));
+                    found.skipped.push((entry.path().to_path_buf(), skip_reason(entry.path(), which.otherwise)));
                     continue;
                 }
                 let rel = entry.path().strip_prefix(input).expect("walkdir yields paths under its root");
@@ -87,7 +87,7 @@ pub(crate) fn collect_inputs(
         } else if meta.is_file() {
             let file = input.file_name().ok_or_else(|| anyhow!("{}: not a file name", crate::shown(input)))?;
             if !(which.reads)(input) {
-                found.skipped.push((input.clone(), which.otherwise));
+                found.skipped.push((input.clone(), skip_reason(input, which.otherwise)));
                 continue;
             }
             found.jobs.push((input.clone(), name(&out.join(Path::new(file)))));
@@ -109,14 +109,14 @@ pub(crate) fn collect_inputs(
 }
 
 /// Where an input goes: a video keeps its container; an image keeps its format, or takes
-/// `format` when one is asked; a JPEG at 16 bits becomes a PNG (JPEG has no 16-bit form);
-/// anything else becomes PNG.
+/// `format` when one is asked; a JPEG or WebP at 16 bits becomes a PNG (neither has a
+/// 16-bit form); anything else becomes PNG.
 fn output_for(path: &Path, depth: Depth, format: Option<ImageFormat>) -> PathBuf {
     if video::is_video(path) {
         return path.to_path_buf();
     }
     match format.or(ImageFormat::of(path)) {
-        Some(ImageFormat::Jpeg) if depth == Depth::Eight => path.with_extension(ImageFormat::Jpeg.ending(path)),
+        Some(f @ (ImageFormat::Jpeg | ImageFormat::Webp)) if depth == Depth::Eight => path.with_extension(f.ending(path)),
         Some(f @ (ImageFormat::Png | ImageFormat::Tiff)) => path.with_extension(f.ending(path)),
         _ => path.with_extension("png"),
     }
@@ -128,6 +128,8 @@ pub enum ImageFormat {
     Png,
     Jpeg,
     Tiff,
+    /// Lossless WebP (8 bits).
+    Webp,
 }
 
 impl ImageFormat {
@@ -139,6 +141,7 @@ impl ImageFormat {
                 Self::Png => "png",
                 Self::Jpeg => "jpg",
                 Self::Tiff => "tif",
+                Self::Webp => "webp",
             }
             .to_string(),
         }
@@ -150,8 +153,18 @@ impl ImageFormat {
             "png" => Some(Self::Png),
             "jpg" | "jpeg" => Some(Self::Jpeg),
             "tif" | "tiff" => Some(Self::Tiff),
+            "webp" => Some(Self::Webp),
             _ => None,
         }
+    }
+}
+
+/// Why a file a command does not read is passed over: `otherwise`, except HEIC/HEIF (every
+/// iPhone's photos), which gets a line saying what to do.
+fn skip_reason(path: &Path, otherwise: &'static str) -> &'static str {
+    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("heic" | "heif") => "HEIC is not read by campro: convert it to JPEG or PNG first (e.g. heif-convert IMG.HEIC IMG.jpg)",
+        _ => otherwise,
     }
 }
 
@@ -450,7 +463,7 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
             inputs,
             out,
             &|p| output_for(p, o.depth, o.image_format),
-            &Reads { reads: &|p| is_image(p) || video::is_video(p), otherwise: "not a PNG, JPEG, TIFF or video file" },
+            &Reads { reads: &|p| is_image(p) || video::is_video(p), otherwise: "not a PNG, JPEG, TIFF, WebP or video file" },
         )?,
     };
     for (i, why) in &found.skipped {
@@ -665,6 +678,7 @@ fn encode(format: ImageFormat, samples: Samples, w: u32, h: u32, quality: u8) ->
         ImageFormat::Jpeg => {
             image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, quality).write_image(&bytes, w, h, color)?
         }
+        ImageFormat::Webp => image::codecs::webp::WebPEncoder::new_lossless(&mut buf).write_image(&bytes, w, h, color)?,
     }
     Ok(buf.into_inner())
 }

@@ -1126,8 +1126,9 @@ fn eval_frontier_plots_the_points_and_refuses_bad_ones() {
     fails_with(&mut frontier(d, "h"), "is a directory; only regular files are read");
 }
 
-/// Sidecars beside photos (`a.txt` by `a.png`, Lightroom's `IMG_1.xmp`, a `.webp` copy) are
-/// skipped with a warning each and never collide with the outputs: the photos are written.
+/// Sidecars beside photos (`a.txt` by `a.png`, Lightroom's `IMG_1.xmp`) are skipped with a
+/// warning each and never collide with the outputs: the photos are written. A HEIC copy is
+/// skipped with a line of its own (convert it first).
 #[test]
 fn sidecars_are_skipped_not_a_collision() {
     let dir = tempfile::tempdir().unwrap();
@@ -1138,7 +1139,7 @@ fn sidecars_are_skipped_not_a_collision() {
             .save(photos.join(format!("{name}.png")))
             .unwrap();
     }
-    for side in ["a.txt", "IMG_1.xmp", "x.webp"] {
+    for side in ["a.txt", "IMG_1.xmp", "x.HEIC"] {
         std::fs::write(photos.join(side), b"sidecar").unwrap();
     }
     let out = dir.path().join("out");
@@ -1155,14 +1156,52 @@ fn sidecars_are_skipped_not_a_collision() {
     for name in ["a.png", "IMG_1.png", "x.png"] {
         assert!(out.join(name).is_file(), "{name} not written: {err}");
     }
-    for side in ["a.txt", "IMG_1.xmp", "x.webp"] {
+    for side in ["a.txt", "IMG_1.xmp"] {
         assert!(
-            err.contains(&format!("skipping {}: not a PNG, JPEG, TIFF or video file", photos.join(side).display())),
+            err.contains(&format!("skipping {}: not a PNG, JPEG, TIFF, WebP or video file", photos.join(side).display())),
             "{err}"
         );
         assert!(!out.join(side).exists());
     }
+    assert!(
+        err.contains(&format!("skipping {}: HEIC is not read by campro: convert it", photos.join("x.HEIC").display())),
+        "{err}"
+    );
     assert!(!err.contains("would both be written"), "{err}");
+}
+
+/// A WebP photo is read and written back as a lossless WebP: its pixels are the camera's
+/// output of the same picture given as a PNG (both lossless, so every code must match).
+#[test]
+fn a_webp_photo_stays_a_lossless_webp_with_the_cameras_pixels() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = image::RgbImage::from_fn(24, 16, |x, y| image::Rgb([(x * 10) as u8, (y * 15) as u8, ((x + y) * 5) as u8]));
+    let (webp, png) = (dir.path().join("w/p.webp"), dir.path().join("p/p.png"));
+    for f in [&webp, &png] {
+        std::fs::create_dir_all(f.parent().unwrap()).unwrap();
+    }
+    let mut bytes = Vec::new();
+    image::codecs::webp::WebPEncoder::new_lossless(&mut bytes)
+        .encode(img.as_raw(), 24, 16, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    std::fs::write(&webp, bytes).unwrap();
+    img.save(&png).unwrap();
+    for (input, out) in [(&webp, "ow"), (&png, "op")] {
+        campro()
+            .arg("simulate")
+            .arg(bundled("campro-omega-0.5.json"))
+            .arg(input.parent().unwrap())
+            .arg("-o")
+            .arg(dir.path().join(out))
+            .assert()
+            .success();
+    }
+    let written = dir.path().join("ow/p.webp");
+    assert_eq!(image::ImageFormat::from_path(&written).unwrap(), image::ImageFormat::WebP);
+    let from_webp = image::open(&written).unwrap().into_rgb8();
+    let from_png = image::open(dir.path().join("op/p.png")).unwrap().into_rgb8();
+    assert_eq!(from_webp, from_png);
+    assert_ne!(from_webp, img, "the camera changed nothing");
 }
 
 /// A phone JPEG stored sideways with EXIF orientation 6 (turn 90° clockwise to show) comes

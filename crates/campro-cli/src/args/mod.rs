@@ -54,7 +54,7 @@ pub enum Cmd {
     /// Map parameters onto a camera stack (Camera2: COLOR_CORRECTION_TRANSFORM, TONEMAP_CURVE).
     Convert(ConvertArgs),
     /// Run the desktop pipeline on images and videos (files, folders, standard input, a
-    /// camera): each output keeps its input's format (JPEG, PNG, TIFF, the video's container).
+    /// camera): each output keeps its input's format (JPEG, PNG, TIFF, WebP, the video's container).
     Simulate(SimulateArgs),
     /// Look at what a parameter set does to your images: raw | protected side by side with
     /// the faces (YuNet) and people (person detector) found on each, a JSON of the

@@ -13,8 +13,16 @@ pub(crate) fn load_params(path: &Path) -> Result<Params> {
     if let Some(preset) = presets::named(path) {
         return Ok(Params::from_json(preset.json)?);
     }
-    if !path.exists() && path.components().count() == 1 && path.extension().is_none() {
+    // A bare name that is no file: most likely a preset's name mistyped (`campro-omega0.5`,
+    // `campro-omega-05.json`), so the error offers the nearest.
+    if !path.exists() && path.components().count() == 1 {
         return Err(presets::not_found(path));
+    }
+    if path.is_dir() {
+        return Err(anyhow!(
+            "{}: is a folder; the parameter set (a preset from campro presets, or a .json file) comes first, e.g. campro simulate PRESET PHOTOS...",
+            crate::shown(path)
+        ));
     }
     Params::from_file(path).map_err(|e| match e {
         // The file error names the path already.

@@ -53,11 +53,28 @@ pub fn named(arg: &Path) -> Option<&'static Preset> {
 /// The error for a parameter argument that is neither a file nor a preset.
 pub fn not_found(arg: &Path) -> anyhow::Error {
     let names: Vec<&str> = PRESETS.iter().map(|p| p.name).collect();
-    anyhow!(
-        "{}: no such file, and not a bundled preset (campro presets lists them: {})",
-        crate::shown(arg),
-        names.join(", ")
-    )
+    match closest(&arg.to_string_lossy()) {
+        Some(near) => anyhow!("{}: no such file, and not a bundled preset; did you mean {near}?", crate::shown(arg)),
+        None => anyhow!(
+            "{}: no such file, and not a bundled preset (campro presets lists them: {})",
+            crate::shown(arg),
+            names.join(", ")
+        ),
+    }
+}
+
+/// The bundled preset whose name is nearest `typed` (case ignored, a `.json` ending
+/// dropped), when it is within a third of its length in edits (at least 2): a slip such as
+/// `campro-omega0.5` or `Campro-Omega-05`, not another word.
+fn closest(typed: &str) -> Option<&'static str> {
+    let t = typed.to_ascii_lowercase();
+    let t = t.strip_suffix(".json").unwrap_or(&t);
+    PRESETS
+        .iter()
+        .map(|p| (strsim::levenshtein(t, p.name), p.name))
+        .filter(|&(d, n)| d <= (n.len() / 3).max(2))
+        .min()
+        .map(|(_, n)| n)
 }
 
 /// `campro presets`: each bundled preset's name, whether it ships an enhancer, and its

@@ -91,8 +91,19 @@ fn presets_are_listed_with_their_line_and_unknown_names_list_them() {
     assert!(v.as_array().unwrap().iter().all(|p| p["ratedForGrey"] == false), "{v}");
     assert_eq!(text.matches("Not rated for grey input").count(), 8, "{text}");
     fails_with(
-        campro().args(["validate", "campro-omega-9"]),
+        campro().args(["validate", "no-such-preset"]),
         "not a bundled preset (campro presets lists them: campro-omega-0.5",
+    );
+    // A slip in a name (a dot counts as an ending, case, a missing dash): the nearest name.
+    for typed in ["campro-omega0.5", "Campro-Omega-0.5-Hour", "campro-omega-05.json"] {
+        let want = if typed.contains("Hour") { "did you mean campro-omega-0.5-hour?" } else { "did you mean campro-omega-0.5?" };
+        fails_with(campro().args(["validate", typed]), want);
+    }
+    // Arguments swapped: the folder of photos where the preset goes.
+    let dir = tempfile::tempdir().unwrap();
+    fails_with(
+        campro().arg("simulate").arg(dir.path()).arg("campro-omega-0.5").arg("-o").arg(dir.path().join("o")),
+        "is a folder; the parameter set (a preset from campro presets, or a .json file) comes first",
     );
     fails_with(
         campro().args(["simulate", "identity", "x.png", "-o", "o", "--enhance"]),

@@ -175,6 +175,30 @@ pub(crate) fn is_image(path: &Path) -> bool {
         .unwrap_or(false)
 }
 
+/// One line for a whole run whose outputs exist already (unless `--force` or
+/// `--skip-existing` says what to do with them): nothing is written, rather than an error
+/// per file after the others were done.
+fn refuse_existing(outputs: impl Iterator<Item = PathBuf>, existing: Existing) -> Result<()> {
+    if existing != Existing::Refuse {
+        return Ok(());
+    }
+    let (mut total, mut there, mut first) = (0usize, 0usize, None);
+    for o in outputs {
+        total += 1;
+        if o.exists() {
+            there += 1;
+            first.get_or_insert(o);
+        }
+    }
+    match first {
+        None => Ok(()),
+        Some(f) => bail!(
+            "{there} of {total} outputs exist already ({} first); nothing was written: --force replaces them, --skip-existing does only the rest",
+            crate::shown(&f)
+        ),
+    }
+}
+
 /// What `simulate` does with an output that exists already.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Existing {
@@ -471,7 +495,7 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
     }
     let (videos, images): (Vec<_>, Vec<_>) = found.jobs.into_iter().partition(|(i, _)| video::is_video(i));
     if images.is_empty() && videos.is_empty() {
-        bail!("no PNG, JPEG, TIFF or video file among the inputs: nothing to do");
+        bail!("no PNG, JPEG, TIFF, WebP or video file among the inputs: nothing to do");
     }
     // A lossless codec moves outputs into Matroska: two inputs must not meet there
     // (a.mp4 and a.mkv would both become a.mkv, and one would be lost).
@@ -488,6 +512,7 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
             );
         }
     }
+    refuse_existing(images.iter().map(|(_, o)| o.clone()).chain(videos.iter().map(|(_, w)| enc.output_path(w))), o.existing)?;
     let bar = if images.len() > 4 {
         indicatif::ProgressBar::new(images.len() as u64)
     } else {

@@ -255,6 +255,8 @@ fn stream_job(inputs: &[PathBuf], out: &Path, o: &Options) -> Result<Option<(Sou
             Some(Source::Stdin(o.frames.clone()))
         } else if video::is_device(i) {
             Some(Source::Camera(i.to_path_buf(), o.frames.clone()))
+        } else if video::url_scheme(i).is_some() {
+            Some(Source::Url(i.to_string_lossy().into_owned(), o.frames.clone()))
         } else {
             None
         }
@@ -268,13 +270,17 @@ fn stream_job(inputs: &[PathBuf], out: &Path, o: &Options) -> Result<Option<(Sou
         None
     };
     if stream_in.is_none() && o.frames != FrameFormat::default() {
-        bail!("--size, --rate and --stall: only for standard input (-) or a camera (/dev/videoN)");
+        bail!("--size, --rate and --stall: only for standard input (-), a camera (/dev/videoN) or a network stream (rtsp://…)");
+    }
+    if let Some(Source::Url(u, _)) = &stream_in {
+        video::check_protocol(&video::url_scheme(Path::new(u)).unwrap_or_default())?;
+        eprintln!("{}: a live network stream: its video only (no audio is kept)", crate::escape(u));
     }
     if stream_in.is_none() && stream_out.is_none() {
         return Ok(None);
     }
     if inputs.len() != 1 {
-        bail!("standard input, a camera, standard output or a device: one input only ({} given)", inputs.len());
+        bail!("standard input, a camera, a network stream, standard output or a device: one input only ({} given)", inputs.len());
     }
     let source = match stream_in {
         Some(s) => s,
@@ -290,7 +296,7 @@ fn stream_job(inputs: &[PathBuf], out: &Path, o: &Options) -> Result<Option<(Sou
         Some(s) => s,
         None if video::is_video(out) && !out.is_dir() => Sink::File(o.enc.output_path(out)),
         None => bail!(
-            "--output {}: with standard input or a camera, give a video file name (endings: {}), - (standard output) or a V4L2 device",
+            "--output {}: with standard input, a camera or a network stream, give a video file name (endings: {}), - (standard output) or a V4L2 device",
             crate::shown(out),
             video::VIDEO_EXTENSIONS.join(", ")
         ),

@@ -115,6 +115,41 @@ pub fn is_video(path: &Path) -> bool {
         .is_some_and(|e| VIDEO_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
+/// Network schemes read as live sources (passed to ffmpeg as they are).
+pub const URL_SCHEMES: &[&str] = &["rtsp", "rtsps", "rtmp", "rtmps", "http", "https", "srt", "udp", "tcp", "rtp"];
+
+/// The scheme of an input that names a network stream (`rtsp://camera/1`, `https://…/a.mp4`),
+/// lower-cased; None for anything else (file names, `-`, devices).
+pub fn url_scheme(input: &Path) -> Option<String> {
+    let s = input.to_str()?;
+    let (scheme, rest) = s.split_once("://")?;
+    let scheme = scheme.to_ascii_lowercase();
+    (URL_SCHEMES.contains(&scheme.as_str()) && !rest.is_empty()).then_some(scheme)
+}
+
+/// The input protocols `ffmpeg -protocols` lists (its "Input:" section).
+pub fn input_protocols(listing: &str) -> Vec<String> {
+    listing
+        .lines()
+        .skip_while(|l| l.trim() != "Input:")
+        .skip(1)
+        .take_while(|l| l.trim() != "Output:")
+        .map(|l| l.trim().to_ascii_lowercase())
+        .filter(|l| !l.is_empty())
+        .collect()
+}
+
+/// Checks that this machine's ffmpeg reads `scheme`: one line naming it when not.
+pub fn check_protocol(scheme: &str) -> Result<()> {
+    let out = ffmpeg()?.arg("-protocols").stdin(Stdio::null()).output()?;
+    let listed = input_protocols(&String::from_utf8_lossy(&out.stdout));
+    if listed.iter().any(|p| p == scheme) {
+        Ok(())
+    } else {
+        bail!("{scheme}://: this machine's ffmpeg does not read that protocol (ffmpeg -protocols lists what it reads)")
+    }
+}
+
 /// Whether `path` is a character device (a V4L2 camera or loopback output), Unix only.
 pub fn is_device(path: &Path) -> bool {
     #[cfg(unix)]
@@ -193,6 +228,9 @@ pub enum Source {
     Stdin(FrameFormat),
     /// A live V4L2 camera (`/dev/videoN`), at the size and rate asked, if any.
     Camera(PathBuf, FrameFormat),
+    /// A network stream (`rtsp://`, `http(s)://`, `srt://`, …; [`URL_SCHEMES`]), read as a
+    /// live source: its audio is not kept.
+    Url(String, FrameFormat),
 }
 
 impl Source {
@@ -201,6 +239,7 @@ impl Source {
         match self {
             Source::File(p) | Source::Camera(p, _) => crate::shown(p),
             Source::Stdin(_) => "standard input".into(),
+            Source::Url(u, _) => crate::escape(u),
         }
     }
 
@@ -214,7 +253,7 @@ impl Source {
         let seconds = match self {
             Source::File(_) => None,
             Source::Stdin(f) => f.stall,
-            Source::Camera(_, f) => Some(f.stall.unwrap_or(CAMERA_STALL_S)),
+            Source::Camera(_, f) | Source::Url(_, f) => Some(f.stall.unwrap_or(CAMERA_STALL_S)),
         };
         seconds.map(|s| std::time::Duration::from_secs(s.into()))
     }
@@ -425,6 +464,9 @@ fn decoder(source: &Source, sixteen: bool) -> Result<Command> {
                 c.args(["-framerate", r]);
             }
             c.arg("-i").arg(dev);
+        }
+        Source::Url(url, _) => {
+            c.arg("-i").arg(url);
         }
     }
     if !matches!(source, Source::Stdin(_)) {
@@ -966,6 +1008,19 @@ fn first_line(stderr: &[u8]) -> String {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn network_inputs_by_scheme_and_the_protocols_ffmpeg_lists() {
+        assert_eq!(url_scheme(Path::new("rtsp://cam/1")).as_deref(), Some("rtsp"));
+        assert_eq!(url_scheme(Path::new("HTTPS://x/a.mp4")).as_deref(), Some("https"));
+        assert_eq!(url_scheme(Path::new("http://")), None); // no host
+        assert_eq!(url_scheme(Path::new("file:///a.mp4")), None); // a file is read as a file
+        assert_eq!(url_scheme(Path::new("photos/a.jpg")), None);
+        assert_eq!(url_scheme(Path::new("-")), None);
+        let listing = "Supported file protocols:\nInput:\n  file\n  http\n  rtsp\nOutput:\n  file\n  srt\n";
+        assert_eq!(input_protocols(listing), ["file", "http", "rtsp"]);
+    }
+
     use super::*;
 
     #[test]

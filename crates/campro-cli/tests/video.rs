@@ -612,3 +612,59 @@ fn a_source_that_gives_no_frame_is_stopped_by_its_limit() {
     );
     fails_with(campro().arg("simulate").arg(&preset).arg("-").args(["--stall", "0", "-o", "-"]), "--stall");
 }
+
+/// A network stream (here `http://127.0.0.1:PORT/…`, served by the test) is read as a live
+/// source: every frame comes out through the camera, the run says no audio is kept; a
+/// scheme this ffmpeg does not read would be one line, and a URL with no host is not a URL.
+#[test]
+fn a_network_stream_is_a_live_source() {
+    if !ffmpeg_present() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("src.mkv");
+    make(&src, "-f lavfi -i testsrc2=size=64x48:rate=10 -t 1 -c:v ffv1");
+    let body = std::fs::read(&src).unwrap();
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    // One HTTP/1.0 answer for each connection ffmpeg opens (it may probe and reopen).
+    std::thread::spawn(move || {
+        use std::io::{Read, Write};
+        for conn in listener.incoming() {
+            let Ok(mut c) = conn else { return };
+            let mut req = [0u8; 4096];
+            let _ = c.read(&mut req);
+            let head = format!("HTTP/1.0 200 OK\r\nContent-Type: video/x-matroska\r\nContent-Length: {}\r\n\r\n", body.len());
+            let _ = c.write_all(head.as_bytes());
+            let _ = c.write_all(&body);
+        }
+    });
+    let out = dir.path().join("out.mkv");
+    let child = std::process::Command::new(assert_cmd::cargo::cargo_bin("campro"))
+        .arg("simulate")
+        .arg(bundled("campro-omega-0.5.json"))
+        .arg(format!("http://127.0.0.1:{port}/src.mkv"))
+        .arg("-o")
+        .arg(&out)
+        .args(["--codec", "ffv1"])
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let run = finish(child, None);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(err.contains("a live network stream: its video only (no audio is kept)"), "{err}");
+    // Ten frames in, ten out, each the exact path's output of its input frame.
+    let (input, output) = (rgb_frames(&src), rgb_frames(&out));
+    assert_eq!(input.len(), 10 * 64 * 48 * 3);
+    let params = Params::from_file(&bundled("campro-omega-0.5.json")).unwrap();
+    let mut want = vec![0u8; input.len()];
+    Exact8::new(&params).run(&input, &mut want);
+    assert_eq!(output, want);
+    fails_with(
+        campro().arg("simulate").arg("identity").arg("http://").arg("-o").arg(dir.path().join("o.mkv")),
+        "http://",
+    );
+}

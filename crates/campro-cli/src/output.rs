@@ -9,11 +9,12 @@ use std::path::{Path, PathBuf};
 
 /// An error chain as one line: each cause's first line (a backtrace some libraries
 /// append with `RUST_BACKTRACE` set never shows), a cause that the text so far already
-/// says left out, control characters escaped.
+/// says left out, the operating system's error numbers (" (os error 2)") dropped, control
+/// characters escaped.
 pub(crate) fn one_line(e: &anyhow::Error) -> String {
     let mut out = String::new();
     for cause in e.chain() {
-        let text = cause.to_string();
+        let text = without_os_error_numbers(&cause.to_string());
         let first = text.lines().map(str::trim).find(|l| !l.is_empty()).unwrap_or_default();
         if first.is_empty() || out.contains(first) {
             continue;
@@ -26,6 +27,26 @@ pub(crate) fn one_line(e: &anyhow::Error) -> String {
         out.push_str(first);
     }
     short(&escape(&out), MAX_ERROR_CHARS)
+}
+
+/// `text` without the " (os error N)" that `std::io::Error` appends to the system's own
+/// words ("No such file or directory (os error 2)"): the number says nothing to a person.
+fn without_os_error_numbers(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(i) = rest.find(" (os error ") {
+        let tail = &rest[i + " (os error ".len()..];
+        let digits = tail.bytes().take_while(u8::is_ascii_digit).count();
+        if digits > 0 && tail[digits..].starts_with(')') {
+            out.push_str(&rest[..i]);
+            rest = &tail[digits + 1..];
+        } else {
+            out.push_str(&rest[..i + 1]);
+            rest = &rest[i + 1..];
+        }
+    }
+    out.push_str(rest);
+    out
 }
 
 /// An error about the input `path` as one line, the path said once (an error that names
@@ -160,5 +181,22 @@ pub(crate) fn check_output_folder(out: &Path, force: bool, flag: &str) -> Result
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(_) if out.exists() => bail!("{flag} {}: is not a folder", crate::shown(out)),
         Err(e) => Err(e).with_context(|| format!("{flag} {}", crate::shown(out))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn os_error_numbers_are_dropped_and_nothing_else() {
+        assert_eq!(
+            without_os_error_numbers("a.png: No such file or directory (os error 2)"),
+            "a.png: No such file or directory"
+        );
+        assert_eq!(without_os_error_numbers("x (os error 13): y (os error 2)"), "x: y");
+        assert_eq!(without_os_error_numbers("kept (os error x) and (os error )"), "kept (os error x) and (os error )");
+        let e = anyhow::Error::from(std::io::Error::from_raw_os_error(2)).context("photo.jpg");
+        assert_eq!(one_line(&e), "photo.jpg: No such file or directory");
     }
 }

@@ -116,7 +116,9 @@ fn output_for(path: &Path, depth: Depth, format: Option<ImageFormat>) -> PathBuf
         return path.to_path_buf();
     }
     match format.or(ImageFormat::of(path)) {
-        Some(f @ (ImageFormat::Jpeg | ImageFormat::Webp)) if depth == Depth::Eight => path.with_extension(f.ending(path)),
+        Some(f @ (ImageFormat::Jpeg | ImageFormat::Webp)) if depth == Depth::Eight => {
+            path.with_extension(f.ending(path))
+        }
         Some(f @ (ImageFormat::Png | ImageFormat::Tiff)) => path.with_extension(f.ending(path)),
         _ => path.with_extension("png"),
     }
@@ -163,7 +165,9 @@ impl ImageFormat {
 /// iPhone's photos), which gets a line saying what to do.
 fn skip_reason(path: &Path, otherwise: &'static str) -> &'static str {
     match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
-        Some("heic" | "heif") => "HEIC is not read by campro: convert it to JPEG or PNG first (e.g. heif-convert IMG.HEIC IMG.jpg)",
+        Some("heic" | "heif") => {
+            "HEIC is not read by campro: convert it to JPEG or PNG first (e.g. heif-convert IMG.HEIC IMG.jpg)"
+        }
         _ => otherwise,
     }
 }
@@ -280,7 +284,10 @@ fn stream_job(inputs: &[PathBuf], out: &Path, o: &Options) -> Result<Option<(Sou
         return Ok(None);
     }
     if inputs.len() != 1 {
-        bail!("standard input, a camera, a network stream, standard output or a device: one input only ({} given)", inputs.len());
+        bail!(
+            "standard input, a camera, a network stream, standard output or a device: one input only ({} given)",
+            inputs.len()
+        );
     }
     let source = match stream_in {
         Some(s) => s,
@@ -493,7 +500,10 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
             inputs,
             out,
             &|p| output_for(p, o.depth, o.image_format),
-            &Reads { reads: &|p| is_image(p) || video::is_video(p), otherwise: "not a PNG, JPEG, TIFF, WebP or video file" },
+            &Reads {
+                reads: &|p| is_image(p) || video::is_video(p),
+                otherwise: "not a PNG, JPEG, TIFF, WebP or video file",
+            },
         )?,
     };
     for (i, why) in &found.skipped {
@@ -518,7 +528,10 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
             );
         }
     }
-    refuse_existing(images.iter().map(|(_, o)| o.clone()).chain(videos.iter().map(|(_, w)| enc.output_path(w))), o.existing)?;
+    refuse_existing(
+        images.iter().map(|(_, o)| o.clone()).chain(videos.iter().map(|(_, w)| enc.output_path(w))),
+        o.existing,
+    )?;
     let bar = if images.len() > 4 {
         indicatif::ProgressBar::new(images.len() as u64)
     } else {
@@ -709,7 +722,9 @@ fn encode(format: ImageFormat, samples: Samples, w: u32, h: u32, quality: u8) ->
         ImageFormat::Jpeg => {
             image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, quality).write_image(&bytes, w, h, color)?
         }
-        ImageFormat::Webp => image::codecs::webp::WebPEncoder::new_lossless(&mut buf).write_image(&bytes, w, h, color)?,
+        ImageFormat::Webp => {
+            image::codecs::webp::WebPEncoder::new_lossless(&mut buf).write_image(&bytes, w, h, color)?
+        }
     }
     Ok(buf.into_inner())
 }

@@ -1158,7 +1158,10 @@ fn sidecars_are_skipped_not_a_collision() {
     }
     for side in ["a.txt", "IMG_1.xmp"] {
         assert!(
-            err.contains(&format!("skipping {}: not a PNG, JPEG, TIFF, WebP or video file", photos.join(side).display())),
+            err.contains(&format!(
+                "skipping {}: not a PNG, JPEG, TIFF, WebP or video file",
+                photos.join(side).display()
+            )),
             "{err}"
         );
         assert!(!out.join(side).exists());
@@ -1175,7 +1178,8 @@ fn sidecars_are_skipped_not_a_collision() {
 #[test]
 fn a_webp_photo_stays_a_lossless_webp_with_the_cameras_pixels() {
     let dir = tempfile::tempdir().unwrap();
-    let img = image::RgbImage::from_fn(24, 16, |x, y| image::Rgb([(x * 10) as u8, (y * 15) as u8, ((x + y) * 5) as u8]));
+    let img =
+        image::RgbImage::from_fn(24, 16, |x, y| image::Rgb([(x * 10) as u8, (y * 15) as u8, ((x + y) * 5) as u8]));
     let (webp, png) = (dir.path().join("w/p.webp"), dir.path().join("p/p.png"));
     for f in [&webp, &png] {
         std::fs::create_dir_all(f.parent().unwrap()).unwrap();

@@ -96,7 +96,11 @@ fn presets_are_listed_with_their_line_and_unknown_names_list_them() {
     );
     // A slip in a name (a dot counts as an ending, case, a missing dash): the nearest name.
     for typed in ["campro-omega0.5", "Campro-Omega-0.5-Hour", "campro-omega-05.json"] {
-        let want = if typed.contains("Hour") { "did you mean campro-omega-0.5-hour?" } else { "did you mean campro-omega-0.5?" };
+        let want = if typed.contains("Hour") {
+            "did you mean campro-omega-0.5-hour?"
+        } else {
+            "did you mean campro-omega-0.5?"
+        };
         fails_with(campro().args(["validate", typed]), want);
     }
     // Arguments swapped: the folder of photos where the preset goes.

@@ -634,7 +634,8 @@ fn a_network_stream_is_a_live_source() {
             let Ok(mut c) = conn else { return };
             let mut req = [0u8; 4096];
             let _ = c.read(&mut req);
-            let head = format!("HTTP/1.0 200 OK\r\nContent-Type: video/x-matroska\r\nContent-Length: {}\r\n\r\n", body.len());
+            let head =
+                format!("HTTP/1.0 200 OK\r\nContent-Type: video/x-matroska\r\nContent-Length: {}\r\n\r\n", body.len());
             let _ = c.write_all(head.as_bytes());
             let _ = c.write_all(&body);
         }

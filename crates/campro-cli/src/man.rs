@@ -66,7 +66,13 @@ pub fn run(command: &[String], output: Option<&Path>, markdown: bool, force: boo
     let wanted: Vec<String> = std::iter::once("campro".to_string()).chain(command.iter().cloned()).collect();
     match all.iter().find(|(path, _)| *path == wanted) {
         Some((_, cmd)) => {
-            crate::say_bytes(&page(cmd)?);
+            let roff = page(cmd)?;
+            // On a terminal the page is shown as a manual page (roff is for `man`, not for
+            // eyes); piped or redirected, it is written as it is (`campro man > campro.1`).
+            if std::io::IsTerminal::is_terminal(&std::io::stdout()) && show_with_man(&roff) {
+                return Ok(());
+            }
+            crate::say_bytes(&roff);
             Ok(())
         }
         None => {
@@ -102,4 +108,16 @@ mod tests {
             "docs/cli.md is out of date: cargo run --release -p campro-cli -- man --markdown > docs/cli.md"
         );
     }
+}
+
+/// Shows a roff page with the system's `man -l -` (its pager); false when there is no `man`
+/// or it failed, and the caller prints the roff instead.
+fn show_with_man(roff: &[u8]) -> bool {
+    use std::io::Write;
+    let Ok(mut child) = std::process::Command::new("man").args(["-l", "-"]).stdin(std::process::Stdio::piped()).spawn()
+    else {
+        return false;
+    };
+    let fed = child.stdin.take().is_some_and(|mut i| i.write_all(roff).is_ok());
+    child.wait().is_ok_and(|s| s.success()) && fed
 }

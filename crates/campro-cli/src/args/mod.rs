@@ -38,36 +38,21 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 pub enum Cmd {
-    /// Check parameter files; prints a summary of each, fails on the first broken rule.
-    Validate(ValidateArgs),
-    /// Print a shell completion script (bash, zsh, fish, elvish, powershell) to stdout.
-    Completions {
-        /// The shell.
-        shell: clap_complete::Shell,
-    },
-    /// Print a manual page (roff) to stdout, `campro man > campro.1`, or a command's
-    /// (`campro man eval privacy`); with -o, write one page per command into a folder; with
-    /// --markdown, the whole reference as Markdown (docs/cli.md).
-    Man(ManArgs),
-    /// Convert a CamPro checkpoint (Pipeline.save .pt) to a parameter file.
-    ImportPt(ImportPtArgs),
-    /// Map parameters onto a camera stack (Camera2: COLOR_CORRECTION_TRANSFORM, TONEMAP_CURVE).
-    Convert(ConvertArgs),
     /// Run the desktop pipeline on images and videos (files, folders, standard input, a
     /// camera): each output keeps its input's format (JPEG, PNG, TIFF, WebP, the video's container).
     Simulate(SimulateArgs),
+    /// List the bundled presets (usable by name anywhere: `campro simulate campro-omega-0.5 ...`).
+    Presets(PresetsArgs),
+    /// Run the recommended learnt preset (or --params) on a built-in chart: before/after PNGs, Camera2 values, error report.
+    Demo(DemoArgs),
     /// Look at what a parameter set does to your images: raw | protected side by side with
     /// the faces (YuNet) and people (person detector) found on each, a JSON of the
     /// detections per image, and OUTPUT/index.html linking them.
     Inspect(InspectArgs),
+    /// Map parameters onto a camera stack (Camera2: COLOR_CORRECTION_TRANSFORM, TONEMAP_CURVE).
+    Convert(ConvertArgs),
     /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
     Compare(CompareArgs),
-    /// Print the run-time-versus-error table (image paths, Camera2 updates, skips) as Markdown;
-    /// `bench train` times the optimiser's steps.
-    #[command(args_conflicts_with_subcommands = true)]
-    Bench(BenchArgs),
-    /// Randomised numerical soak: adversarial cases checked against every invariant until time runs out.
-    Stress(StressArgs),
     /// Evaluate privacy (face recognition), utility (person detection) and image quality with real models.
     Eval {
         #[command(subcommand)]
@@ -85,10 +70,25 @@ pub enum Cmd {
     /// data.faces = "restore" it trains the restoration attacker's network instead
     /// (PARAMS.restorer.*, for eval privacy --attack restore-net).
     TrainEnhancer(TrainEnhancerArgs),
-    /// List the bundled presets (usable by name anywhere: `campro simulate campro-omega-0.5 ...`).
-    Presets(PresetsArgs),
-    /// Run the recommended learnt preset (or --params) on a built-in chart: before/after PNGs, Camera2 values, error report.
-    Demo(DemoArgs),
+    /// Print the run-time-versus-error table (image paths, Camera2 updates, skips) as Markdown;
+    /// `bench train` times the optimiser's steps.
+    #[command(args_conflicts_with_subcommands = true)]
+    Bench(BenchArgs),
+    /// Randomised numerical soak: adversarial cases checked against every invariant until time runs out.
+    Stress(StressArgs),
+    /// Check parameter files; prints a summary of each, fails on the first broken rule.
+    Validate(ValidateArgs),
+    /// Convert a CamPro checkpoint (Pipeline.save .pt) to a parameter file.
+    ImportPt(ImportPtArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell) to stdout.
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
+    /// Print a manual page (roff) to stdout, `campro man > campro.1`, or a command's
+    /// (`campro man eval privacy`); with -o, write one page per command into a folder; with
+    /// --markdown, the whole reference as Markdown (docs/cli.md).
+    Man(ManArgs),
 }
 
 /// Where the real data and models are: the shared data folder and its models (`inspect`,

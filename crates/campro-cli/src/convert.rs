@@ -106,15 +106,19 @@ pub fn compare(a: CompareArgs) -> Result<()> {
     let t = files.target(&target, Camera2::new(m, options, model))?;
     let (exported, base) = files.export(t.as_ref(), &p)?;
     let conditions = t.emulate(&p, &exported, base.as_deref())?;
-    let table = comparison_table(&compare::comparison(&p, &conditions, random as usize, seed)?);
+    let rows = compare::comparison(&p, &conditions, random as usize, seed)?;
+    let table = comparison_table(&rows);
+    let (holds, verdict) = verdict(&rows);
     match format {
         Report::Text => {
             say!("target {} ({} bytes exported)", t.name(), exported.len());
             say_bytes(table.text().as_bytes());
+            say!("verdict: {verdict}");
         }
         Report::Json => {
             let mut json = serde_json::json!({
                 "target": t.name(), "exportedBytes": exported.len(), "comparison": table.json(),
+                "holds": holds, "verdict": verdict,
             });
             if target == "camera2" {
                 json["camera2"] = serde_json::from_slice(&exported)?;
@@ -123,6 +127,37 @@ pub fn compare(a: CompareArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// What a comparison says in one sentence, and whether the stack holds the preset: every
+/// condition within its stated bound (where one is stated) and the worst error under half
+/// an 8-bit code (below that, no output code can differ by more than rounding).
+pub fn verdict(rows: &[compare::Row]) -> (bool, String) {
+    let worst = rows.iter().map(|r| r.stats.max_lsb()).fold(0.0, f64::max);
+    let over: Vec<&compare::Row> =
+        rows.iter().filter(|r| r.bound.is_some_and(|b| r.stats.max_lsb() > b * 255.0 * (1.0 + 1e-9) + 1e-9)).collect();
+    let bound = if over.is_empty() {
+        "every condition within its stated bound".to_string()
+    } else {
+        format!(
+            "OVER the stated bound on {} of {} conditions ({}, {}: {:.4} LSB against {:.4})",
+            over.len(),
+            rows.len(),
+            over[0].condition,
+            over[0].pixels,
+            over[0].stats.max_lsb(),
+            over[0].bound.unwrap_or_default() * 255.0
+        )
+    };
+    let holds = over.is_empty() && worst <= 0.5;
+    let reach = if worst <= 0.5 {
+        format!("this stack holds the preset (at most {worst:.4} LSB, under half an 8-bit code)")
+    } else if worst <= CONVERT_WARN_LSB {
+        format!("this stack comes close to the preset (up to {worst:.2} LSB: some output codes differ)")
+    } else {
+        format!("this stack cannot hold the preset (up to {worst:.1} LSB: a visibly different camera)")
+    };
+    (holds, format!("{bound}; {reach}"))
 }
 
 /// A comparison's rows as a table: errors in 8-bit LSB, PSNR in dB, the stated bound.
@@ -232,6 +267,10 @@ fn device_gains(d: &DeviceArgs) -> Result<Option<[f32; 4]>> {
     camera2::gains_from_capture_result(&text).map_err(|e| anyhow!("--capture-result {}: {e}", crate::shown(f)))
 }
 
+/// What `convert` and `compare` say when no device transform is given: the values are for
+/// a camera whose own colour transform is the identity, which no phone is.
+pub const NO_DEVICE_TRANSFORM: &str = "note: no device transform given, so the identity was assumed (a camera whose own colour transform does nothing; no phone is one). For a phone, give the COLOR_CORRECTION_TRANSFORM of one of its auto-mode results: --device-ccm A11 .. A33, or --capture-result result.json (docs/commands.md says how to save one); --ct K uses the file's own calibration.";
+
 /// The device matrix and conversion options from the command line.
 pub fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
     let m = if let Some(v) = &d.device_ccm {
@@ -246,6 +285,7 @@ pub fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
         }
         campro::color_temp::interpolate(&p.ct_calibration, ct)?
     } else {
+        eprintln!("{NO_DEVICE_TRANSFORM}");
         ccm::IDENTITY
     };
     // A device transform with no inverse maps colours onto a plane: nothing sensible can be

@@ -416,12 +416,27 @@ fn compare_reports_within_bound() {
         assert!(r["maxLsb"].as_f64().unwrap() <= r["boundLsb"].as_f64().unwrap() + 1e-9, "{r}");
         assert!(r["maxLsb"].as_f64().unwrap() > 0.0, "a 256-entry LUT and Q10 matrix cost something");
     }
+    assert!(v["verdict"].as_str().unwrap().starts_with("every condition within its stated bound"), "{v}");
     campro()
         .arg("compare")
         .arg(bundled("identity.json"))
         .assert()
         .success()
-        .stdout(predicates::str::contains("every grey level"));
+        .stdout(predicates::str::contains("every grey level"))
+        .stdout(predicates::str::contains(
+            "verdict: every condition within its stated bound; this stack holds the preset (at most",
+        ));
+    // A 4-entry device LUT cannot hold a learnt curve: the verdict says so.
+    let out = campro()
+        .arg("compare")
+        .arg(bundled("campro-omega-0.5.json"))
+        .args(["--format", "json", "--random", "2000", "--lut-size", "4"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["holds"], false, "{v}");
+    assert!(v["verdict"].as_str().unwrap().contains("this stack cannot hold the preset (up to"), "{v}");
 }
 
 #[test]

@@ -160,6 +160,29 @@ fn convert_says_what_a_target_costs_and_refuses_kotlin_where_there_is_none() {
         campro().args(["convert", "identity", "--target", "cube", "--format", "kotlin"]),
         "--format kotlin: only --target camera2 has a Kotlin form",
     );
+    // Camera2 without a device transform: the assumption is said, with how to give a phone's.
+    let out = campro().args(["convert", "campro-omega-0.5"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && err.contains("no device transform given, so the identity was assumed"), "{err}");
+    assert!(err.contains("--capture-result result.json"), "{err}");
+    let out = campro()
+        .args([
+            "convert",
+            "campro-omega-0.5",
+            "--device-ccm",
+            "1.6",
+            "-0.4",
+            "-0.2",
+            "-0.2",
+            "1.5",
+            "-0.3",
+            "0",
+            "-0.5",
+            "1.5",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success() && !String::from_utf8_lossy(&out.stderr).contains("identity was assumed"));
 }
 
 #[test]

@@ -40,18 +40,34 @@ pub struct Cli {
 pub enum Cmd {
     /// Run the desktop pipeline on images and videos (files, folders, standard input, a
     /// camera): each output keeps its input's format (JPEG, PNG, TIFF, WebP, the video's container).
+    #[command(
+        after_help = "Examples:\n  campro simulate campro-omega-0.5 photos/ -o protected/            # a folder, mirrored\n  campro simulate campro-omega-0.5 IMG_1.jpg -o IMG_1.protected.jpg  # one file\n  campro simulate campro-omega-0.5-hour clip.mp4 -o out/ --enhance  # video, the enhanced view\n  campro simulate campro-omega-0.5 rtsp://cam/1 -o door.mkv --frames 900"
+    )]
     Simulate(SimulateArgs),
     /// List the bundled presets (usable by name anywhere: `campro simulate campro-omega-0.5 ...`).
+    #[command(after_help = "Examples:\n  campro presets\n  campro presets --format json")]
     Presets(PresetsArgs),
     /// Run the recommended learnt preset (or --params) on a built-in chart: before/after PNGs, Camera2 values, error report.
+    #[command(
+        after_help = "Examples:\n  campro demo -o demo/\n  campro demo -o demo-hour/ --params campro-omega-0.5-hour"
+    )]
     Demo(DemoArgs),
     /// Look at what a parameter set does to your images: raw | protected side by side with
     /// the faces (YuNet) and people (person detector) found on each, a JSON of the
     /// detections per image, and OUTPUT/index.html linking them.
+    #[command(
+        after_help = "Examples:\n  campro inspect campro-omega-0.5 photos/ -o look/ --enhance   # then open look/index.html"
+    )]
     Inspect(InspectArgs),
     /// Map parameters onto a camera stack (Camera2: COLOR_CORRECTION_TRANSFORM, TONEMAP_CURVE).
+    #[command(
+        after_help = "Examples:\n  campro convert campro-omega-0.5 --capture-result result.json --format kotlin\n  campro convert campro-omega-0.5 --target cube -o campro.cube"
+    )]
     Convert(ConvertArgs),
     /// Compare a simulated Camera2 device with the desktop pipeline (grey levels, RGB cube, random pixels, the chart).
+    #[command(
+        after_help = "Examples:\n  campro compare campro-omega-0.5 --target camera2 --capture-result result.json\n  campro compare campro-omega-0.5 --matrix-frac-bits 10 --lut-size 64"
+    )]
     Compare(CompareArgs),
     /// Evaluate privacy (face recognition), utility (person detection) and image quality with real models.
     Eval {
@@ -77,6 +93,7 @@ pub enum Cmd {
     /// Randomised numerical soak: adversarial cases checked against every invariant until time runs out.
     Stress(StressArgs),
     /// Check parameter files; prints a summary of each, fails on the first broken rule.
+    #[command(after_help = "Examples:\n  campro validate my-camera.json")]
     Validate(ValidateArgs),
     /// Convert a CamPro checkpoint (Pipeline.save .pt) to a parameter file.
     ImportPt(ImportPtArgs),
@@ -148,4 +165,31 @@ pub enum Report {
 /// `value` cut for an error message about an argument (see [`crate::short`]).
 fn shown_arg(value: &str) -> String {
     crate::short(value, 40)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// Every example in a command's help parses as written (so none goes stale), and the
+    /// commands people start with all have examples.
+    #[test]
+    fn every_help_example_parses() {
+        let cli = Cli::command();
+        let mut seen = Vec::new();
+        for sub in cli.get_subcommands() {
+            let Some(after) = sub.get_after_help() else { continue };
+            for line in after.to_string().lines().map(str::trim).filter(|l| l.starts_with("campro ")) {
+                let words: Vec<&str> = line.split('#').next().unwrap().split_whitespace().collect();
+                if let Err(e) = Cli::try_parse_from(&words) {
+                    panic!("{line}: {e}");
+                }
+                seen.push(sub.get_name().to_string());
+            }
+        }
+        for name in ["simulate", "presets", "demo", "inspect", "convert", "compare", "validate"] {
+            assert!(seen.iter().any(|s| s == name), "{name} has no example");
+        }
+    }
 }

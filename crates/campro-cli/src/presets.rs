@@ -13,6 +13,8 @@ pub struct Preset {
     pub json: &'static str,
     /// `params/NAME.enhancer.onnx`, when present.
     pub enhancer: Option<&'static [u8]>,
+    /// What to pick it for, in plain words (`campro presets` prints it first).
+    pub pick: &'static str,
 }
 
 /// Every bundled preset, sorted by name (`params/*.json`; a test checks the list is whole).
@@ -21,22 +23,25 @@ pub const PRESETS: &[Preset] = &[
         name: "campro-omega-0.5",
         json: include_str!("../../../params/campro-omega-0.5.json"),
         enhancer: Some(include_bytes!("../../../params/campro-omega-0.5.enhancer.onnx")),
+        pick: "Pick this for everyday use: faces are hidden and people are still found, with an enhanced view for people to watch.",
     },
     Preset {
         name: "campro-omega-0.5-distill",
         json: include_str!("../../../params/campro-omega-0.5-distill.json"),
         enhancer: None,
+        pick: "Pick this when finding people matters more than hiding faces: it hides faces less well than campro-omega-0.5.",
     },
     Preset {
         name: "campro-omega-0.5-hour",
         json: include_str!("../../../params/campro-omega-0.5-hour.json"),
         enhancer: Some(include_bytes!("../../../params/campro-omega-0.5-hour.enhancer.onnx")),
+        pick: "Pick this where hiding faces matters most: the most private camera here, with an enhanced view.",
     },
-    Preset { name: "campro-omega-1", json: include_str!("../../../params/campro-omega-1.json"), enhancer: None },
-    Preset { name: "campro-omega-5", json: include_str!("../../../params/campro-omega-5.json"), enhancer: None },
-    Preset { name: "color-inversion", json: include_str!("../../../params/color-inversion.json"), enhancer: None },
-    Preset { name: "identity", json: include_str!("../../../params/identity.json"), enhancer: None },
-    Preset { name: "srgb-passthrough", json: include_str!("../../../params/srgb-passthrough.json"), enhancer: None },
+    Preset { name: "campro-omega-1", json: include_str!("../../../params/campro-omega-1.json"), enhancer: None, pick: "Detection first: people are found more often, faces are hidden less well. Not for privacy-critical use." },
+    Preset { name: "campro-omega-5", json: include_str!("../../../params/campro-omega-5.json"), enhancer: None, pick: "For experiments only: faces are recognised often in its pictures." },
+    Preset { name: "color-inversion", json: include_str!("../../../params/color-inversion.json"), enhancer: None, pick: "No protection: an example transform that is easily undone. For comparisons." },
+    Preset { name: "identity", json: include_str!("../../../params/identity.json"), enhancer: None, pick: "No protection: the unprotected starting point. For comparisons." },
+    Preset { name: "srgb-passthrough", json: include_str!("../../../params/srgb-passthrough.json"), enhancer: None, pick: "No protection: an ordinary camera's picture. For comparisons." },
 ];
 
 /// The preset `arg` names, when `arg` is not an existing path but a bundled preset's name
@@ -83,20 +88,32 @@ pub fn list(json: bool) -> Result<()> {
     let mut rows = Vec::new();
     for p in PRESETS {
         let params = campro::Params::from_json(p.json)?;
-        rows.push((p.name, p.enhancer.is_some(), params.rated_for_grey(), params.description));
+        rows.push((p.name, p.pick, p.enhancer.is_some(), params.rated_for_grey(), params.description));
     }
     if json {
         let v: Vec<_> = rows
             .iter()
-            .map(|(n, e, g, d)| serde_json::json!({ "name": n, "enhancer": e, "ratedForGrey": g, "description": d }))
+            .map(|(n, pick, e, g, d)| {
+                serde_json::json!({ "name": n, "pick": pick, "enhancer": e, "ratedForGrey": g, "description": d })
+            })
             .collect();
         crate::say!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        for (n, e, g, d) in rows {
-            let grey =
-                if g { "" } else { "\n    Not rated for grey input: simulate refuses grey pictures (--allow-grey)." };
-            crate::say!("{n}{}\n    {}{grey}", if e { " (with enhancer)" } else { "" }, crate::escape(&d));
+        for (n, pick, e, g, d) in rows {
+            let grey = if g {
+                ""
+            } else {
+                "\n    Not rated for grey input: black-and-white pictures are refused (--allow-grey writes them unprotected)."
+            };
+            crate::say!(
+                "{n}{}\n    {pick}\n    Measured: {}{grey}",
+                if e { " (with enhancer)" } else { "" },
+                crate::escape(&d)
+            );
         }
+        crate::say!(
+            "\n(top-1: how often a face-recognition system names the right person among 100 to 1,239; 1% is chance. AP: how well people are still found, against the unprotected picture.)"
+        );
     }
     Ok(())
 }

@@ -90,6 +90,10 @@ fn presets_are_listed_with_their_line_and_unknown_names_list_them() {
     // No bundled preset is rated for grey input yet, and each says so.
     assert!(v.as_array().unwrap().iter().all(|p| p["ratedForGrey"] == false), "{v}");
     assert_eq!(text.matches("Not rated for grey input").count(), 8, "{text}");
+    // Each says in plain words what to pick it for, the unprotected ones that they protect nothing.
+    assert!(text.contains("campro-omega-0.5 (with enhancer)\n    Pick this for everyday use"), "{text}");
+    assert_eq!(text.matches("\n    No protection:").count(), 3, "{text}");
+    assert!(v.as_array().unwrap().iter().all(|p| p["pick"].as_str().is_some_and(|s| s.len() > 20)), "{v}");
     fails_with(
         campro().args(["validate", "no-such-preset"]),
         "not a bundled preset (campro presets lists them: campro-omega-0.5",

@@ -15,7 +15,7 @@ use campro::Params;
 /// useful one that meets both privacy targets on the paper's protocol (trained/README.md).
 const DEFAULT_PARAMS: &str = include_str!("../../../params/campro-omega-0.5.json");
 /// The file name [`DEFAULT_PARAMS`] is bundled as, for messages.
-const DEFAULT_PARAMS_FILE: &str = "params/campro-omega-0.5.json";
+const DEFAULT_PARAMS_NAME: &str = "campro-omega-0.5";
 
 pub fn demo(a: &DemoArgs) -> Result<()> {
     let (out, force, format) = (a.output.as_path(), a.force, a.format);
@@ -26,7 +26,9 @@ pub fn demo(a: &DemoArgs) -> Result<()> {
     check_output_folder(out, force || earlier_demo, "--output")?;
     let (p, file) = match &a.params {
         Some(path) => (load_params(path)?, path.display().to_string()),
-        None => (Params::from_json(DEFAULT_PARAMS)?, format!("{DEFAULT_PARAMS_FILE} (the recommended preset)")),
+        None => {
+            (Params::from_json(DEFAULT_PARAMS)?, format!("{DEFAULT_PARAMS_NAME} (the recommended preset, built in)"))
+        }
     };
     let chart = campro::chart::render();
     let (w, h) = (campro::chart::WIDTH, campro::chart::HEIGHT);
@@ -68,7 +70,7 @@ pub fn demo(a: &DemoArgs) -> Result<()> {
     say!("preset: {file}");
     say!("parameters: {} - {}", escape(&p.name), escape(&p.description));
     say!("wrote {} (input) and {} (desktop pipeline output)\n", crate::shown(&before), crate::shown(&after));
-    say!("Camera2 values (device transform: identity; `campro convert --device-ccm ...` for yours):");
+    say!("Camera2 values (device transform: identity; for a phone: `campro convert PRESET --capture-result result.json`, docs/commands.md):");
     say!("  COLOR_CORRECTION_TRANSFORM (num/den pairs): {:?}", v.color_correction_transform);
     let c = &v.tonemap_curve.red;
     let pts: Vec<String> = c.chunks(2).take(4).map(|p| format!("({:.4}, {:.4})", p[0], p[1])).collect();

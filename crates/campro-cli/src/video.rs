@@ -703,8 +703,12 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         None => indicatif::ProgressBar::no_length(),
     };
     bar.set_style(
-        indicatif::ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} frames {per_sec} eta {eta}")
-            .expect("valid template"),
+        indicatif::ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} frames {rate} eta {eta}")
+            .expect("valid template")
+            // indicatif's own {per_sec} prints four decimals ("47.7022/s").
+            .with_key("rate", |s: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = write!(w, "{:.1}/s", s.per_sec());
+            }),
     );
     bar.set_message(match source {
         Source::File(p) => p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),

@@ -451,7 +451,7 @@ fn demo_writes_before_and_after() {
         .assert()
         .success()
         .stdout(predicates::str::contains("COLOR_CORRECTION_TRANSFORM"))
-        .stdout(predicates::str::contains("preset: params/campro-omega-0.5.json (the recommended preset)"));
+        .stdout(predicates::str::contains("preset: campro-omega-0.5 (the recommended preset, built in)"));
     let preset = Params::from_file(&bundled("campro-omega-0.5.json")).unwrap();
     let chart = image::open(out.join("chart.png")).unwrap().into_rgb8();
     let protected = image::open(out.join("chart-protected.png")).unwrap().into_rgb8();

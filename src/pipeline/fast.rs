@@ -31,8 +31,26 @@ use crate::tone_curve::ToneCurve;
 
 /// Cells of [`Exact8`]'s output table over [0, 1] (2^16; the last cell holds t = 1).
 const FINE: usize = 1 << 16;
-/// Marks a cell whose pixels take the reference path.
+/// Marks a cell whose pixels take the reference path. A cell below it holds its code.
 const AMBIGUOUS: u16 = 0x100;
+/// Marks a split cell: the low 15 bits index [`Exact8`]'s splits.
+const SPLIT: u16 = 0x8000;
+/// Most split cells a table holds (indices below [`SPLIT`]).
+const MAX_SPLITS: usize = 0x7FFF;
+
+/// A cell holding exactly one rounding boundary of the reference's output, at curve input
+/// `t*`: every input below `t*` gives `below`, every input from `t*` on gives `above`. Its
+/// pixels whose f32 input lies within the error bound of `t*` (between `lo` and `hi`) take
+/// the reference; the others are decided by comparing the f32 input with `lo` and `hi`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Split {
+    /// `t* - delta`, rounded down to f32: an f32 input below it is surely below `t*`.
+    lo: f32,
+    /// `t* + delta`, rounded up to f32: an f32 input from it on is surely at or above `t*`.
+    hi: f32,
+    below: u8,
+    above: u8,
+}
 
 /// Round-half-up to an output code, as [`Prepared::run`] does.
 #[inline]
@@ -62,8 +80,9 @@ pub struct Exact8<'a> {
     reference: Prepared<'a>,
     /// `terms[256 * j + x] = (CCM[0][j], CCM[1][j], CCM[2][j], 0) · degamma(x / 255)`.
     terms: Vec<[f32; 4]>,
-    /// FINE + 1 cells: the output code, or [`AMBIGUOUS`].
+    /// FINE + 1 cells: the output code, [`AMBIGUOUS`], or [`SPLIT`] | an index into `splits`.
     cells: Vec<u16>,
+    splits: Vec<Split>,
     ambiguous: usize,
     elision: Elision,
     #[cfg(target_arch = "x86_64")]
@@ -106,13 +125,14 @@ impl<'a> Exact8<'a> {
         // the reference's own f64 rounding.
         let row = crate::ccm::norm_inf(m);
         let delta = 3.0 * row * f32::EPSILON as f64 / 2.0 * 1.0000001 + 1e-12;
-        let (cells, ambiguous) = cell_table(&params.tone_curve, delta);
+        let (cells, splits, ambiguous) = cell_table(&params.tone_curve, delta);
         Self {
             #[cfg(target_arch = "x86_64")]
             simd: avx512::Kernel::new(params, &d),
             reference,
             terms,
             cells,
+            splits,
             ambiguous,
             elision: Elision::of(params),
         }
@@ -136,9 +156,16 @@ impl<'a> Exact8<'a> {
         Engine::Scalar
     }
 
-    /// Fraction of the output table's cells whose pixels take the reference path.
+    /// Fraction of the output table's cells whose pixels all take the reference path
+    /// (a cell with more than one rounding boundary, or a knot, inside).
     pub fn fallback_fraction(&self) -> f64 {
         self.ambiguous as f64 / self.cells.len() as f64
+    }
+
+    /// Fraction of the output table's cells that hold one rounding boundary: only their
+    /// pixels within the error bound of it take the reference.
+    pub fn split_fraction(&self) -> f64 {
+        self.splits.len() as f64 / self.cells.len() as f64
     }
 
     /// Stages this parameter set lets the path skip.
@@ -158,16 +185,36 @@ impl<'a> Exact8<'a> {
         let (a, b, c) =
             (&self.terms[rgb[0] as usize], &self.terms[256 + rgb[1] as usize], &self.terms[512 + rgb[2] as usize]);
         // Four lanes (the fourth is padding) so the sums, clamps and conversions vectorise.
+        let mut t = [0f32; 4];
         let mut idx = [0i32; 4];
         #[allow(clippy::manual_clamp)] // max/min vectorise to maxps/minps; no NaN can occur
         for k in 0..4 {
-            idx[k] = ((a[k] + b[k] + c[k]).max(0.0).min(1.0) * FINE as f32) as i32;
+            t[k] = (a[k] + b[k] + c[k]).max(0.0).min(1.0);
+            idx[k] = (t[k] * FINE as f32) as i32;
         }
         let e = [self.cells[idx[0] as usize], self.cells[idx[1] as usize], self.cells[idx[2] as usize]];
-        if (e[0] | e[1] | e[2]) & AMBIGUOUS == 0 {
+        if (e[0] | e[1] | e[2]) < AMBIGUOUS {
             return ([e[0] as u8, e[1] as u8, e[2] as u8], false);
         }
-        (self.exact(rgb), true)
+        // A split cell decides by its boundary unless the input is within the bound of it.
+        let mut out = [0u8; 3];
+        for k in 0..3 {
+            out[k] = match e[k] {
+                code if code < AMBIGUOUS => code as u8,
+                AMBIGUOUS => return (self.exact(rgb), true),
+                split => {
+                    let s = &self.splits[(split & !SPLIT) as usize];
+                    if t[k] < s.lo {
+                        s.below
+                    } else if t[k] >= s.hi {
+                        s.above
+                    } else {
+                        return (self.exact(rgb), true);
+                    }
+                }
+            };
+        }
+        (out, false)
     }
 
     /// Interleaved RGB8 in and out; `src.len() == dst.len()`, a multiple of 3. Uses
@@ -328,11 +375,13 @@ impl F32Path {
 }
 
 /// For each cell `[k, k+1) / FINE` widened by `delta`: the rounded 8-bit curve output if
-/// it is the same over the whole interval, else [`AMBIGUOUS`]. Returns the table and
-/// the number of ambiguous cells.
-fn cell_table(curve: &ToneCurve, delta: f64) -> (Vec<u16>, usize) {
+/// it is the same over the whole interval; else a [`Split`] when the interval holds exactly
+/// one rounding boundary and no knot; else [`AMBIGUOUS`]. Returns the table, the splits
+/// and the number of ambiguous cells.
+fn cell_table(curve: &ToneCurve, delta: f64) -> (Vec<u16>, Vec<Split>, usize) {
     let n = FINE as f64;
     let mut cells = Vec::with_capacity(FINE + 1);
+    let mut splits = Vec::new();
     let mut ambiguous = 0;
     let mut knot = 0; // first knot index with x > lo
     for k in 0..=FINE {
@@ -340,13 +389,72 @@ fn cell_table(curve: &ToneCurve, delta: f64) -> (Vec<u16>, usize) {
         let hi = ((k + 1) as f64 / n + delta).min(1.0);
         match constant_code(curve, lo, hi, &mut knot) {
             Some(q) => cells.push(q),
-            None => {
-                cells.push(AMBIGUOUS);
-                ambiguous += 1;
-            }
+            None => match split_at(curve, lo, hi, delta) {
+                Some(s) if splits.len() < MAX_SPLITS => {
+                    cells.push(SPLIT | splits.len() as u16);
+                    splits.push(s);
+                }
+                _ => {
+                    cells.push(AMBIGUOUS);
+                    ambiguous += 1;
+                }
+            },
         }
     }
-    (cells, ambiguous)
+    (cells, splits, ambiguous)
+}
+
+/// The reference's 8-bit code for a curve input `t` in [0, 1], as [`Prepared::run`] rounds it.
+fn code(curve: &ToneCurve, t: f64) -> u16 {
+    quantize(curve.eval(t), 255.0)
+}
+
+/// The one rounding boundary in `[lo, hi]`, when there is exactly one and no knot: on one
+/// segment the reference's output is a monotone function of its input (each f64 operation
+/// of the interpolation is monotone), so codes that differ by one at the ends change once,
+/// at the least f64 input `t*` that gives the upper end's code, found by bisecting the
+/// f64 bit patterns (non-negative floats order as their bits).
+fn split_at(curve: &ToneCurve, lo: f64, hi: f64, delta: f64) -> Option<Split> {
+    let xs = curve.x();
+    if xs.iter().any(|&x| x >= lo && x <= hi) {
+        return None;
+    }
+    let (a, b) = (code(curve, lo), code(curve, hi));
+    if a.abs_diff(b) != 1 {
+        return None;
+    }
+    // Invariant: code(lo bits) == a, code(hi bits) == b.
+    let (mut l, mut h) = (lo.to_bits(), hi.to_bits());
+    while h - l > 1 {
+        let m = l + (h - l) / 2;
+        if code(curve, f64::from_bits(m)) == a {
+            l = m;
+        } else {
+            h = m;
+        }
+    }
+    let t = f64::from_bits(h);
+    Some(Split { lo: f32_down(t - delta), hi: f32_up(t + delta), below: a as u8, above: b as u8 })
+}
+
+/// The largest f32 not above `v`.
+fn f32_down(v: f64) -> f32 {
+    let f = v as f32;
+    if f as f64 > v {
+        f.next_down()
+    } else {
+        f
+    }
+}
+
+/// The least f32 not below `v`.
+fn f32_up(v: f64) -> f32 {
+    let f = v as f32;
+    if (f as f64) < v {
+        f.next_up()
+    } else {
+        f
+    }
 }
 
 /// The reference's rounded 8-bit output if it is the same for every curve input in

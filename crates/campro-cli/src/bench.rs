@@ -152,7 +152,14 @@ pub fn run(params: &Params, quick: bool) -> Vec<Row> {
     let t = median(runs, || {
         scalar.run(black_box(&frame), &mut out);
     });
-    let fb = format!("{}, {:.2}% cells to reference", ratio(t), 100.0 * scalar.fallback_fraction());
+    let fell = scalar.run(&frame, &mut out);
+    let fb = format!(
+        "{}; {:.3}% px to the reference ({:.2}% of cells split at one rounding boundary, {:.3}% ambiguous)",
+        ratio(t),
+        fell.ambiguous as f64 / px,
+        100.0 * scalar.split_fraction(),
+        100.0 * scalar.fallback_fraction()
+    );
     rows.push(Row {
         group: "image",
         name: "exact 8-bit, scalar tables, 1 thread".into(),

@@ -81,6 +81,18 @@ pub fn run(command: &[String], output: Option<&Path>, markdown: bool, force: boo
     }
 }
 
+/// Shows a roff page with the system's `man -l -` (its pager); false when there is no `man`
+/// or it failed, and the caller prints the roff instead.
+fn show_with_man(roff: &[u8]) -> bool {
+    use std::io::Write;
+    let Ok(mut child) = std::process::Command::new("man").args(["-l", "-"]).stdin(std::process::Stdio::piped()).spawn()
+    else {
+        return false;
+    };
+    let fed = child.stdin.take().is_some_and(|mut i| i.write_all(roff).is_ok());
+    child.wait().is_ok_and(|s| s.success()) && fed
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -108,16 +120,4 @@ mod tests {
             "docs/cli.md is out of date: cargo run --release -p campro-cli -- man --markdown > docs/cli.md"
         );
     }
-}
-
-/// Shows a roff page with the system's `man -l -` (its pager); false when there is no `man`
-/// or it failed, and the caller prints the roff instead.
-fn show_with_man(roff: &[u8]) -> bool {
-    use std::io::Write;
-    let Ok(mut child) = std::process::Command::new("man").args(["-l", "-"]).stdin(std::process::Stdio::piped()).spawn()
-    else {
-        return false;
-    };
-    let fed = child.stdin.take().is_some_and(|mut i| i.write_all(roff).is_ok());
-    child.wait().is_ok_and(|s| s.success()) && fed
 }

@@ -30,6 +30,21 @@ class PipelineTest {
 
     private fun names() = states.map { it.javaClass.simpleName }
 
+    /** A started pipeline whose first metering result converged: probing the device's pixels. */
+    private fun probing(): CamProPipeline<Int> {
+        val p = pipeline()
+        p.start(Fixtures.supported())
+        p.onMeteringResult(Fixtures.converged())
+        assertTrue(p.isProbing)
+        return p
+    }
+
+    /** A probe frame at [ts] whose result reports the probe's settings and whose luma is [luma]. */
+    private fun probeFrame(p: CamProPipeline<Int>, ts: Long, luma: (Int) -> Int) {
+        p.onProbeResult(ts, cam.honouredProbe())
+        p.onProbeFrame(ts, ByteArray(4800) { luma(it).toByte() })
+    }
+
     /** A metering result, then the pixel probe answered as an honest device would. */
     private fun meter(p: CamProPipeline<Int>, m: MeteringReport, camera: FakeCamera = cam) {
         p.onMeteringResult(m)
@@ -329,12 +344,9 @@ class PipelineTest {
 
     @Test
     fun aDeviceThatEchoesTheCurveButAppliesItsOwnIsUnsupported() {
-        val p = pipeline()
-        p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
+        val p = probing()
         // The result reports the constant curve; the pixels show the scene.
-        p.onProbeResult(5, cam.honouredProbe())
-        p.onProbeFrame(5, ByteArray(4800) { (it * 7 % 256).toByte() })
+        probeFrame(p, 5) { it * 7 % 256 }
         val s = p.state
         assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("TONEMAP_CURVE"))
         assertTrue(cam.calls.none { it.startsWith("protect") })
@@ -343,14 +355,10 @@ class PipelineTest {
 
     @Test
     fun aDeviceThatIgnoresTheTransformIsUnsupported() {
-        val p = pipeline()
-        p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
-        p.onProbeResult(5, cam.honouredProbe())
-        p.onProbeFrame(5, ByteArray(4800) { 64 })
+        val p = probing()
+        probeFrame(p, 5) { 64 }
         // Zero transform sent and reported; the frame shows the scene through the curve.
-        p.onProbeResult(6, cam.honouredProbe())
-        p.onProbeFrame(6, ByteArray(4800) { (128 + it % 100).toByte() })
+        probeFrame(p, 6) { 128 + it % 100 }
         val s = p.state
         assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("COLOR_CORRECTION_TRANSFORM"))
         assertTrue(cam.calls.none { it.startsWith("protect") })
@@ -359,22 +367,15 @@ class PipelineTest {
     @Test
     fun aDeviceWhoseProbeLevelsDoNotStepIsUnsupported() {
         // A flat scene through a device that applies neither: the same level twice.
-        val p = pipeline()
-        p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
-        for (ts in 5L..6L) {
-            p.onProbeResult(ts, cam.honouredProbe())
-            p.onProbeFrame(ts, ByteArray(4800) { 90 })
-        }
+        val p = probing()
+        for (ts in 5L..6L) probeFrame(p, ts) { 90 }
         val s = p.state
         assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("luma 90 and 90"))
     }
 
     @Test
     fun aProbeThatNeverSeesItsSettingsGivesUp() {
-        val p = pipeline()
-        p.start(Fixtures.supported())
-        p.onMeteringResult(Fixtures.converged())
+        val p = probing()
         for (ts in 1L..CamProPipeline.PROBE_FRAME_LIMIT.toLong()) {
             p.onProbeFrame(ts, ByteArray(4800) { 64 }) // its result never comes (or another timestamp base)
             assertEquals(ProtectionState.Verifying, p.state)

@@ -10,6 +10,7 @@ mod demo;
 mod eval;
 mod inspect;
 mod man;
+mod metadata;
 mod models;
 mod output;
 mod params;

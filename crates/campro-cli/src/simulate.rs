@@ -249,6 +249,8 @@ pub struct Options<'a> {
     pub max_frames: Option<u64>,
     /// Write grey input although the preset is not rated for it (`--allow-grey`).
     pub allow_grey: bool,
+    /// What image outputs keep of their inputs' metadata.
+    pub metadata: crate::metadata::Policy,
 }
 
 /// What `-` and device paths mean among the inputs and for the output: one video stream.
@@ -441,6 +443,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         scale,
         data,
         allow_grey,
+        metadata,
         skip_existing,
         format,
     } = a;
@@ -467,6 +470,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         frames: video::FrameFormat { size, rate, stall },
         max_frames: frames,
         allow_grey,
+        metadata,
     };
     simulate(&p, &inputs, &output, &options)
 }
@@ -543,7 +547,7 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
     );
     let budget = Budget::global();
     let failed = AtomicUsize::new(0);
-    let paths = Paths { capture: &capture, budget, depth: o.depth, force, quality: o.quality };
+    let paths = Paths { capture: &capture, budget, depth: o.depth, force, quality: o.quality, metadata: o.metadata };
     pool.install(|| {
         images.par_iter().for_each(|(i, out)| {
             let started = std::time::Instant::now();
@@ -646,12 +650,16 @@ struct Paths<'a, 'p> {
     depth: Depth,
     force: bool,
     quality: u8,
+    metadata: crate::metadata::Policy,
 }
 
 impl Paths<'_, '_> {
     /// Simulates one image; Ok(true) when it was grey and let through (`--allow-grey`).
     fn one(&self, input: &Path, output: &Path, warn: &dyn Fn(&str)) -> Result<bool> {
-        let (img, _lease) = campro_eval::image_file::read(input, self.budget, &|w, h| self.capture.work(w, h), warn)?;
+        let (img, _lease, meta) =
+            campro_eval::image_file::read_with_metadata(input, self.budget, &|w, h| self.capture.work(w, h), warn)?;
+        let kept = crate::metadata::kept(self.metadata, meta.exif.as_deref(), meta.icc, warn);
+        let encode = |format, samples, w, h, quality| encode(format, samples, w, h, quality, &kept);
         let (w, h) = (img.width(), img.height());
         let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
         let row = 3 * w as usize;
@@ -706,8 +714,16 @@ enum Samples<'a> {
     Sixteen(&'a [u16]),
 }
 
-/// `samples` (a `w` x `h` RGB image) as a file of `format`; JPEG at `quality` (8 bits only).
-fn encode(format: ImageFormat, samples: Samples, w: u32, h: u32, quality: u8) -> Result<Vec<u8>> {
+/// `samples` (a `w` x `h` RGB image) as a file of `format`; JPEG at `quality` (8 bits
+/// only), carrying the `kept` metadata where the format can (TIFF takes no EXIF here).
+fn encode(
+    format: ImageFormat,
+    samples: Samples,
+    w: u32,
+    h: u32,
+    quality: u8,
+    kept: &crate::metadata::Kept,
+) -> Result<Vec<u8>> {
     use image::ImageEncoder;
     let (bytes, color) = match samples {
         Samples::Eight(s) => (std::borrow::Cow::Borrowed(s), image::ExtendedColorType::Rgb8),
@@ -716,14 +732,27 @@ fn encode(format: ImageFormat, samples: Samples, w: u32, h: u32, quality: u8) ->
         }
     };
     let mut buf = std::io::Cursor::new(Vec::new());
-    match format {
-        ImageFormat::Png => image::codecs::png::PngEncoder::new(&mut buf).write_image(&bytes, w, h, color)?,
-        ImageFormat::Tiff => image::codecs::tiff::TiffEncoder::new(&mut buf).write_image(&bytes, w, h, color)?,
-        ImageFormat::Jpeg => {
-            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, quality).write_image(&bytes, w, h, color)?
+    // An encoder that cannot carry a block leaves it out (the output is still written).
+    fn with<E: ImageEncoder>(mut e: E, kept: &crate::metadata::Kept) -> E {
+        if let Some(icc) = &kept.icc {
+            let _ = e.set_icc_profile(icc.clone());
         }
+        if let Some(exif) = &kept.exif {
+            let _ = e.set_exif_metadata(exif.clone());
+        }
+        e
+    }
+    match format {
+        ImageFormat::Png => {
+            with(image::codecs::png::PngEncoder::new(&mut buf), kept).write_image(&bytes, w, h, color)?
+        }
+        ImageFormat::Tiff => {
+            with(image::codecs::tiff::TiffEncoder::new(&mut buf), kept).write_image(&bytes, w, h, color)?
+        }
+        ImageFormat::Jpeg => with(image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, quality), kept)
+            .write_image(&bytes, w, h, color)?,
         ImageFormat::Webp => {
-            image::codecs::webp::WebPEncoder::new_lossless(&mut buf).write_image(&bytes, w, h, color)?
+            with(image::codecs::webp::WebPEncoder::new_lossless(&mut buf), kept).write_image(&bytes, w, h, color)?
         }
     }
     Ok(buf.into_inner())
@@ -734,8 +763,8 @@ pub fn encode_png(samples: &[u16], w: u32, h: u32, depth: Depth) -> Result<Vec<u
     match depth {
         Depth::Eight => {
             let eight: Vec<u8> = samples.iter().map(|&v| v as u8).collect();
-            encode(ImageFormat::Png, Samples::Eight(&eight), w, h, 100)
+            encode(ImageFormat::Png, Samples::Eight(&eight), w, h, 100, &Default::default())
         }
-        Depth::Sixteen => encode(ImageFormat::Png, Samples::Sixteen(samples), w, h, 100),
+        Depth::Sixteen => encode(ImageFormat::Png, Samples::Sixteen(samples), w, h, 100, &Default::default()),
     }
 }

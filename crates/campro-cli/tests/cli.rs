@@ -1223,6 +1223,85 @@ fn a_webp_photo_stays_a_lossless_webp_with_the_cameras_pixels() {
     assert_ne!(from_webp, img, "the camera changed nothing");
 }
 
+/// The EXIF fields of an image file's block, as (tag, value) text; none without a block.
+fn exif_fields(path: &Path) -> Vec<(String, String)> {
+    use image::ImageDecoder;
+    let bytes = std::fs::read(path).unwrap();
+    let mut d =
+        image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().unwrap().into_decoder().unwrap();
+    let Some(block) = d.exif_metadata().unwrap() else { return Vec::new() };
+    let e = exif::Reader::new().read_raw(block).unwrap();
+    e.fields().map(|f| (f.tag.to_string(), f.display_value().to_string())).collect()
+}
+
+/// A phone's JPEG with the date, the camera, GPS, a serial number, a maker note and
+/// orientation 6: by default the output keeps date and camera, drops the rest and says
+/// orientation 1; `--metadata keep` keeps GPS too (never the maker note); `strip` nothing.
+/// The colour profile travels with keep-safe and keep.
+#[test]
+fn metadata_policy_keeps_the_date_and_camera_and_drops_gps() {
+    use exif::{Field, In, Tag, Value};
+    use image::ImageEncoder;
+    let dir = tempfile::tempdir().unwrap();
+    let fields = [
+        Field { tag: Tag::Make, ifd_num: In::PRIMARY, value: Value::Ascii(vec![b"Phone".to_vec()]) },
+        Field { tag: Tag::Model, ifd_num: In::PRIMARY, value: Value::Ascii(vec![b"X1".to_vec()]) },
+        Field { tag: Tag::Orientation, ifd_num: In::PRIMARY, value: Value::Short(vec![6]) },
+        Field {
+            tag: Tag::DateTimeOriginal,
+            ifd_num: In::PRIMARY,
+            value: Value::Ascii(vec![b"2026:12:06 09:00:00".to_vec()]),
+        },
+        Field { tag: Tag::BodySerialNumber, ifd_num: In::PRIMARY, value: Value::Ascii(vec![b"SN123".to_vec()]) },
+        Field { tag: Tag::MakerNote, ifd_num: In::PRIMARY, value: Value::Undefined(vec![7; 40], 0) },
+        Field {
+            tag: Tag::GPSLatitude,
+            ifd_num: In::PRIMARY,
+            value: Value::Rational(vec![(48, 1).into(), (12, 1).into(), (0, 1).into()]),
+        },
+    ];
+    let mut w = exif::experimental::Writer::new();
+    fields.iter().for_each(|f| w.push_field(f));
+    let mut block = std::io::Cursor::new(Vec::new());
+    w.write(&mut block, true).unwrap();
+    let img = image::RgbImage::from_fn(24, 16, |x, y| image::Rgb([(x * 9) as u8, (y * 14) as u8, 90]));
+    let mut jpeg = Vec::new();
+    let mut enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 95);
+    enc.set_exif_metadata(block.into_inner()).unwrap();
+    enc.set_icc_profile(vec![0; 128]).unwrap();
+    enc.write_image(img.as_raw(), 24, 16, image::ExtendedColorType::Rgb8).unwrap();
+    let input = dir.path().join("IMG_1.jpg");
+    std::fs::write(&input, jpeg).unwrap();
+    let run = |policy: Option<&str>, out: &str| {
+        let mut c = campro();
+        c.arg("simulate").arg(bundled("campro-omega-0.5.json")).arg(&input).arg("-o").arg(dir.path().join(out));
+        if let Some(p) = policy {
+            c.args(["--metadata", p]);
+        }
+        c.assert().success();
+        exif_fields(&dir.path().join(out))
+    };
+    let has = |f: &[(String, String)], tag: &str| f.iter().any(|(t, _)| t == tag);
+    let safe = run(None, "safe.jpg");
+    assert!(has(&safe, "Make") && has(&safe, "Model") && has(&safe, "DateTimeOriginal"), "{safe:?}");
+    for gone in ["GPSLatitude", "BodySerialNumber", "MakerNote"] {
+        assert!(!has(&safe, gone), "{gone} kept: {safe:?}");
+    }
+    assert!(safe.iter().any(|(t, v)| t == "Orientation" && v.contains("row 0 at top")), "{safe:?}");
+    // The pixels were turned: 16 wide, 24 tall.
+    assert_eq!(image::image_dimensions(dir.path().join("safe.jpg")).unwrap(), (16, 24));
+    let keep = run(Some("keep"), "keep.jpg");
+    assert!(has(&keep, "GPSLatitude") && has(&keep, "BodySerialNumber") && !has(&keep, "MakerNote"), "{keep:?}");
+    assert!(run(Some("strip"), "strip.jpg").is_empty());
+    let icc = |name: &str| {
+        use image::ImageDecoder;
+        let bytes = std::fs::read(dir.path().join(name)).unwrap();
+        image::codecs::jpeg::JpegDecoder::new(std::io::Cursor::new(bytes)).unwrap().icc_profile().unwrap()
+    };
+    assert_eq!(icc("safe.jpg"), Some(vec![0; 128]));
+    assert_eq!(icc("strip.jpg"), None);
+}
+
 /// A phone JPEG stored sideways with EXIF orientation 6 (turn 90° clockwise to show) comes
 /// out turned: the output is as tall as the stored picture is wide, and each pixel is the
 /// untagged copy's pixel at the turned place (the same decoded pixel through the camera).

@@ -142,6 +142,26 @@ fn header_reader<'a>(path: &Path, bytes: &'a [u8]) -> Result<image::ImageReader<
     Ok(reader)
 }
 
+/// What an image file says about itself besides its pixels, as read (no policy applied).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Metadata {
+    /// The EXIF block, TIFF-structured (no `Exif\0\0` prefix).
+    pub exif: Option<Vec<u8>>,
+    /// The ICC colour profile.
+    pub icc: Option<Vec<u8>>,
+}
+
+/// [`read`] that also returns the file's [`Metadata`].
+pub fn read_with_metadata<'b>(
+    path: &Path,
+    budget: &'b Budget,
+    work: Work,
+    warn: &dyn Fn(&str),
+) -> Result<(image::DynamicImage, Lease<'b>, Metadata)> {
+    let bytes = campro::file::read_capped(path, MAX_FILE_BYTES, "an image")?;
+    decode_with_metadata(path, &bytes, budget, work, warn)
+}
+
 /// [`read`] on bytes already read (`path` names them in errors).
 pub fn decode<'b>(
     path: &Path,
@@ -150,6 +170,18 @@ pub fn decode<'b>(
     work: Work,
     warn: &dyn Fn(&str),
 ) -> Result<(image::DynamicImage, Lease<'b>)> {
+    decode_with_metadata(path, bytes, budget, work, warn).map(|(img, lease, _)| (img, lease))
+}
+
+/// [`decode`] that also returns the file's [`Metadata`] (read within the header's
+/// allocation limit; a block the decoder cannot read is left out).
+pub fn decode_with_metadata<'b>(
+    path: &Path,
+    bytes: &[u8],
+    budget: &'b Budget,
+    work: Work,
+    warn: &dyn Fn(&str),
+) -> Result<(image::DynamicImage, Lease<'b>, Metadata)> {
     use image::ImageDecoder;
     if let Some(n) = extra_frames(bytes) {
         warn(&format!("{n}; only the first is read"));
@@ -180,11 +212,12 @@ pub fn decode<'b>(
     // orientation): the pixels are turned here, so every output stands as the photo was
     // taken (outputs carry no orientation tag). The turned copy fits `need` (18 bytes a
     // pixel against 6 for two 8-bit RGB copies).
+    let meta = Metadata { exif: decoder.exif_metadata().ok().flatten(), icc: decoder.icc_profile().ok().flatten() };
     let orientation = decoder.orientation().unwrap_or(image::metadata::Orientation::NoTransforms);
     let lease = budget.take(need).expect("need is within the budget");
     let mut img = image::DynamicImage::from_decoder(decoder).map_err(|e| image_error(path, e.to_string()))?;
     img.apply_orientation(orientation);
-    Ok((img, lease))
+    Ok((img, lease, meta))
 }
 
 /// A header error in words: the image crate's limit errors say "limits exceeded".

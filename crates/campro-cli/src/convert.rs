@@ -47,7 +47,9 @@ pub fn convert(a: ConvertArgs) -> Result<()> {
         }
         Format::Kotlin => v.to_kotlin(gains),
     };
-    write_or_print(output.as_deref(), text.as_bytes(), force)
+    write_or_print(output.as_deref(), text.as_bytes(), force)?;
+    note_assumed_identity(&device);
+    Ok(())
 }
 
 /// `campro convert --target` of a file-based stack: the stack's file, checked on its
@@ -125,6 +127,9 @@ pub fn compare(a: CompareArgs) -> Result<()> {
             }
             say!("{}", serde_json::to_string_pretty(&json)?)
         }
+    }
+    if target == "camera2" {
+        note_assumed_identity(&device);
     }
     Ok(())
 }
@@ -267,8 +272,16 @@ fn device_gains(d: &DeviceArgs) -> Result<Option<[f32; 4]>> {
     camera2::gains_from_capture_result(&text).map_err(|e| anyhow!("--capture-result {}: {e}", crate::shown(f)))
 }
 
-/// What `convert` and `compare` say when no device transform is given: the values are for
-/// a camera whose own colour transform is the identity, which no phone is.
+/// What `convert` and `compare` say (on stderr, after their output) when no device
+/// transform is given: the values are for a camera whose own colour transform is the
+/// identity, which no phone is.
+fn note_assumed_identity(d: &DeviceArgs) {
+    if d.device_ccm.is_none() && d.capture_result.is_none() && d.ct.is_none() {
+        eprintln!("{NO_DEVICE_TRANSFORM}");
+    }
+}
+
+/// The words of [`note_assumed_identity`].
 pub const NO_DEVICE_TRANSFORM: &str = "note: no device transform given, so the identity was assumed (a camera whose own colour transform does nothing; no phone is one). For a phone, give the COLOR_CORRECTION_TRANSFORM of one of its auto-mode results: --device-ccm A11 .. A33, or --capture-result result.json (docs/commands.md says how to save one); --ct K uses the file's own calibration.";
 
 /// The device matrix and conversion options from the command line.
@@ -285,7 +298,6 @@ pub fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
         }
         campro::color_temp::interpolate(&p.ct_calibration, ct)?
     } else {
-        eprintln!("{NO_DEVICE_TRANSFORM}");
         ccm::IDENTITY
     };
     // A device transform with no inverse maps colours onto a plane: nothing sensible can be

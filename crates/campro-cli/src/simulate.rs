@@ -196,8 +196,11 @@ fn refuse_existing(outputs: impl Iterator<Item = PathBuf>, existing: Existing) -
     }
     match first {
         None => Ok(()),
+        Some(f) if total == 1 => {
+            bail!("{} exists (use --force to overwrite, or --skip-existing); nothing was written", crate::shown(&f))
+        }
         Some(f) => bail!(
-            "{there} of {total} outputs exist already ({} first); nothing was written: --force replaces them, --skip-existing does only the rest",
+            "{} exists, and {there} of {total} outputs in all; nothing was written: --force replaces them, --skip-existing does only the rest",
             crate::shown(&f)
         ),
     }
@@ -331,7 +334,7 @@ fn single_file(inputs: &[PathBuf], out: &Path) -> Result<Option<(PathBuf, PathBu
             crate::shown(out),
             crate::shown(input),
             if video::is_video(input) { "a video" } else { "an image" },
-            if video::is_video(input) { "video" } else { "PNG, JPEG or TIFF" }
+            if video::is_video(input) { "video" } else { "PNG, JPEG, TIFF or WebP" }
         );
     }
     if file_key(input) == file_key(out) {

@@ -235,7 +235,7 @@ fn re_runs_skip_what_is_there_and_json_says_what_happened() {
     assert!(!ok && err.contains("--skip-existing"), "{err}");
     // One line for the run, not one a file.
     assert_eq!(err.trim().lines().count(), 1, "{err}");
-    assert!(err.contains("2 of 3 outputs exist already") && err.contains("nothing was written"), "{err}");
+    assert!(err.contains("exists, and 2 of 3 outputs in all") && err.contains("nothing was written"), "{err}");
     std::fs::remove_file(inp.join("broken.png")).unwrap();
     let (ok, v, err) = run(&["--skip-existing", "--format", "json"]);
     assert!(ok, "{err}");

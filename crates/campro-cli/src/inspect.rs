@@ -207,7 +207,32 @@ fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, Stri
         "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>campro inspect</title>\n\
          <style>body{font-family:sans-serif;margin:1em}img{max-width:100%;height:auto}\
          td,th{padding:.3em .6em;vertical-align:top;text-align:left}\
-         .face{color:#c0c}.person{color:#080}</style></head><body>\n",
+         .face{color:#c0c}.person{color:#080}tr.flag{background:#fee}.warn{color:#a00;font-weight:bold}\
+         </style></head><body>\n",
+    );
+    // The summary a reader needs first: faces and people per panel over all images, and
+    // the images where a face is still found after the camera (flagged, listed first).
+    let total = |what| {
+        (0..panels.len())
+            .map(|k| items.iter().map(|(_, v)| count(v, k, what)).sum::<usize>().to_string())
+            .collect::<Vec<_>>()
+            .join(" &rarr; ")
+    };
+    let flagged = items.iter().filter(|(_, v)| shows_faces(v, panels.len())).count();
+    s += &format!(
+        "<p id=\"summary\">{} images. Faces found, {arrows}: <b class=\"face\">{}</b>; people: <b class=\"person\">{}</b>. {}</p>\n",
+        items.len(),
+        total("faces"),
+        total("people"),
+        if flagged == 0 {
+            "No face is found in any picture after the camera.".to_string()
+        } else {
+            format!(
+                "<span class=\"warn\">{flagged} image{} still show{} faces after the camera</span> (listed first, marked): look at them before you share.",
+                if flagged == 1 { "" } else { "s" },
+                if flagged == 1 { "s" } else { "" }
+            )
+        }
     );
     s += &format!(
         "<h1>campro inspect</h1>\n<p>Parameters: {}. Panels, left to right: {}. \
@@ -217,17 +242,23 @@ fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, Stri
         html_escape(params),
         panels.join(", ")
     );
-    for (picture, v) in items {
+    // Flagged images first, then in input order (a stable sort).
+    let mut order: Vec<&(PathBuf, Value)> = items.iter().collect();
+    order.sort_by_key(|(_, v)| !shows_faces(v, panels.len()));
+    for (picture, v) in order {
+        let flag = shows_faces(v, panels.len());
         let counts =
             |what| (0..panels.len()).map(|k| count(v, k, what).to_string()).collect::<Vec<_>>().join(" &rarr; ");
         let link = href(picture, out);
         let json_link = href(&picture.with_extension("json"), out);
         let name = html_escape(&href_name(picture, out));
         s += &format!(
-            "<tr><td><a href=\"{link}\"><img src=\"{link}\" alt=\"{name}\" width=\"640\"></a><br>{name}</td>\
-             <td class=\"face\">{}</td><td class=\"person\">{}</td>\
+            "<tr{}><td><a href=\"{link}\"><img src=\"{link}\" alt=\"{name}\" width=\"640\"></a><br>{name}</td>\
+             <td class=\"face\">{}{}</td><td class=\"person\">{}</td>\
              <td><a href=\"{json_link}\">JSON</a></td></tr>\n",
+            if flag { " class=\"flag\"" } else { "" },
             counts("faces"),
+            if flag { "<br><span class=\"warn\">faces found after the camera</span>" } else { "" },
             counts("people"),
         );
     }
@@ -240,6 +271,12 @@ fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, Stri
         s += "</ul>\n";
     }
     s + "</body></html>\n"
+}
+
+/// Whether any panel after the first (the raw photo) of an image's JSON has a face found:
+/// the camera, or the enhanced view, shows a face a detector finds.
+fn shows_faces(v: &Value, panels: usize) -> bool {
+    (1..panels).any(|k| count(v, k, "faces") > 0)
 }
 
 /// How many `what` ("faces" or "people") panel `panel` of an image's JSON lists.
@@ -424,6 +461,30 @@ mod tests {
         assert_eq!(s[(2, 1)], Rgb([1, 2, 3]));
         assert_eq!(s[(3, 0)], Rgb([255, 255, 255]));
         assert_eq!(s[(3 + GAP, 0)], Rgb([4, 5, 6]));
+    }
+
+    #[test]
+    fn the_page_sums_up_and_lists_images_that_show_faces_first() {
+        const NAMES: [&str; 3] = ["raw", "protected", "enhanced"];
+        let item = |name: &str, faces: [usize; 3]| {
+            let panel = |k: usize, n: usize| json!({"panel": NAMES[k], "faces": vec![json!({}); n], "people": []});
+            (
+                PathBuf::from(format!("/o/{name}.png")),
+                json!({"panels": [panel(0, faces[0]), panel(1, faces[1]), panel(2, faces[2])]}),
+            )
+        };
+        let items = [item("portrait", [1, 0, 0]), item("class", [31, 0, 32]), item("street", [0, 0, 0])];
+        let html = index_html("p", &items, &[], Path::new("/o"));
+        // Totals per panel, and the one image that still shows faces named in the summary.
+        assert!(html.contains("3 images. Faces found, raw &rarr; protected &rarr; enhanced: <b class=\"face\">32 &rarr; 0 &rarr; 32</b>"), "{html}");
+        assert!(html.contains("1 image still shows faces after the camera"), "{html}");
+        // The class photo's row comes first and is marked; the others keep their order.
+        let (c, p, st) =
+            (html.find("class.png").unwrap(), html.find("portrait.png").unwrap(), html.find("street.png").unwrap());
+        assert!(c < p && p < st, "{html}");
+        assert_eq!(html.matches("<tr class=\"flag\">").count(), 1);
+        let clean = index_html("p", &items[..1], &[], Path::new("/o"));
+        assert!(clean.contains("No face is found in any picture after the camera."), "{clean}");
     }
 
     #[test]

@@ -192,4 +192,38 @@ mod tests {
             assert!(seen.iter().any(|s| s == name), "{name} has no example");
         }
     }
+
+    /// Every `campro` command in the README's and `docs/commands.md`'s shell blocks parses
+    /// as written (its flags and values exist), so the guides cannot drift from the CLI.
+    #[test]
+    fn every_guide_example_parses() {
+        let root = campro_testkit::workspace_root();
+        let mut n = 0;
+        for doc in ["README.md", "docs/commands.md"] {
+            let text = std::fs::read_to_string(root.join(doc)).unwrap();
+            let mut in_sh = false;
+            for line in text.lines() {
+                if line.starts_with("```") {
+                    in_sh = line.trim() == "```sh";
+                    continue;
+                }
+                if !in_sh {
+                    continue;
+                }
+                let line = line.split(" #").next().unwrap().trim_end_matches('\\');
+                for part in line.split('|') {
+                    let part = part.split('>').next().unwrap().trim();
+                    if !part.starts_with("campro ") {
+                        continue;
+                    }
+                    let words: Vec<&str> = part.split_whitespace().collect();
+                    if let Err(e) = Cli::try_parse_from(&words) {
+                        panic!("{doc}: {part}: {e}");
+                    }
+                    n += 1;
+                }
+            }
+        }
+        assert!(n >= 15, "only {n} examples found");
+    }
 }

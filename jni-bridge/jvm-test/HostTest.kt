@@ -202,10 +202,11 @@ fun readbackAndController(paramsJson: String) {
             val moved = PHONE.copyOf().also { it[0] = 150 }
             expect(ctl.onMeteringResult(moved, floatArrayOf(2.1f, 1.0f, 1.0f, 1.6f))) { "transform moved" }
             expect(ctl.rebuilds == 3L && ctl.meteringResults == 5L) { "counts ${ctl.rebuilds}/${ctl.meteringResults}" }
-            expect(ctl.isMeteringFrame(20) && !ctl.isMeteringFrame(21)) { "schedule" }
+            // A run of 3 metering frames (the default) at the start of each burst of 10.
+            expect(ctl.isMeteringFrame(20) && ctl.isMeteringFrame(22) && !ctl.isMeteringFrame(23)) { "schedule" }
             expect(ctl.status().startsWith("CamPro on")) { ctl.status() }
             throws<IllegalArgumentException>("gains[2]") { ctl.onMeteringResult(PHONE, floatArrayOf(1f, 1f, Float.NaN, 1f)) }
-            throws<IllegalArgumentException>("meteringInterval") { CamProController(s, meteringInterval = 1) }
+            throws<IllegalArgumentException>("meteringInterval") { CamProController(s, meteringInterval = 3) }
         }
     }
     check("device support follows Camera2's rules") {

@@ -8,21 +8,26 @@ import kotlin.math.max
  *
  * With CamPro on, frames run with `CONTROL_AWB_MODE_OFF`, `COLOR_CORRECTION_MODE_TRANSFORM_MATRIX`
  * and `TONEMAP_MODE_CONTRAST_CURVE`. AWB being off, the device no longer estimates the
- * light, so every [meteringInterval]-th frame of the repeating burst is a metering frame
- * in auto mode (AWB on) that goes only to a small metering surface, never to the preview.
+ * light, so each repeating burst of [meteringInterval] frames begins with [meteringRun]
+ * metering frames in auto mode (AWB on) that go only to a small metering surface, never to
+ * the preview. A run, not one frame: switching AWB into AUTO resets its state to INACTIVE,
+ * so a conforming device can report CONVERGED only from a later AUTO frame of the run.
  * Its `CaptureResult` gives the device's current `COLOR_CORRECTION_TRANSFORM` and
  * `COLOR_CORRECTION_GAINS` ([onMeteringResult]); the protected request is rebuilt only
  * when the native skip rule or the gains say the change matters.
  */
 class CamProController(
     val session: CamProSession,
-    /** One metering frame per this many frames (>= 2). */
-    val meteringInterval: Int = 15,
+    /** Frames of the repeating burst (> [meteringRun]). */
+    val meteringInterval: Int = 30,
+    /** Metering frames at the start of each burst (>= 1): 3 of 30 at the default, a tenth of the frames. */
+    val meteringRun: Int = 3,
     /** Relative change of any white-balance gain that triggers a rebuild. */
     val gainTolerance: Float = 1e-3f,
 ) {
     init {
-        require(meteringInterval >= 2) { "meteringInterval must be >= 2, got $meteringInterval" }
+        require(meteringRun >= 1) { "meteringRun must be >= 1, got $meteringRun" }
+        require(meteringInterval > meteringRun) { "meteringInterval must be > meteringRun ($meteringRun), got $meteringInterval" }
         require(gainTolerance >= 0f && gainTolerance.isFinite()) { "gainTolerance must be finite and >= 0, got $gainTolerance" }
     }
 
@@ -45,8 +50,8 @@ class CamProController(
     var worstReadbackBound = 0.0
         private set
 
-    /** Whether frame [frameIndex] of the burst is the metering one. */
-    fun isMeteringFrame(frameIndex: Long) = frameIndex % meteringInterval == 0L
+    /** Whether frame [frameIndex] of the repeating burst is a metering one. */
+    fun isMeteringFrame(frameIndex: Long) = frameIndex % meteringInterval < meteringRun
 
     /**
      * An auto-mode result arrived: [deviceTransform] is its `COLOR_CORRECTION_TRANSFORM`

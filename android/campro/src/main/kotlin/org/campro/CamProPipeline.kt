@@ -28,10 +28,11 @@ interface CameraRequests {
 
     /**
      * Repeat protected frames with these values (AWB off, TRANSFORM_MATRIX, CONTRAST_CURVE).
-     * With [interleaveMetering], one frame in every [meteringInterval] of the repeating burst
+     * With [interleaveMetering], the repeating burst of [meteringInterval] frames begins with
+     * [meteringRun] auto-mode metering frames (a run: AWB converges only after its first)
      * is an auto-mode metering frame (needs per-frame control: `SYNC_MAX_LATENCY_PER_FRAME_CONTROL`).
      */
-    fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int)
+    fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int)
 
     /**
      * Repeat probe frames ([PixelProbe]) with these values (AWB off, TRANSFORM_MATRIX,
@@ -54,7 +55,7 @@ interface CameraRequests {
  * the transform and curve it is sent ([PixelProbe]: once a start and physical camera;
  * a device whose pixels do not follow is Unsupported), sends CamPro's values
  * ([CameraRequests.protect]) and is `Verifying` until a protected result reads back. On a device with per-frame control
- * the repeating burst keeps one metering frame in [CamProController.meteringInterval] and the
+ * the repeating burst keeps a run of metering frames in [CamProController.meteringInterval] and the
  * values follow the light; otherwise (AUTO/OFF switches may land frames late) metering runs
  * again only on [remeter], with the preview closed meanwhile.
  *
@@ -349,7 +350,7 @@ class CamProPipeline<T>(
         val gains = controller.gains.copyOf()
         guard.requestChanged(gains, meteredPhysicalId)
         gate.clear()
-        camera.protect(session.transform.copyOf(), session.curveForRequest(), gains, perFrameControl, controller.meteringInterval)
+        camera.protect(session.transform.copyOf(), session.curveForRequest(), gains, perFrameControl, controller.meteringInterval, controller.meteringRun)
     }
 
     /** Runs [body]; any exception stops the loop closed with its message. */

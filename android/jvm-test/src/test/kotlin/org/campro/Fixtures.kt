@@ -50,9 +50,9 @@ object Fixtures {
         var failWith: Exception? = null
 
         override fun meter() { failWith?.let { throw it }; calls += "meter" }
-        override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int) {
+        override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
             failWith?.let { throw it }
-            calls += if (interleaveMetering) "protect+meter/$meteringInterval" else "protect"
+            calls += if (interleaveMetering) "protect+meter$meteringRun/$meteringInterval" else "protect"
             lastTransform = transform; lastCurve = curve; lastGains = gains
         }
         override fun halt() { calls += "halt" }

@@ -62,7 +62,7 @@ class PipelineTest {
         assertEquals(1L, p.unconvergedMeteringResults)
         assertEquals(listOf("meter"), cam.calls)
         meter(p, Fixtures.converged())
-        assertEquals(listOf("meter", "protect+meter/15"), cam.calls)
+        assertEquals(listOf("meter", "protect+meter3/30"), cam.calls)
         assertEquals(ProtectionState.Verifying, p.state)
         // What was sent is the session's conversion of the device's own transform.
         CamProSession.fromJson(Fixtures.params()).use { ref ->

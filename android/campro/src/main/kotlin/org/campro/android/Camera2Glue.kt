@@ -192,7 +192,7 @@ class CamProCamera2(
             s.setRepeatingRequest(meteringRequest(), callback, cameraHandler)
         }
 
-        override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int) {
+        override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
             val s = captureSession ?: error("no capture session")
             val d = device ?: error("no camera device")
             val protected = d.createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply {
@@ -201,7 +201,8 @@ class CamProCamera2(
                 setTag(PROTECTED)
             }.build()
             if (interleaveMetering) {
-                s.setRepeatingBurst(listOf(meteringRequest()) + List(meteringInterval - 1) { protected }, callback, cameraHandler)
+                val metering = meteringRequest()
+                s.setRepeatingBurst(List(meteringRun) { metering } + List(meteringInterval - meteringRun) { protected }, callback, cameraHandler)
             } else {
                 s.setRepeatingRequest(protected, callback, cameraHandler)
             }

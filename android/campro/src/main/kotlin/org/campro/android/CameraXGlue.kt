@@ -65,7 +65,7 @@ class CamProCameraX(
     private val requests = object : CameraRequests {
         override fun meter() = send(listOf(CaptureRequest.CONTROL_AWB_MODE to CaptureRequest.CONTROL_AWB_MODE_AUTO))
 
-        override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int) =
+        override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) =
             send(camproSettings(transform, curve, gains))
 
         override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) = send(camproSettings(transform, curve, gains))

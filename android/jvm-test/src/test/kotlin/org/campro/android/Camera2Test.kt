@@ -142,8 +142,8 @@ class Camera2Test {
         cam.onResult(CamProCamera2.METERING, converged())
         passProbe(cam, fake)
         val burst = fake.repeated.last().map { it.tag }
-        assertEquals(15, burst.size)
-        assertEquals(listOf(CamProCamera2.METERING) + List(14) { CamProCamera2.PROTECTED }, burst)
+        assertEquals(30, burst.size)
+        assertEquals(List(3) { CamProCamera2.METERING } + List(27) { CamProCamera2.PROTECTED }, burst)
         cam.onResult(CamProCamera2.PROTECTED, honoured(1))
         assertEquals(ProtectionState.Protected, cam.pipeline.state)
         cam.onResult(CamProCamera2.PROTECTED, honoured(2, floatArrayOf(0f, 0f, 1f, 1f)))

@@ -41,6 +41,8 @@ class HalScenariosTest {
         Behaviour("honest, lens covered (a flat scene)", flatScene = true) to Outcome.Protects,
         Behaviour("honest, settings 2 frames late, results 3 frames after their images", latency = 2, resultDelay = 3) to Outcome.Protects,
         Behaviour("logical camera switches its physical sensor at frame 40", physicalSwitchAt = 40) to Outcome.Protects,
+        Behaviour("the light changes at frame 40 (per-frame control: the values follow)", lightChangeAt = 40) to Outcome.Protects,
+        Behaviour("the light changes at frame 40, AWB converging over 2 frames", lightChangeAt = 40, awbSettleFrames = 1) to Outcome.Protects,
         Behaviour("disconnected at frame 40", disconnectAt = 40) to Outcome.Stops,
         Behaviour("results without CONTROL_AWB_STATE", awbStateAbsent = true) to Outcome.Refuses,
         Behaviour(
@@ -62,6 +64,9 @@ class HalScenariosTest {
     /** A flat scene: every pixel the same mid-grey sensor colour. */
     private val flat = FloatArray(3 * 256) { floatArrayOf(0.18f, 0.3f, 0.2f)[it % 3] }
 
+    /** The first sensor's transform after the light changed (warmer: less red, more blue). */
+    private val relit = intArrayOf(150, 100, -35, 100, -15, 100, -28, 100, 160, 100, -32, 100, 3, 100, -45, 100, 142, 100)
+
     /** A second physical sensor (a tele module): another transform. */
     private val tele = intArrayOf(160, 100, -45, 100, -15, 100, -35, 100, 170, 100, -35, 100, 5, 100, -60, 100, 155, 100)
 
@@ -70,18 +75,23 @@ class HalScenariosTest {
         val session = Fixtures.session()
         val reference = SimulatedHal.reference(Fixtures.params())
         try {
-            val hal = SimulatedHal(b, if (b.flatScene) flat else scene, listOf(Fixtures.PHONE, tele), Fixtures.GAINS, reference)
+            val hal = SimulatedHal(b, if (b.flatScene) flat else scene, listOf(Fixtures.PHONE, tele, relit), Fixtures.GAINS, reference)
             var delivered = 0
             var leaked = 0
             var lastDelivered = -1
             var worst = 0
+            var lastFollows = false
             val p = CamProPipeline<SimFrame>(
                 session, hal, { it.run() },
                 perFrameControl = b.latency == 0, pipelineDepth = 4 + b.resultDelay, imageQueueDepth = 6 + b.resultDelay,
                 deliver = { f ->
                     delivered++
                     lastDelivered = f.index
-                    val d = f.pixels.indices.maxOf { kotlin.math.abs((f.pixels[it].toInt() and 255) - (f.expected[it].toInt() and 255)) }
+                    fun off(want: ByteArray) = f.pixels.indices.maxOf { kotlin.math.abs((f.pixels[it].toInt() and 255) - (want[it].toInt() and 255)) }
+                    val now = off(f.expected)
+                    lastFollows = now <= BOUND_LSB
+                    // Frames still made with the values metered before a light change are protected too.
+                    val d = minOf(now, f.before?.let { off(it) } ?: Int.MAX_VALUE)
                     worst = maxOf(worst, d)
                     if (d > BOUND_LSB) leaked++
                 },
@@ -94,6 +104,7 @@ class HalScenariosTest {
             val why = mutableListOf<String>()
             if (leaked > 0) why += "$leaked frames off by up to $worst LSB reached the app"
             if (state == ProtectionState.Protected && !recent) why += "Protected, but no frame delivered in the last 10"
+            if (b.lightChangeAt >= 0 && !lastFollows) why += "the values did not follow the light (the last frame delivered is the old light's)"
             when (outcome) {
                 Outcome.Protects -> if (!(state == ProtectionState.Protected && recent)) why += "ends $state with ${delivered} frames"
                 Outcome.Refuses -> if (state == ProtectionState.Protected || (delivered > 0 && leaked > 0)) why += "ends $state"
@@ -123,7 +134,7 @@ class HalScenariosTest {
         for (r in rows) {
             assertEquals("${r.name}: ${r.why}", r.name !in KNOWN_GAPS, r.held)
         }
-        assertTrue(rows.size >= 19)
+        assertTrue(rows.size >= 21)
     }
 
     companion object {

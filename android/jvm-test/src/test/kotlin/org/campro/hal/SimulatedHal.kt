@@ -49,6 +49,8 @@ data class Behaviour(
     val flatScene: Boolean = false,
     /** The frame from which a logical camera streams from its second physical sensor (-1: never). */
     val physicalSwitchAt: Int = -1,
+    /** The frame from which the light changes: the first sensor's auto transform becomes the third one given (-1: never). */
+    val lightChangeAt: Int = -1,
     /** The frame at which the camera is disconnected (-1: never). */
     val disconnectAt: Int = -1,
     /** AUTO frames after a switch into AUTO before AWB reports CONVERGED. */
@@ -59,8 +61,12 @@ data class Behaviour(
     val offFrameAwbState: Int = 0,
 )
 
-/** One frame as the app would receive it: its index, its pixels and the pixels CamPro promises. */
-class SimFrame(val index: Int, val pixels: ByteArray, val expected: ByteArray)
+/**
+ * One frame as the app would receive it: its index, its pixels and the pixels CamPro
+ * promises; after a light change also [before], the protected output under the old light
+ * (frames still made with the values metered before the change).
+ */
+class SimFrame(val index: Int, val pixels: ByteArray, val expected: ByteArray, val before: ByteArray? = null)
 
 /**
  * A simulated Camera2 device: requests in, frames and results out, the pixels of each frame
@@ -73,7 +79,7 @@ class SimulatedHal(
     private val b: Behaviour,
     /** Linear sensor RGB of the scene, 3 floats a pixel. */
     private val scene: FloatArray,
-    /** The two physical sensors' auto-mode transforms (a logical camera switches from the first to the second). */
+    /** The physical sensors' auto-mode transforms (a logical camera switches from the first to the second; the third is the first's after a light change). */
     private val sensors: List<IntArray>,
     private val autoGains: FloatArray,
     /** A handle of CamProNative with the same parameters as the pipeline's session (the reference). */
@@ -95,9 +101,9 @@ class SimulatedHal(
 
     override fun meter() { setRepeating(listOf(Req.Auto)) }
 
-    override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int) {
+    override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
         val p = Req.Protect(transform.copyOf(), curve.copyOf(), gains.copyOf())
-        setRepeating(if (interleaveMetering) listOf<Req>(Req.Auto) + List(meteringInterval - 1) { p } else listOf(p))
+        setRepeating(if (interleaveMetering) List<Req>(meteringRun) { Req.Auto } + List(meteringInterval - meteringRun) { p } else listOf(p))
     }
 
     override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) {
@@ -150,10 +156,12 @@ class SimulatedHal(
             submitted += tagged
             val applied = submitted.getOrNull(i - b.latency) ?: Req.Auto
             val sensor = if (b.physicalSwitchAt in 0..i) 1 else 0
-            val device = sensors[sensor]
+            val relit = sensor == 0 && b.lightChangeAt in 0..i
+            val device = if (relit) sensors[2] else sensors[sensor]
             val physicalId = sensor.toString()
             val ts = 1_000_000_000L + i * 33_333_333L
             val expected = ByteArray(scene.size).also { HalNative.desktop(reference, device, autoGains, scene, it) }
+            val before = if (relit) ByteArray(scene.size).also { HalNative.desktop(reference, sensors[0], autoGains, scene, it) } else null
             when (applied) {
                 is Req.Auto -> {
                     autoRun++
@@ -166,7 +174,7 @@ class SimulatedHal(
                     if (tagged is Req.Protect) {
                         // A protected (or probe) request whose frame still carries auto settings: its result says so.
                         val report = CaptureReport(1, 1, 2, device.copyOf(), List(3) { defaultCurve.copyOf() }, autoGains.copyOf(), physicalId)
-                        deliver(p, tagged, i, ts, report, pixels, expected)
+                        deliver(p, tagged, i, ts, report, pixels, expected, before)
                     } else {
                         val reported = if (b.awbStateAbsent) null else state
                         schedule(i) { p.onMeteringResult(MeteringReport(1, reported, device.copyOf(), autoGains.copyOf(), physicalId)) }
@@ -189,7 +197,7 @@ class SimulatedHal(
                     val reportedTransform = if (b.echo || b.ignoreTransform) applied.transform else t
                     val report = CaptureReport(0, 0, 0, reportedTransform.copyOf(), List(3) { reportedCurve.copyOf() }, applied.gains.copyOf(), physicalId)
                     if (tagged is Req.Protect) {
-                        deliver(p, tagged, i, ts, report, pixels, expected)
+                        deliver(p, tagged, i, ts, report, pixels, expected, before)
                     } else {
                         // A metering request whose frame still carries protected settings: AWB reads OFF.
                         val reported = if (b.awbStateAbsent) null else b.offFrameAwbState
@@ -203,13 +211,13 @@ class SimulatedHal(
     }
 
     /** A frame of a protected or probe request, with its result: to the app's stream or (probe) the metering stream's luma. */
-    private fun deliver(p: CamProPipeline<SimFrame>, tagged: Req.Protect, i: Int, ts: Long, report: CaptureReport, pixels: ByteArray, expected: ByteArray) {
+    private fun deliver(p: CamProPipeline<SimFrame>, tagged: Req.Protect, i: Int, ts: Long, report: CaptureReport, pixels: ByteArray, expected: ByteArray, before: ByteArray?) {
         if (tagged.probe) {
             schedule(i) { p.onProbeResult(ts, report) }
             p.onProbeFrame(ts + if (b.offsetOnEveryStream) b.imageTimestampOffsetNs else 0L, org.campro.PixelProbe.lumaOfRgb(pixels))
         } else {
             schedule(i) { p.onProtectedResult(ts, report) }
-            p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected))
+            p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected, before))
         }
     }
 

@@ -159,7 +159,7 @@ pub fn read_with_metadata<'b>(
     warn: &dyn Fn(&str),
 ) -> Result<(image::DynamicImage, Lease<'b>, Metadata)> {
     let bytes = campro::file::read_capped(path, MAX_FILE_BYTES, "an image")?;
-    decode_with_metadata(path, &bytes, budget, work, warn)
+    decoded(path, &bytes, budget, work, warn, true)
 }
 
 /// [`read`] on bytes already read (`path` names them in errors).
@@ -170,17 +170,19 @@ pub fn decode<'b>(
     work: Work,
     warn: &dyn Fn(&str),
 ) -> Result<(image::DynamicImage, Lease<'b>)> {
-    decode_with_metadata(path, bytes, budget, work, warn).map(|(img, lease, _)| (img, lease))
+    decoded(path, bytes, budget, work, warn, false).map(|(img, lease, _)| (img, lease))
 }
 
-/// [`decode`] that also returns the file's [`Metadata`] (read within the header's
-/// allocation limit; a block the decoder cannot read is left out).
-pub fn decode_with_metadata<'b>(
+/// [`decode`], and the file's [`Metadata`] when `metadata` asks for it (read within the
+/// header's allocation limit; a block the decoder cannot read is left out). Without it no
+/// header is parsed twice (JPEG's EXIF and ICC are read by a second header pass).
+fn decoded<'b>(
     path: &Path,
     bytes: &[u8],
     budget: &'b Budget,
     work: Work,
     warn: &dyn Fn(&str),
+    metadata: bool,
 ) -> Result<(image::DynamicImage, Lease<'b>, Metadata)> {
     use image::ImageDecoder;
     if let Some(n) = extra_frames(bytes) {
@@ -210,9 +212,13 @@ pub fn decode_with_metadata<'b>(
     }
     // Phones store the picture as the sensor read it and say how to turn it (EXIF
     // orientation): the pixels are turned here, so every output stands as the photo was
-    // taken (outputs carry no orientation tag). The turned copy fits `need` (18 bytes a
-    // pixel against 6 for two 8-bit RGB copies).
-    let meta = Metadata { exif: decoder.exif_metadata().ok().flatten(), icc: decoder.icc_profile().ok().flatten() };
+    // taken (and says orientation 1). The turned copy fits `need` (18 bytes a pixel against
+    // 6 for two 8-bit RGB copies).
+    let meta = if metadata {
+        Metadata { exif: decoder.exif_metadata().ok().flatten(), icc: decoder.icc_profile().ok().flatten() }
+    } else {
+        Metadata::default()
+    };
     let orientation = decoder.orientation().unwrap_or(image::metadata::Orientation::NoTransforms);
     let lease = budget.take(need).expect("need is within the budget");
     let mut img = image::DynamicImage::from_decoder(decoder).map_err(|e| image_error(path, e.to_string()))?;

@@ -19,20 +19,36 @@ import cv2
 CASCADES = ["haarcascade_frontalface_default.xml", "haarcascade_profileface.xml"]
 
 
-def count(detectors, path):
+def detectors():
+    """The cascades, loaded; one line naming the fix when OpenCV lacks them."""
+    ds = [cv2.CascadeClassifier(os.path.join(cv2.data.haarcascades, c)) for c in CASCADES]
+    if any(d.empty() for d in ds):
+        raise SystemExit("the Haar cascades are missing: pip install 'opencv-python-headless<5'")
+    return ds
+
+
+def boxes(detectors, path):
+    """Every find in the image at `path`, as (x0, y0, x1, y1) in the enlarged image's pixels:
+    each cascade, and the profile one on the mirrored image too (faces turned the other way)."""
     img = cv2.imread(path, cv2.IMREAD_COLOR)
     if img is None:
         raise SystemExit(f"{path}: not an image OpenCV reads")
     grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
     grey = cv2.resize(grey, None, fx=1.5, fy=1.5, interpolation=cv2.INTER_LINEAR)
     grey = cv2.equalizeHist(grey)
-    n = 0
+    width = grey.shape[1]
+    out = []
     for d in detectors:
-        n += len(d.detectMultiScale(grey, scaleFactor=1.15, minNeighbors=5, minSize=(24, 24)))
-        # profile faces looking the other way
+        for (x, y, w, h) in d.detectMultiScale(grey, scaleFactor=1.15, minNeighbors=5, minSize=(24, 24)):
+            out.append((x, y, x + w, y + h))
         if d is detectors[-1]:
-            n += len(d.detectMultiScale(cv2.flip(grey, 1), scaleFactor=1.15, minNeighbors=5, minSize=(24, 24)))
-    return n
+            for (x, y, w, h) in d.detectMultiScale(cv2.flip(grey, 1), scaleFactor=1.15, minNeighbors=5, minSize=(24, 24)):
+                out.append((width - x - w, y, width - x, y + h))
+    return out
+
+
+def count(detectors, path):
+    return len(boxes(detectors, path))
 
 
 def stems(folder):
@@ -52,14 +68,12 @@ def main(argv):
         argv = argv[:i] + argv[i + 2:]
     if len(argv) < 2:
         raise SystemExit(__doc__)
-    detectors = [cv2.CascadeClassifier(os.path.join(cv2.data.haarcascades, c)) for c in CASCADES]
-    if any(d.empty() for d in detectors):
-        raise SystemExit("the Haar cascades are missing: pip install 'opencv-python-headless<5'")
+    ds = detectors()
     folders = [stems(f) for f in argv]
     names = sorted(set.intersection(*(set(f) for f in folders)))
     rows = []
     for name in names:
-        rows.append([name] + [count(detectors, f[name]) for f in folders])
+        rows.append([name] + [count(ds, f[name]) for f in folders])
     print(f"{len(names)} images in all {len(argv)} folders")
     for j, folder in enumerate(argv):
         faces = sum(r[j + 1] for r in rows)

@@ -5,16 +5,9 @@ Usage: match_raw.py COUNTS.csv ROOT (the folders named in the CSV header, under 
 import csv, os, sys, cv2
 import importlib.util
 spec = importlib.util.spec_from_file_location("cf", os.path.join(os.path.dirname(os.path.abspath(__file__)), "count_faces.py")); cf = importlib.util.module_from_spec(spec); spec.loader.exec_module(cf)
-dets = [cv2.CascadeClassifier(os.path.join(cv2.data.haarcascades, c)) for c in cf.CASCADES]
+dets = cf.detectors()
 def boxes(path):
-    img = cv2.imread(path); g = cv2.equalizeHist(cv2.resize(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY), None, fx=1.5, fy=1.5))
-    out = []
-    for i, d in enumerate(dets):
-        for (x,y,w,h) in d.detectMultiScale(g, scaleFactor=1.15, minNeighbors=5, minSize=(24,24)): out.append((x,y,x+w,y+h))
-        if i == len(dets)-1:
-            W = g.shape[1]
-            for (x,y,w,h) in d.detectMultiScale(cv2.flip(g,1), scaleFactor=1.15, minNeighbors=5, minSize=(24,24)): out.append((W-x-w,y,W-x,y+h))
-    return out
+    return cf.boxes(dets, path)
 def iou(a,b):
     ix=max(0,min(a[2],b[2])-max(a[0],b[0])); iy=max(0,min(a[3],b[3])-max(a[1],b[1])); i=ix*iy
     u=(a[2]-a[0])*(a[3]-a[1])+(b[2]-b[0])*(b[3]-b[1])-i

@@ -148,15 +148,4 @@ object PixelProbe {
         }
         return out.toByteArray()
     }
-
-    /** BT.601 luma (0..255) of interleaved 8-bit RGB, every [stride]-th pixel: what a YUV stream's Y plane carries. */
-    fun lumaOfRgb(rgb: ByteArray, stride: Int = 1): ByteArray {
-        require(stride >= 1) { "stride must be >= 1, got $stride" }
-        val n = rgb.size / 3
-        return ByteArray((n + stride - 1) / stride) { k ->
-            val i = 3 * k * stride
-            val y = (299 * (rgb[i].toInt() and 255) + 587 * (rgb[i + 1].toInt() and 255) + 114 * (rgb[i + 2].toInt() and 255) + 500) / 1000
-            y.toByte()
-        }
-    }
 }

@@ -400,7 +400,7 @@ class PipelineTest {
         assertEquals(null, PixelProbe.verdict(70, 70 + PixelProbe.MIN_STEP))
         assertTrue(PixelProbe.verdict(70, 70 + PixelProbe.MIN_STEP - 1)!!.contains("do not follow"))
         // Luma of RGB: BT.601 weights, rounded: (299 * 255 + 500) / 1000 = 76.
-        assertTrue(byteArrayOf(76, 150.toByte(), 29).contentEquals(PixelProbe.lumaOfRgb(byteArrayOf(-1, 0, 0, 0, -1, 0, 0, 0, -1))))
+        assertTrue(byteArrayOf(76, 150.toByte(), 29).contentEquals(org.campro.hal.lumaOfRgb(byteArrayOf(-1, 0, 0, 0, -1, 0, 0, 0, -1))))
         // A Y plane with row padding and 2-byte pixels, sampled every 2nd pixel of every 2nd row.
         val plane = java.nio.ByteBuffer.wrap(ByteArray(4 * 10) { it.toByte() }) // 4 rows of 10 bytes: 4 pixels of stride 2 + 2 padding
         val luma = PixelProbe.lumaOfPlane(plane, 4, 4, 10, 2, 2)

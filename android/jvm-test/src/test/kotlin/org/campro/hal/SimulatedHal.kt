@@ -214,7 +214,7 @@ class SimulatedHal(
     private fun deliver(p: CamProPipeline<SimFrame>, tagged: Req.Protect, i: Int, ts: Long, report: CaptureReport, pixels: ByteArray, expected: ByteArray, before: ByteArray?) {
         if (tagged.probe) {
             schedule(i) { p.onProbeResult(ts, report) }
-            p.onProbeFrame(ts + if (b.offsetOnEveryStream) b.imageTimestampOffsetNs else 0L, org.campro.PixelProbe.lumaOfRgb(pixels))
+            p.onProbeFrame(ts + if (b.offsetOnEveryStream) b.imageTimestampOffsetNs else 0L, lumaOfRgb(pixels))
         } else {
             schedule(i) { p.onProtectedResult(ts, report) }
             p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected, before))
@@ -239,4 +239,10 @@ class SimulatedHal(
         /** A reference handle for [HalNative.desktop] with the parameters [json]. */
         fun reference(json: String): Long = CamProNative.create(json, 64, 65536, 0.0)
     }
+}
+
+/** What a YUV stream's Y plane carries for interleaved 8-bit RGB: BT.601 luma (0..255), rounded. */
+fun lumaOfRgb(rgb: ByteArray): ByteArray = ByteArray(rgb.size / 3) { k ->
+    val i = 3 * k
+    ((299 * (rgb[i].toInt() and 255) + 587 * (rgb[i + 1].toInt() and 255) + 114 * (rgb[i + 2].toInt() and 255) + 500) / 1000).toByte()
 }

@@ -282,7 +282,7 @@ fn note_assumed_identity(d: &DeviceArgs) {
 }
 
 /// The words of [`note_assumed_identity`].
-pub const NO_DEVICE_TRANSFORM: &str = "note: no device transform given, so the identity was assumed (a camera whose own colour transform does nothing; no phone is one). For a phone, give the COLOR_CORRECTION_TRANSFORM of one of its auto-mode results: --device-ccm A11 .. A33, or --capture-result result.json (docs/commands.md says how to save one); --ct K uses the file's own calibration.";
+const NO_DEVICE_TRANSFORM: &str = "note: no device transform given, so the identity was assumed (a camera whose own colour transform does nothing; no phone is one). For a phone, give the COLOR_CORRECTION_TRANSFORM of one of its auto-mode results: --device-ccm A11 .. A33, or --capture-result result.json (docs/commands.md says how to save one); --ct K uses the file's own calibration.";
 
 /// The device matrix and conversion options from the command line.
 pub fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {

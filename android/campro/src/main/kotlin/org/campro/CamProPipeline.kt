@@ -85,6 +85,13 @@ class CamProPipeline<T>(
     private val onState: (ProtectionState) -> Unit = {},
     /** Metering results in a row without transform or gains after which the device is Unsupported. */
     val meteringKeyLimit: Int = 30,
+    /**
+     * Largest deviation of the reported values from the ideal camera the app accepts, 8-bit
+     * LSB ([ProtectionGuard.maxDeviationLsb]). The default 0.5 refuses a HAL that rounds the
+     * matrix to 1/1024 (about 4.7 LSB for `campro-omega-0.5`); raise it only for a preset
+     * evaluated with that device's rounding (`campro convert --capture-result`).
+     */
+    maxDeviationLsb: Double = 0.5,
 ) {
     init {
         require(pipelineDepth >= 1) { "pipelineDepth must be >= 1, got $pipelineDepth" }
@@ -93,7 +100,7 @@ class CamProPipeline<T>(
     }
 
     /** The fail-closed state. */
-    val guard = ProtectionGuard(session, trustMissingKeys = trustMissingKeys)
+    val guard = ProtectionGuard(session, maxDeviationLsb = maxDeviationLsb, trustMissingKeys = trustMissingKeys)
 
     /** When to rebuild and with which gains. */
     val controller = CamProController(session)
@@ -298,6 +305,12 @@ class CamProPipeline<T>(
         if (!running) return drop(frame)
         gate.onFrame(timestampNs, frame)
     }
+
+    /**
+     * The camera will never deliver the protected frame at [timestampNs] (Camera2's
+     * `onCaptureBufferLost`, its timestamp from `onCaptureStarted`): see [FrameGate.onFrameLost].
+     */
+    fun onFrameLost(timestampNs: Long) = gate.onFrameLost(timestampNs)
 
     /** The camera failed, was disconnected or closed: closed, nothing waiting survives. */
     @Synchronized

@@ -297,6 +297,8 @@ class FrameGate<T>(
 ) {
     private val waiting = LinkedHashMap<Long, T>()
     private val verdicts = LinkedHashMap<Long, Boolean>()
+    /** Timestamps of frames the camera said it lost ([onFrameLost]) whose results have not come yet. */
+    private val lost = LinkedHashSet<Long>()
     private var stopped = false
     /** Passing verdicts in a row that found no frame (the health check; see [unmatchedLimit]). */
     private var unmatchedInARow = 0
@@ -345,6 +347,21 @@ class FrameGate<T>(
         release(out)
     }
 
+    /**
+     * The camera will never deliver the frame at [timestampNs] (`onCaptureBufferLost`: the
+     * app holds every buffer of the stream, or the HAL dropped it). Its verdict is then no
+     * sign of mismatched timestamps: it is forgotten without counting towards
+     * [unmatchedLimit], so an app that holds its frames for a while never reads Violated.
+     */
+    fun onFrameLost(timestampNs: Long) {
+        synchronized(this) {
+            if (verdicts.remove(timestampNs) == null) {
+                lost += timestampNs
+                while (lost.size > maxPendingVerdicts) lost.remove(lost.first())
+            }
+        }
+    }
+
     /** The result of the protected frame at [timestampNs] arrived: checks it and releases that frame. */
     fun onResult(timestampNs: Long, report: CaptureReport): ProtectionState {
         val out = ArrayList<Pair<T, Boolean>>(1)
@@ -356,6 +373,8 @@ class FrameGate<T>(
             if (frame != null) {
                 matched()
                 out += frame to ok
+            } else if (lost.remove(timestampNs)) {
+                // Its frame was lost: the verdict has nothing to release.
             } else if (!stopped) {
                 verdicts[timestampNs] = ok
                 while (verdicts.size > maxPendingVerdicts) {
@@ -384,6 +403,7 @@ class FrameGate<T>(
             out = waiting.values.map { it to false }
             waiting.clear()
             verdicts.clear()
+            lost.clear()
         }
         release(out)
     }

@@ -302,9 +302,39 @@ class CamProCamera2(
         }
     }
 
+    /**
+     * Sensor timestamps of the protected captures started lately, by frame number (a lost
+     * buffer is named by frame number only). Touched on [cameraHandler]'s thread only.
+     */
+    private val started = object : LinkedHashMap<Long, Long>() {
+        override fun removeEldestEntry(eldest: MutableMap.MutableEntry<Long, Long>?) = size > STARTED_KEPT
+    }
+
     private val callback = object : CameraCaptureSession.CaptureCallback() {
+        override fun onCaptureStarted(s: CameraCaptureSession, request: CaptureRequest, timestamp: Long, frameNumber: Long) =
+            onStarted(request.tag, timestamp, frameNumber)
+
         override fun onCaptureCompleted(s: CameraCaptureSession, request: CaptureRequest, result: TotalCaptureResult) =
             onResult(request.tag, result)
+
+        override fun onCaptureBufferLost(s: CameraCaptureSession, request: CaptureRequest, target: android.view.Surface, frameNumber: Long) =
+            onBufferLost(request.tag, frameNumber, target == frames.surface)
+    }
+
+    /** A capture started at sensor time [timestamp] (internal: tests call it). */
+    internal fun onStarted(tag: Any?, timestamp: Long, frameNumber: Long) {
+        if (tag == PROTECTED) started[frameNumber] = timestamp
+    }
+
+    /**
+     * A capture's buffer for [toFrames] (the protected reader) was lost (internal: tests
+     * call it): the app holds every image of the stream, or the HAL dropped the buffer.
+     * Its result must not count as one whose frame never matched ([CamProPipeline.onFrameLost]).
+     */
+    internal fun onBufferLost(tag: Any?, frameNumber: Long, toFrames: Boolean) {
+        if (tag != PROTECTED || !toFrames) return
+        val ts = started.remove(frameNumber) ?: return
+        pipeline.onFrameLost(ts)
     }
 
     /** One completed capture, routed by its request's tag (internal: tests feed scripted results). */
@@ -357,5 +387,7 @@ class CamProCamera2(
         internal const val METERING = "campro-metering"
         internal const val PROTECTED = "campro-protected"
         internal const val PROBE = "campro-probe"
+        /** Started protected captures remembered for [onBufferLost]: more than the pipeline holds in flight. */
+        private const val STARTED_KEPT = 64
     }
 }

@@ -180,6 +180,35 @@ class Camera2Test {
     }
 
     @Test
+    fun lostBuffersAreNotTakenForMismatchedTimestamps() {
+        val chars = supportedCharacteristics(syncLatency = 0)
+        val dev = openDevice(chars)
+        val states = mutableListOf<ProtectionState>()
+        val cam = camera(chars, states)
+        val fake = FakeSession(dev)
+        cam.onConfigured(dev, fake)
+        cam.onResult(CamProCamera2.METERING, converged())
+        passProbe(cam, fake)
+        val limit = cam.pipeline.gate.unmatchedLimit
+        // The app holds every image: each protected capture starts, loses its buffer, and its result verifies.
+        for (n in 1L..(2L * limit)) {
+            cam.onStarted(CamProCamera2.PROTECTED, 1000L + n, n)
+            cam.onBufferLost(CamProCamera2.PROTECTED, n, toFrames = true)
+            cam.onResult(CamProCamera2.PROTECTED, honoured(1000L + n))
+        }
+        assertEquals("lost buffers are not a timestamp mismatch", ProtectionState.Protected, cam.pipeline.state)
+        // A buffer lost to another stream, or a capture never seen starting, says nothing: the health check still trips.
+        for (n in (2L * limit + 1)..(4L * limit)) {
+            cam.onStarted(CamProCamera2.METERING, 1000L + n, n)
+            cam.onBufferLost(CamProCamera2.PROTECTED, n, toFrames = true)
+            cam.onResult(CamProCamera2.PROTECTED, honoured(1000L + n))
+        }
+        val s = cam.pipeline.state
+        assertTrue("$s", s is ProtectionState.Violated && s.reason.contains("matched no frame"))
+        cam.close()
+    }
+
+    @Test
     fun closeReleasesTheProtectedReaderOnlyAfterQueuedDeliveries() {
         val chars = supportedCharacteristics(syncLatency = 0)
         val dev = openDevice(chars)

@@ -13,7 +13,7 @@ import java.io.File
  * The library on simulated cameras that behave as real HALs may (`SimulatedHal`): each
  * frame's pixels come from the settings the device applied to it, and the assertion is on
  * pixels. A scenario holds when no frame whose pixels differ from the desktop pipeline's
- * output for its scene by more than [BOUND_LSB] reaches the app, and the state says the
+ * output for its scene by more than [App.boundLsb] reaches the app, and the state says the
  * truth: Protected only while frames are delivered; a camera that can protect ends
  * Protected with frames; one that cannot be verified ends Unsupported or Violated with
  * none delivered; a disconnected one ends Stopped.
@@ -22,16 +22,37 @@ class HalScenariosTest {
     /** What a scenario must end in, besides "no frame leaked". */
     enum class Outcome { Protects, Refuses, Stops }
 
-    class Row(val name: String, val frames: Int, val delivered: Int, val leaked: Int, val state: ProtectionState, val held: Boolean, val why: String)
+    /** What the app does: its settings and how it treats its frames and its lifecycle. */
+    data class App(
+        /** [CamProPipeline]'s `maxDeviationLsb`: the largest deviation from the ideal camera accepted, 8-bit LSB. */
+        val acceptLsb: Double = 0.5,
+        /** From this frame to [holdUntil] the app keeps every frame it gets open (-1: never): the stream runs out of buffers. */
+        val holdFrom: Int = -1,
+        val holdUntil: Int = -1,
+        /** At this frame the app pauses (`stop()`), at [resumeAt] it starts again (-1: never). */
+        val pauseAt: Int = -1,
+        val resumeAt: Int = -1,
+    ) {
+        /** Largest difference a delivered frame may show from the desktop pipeline: the accepted deviation (at least the conversion's bound, under 0.5) plus 8-bit rounding. */
+        val boundLsb: Int get() = kotlin.math.ceil(maxOf(acceptLsb, 0.5)).toInt() + 1
+    }
 
-    private val scenarios: List<Pair<Behaviour, Outcome>> = listOf(
+    class Scenario(val hal: Behaviour, val outcome: Outcome, val app: App = App()) {
+        val name: String get() = hal.name
+    }
+
+    class Row(val name: String, val frames: Int, val delivered: Int, val lost: Int, val leaked: Int, val state: ProtectionState, val held: Boolean, val why: String)
+
+    private infix fun Behaviour.to(o: Outcome) = Scenario(this, o)
+
+    private val scenarios: List<Scenario> = listOf(
         Behaviour("honest, per-frame control") to Outcome.Protects,
         Behaviour("settings 2 frames late (SYNC_MAX_LATENCY 2)", latency = 2) to Outcome.Protects,
         Behaviour("results 3 frames after their images", resultDelay = 3) to Outcome.Protects,
         Behaviour("results out of order (pairs swapped)", swapResults = true) to Outcome.Protects,
         Behaviour("one result in 7 lost", loseResultEvery = 7) to Outcome.Protects,
         Behaviour("AWB converges over 5 frames", awbSettleFrames = 5) to Outcome.Protects,
-        Behaviour("matrices rounded to 1/1024 (Q10)", matrixStep = 1024) to Outcome.Protects,
+        Behaviour("matrices rounded to 1/1024 (Q10)", matrixStep = 1024) to Outcome.Refuses,
         Behaviour("matrices rounded to 1/128 (Q7)", matrixStep = 128) to Outcome.Refuses,
         Behaviour("curve resampled to 17 points", curvePoints = 17) to Outcome.Refuses,
         Behaviour("display timestamp base on the protected stream (image 5 ms after the sensor)", imageTimestampOffsetNs = 5_000_000) to Outcome.Refuses,
@@ -49,6 +70,10 @@ class HalScenariosTest {
             "settings 2 frames late, re-metered at a sensor switch, AWB-off frames reported CONVERGED",
             latency = 2, physicalSwitchAt = 40, offFrameAwbState = CamProPipeline.AWB_STATE_CONVERGED,
         ) to Outcome.Protects,
+        Scenario(Behaviour("matrices rounded to 1/1024 (Q10), the app accepting 5 LSB", matrixStep = 1024), Outcome.Protects, App(acceptLsb = 5.0)),
+        Scenario(Behaviour("the app holds every frame from 30 to 60 (the stream runs out of buffers)"), Outcome.Protects, App(holdFrom = 30, holdUntil = 60)),
+        Scenario(Behaviour("paused at frame 30, resumed at 45"), Outcome.Protects, App(pauseAt = 30, resumeAt = 45)),
+        Scenario(Behaviour("paused at frame 30, resumed at 45, settings 2 frames late", latency = 2), Outcome.Protects, App(pauseAt = 30, resumeAt = 45)),
     )
 
     /** A scene of 256 linear sensor colours: a grid over the gamut, greys and skin-like tones. */
@@ -70,47 +95,68 @@ class HalScenariosTest {
     /** A second physical sensor (a tele module): another transform. */
     private val tele = intArrayOf(160, 100, -45, 100, -15, 100, -35, 100, 170, 100, -35, 100, 5, 100, -60, 100, 155, 100)
 
-    private fun run(b: Behaviour, outcome: Outcome): Row {
+    private fun run(sc: Scenario): Row {
+        val b = sc.hal
+        val app = sc.app
         Fixtures.load()
         val session = Fixtures.session()
         val reference = SimulatedHal.reference(Fixtures.params())
         try {
-            val hal = SimulatedHal(b, if (b.flatScene) flat else scene, listOf(Fixtures.PHONE, tele, relit), Fixtures.GAINS, reference)
+            val queue = 6 + b.resultDelay
+            val hal = SimulatedHal(b, if (b.flatScene) flat else scene, listOf(Fixtures.PHONE, tele, relit), Fixtures.GAINS, reference, bufferPool = queue)
             var delivered = 0
             var leaked = 0
             var lastDelivered = -1
             var worst = 0
             var lastFollows = false
+            var frameNow = 0
+            val held = ArrayList<SimFrame>()
+            val states = ArrayList<ProtectionState>()
             val p = CamProPipeline<SimFrame>(
                 session, hal, { it.run() },
-                perFrameControl = b.latency == 0, pipelineDepth = 4 + b.resultDelay, imageQueueDepth = 6 + b.resultDelay,
+                perFrameControl = b.latency == 0, pipelineDepth = 4 + b.resultDelay, imageQueueDepth = queue,
+                maxDeviationLsb = app.acceptLsb,
                 deliver = { f ->
                     delivered++
                     lastDelivered = f.index
                     fun off(want: ByteArray) = f.pixels.indices.maxOf { kotlin.math.abs((f.pixels[it].toInt() and 255) - (want[it].toInt() and 255)) }
                     val now = off(f.expected)
-                    lastFollows = now <= BOUND_LSB
+                    lastFollows = now <= app.boundLsb
                     // Frames still made with the values metered before a light change are protected too.
                     val d = minOf(now, f.before?.let { off(it) } ?: Int.MAX_VALUE)
                     worst = maxOf(worst, d)
-                    if (d > BOUND_LSB) leaked++
+                    if (d > app.boundLsb) leaked++
+                    if (frameNow in app.holdFrom until app.holdUntil) held += f else f.close()
                 },
-                drop = {},
+                drop = { it.close() },
+                onState = { states += it },
             )
             p.start(Fixtures.supported())
-            hal.run(FRAMES, p)
+            hal.run(FRAMES, p) { i ->
+                frameNow = i + 1
+                if (i + 1 == app.holdUntil) { held.forEach { it.close() }; held.clear() }
+                if (i + 1 == app.pauseAt) p.stop("paused")
+                if (i + 1 == app.resumeAt) p.start(Fixtures.supported())
+            }
             val state = p.state
             val recent = lastDelivered >= FRAMES - 10
             val why = mutableListOf<String>()
             if (leaked > 0) why += "$leaked frames off by up to $worst LSB reached the app"
+            if (app.holdFrom >= 0) {
+                if (hal.lostFrames == 0) why += "no buffer ran out: the scenario tests nothing"
+                val firstProtected = states.indexOf(ProtectionState.Protected)
+                val after = if (firstProtected < 0) emptyList() else states.drop(firstProtected)
+                after.firstOrNull { it is ProtectionState.Violated }?.let { why += "said $it while the app held its frames (${hal.lostFrames} buffers lost)" }
+            }
+            if (app.pauseAt >= 0 && states.none { it is ProtectionState.Stopped && it.reason == "paused" }) why += "never said Stopped while paused"
             if (state == ProtectionState.Protected && !recent) why += "Protected, but no frame delivered in the last 10"
             if (b.lightChangeAt >= 0 && !lastFollows) why += "the values did not follow the light (the last frame delivered is the old light's)"
-            when (outcome) {
-                Outcome.Protects -> if (!(state == ProtectionState.Protected && recent)) why += "ends $state with ${delivered} frames"
+            when (sc.outcome) {
+                Outcome.Protects -> if (!(state == ProtectionState.Protected && recent)) why += "ends $state with ${delivered} frames (states: ${states.joinToString(" > ") { it.javaClass.simpleName }})"
                 Outcome.Refuses -> if (state == ProtectionState.Protected || (delivered > 0 && leaked > 0)) why += "ends $state"
                 Outcome.Stops -> if (state !is ProtectionState.Stopped) why += "ends $state"
             }
-            return Row(b.name, FRAMES, delivered, leaked, state, why.isEmpty(), why.joinToString("; "))
+            return Row(b.name, FRAMES, delivered, hal.lostFrames, leaked, state, why.isEmpty(), why.joinToString("; "))
         } finally {
             CamProNative.close(reference)
             session.close()
@@ -119,11 +165,11 @@ class HalScenariosTest {
 
     @Test
     fun everyScenarioHoldsOrIsAKnownGap() {
-        val rows = scenarios.map { (b, o) -> run(b, o) }
+        val rows = scenarios.map { run(it) }
         val table = buildString {
-            appendLine("| scenario | frames | delivered | leaked | final state | held |")
-            appendLine("|---|---|---|---|---|---|")
-            for (r in rows) appendLine("| ${r.name} | ${r.frames} | ${r.delivered} | ${r.leaked} | ${r.state} | ${if (r.held) "yes" else "no: ${r.why}"} |")
+            appendLine("| scenario | frames | delivered | buffers lost | leaked | final state | held |")
+            appendLine("|---|---|---|---|---|---|---|")
+            for (r in rows) appendLine("| ${r.name} | ${r.frames} | ${r.delivered} | ${r.lost} | ${r.leaked} | ${r.state} | ${if (r.held) "yes" else "no: ${r.why}"} |")
         }
         File("target").mkdirs()
         File("target/hal-scenarios.md").writeText(table)
@@ -134,21 +180,13 @@ class HalScenariosTest {
         for (r in rows) {
             assertEquals("${r.name}: ${r.why}", r.name !in KNOWN_GAPS, r.held)
         }
-        assertTrue(rows.size >= 21)
+        assertTrue(rows.size >= 25)
     }
 
     companion object {
         const val FRAMES = 90
-        /** Largest difference a protected frame may show from the desktop pipeline: the conversion's bound (< 0.5) plus 8-bit rounding. */
-        const val BOUND_LSB = 1
 
-        /**
-         * Behaviours the library does not hold yet (docs/android.md, "What the simulated
-         * camera shows"): a HAL that rounds to 1/1024 could be served by a request already on
-         * its grid (today it ends Unsupported, nothing shown).
-         */
-        val KNOWN_GAPS: Set<String> = setOf(
-            "matrices rounded to 1/1024 (Q10)",
-        )
+        /** Behaviours the library does not hold yet (docs/android.md, "What the simulated camera shows"). */
+        val KNOWN_GAPS: Set<String> = emptySet()
     }
 }

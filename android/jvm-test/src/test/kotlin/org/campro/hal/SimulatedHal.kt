@@ -66,7 +66,16 @@ data class Behaviour(
  * promises; after a light change also [before], the protected output under the old light
  * (frames still made with the values metered before the change).
  */
-class SimFrame(val index: Int, val pixels: ByteArray, val expected: ByteArray, val before: ByteArray? = null)
+class SimFrame(val index: Int, val pixels: ByteArray, val expected: ByteArray, val before: ByteArray? = null, private val onClose: () -> Unit = {}) : AutoCloseable {
+    private var closed = false
+
+    /** Gives its buffer back to the stream (an `Image.close()`); twice is a test failure. */
+    override fun close() {
+        check(!closed) { "frame $index closed twice" }
+        closed = true
+        onClose()
+    }
+}
 
 /**
  * A simulated Camera2 device: requests in, frames and results out, the pixels of each frame
@@ -84,7 +93,16 @@ class SimulatedHal(
     private val autoGains: FloatArray,
     /** A handle of CamProNative with the same parameters as the pipeline's session (the reference). */
     private val reference: Long,
+    /** Buffers of the protected stream (the `ImageReader`'s maxImages): with all of them open, a frame's buffer is lost. */
+    private val bufferPool: Int = 6,
 ) : CameraRequests {
+    /** Protected frames handed to the pipeline and not closed yet. */
+    private var open = 0
+
+    /** Protected frames whose buffer was lost (every buffer was open). */
+    var lostFrames = 0
+        private set
+
     private sealed class Req {
         object Auto : Req()
         /** CamPro-style settings: a protected request, or a probe ([probe]) when [probe] is set. */
@@ -150,7 +168,12 @@ class SimulatedHal(
                 repeating = emptyList()
             }
             deliverResults(i)
-            if (repeating.isEmpty()) { onFrame(i); continue }
+            if (repeating.isEmpty()) {
+                // Nothing repeats: no frame (its slot stays, so frame i still applies entry i - latency).
+                submitted += null
+                onFrame(i)
+                continue
+            }
             val tagged = repeating[cursor % repeating.size]
             cursor++
             submitted += tagged
@@ -217,7 +240,14 @@ class SimulatedHal(
             p.onProbeFrame(ts + if (b.offsetOnEveryStream) b.imageTimestampOffsetNs else 0L, lumaOfRgb(pixels))
         } else {
             schedule(i) { p.onProtectedResult(ts, report) }
-            p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected, before))
+            if (open >= bufferPool) {
+                // No free buffer: the frame is lost, and Camera2 says so (onCaptureBufferLost).
+                lostFrames++
+                p.onFrameLost(ts)
+                return
+            }
+            open++
+            p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected, before) { open-- })
         }
     }
 

@@ -3,35 +3,41 @@ package org.campro.android
 // CameraX support: CamProPipeline on a CameraX camera. CamPro's values (and the metering
 // switches) are set through Camera2 interop, every result is checked by the same fail-closed
 // ProtectionGuard, and ImageAnalysis frames wait in the FrameGate until their own result
-// verifies. A plain Preview use case is NOT fail-closed: CameraX feeds it straight from the
-// camera, before any result is checked. Show the gated ImageAnalysis frames instead.
+// verifies. CamPro owns the binding: `bind` binds its gated ImageAnalysis alone (a Preview,
+// ImageCapture or VideoCapture beside it would be fed straight from the camera, before any
+// result is checked, and interop options would reach still captures too):
 //
 //     val campro = CamProCameraX(session, mainExecutor, deliver = { image -> render(image) }, onState = ::show)
-//     val analysis = ImageAnalysis.Builder().also { campro.extend(it) }.build()
-//     analysis.setAnalyzer(cameraExecutor, campro.analyzer)
-//     val camera = provider.bindToLifecycle(owner, selector, analysis)   // no Preview
-//     campro.start(Camera2CameraControl.from(camera.cameraControl), support)
+//     campro.bind(provider, owner, CameraSelector.DEFAULT_BACK_CAMERA, cameraManager, cameraExecutor)
 //
 // Compiled against Robolectric's android-all and android/jvm-test/stubs (the CameraX API it
 // uses; Google's Maven is not reachable here) and run under Robolectric by android/check-on-jvm.sh.
 
 import android.hardware.camera2.CameraCaptureSession
+import android.hardware.camera2.CameraManager
 import android.hardware.camera2.CaptureRequest
 import android.hardware.camera2.CaptureResult
 import android.hardware.camera2.TotalCaptureResult
 import androidx.annotation.OptIn
 import androidx.camera.camera2.interop.Camera2CameraControl
+import androidx.camera.camera2.interop.Camera2CameraInfo
 import androidx.camera.camera2.interop.Camera2Interop
 import androidx.camera.camera2.interop.CaptureRequestOptions
 import androidx.camera.camera2.interop.ExperimentalCamera2Interop
+import androidx.camera.core.Camera
+import androidx.camera.core.CameraControl
+import androidx.camera.core.CameraSelector
 import androidx.camera.core.ImageAnalysis
 import androidx.camera.core.ImageProxy
+import androidx.camera.lifecycle.ProcessCameraProvider
+import androidx.lifecycle.LifecycleOwner
 import org.campro.CamProPipeline
 import org.campro.CamProSession
 import org.campro.CameraRequests
 import org.campro.DeviceSupport
 import org.campro.PixelProbe
 import org.campro.ProtectionState
+import java.util.concurrent.ExecutionException
 import java.util.concurrent.Executor
 
 /**
@@ -120,11 +126,98 @@ class CamProCameraX(
         }
     }
 
+    /** The provider and use case of [bind] (`null`: not bound by the library). */
+    private var bound: Pair<ProcessCameraProvider, ImageAnalysis>? = null
+
+    /**
+     * Binds CamPro's gated `ImageAnalysis` **alone** to [owner] on the camera [selector]
+     * picks, and starts: the library owns the binding. Everything bound to [provider] is
+     * unbound first: a `Preview`, `ImageCapture` or `VideoCapture` beside the analysis
+     * would get frames straight from the camera (metering frames in auto mode, frames whose
+     * result never verified), and interop options would apply to still captures too. Show
+     * and record the gated frames instead. The camera's support is read from its Camera2
+     * characteristics ([cameras]); an unsupported camera ends Unsupported with nothing
+     * delivered. [configure] may set the analysis' resolution or output format; its queue
+     * depth, back-pressure and callbacks are CamPro's. Frames are analysed on
+     * [analysisExecutor]. CameraX closes and reopens the camera with [owner]'s lifecycle:
+     * each new capture session starts CamPro again (metering, the pixel probe), and a closed
+     * one stops it.
+     *
+     * What CameraX cannot let a library prove (and the stubs cannot show): that the app
+     * binds nothing to this provider afterwards. CameraX has no way to list or refuse use
+     * cases; binding one more reconfigures the session, which restarts CamPro's checks but
+     * cannot close the other use case's stream.
+     */
+    fun bind(
+        provider: ProcessCameraProvider,
+        owner: LifecycleOwner,
+        selector: CameraSelector,
+        cameras: CameraManager,
+        analysisExecutor: Executor,
+        configure: (ImageAnalysis.Builder) -> Unit = {},
+    ): Camera {
+        check(bound == null) { "CamProCameraX.bind: already bound (unbind() first)" }
+        val builder = ImageAnalysis.Builder()
+        configure(builder)
+        extend(builder)
+        Camera2Interop.Extender(builder).setSessionStateCallback(sessionCallback)
+        val analysis = builder.build()
+        analysis.setAnalyzer(analysisExecutor, analyzer)
+        provider.unbindAll()
+        val camera = provider.bindToLifecycle(owner, selector, analysis)
+        bound = provider to analysis
+        val support = try {
+            cameras.getCameraCharacteristics(Camera2CameraInfo.from(camera.cameraInfo).cameraId).camproSupport()
+        } catch (e: Exception) {
+            DeviceSupport.Result.Unsupported(listOf("the camera's characteristics cannot be read: ${e.javaClass.simpleName}: ${e.message}"))
+        }
+        this.support = support
+        start(Camera2CameraControl.from(camera.cameraControl), support)
+        return camera
+    }
+
+    /** Stops CamPro and unbinds its analysis from the provider of [bind]. */
+    fun unbind() {
+        stop()
+        val (provider, analysis) = bound ?: return
+        bound = null
+        provider.unbind(analysis)
+    }
+
+    /** The support of the camera bound by [bind] (`null` before). */
+    @Volatile
+    var support: DeviceSupport.Result? = null
+        private set
+
     /** Starts metering on the bound camera ([support] from its characteristics); closed until verified. */
     fun start(control: Camera2CameraControl, support: DeviceSupport.Result) {
         this.control = control
+        this.support = support
         pipeline.start(support)
     }
+
+    /**
+     * The capture session's life (set by [bind]): CameraX closes the camera when the
+     * lifecycle stops (pause, multi-window eviction) and opens a new session when it
+     * starts again, so CamPro starts again on every configured session after the first.
+     */
+    private val sessionCallback = object : CameraCaptureSession.StateCallback() {
+        override fun onConfigured(s: CameraCaptureSession) = onSessionConfigured()
+        override fun onConfigureFailed(s: CameraCaptureSession) = pipeline.onCameraStopped("the capture session could not be configured")
+        override fun onClosed(s: CameraCaptureSession) = onSessionClosed()
+    }
+
+    /** Sessions configured since [bind]. */
+    private val sessionsConfigured = java.util.concurrent.atomic.AtomicInteger()
+
+    /** A capture session of the bound camera is configured (internal: tests call it): every one after the first starts CamPro again. */
+    internal fun onSessionConfigured() {
+        val supp = support
+        if (sessionsConfigured.getAndIncrement() > 0 && control != null && supp != null) pipeline.start(supp)
+    }
+
+    /** The bound camera's capture session closed (internal: tests call it): stopped, nothing delivered until a new session verifies. */
+    internal fun onSessionClosed() = pipeline.onCameraStopped("the capture session closed (the app paused, or another app took the camera)")
 
     /** Meters again (closed meanwhile). */
     fun remeter() = pipeline.remeter()
@@ -132,19 +225,59 @@ class CamProCameraX(
     /** Closes the gate; frames are dropped from now on. */
     fun stop() = pipeline.stop()
 
+    /** Calls to [send] so far: a failed future of an older one was superseded, not refused. */
+    private val sends = java.util.concurrent.atomic.AtomicLong()
+
+    /**
+     * Sets [settings] as the camera's interop options. CameraX reports failure through the
+     * returned future, not an exception: the latest call's future failing (the camera is not
+     * active, or refused the options) stops CamPro closed with the reason; an older one's
+     * `OperationCanceledException` only means a newer call replaced it.
+     */
     private fun send(settings: List<Pair<CaptureRequest.Key<*>, Any>>) {
         val c = control ?: error("start() has not been given a Camera2CameraControl")
         val b = CaptureRequestOptions.Builder()
         for ((k, v) in settings) b.setAny(k, v)
-        c.setCaptureRequestOptions(b.build())
+        val n = sends.incrementAndGet()
+        val future = c.setCaptureRequestOptions(b.build())
+        future.addListener({
+            val failure = try {
+                future.get()
+                null
+            } catch (e: ExecutionException) {
+                e.cause ?: e
+            } catch (e: java.util.concurrent.CancellationException) {
+                e
+            } catch (e: InterruptedException) {
+                Thread.currentThread().interrupt()
+                e
+            }
+            val superseded = failure is CameraControl.OperationCanceledException && n != sends.get()
+            if (failure != null && !superseded) pipeline.onCameraStopped("CameraX refused CamPro's settings: ${failure.javaClass.simpleName}: ${failure.message}")
+        }, Runnable::run)
     }
 
     @Suppress("UNCHECKED_CAST")
     private fun CaptureRequestOptions.Builder.setAny(key: CaptureRequest.Key<*>, value: Any) =
         setCaptureRequestOption(key as CaptureRequest.Key<Any>, value)
 
+    /** Sensor timestamps of captures started lately, by frame number (a lost buffer is named by frame number only). */
+    private val started = object : LinkedHashMap<Long, Long>() {
+        override fun removeEldestEntry(eldest: MutableMap.MutableEntry<Long, Long>?) = size > STARTED_KEPT
+    }
+
     internal val captureCallback = object : CameraCaptureSession.CaptureCallback() {
+        override fun onCaptureStarted(s: CameraCaptureSession, request: CaptureRequest, timestamp: Long, frameNumber: Long) {
+            synchronized(started) { started[frameNumber] = timestamp }
+        }
+
         override fun onCaptureCompleted(s: CameraCaptureSession, request: CaptureRequest, result: TotalCaptureResult) = onResult(result)
+
+        // The analysis stream is the only one the library binds: a lost buffer is one of its frames.
+        override fun onCaptureBufferLost(s: CameraCaptureSession, request: CaptureRequest, target: android.view.Surface, frameNumber: Long) {
+            val ts = synchronized(started) { started.remove(frameNumber) } ?: return
+            if (!pipeline.isMetering && !pipeline.isProbing) pipeline.onFrameLost(ts)
+        }
     }
 
     /** One completed capture: metering while metering, a probe result while probing, otherwise a protected result (internal: tests feed scripted results). */
@@ -161,5 +294,7 @@ class CamProCameraX(
     companion object {
         /** ImageAnalysis queue depth the gate needs: frames wait there for their results. */
         const val QUEUE_DEPTH = 6
+        /** Started captures remembered for a lost buffer: more than the pipeline holds in flight. */
+        private const val STARTED_KEPT = 64
     }
 }

@@ -6,9 +6,18 @@ import android.hardware.camera2.CaptureResult
 import android.hardware.camera2.params.ColorSpaceTransform
 import android.hardware.camera2.params.RggbChannelVector
 import android.hardware.camera2.params.TonemapCurve
+import android.hardware.camera2.CameraManager
 import androidx.camera.camera2.interop.Camera2CameraControl
+import androidx.camera.camera2.interop.Camera2CameraInfo
 import androidx.camera.camera2.interop.CaptureRequestOptions
+import androidx.camera.core.Camera
+import androidx.camera.core.CameraControl
+import androidx.camera.core.CameraInfo
+import androidx.camera.core.CameraSelector
 import androidx.camera.core.ImageAnalysis
+import androidx.camera.core.UseCase
+import androidx.camera.lifecycle.ProcessCameraProvider
+import androidx.lifecycle.LifecycleOwner
 import androidx.camera.core.ImageInfo
 import androidx.camera.core.ImageProxy
 import com.google.common.util.concurrent.ListenableFuture
@@ -24,6 +33,8 @@ import org.junit.Assert.assertTrue
 import org.junit.Test
 import org.junit.runner.RunWith
 import org.robolectric.RobolectricTestRunner
+import org.robolectric.RuntimeEnvironment
+import org.robolectric.Shadows.shadowOf
 import org.robolectric.annotation.Config
 import org.robolectric.shadow.api.Shadow
 import org.robolectric.shadows.ShadowCameraCharacteristics
@@ -135,12 +146,17 @@ class GlueTest {
         override fun close() { closed = true }
     }
 
-    private class RecordingControl : Camera2CameraControl() {
+    private class RecordingControl : Camera2CameraControl(), CameraControl {
+        /** Futures handed out, in order, when [holdFutures]: tests complete them. */
+        var holdFutures = false
+        val futures = mutableListOf<SettableFuture>()
+
         val sent = mutableListOf<CaptureRequestOptions>()
         var failWith: RuntimeException? = null
         override fun setCaptureRequestOptions(options: CaptureRequestOptions): ListenableFuture<Void?> {
             failWith?.let { throw it }
             sent += options
+            if (holdFutures) return SettableFuture().also { futures += it }
             return object : ListenableFuture<Void?> {
                 override fun addListener(listener: Runnable, executor: Executor) = executor.execute(listener)
                 override fun cancel(mayInterruptIfRunning: Boolean) = false
@@ -252,6 +268,111 @@ class GlueTest {
         x.analyzer.analyze(f6)
         assertTrue(f6.closed)
         assertEquals(listOf(20L, 40L), shown)
+    }
+
+    /** A future a test completes: listeners run when it does. */
+    private class SettableFuture : ListenableFuture<Void?> {
+        private var failure: Throwable? = null
+        private var done = false
+        private val listeners = mutableListOf<Runnable>()
+        fun succeed() { done = true; listeners.forEach { it.run() } }
+        fun fail(t: Throwable) { failure = t; succeed() }
+        override fun addListener(listener: Runnable, executor: Executor) { if (done) executor.execute(listener) else listeners += Runnable { executor.execute(listener) } }
+        override fun cancel(mayInterruptIfRunning: Boolean) = false
+        override fun isCancelled() = false
+        override fun isDone() = done
+        override fun get(): Void? = failure?.let { throw java.util.concurrent.ExecutionException(it) }
+        override fun get(timeout: Long, unit: TimeUnit): Void? = get()
+    }
+
+    private class FakeInfo(override val cameraId: String) : Camera2CameraInfo(), CameraInfo
+
+    private class RecordingProvider(private val camera: Camera) : ProcessCameraProvider() {
+        val calls = mutableListOf<String>()
+        val boundCases = mutableListOf<UseCase>()
+        override fun bindToLifecycle(lifecycleOwner: LifecycleOwner, cameraSelector: CameraSelector, vararg useCases: UseCase): Camera {
+            calls += "bind ${useCases.size}"
+            boundCases += useCases
+            return camera
+        }
+        override fun isBound(useCase: UseCase) = useCase in boundCases
+        override fun unbind(vararg useCases: UseCase) { calls += "unbind ${useCases.size}"; boundCases -= useCases.toSet() }
+        override fun unbindAll() { calls += "unbindAll"; boundCases.clear() }
+    }
+
+    private fun cameraManager(id: String, chars: CameraCharacteristics): CameraManager {
+        val manager = RuntimeEnvironment.getApplication().getSystemService(CameraManager::class.java)
+        shadowOf(manager).addCamera(id, chars)
+        return manager
+    }
+
+    @Test
+    fun cameraXBindOwnsTheBindingAndRestartsWithEachSession() {
+        val direct = Executor { it.run() }
+        val control = RecordingControl()
+        val camera = object : Camera {
+            override val cameraControl: CameraControl = control
+            override val cameraInfo: CameraInfo = FakeInfo("7")
+        }
+        val provider = RecordingProvider(camera)
+        val x = CamProCameraX(session, direct, deliver = { it.close() })
+        val owner = object : LifecycleOwner {}
+        x.bind(provider, owner, CameraSelector.DEFAULT_BACK_CAMERA, cameraManager("7", supportedCharacteristics()), direct) { it.setImageQueueDepth(1) }
+        // Everything the app bound is unbound first; CamPro's analysis is bound alone, extended (its queue, not the app's).
+        assertEquals(listOf("unbindAll", "bind 1"), provider.calls)
+        val analysis = provider.boundCases.single() as ImageAnalysis
+        assertEquals(CamProCameraX.QUEUE_DEPTH, analysis.builder.queueDepth)
+        assertTrue(analysis.builder.sessionCaptureCallback != null && analysis.builder.sessionStateCallback != null && analysis.builder.analyzer != null)
+        assertTrue("${x.support}", x.support is org.campro.DeviceSupport.Result.Supported)
+        assertEquals(CaptureRequest.CONTROL_AWB_MODE_AUTO, control.sent.single().getCaptureRequestOption(CaptureRequest.CONTROL_AWB_MODE))
+        assertTrue("bind twice", runCatching { x.bind(provider, owner, CameraSelector.DEFAULT_BACK_CAMERA, cameraManager("7", supportedCharacteristics()), direct) }.isFailure)
+        // The first session is the one bind started; the lifecycle pauses (closed) and resumes (a new session): metering again.
+        x.onSessionConfigured()
+        assertEquals(1, control.sent.size)
+        x.onSessionClosed()
+        assertTrue("${x.state}", x.state is ProtectionState.Stopped)
+        x.onSessionConfigured()
+        assertEquals(2, control.sent.size)
+        assertEquals(CaptureRequest.CONTROL_AWB_MODE_AUTO, control.sent.last().getCaptureRequestOption(CaptureRequest.CONTROL_AWB_MODE))
+        assertEquals(ProtectionState.Verifying, x.state)
+        x.unbind()
+        assertEquals("unbind 1", provider.calls.last())
+        assertTrue(provider.boundCases.isEmpty())
+    }
+
+    @Test
+    fun cameraXBindOnAnUnsupportedCameraDeliversNothing() {
+        val direct = Executor { it.run() }
+        val control = RecordingControl()
+        val camera = object : Camera {
+            override val cameraControl: CameraControl = control
+            override val cameraInfo: CameraInfo = FakeInfo("8")
+        }
+        val x = CamProCameraX(session, direct, deliver = { it.close() })
+        x.bind(RecordingProvider(camera), object : LifecycleOwner {}, CameraSelector.DEFAULT_FRONT_CAMERA, cameraManager("8", supportedCharacteristics(syncLatency = -1)), direct)
+        val s = x.state
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("SYNC_MAX_LATENCY"))
+        assertTrue("nothing sent to an unsupported camera", control.sent.isEmpty())
+    }
+
+    @Test
+    fun cameraXFailedFuturesStopClosedUnlessSuperseded() {
+        val direct = Executor { it.run() }
+        val control = RecordingControl().apply { holdFutures = true }
+        val x = CamProCameraX(session, direct, deliver = { it.close() })
+        x.start(control, Fixtures.supported())
+        x.remeter()
+        assertEquals(2, control.futures.size)
+        // The first call was replaced by the second: CameraX cancels it, which is no failure.
+        control.futures[0].fail(CameraControl.OperationCanceledException("superseded"))
+        assertEquals(ProtectionState.Verifying, x.state)
+        control.futures[1].succeed()
+        assertEquals(ProtectionState.Verifying, x.state)
+        // The latest call refused (the camera is not active): stopped closed, with the reason.
+        x.remeter()
+        control.futures[2].fail(CameraControl.OperationCanceledException("Camera is not active."))
+        val s = x.state
+        assertTrue("$s", s is ProtectionState.Stopped && s.reason.contains("Camera is not active"))
     }
 
     @Test

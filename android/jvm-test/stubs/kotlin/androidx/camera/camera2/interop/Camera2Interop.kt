@@ -29,8 +29,9 @@ open class Camera2CameraControl protected constructor() {
     open fun setCaptureRequestOptions(options: CaptureRequestOptions): ListenableFuture<Void?> = throw UnsupportedOperationException("stub")
 
     companion object {
+        /** The stub's way for tests to answer: a [CameraControl] that is also a Camera2CameraControl. */
         @JvmStatic
-        fun from(control: CameraControl): Camera2CameraControl = throw UnsupportedOperationException("stub")
+        fun from(control: CameraControl): Camera2CameraControl = control as? Camera2CameraControl ?: throw UnsupportedOperationException("stub")
     }
 }
 
@@ -40,5 +41,20 @@ object Camera2Interop {
         fun setSessionCaptureCallback(callback: CameraCaptureSession.CaptureCallback): Extender<T> = apply {
             (builder as? ImageAnalysis.Builder)?.sessionCaptureCallback = callback
         }
+
+        fun setSessionStateCallback(callback: CameraCaptureSession.StateCallback): Extender<T> = apply {
+            (builder as? ImageAnalysis.Builder)?.sessionStateCallback = callback
+        }
+    }
+}
+
+/** Stub of Camera2CameraInfo: the Camera2 id behind a CameraX camera. */
+open class Camera2CameraInfo protected constructor() {
+    open val cameraId: String get() = throw UnsupportedOperationException("stub")
+
+    companion object {
+        /** The stub's way for tests to answer [from]: a [androidx.camera.core.CameraInfo] that is also a Camera2CameraInfo. */
+        @JvmStatic
+        fun from(info: androidx.camera.core.CameraInfo): Camera2CameraInfo = info as? Camera2CameraInfo ?: throw UnsupportedOperationException("stub")
     }
 }

@@ -3,6 +3,7 @@
 
 use crate::args::{AttackArg, Common, EnrolArg, EvalCmd, PrivacyArgs, UtilityArgs};
 use crate::models::{load, manifest};
+use crate::say;
 use anyhow::{anyhow, bail, Context, Result};
 use campro::pipeline::fast::Exact8;
 use campro::Params;
@@ -412,6 +413,9 @@ fn run_quality(
 pub fn run(cmd: EvalCmd) -> Result<()> {
     let common = match &cmd {
         EvalCmd::Frontier { points, output, force } => return run_frontier(points, output, *force),
+        EvalCmd::Thresholds { data, lfw, face_detector, face_models, folds } => {
+            return run_thresholds(data, lfw.as_deref(), face_detector, face_models, *folds as usize)
+        }
         EvalCmd::Privacy { common, .. }
         | EvalCmd::Utility { common, .. }
         | EvalCmd::Quality { common, .. }
@@ -437,8 +441,33 @@ pub fn run(cmd: EvalCmd) -> Result<()> {
             eprintln!("report: {}", crate::shown(&common.output.join("report.md")));
             Ok(())
         }
-        EvalCmd::Frontier { .. } => unreachable!("run_frontier above"),
+        EvalCmd::Frontier { .. } | EvalCmd::Thresholds { .. } => unreachable!("returned above"),
     }
+}
+
+/// `eval thresholds`: each model's calibration as a JSON line on stdout (its `thresholds`
+/// object is what the manifest's task.thresholds holds).
+fn run_thresholds(data: &crate::args::DataArgs, lfw: Option<&Path>, detector: &str, models: &[String], folds: usize) -> Result<()> {
+    let lfw_dir = lfw.map(Path::to_path_buf).unwrap_or_else(|| data.shared_dir().join("data/lfw"));
+    let lfw = data::Lfw::open(&lfw_dir).with_context(|| "reading LFW (set --lfw or --shared)")?;
+    let dir = data.models_dir();
+    let det = FaceDetector::new(load(detector, &dir)?)?;
+    for name in models {
+        let e = Embedder::new(load(name, &dir)?)?;
+        let start = std::time::Instant::now();
+        let c = campro_eval::check::calibrate(&lfw, &det, &e, folds)?;
+        eprintln!(
+            "{}: {} images, {} pairs of different people, {:.0} s; genuine pairs accepted {:.3} at FAR 1e-3, {:.3} at 1e-2",
+            c.model,
+            c.images,
+            c.thresholds.impostor_pairs,
+            start.elapsed().as_secs_f64(),
+            c.genuine_accept[0],
+            c.genuine_accept[1]
+        );
+        say!("{}", serde_json::to_string(&c)?);
+    }
+    Ok(())
 }
 
 /// `eval frontier`: the plot and table of measured points.

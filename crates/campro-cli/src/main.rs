@@ -5,6 +5,7 @@
 mod args;
 mod bench;
 mod capture;
+mod check;
 mod convert;
 mod demo;
 mod eval;
@@ -86,6 +87,10 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Compare(a) => convert::compare(a),
         Cmd::Simulate(a) => simulate::run(a),
         Cmd::Inspect(a) => inspect::run(a),
+        Cmd::Check(a) => match check::run(a)? {
+            0 => Ok(()),
+            code => std::process::exit(code),
+        },
         Cmd::Bench(BenchArgs { what: Some(BenchWhat::Train(a)), .. }) => train::bench_train(&a),
         Cmd::Bench(BenchArgs { what: Some(BenchWhat::Enhancer(a)), .. }) => train::bench_enhancer(&a),
         Cmd::Bench(a) => bench::run_command(&a),

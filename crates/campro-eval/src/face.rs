@@ -141,7 +141,7 @@ pub struct Embedder {
 impl Embedder {
     pub fn new(model: Model) -> Result<Self> {
         match &model.manifest.task {
-            Task::FaceEmbedder { output, template } => {
+            Task::FaceEmbedder { output, template, .. } => {
                 Ok(Self { output: output.clone(), template: template.map(|p| p.map(f64::from)), model })
             }
             _ => Err(EvalError::Invalid(format!("model {} is not a face_embedder", model.manifest.name))),
@@ -150,6 +150,14 @@ impl Embedder {
 
     pub fn name(&self) -> &str {
         &self.model.manifest.name
+    }
+
+    /// The verification thresholds of its manifest (`None`: not calibrated).
+    pub fn thresholds(&self) -> Option<crate::manifest::Thresholds> {
+        match &self.model.manifest.task {
+            Task::FaceEmbedder { thresholds, .. } => *thresholds,
+            _ => None,
+        }
     }
 
     /// The crop this model expects: a similarity transform from `landmarks` onto the

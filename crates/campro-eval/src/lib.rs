@@ -13,6 +13,7 @@
 pub mod ap;
 pub mod atomic;
 pub mod baselines;
+pub mod check;
 pub mod data;
 pub mod enhance;
 pub mod error;

@@ -71,7 +71,33 @@ pub enum Task {
     /// Face embedder: the face is aligned by a similarity transform from 5 landmarks
     /// (right eye, left eye, nose, right and left mouth corner of the person, i.e. image-left
     /// first) onto `template` (pixels of the input crop); the embedding is L2-normalised.
-    FaceEmbedder { output: String, template: [[f32; 2]; 5] },
+    FaceEmbedder {
+        output: String,
+        template: [[f32; 2]; 5],
+        /// Verification thresholds calibrated on LFW (`campro eval thresholds`); `campro
+        /// check` needs them.
+        #[serde(default)]
+        thresholds: Option<Thresholds>,
+    },
+}
+
+/// A face model's verification thresholds: two faces are linked when the cosine similarity
+/// of their embeddings is **above** the threshold of the false-accept rate (FAR) chosen.
+/// Calibrated once on LFW by `campro eval thresholds` (every pair of different people among
+/// the images of `pairs.txt`'s first folds); a test recomputes them.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Thresholds {
+    /// At most 1 in 1,000 pairs of different people scores above this (cosine, -1..1).
+    #[serde(rename = "far_1e-3")]
+    pub far_1e3: f32,
+    /// At most 1 in 100 (cosine, -1..1).
+    #[serde(rename = "far_1e-2")]
+    pub far_1e2: f32,
+    /// Pairs of different people the thresholds were set on.
+    pub impostor_pairs: usize,
+    /// LFW `pairs.txt` folds whose images were used (1..=10).
+    pub folds: usize,
 }
 
 fn pad114() -> u8 {
@@ -147,9 +173,18 @@ impl Manifest {
                     return bad("task.max_detections", "must be at least 1");
                 }
             }
-            Task::FaceEmbedder { template, .. } => {
+            Task::FaceEmbedder { template, thresholds, .. } => {
                 if template.iter().flatten().any(|v| !v.is_finite()) {
                     return bad("task.template", "must be finite");
+                }
+                if let Some(t) = thresholds {
+                    let cos = |v: f32| (-1.0..=1.0).contains(&v);
+                    if !cos(t.far_1e3) || !cos(t.far_1e2) || t.far_1e3 < t.far_1e2 {
+                        return bad("task.thresholds", "far_1e-3 and far_1e-2 must be cosines in [-1, 1], far_1e-3 >= far_1e-2");
+                    }
+                    if !(1..=10).contains(&t.folds) || t.impostor_pairs == 0 {
+                        return bad("task.thresholds", "folds must be in 1..=10 and impostor_pairs at least 1");
+                    }
                 }
             }
         }

@@ -43,6 +43,28 @@ pub enum EvalCmd {
         #[command(flatten)]
         u: UtilityArgs,
     },
+    /// Calibrate face models' verification thresholds on LFW (for `campro check`): the
+    /// cosine above which at most 1e-3 and 1e-2 of pairs of different people score, printed
+    /// as each manifest's task.thresholds (JSON, a line per model).
+    #[command(
+        after_help = "Examples:\n  campro eval thresholds --face-model faceplugin --face-model mobilefacenet-casia --folds 2"
+    )]
+    Thresholds {
+        #[command(flatten)]
+        data: super::DataArgs,
+        /// LFW folder (default: SHARED/data/lfw).
+        #[arg(long)]
+        lfw: Option<PathBuf>,
+        /// Face detector: a bundled name or a manifest file.
+        #[arg(long, default_value = "yunet")]
+        face_detector: String,
+        /// Face recognition models: bundled names or manifest files (repeatable).
+        #[arg(long = "face-model", default_values_t = ["faceplugin".to_string(), "mobilefacenet-casia".to_string()])]
+        face_models: Vec<String>,
+        /// Use the images of pairs.txt's first N folds (1..=10; 2: about 1,200 images, 700,000 pairs).
+        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u8).range(1..=10))]
+        folds: u8,
+    },
     /// The privacy-utility frontier across runs (the paper's Figure 10) from measured points:
     /// frontier.svg and frontier.md.
     Frontier {

@@ -3,6 +3,7 @@
 //! modules (`convert`, `simulate`, `eval`, ...); `main` only dispatches.
 
 mod bench;
+mod check;
 mod convert;
 mod eval;
 mod inspect;
@@ -10,6 +11,7 @@ mod params;
 mod simulate;
 mod train;
 
+pub use check::{CheckArgs, ViewArg};
 pub use bench::{BenchArgs, BenchEnhancerArgs, BenchTrainArgs, BenchWhat, StepArg, StressArgs};
 pub use convert::{CompareArgs, ConvertArgs, DeviceArgs, FileTargetArgs, Format};
 pub use eval::{AttackArg, Common, EnrolArg, EvalCmd, LossArg, PrivacyArgs, RetrainArgs, UtilityArgs};
@@ -59,6 +61,13 @@ pub enum Cmd {
         after_help = "Examples:\n  campro inspect campro-omega-0.5 photos/ -o look/ --enhance   # then open look/index.html"
     )]
     Inspect(InspectArgs),
+    /// Does a preset protect *your* photos? Every face in them, raw against as captured,
+    /// enhanced and restored, by every face model: linkable at a false-accept rate of 1e-3 or
+    /// 1e-2, and the rank of the true person in a gallery of raw faces.
+    #[command(
+        after_help = "Examples:\n  campro check campro-omega-0.5 photos/ -o report/        # then open report/index.html\n  campro check campro-omega-0.5-hour --person me=mine/ --person you=yours/ --fail-above 1e-3"
+    )]
+    Check(CheckArgs),
     /// Map parameters onto a camera stack (Camera2: COLOR_CORRECTION_TRANSFORM, TONEMAP_CURVE).
     #[command(
         after_help = "Examples:\n  campro convert campro-omega-0.5 --capture-result result.json --format kotlin\n  campro convert campro-omega-0.5 --target cube -o campro.cube"

@@ -1,0 +1,549 @@
+//! `campro check`: does a preset protect the user's own photos? The models, photos and views
+//! are gathered here; the scoring is `campro_eval::check`; the report (lines, JSON, CSV and
+//! an HTML page with the face crops) is written here.
+
+use crate::args::{CheckArgs, Report, ViewArg};
+use crate::inspect::{href, html_escape};
+use crate::{escape, say, write_atomic};
+use anyhow::{anyhow, bail, Context, Result};
+use campro_eval::check::{self, FaceCheck, Judge, PhotoCheck, FARS};
+use campro_eval::face::{Embedder, FaceDetector};
+use campro_eval::image_file::Budget;
+use campro_eval::Condition;
+use image::RgbImage;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// The exit status when a face is linkable at `--fail-above`.
+pub const LINKABLE_EXIT: i32 = 3;
+
+/// A photo to check and the person it shows (`None`: loose).
+struct Photo {
+    path: PathBuf,
+    person: Option<String>,
+}
+
+/// Every photo of `a`: loose files, folders (their subfolders are persons), `--person`.
+fn photos_of(a: &CheckArgs, out: &Path) -> Result<Vec<Photo>> {
+    let which = crate::simulate::Reads { reads: &crate::simulate::is_image, otherwise: "not a PNG, JPEG, TIFF or WebP file" };
+    let list = |inputs: &[PathBuf]| -> Result<Vec<PathBuf>> {
+        let found = crate::simulate::collect_inputs(inputs, out, &|p| p.to_path_buf(), &which)?;
+        for (i, why) in &found.skipped {
+            eprintln!("warning: skipping {}: {why}", crate::shown(i));
+        }
+        Ok(found.jobs.into_iter().map(|(i, _)| i).collect())
+    };
+    let mut photos = Vec::new();
+    for input in &a.photos {
+        if !input.is_dir() {
+            photos.extend(list(std::slice::from_ref(input))?.into_iter().map(|path| Photo { path, person: None }));
+            continue;
+        }
+        let mut entries: Vec<PathBuf> = std::fs::read_dir(input)
+            .with_context(|| crate::shown(input))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .collect();
+        entries.sort();
+        let (dirs, files): (Vec<PathBuf>, Vec<PathBuf>) = entries.into_iter().partition(|p| p.is_dir());
+        if !files.is_empty() {
+            photos.extend(list(&files)?.into_iter().map(|path| Photo { path, person: None }));
+        }
+        for d in dirs {
+            let name = d.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            photos.extend(list(std::slice::from_ref(&d))?.into_iter().map(|path| Photo { path, person: Some(name.clone()) }));
+        }
+    }
+    for (name, dir) in &a.persons {
+        if !dir.is_dir() {
+            bail!("--person {name}={}: not a folder", crate::shown(dir));
+        }
+        photos.extend(list(std::slice::from_ref(dir))?.into_iter().map(|path| Photo { path, person: Some(name.clone()) }));
+    }
+    if photos.is_empty() {
+        bail!("no PNG, JPEG, TIFF or WebP photo among the inputs: nothing to check");
+    }
+    Ok(photos)
+}
+
+/// The views of `a` (default: every one the preset has), as conditions on a raw photo.
+fn views_of(a: &CheckArgs, p: &campro::Params, models: &Path, photos: &[Photo], notes: &mut Vec<String>) -> Result<Vec<Condition>> {
+    let asked = !a.views.is_empty();
+    let wanted = |v: ViewArg| !asked || a.views.contains(&v);
+    let captured = crate::eval::params_condition("captured".into(), p.clone());
+    let protect = captured.protect.clone().ok_or_else(|| anyhow!("the captured view has no camera"))?;
+    let mut views = Vec::new();
+    if wanted(ViewArg::Captured) {
+        views.push(captured.clone());
+    }
+    if wanted(ViewArg::Enhanced) {
+        match crate::capture::enhancer_of(&a.params, p, a.scale, models) {
+            Ok(e) => {
+                let pr = protect.clone();
+                let e = std::sync::Arc::new(e);
+                // An enhancement that fails shows the captured picture: the check then scores that.
+                views.push(Condition::new("enhanced", move |img: &RgbImage| {
+                    let c = pr(img);
+                    crate::capture::enhance(&e, &c).unwrap_or(c)
+                }));
+            }
+            Err(e) if !asked => notes.push(format!("enhanced view left out: {}", crate::one_line(&e))),
+            Err(e) => return Err(e.context("--view enhanced")),
+        }
+    }
+    if wanted(ViewArg::Restored) {
+        let dir = a.restore_prior.clone().unwrap_or_else(|| a.data.shared_dir().join("data/coco-person/images"));
+        let mut prior_paths: Vec<PathBuf> = if dir.is_dir() || a.restore_prior.is_some() {
+            let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
+                .with_context(|| format!("--restore-prior {}", crate::shown(&dir)))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| crate::simulate::is_image(p))
+                .collect();
+            v.sort();
+            notes.push(format!("restoration fitted on {} images of {}", v.len().min(200), crate::shown(&dir)));
+            v
+        } else {
+            notes.push("restoration fitted on the photos checked themselves (no COCO prior): the strongest attacker".into());
+            photos.iter().map(|p| p.path.clone()).collect()
+        };
+        prior_paths.truncate(200);
+        let prior = prior_paths
+            .iter()
+            .map(|p| campro_eval::data::read_rgb8(p).map_err(anyhow::Error::from))
+            .collect::<Result<Vec<_>>>()?;
+        if prior.is_empty() {
+            bail!("--restore-prior {}: no images", crate::shown(&dir));
+        }
+        let r = campro_eval::restore::Restorer::fit(protect.as_ref(), &prior)?;
+        let pr = protect.clone();
+        views.push(Condition::new("restored", move |img: &RgbImage| r.apply(&pr(img))));
+    }
+    if wanted(ViewArg::RestoreNet) {
+        match crate::capture::network_of(&a.params, p, crate::capture::Network::Restorer) {
+            Ok(net) => {
+                let net = net.with_scale(a.scale.enhance_scale);
+                let pr = protect.clone();
+                views.push(Condition::new("restore-net", move |img: &RgbImage| {
+                    let c = pr(img);
+                    net.enhance(&c).unwrap_or(c)
+                }));
+            }
+            Err(e) if !asked => notes.push(format!("restore-net view left out: {}", crate::one_line(&e))),
+            Err(e) => return Err(e.context("--view restore-net")),
+        }
+    }
+    Ok(views)
+}
+
+/// The whole check, as `--format json` prints it and check.json holds.
+#[derive(Serialize)]
+struct CheckReport<'a> {
+    params: String,
+    models: Vec<ModelRow>,
+    views: Vec<String>,
+    /// Identities in the re-identification gallery (persons or loose faces, and distractors).
+    gallery: usize,
+    distractors: usize,
+    notes: &'a [String],
+    photos: &'a [PhotoCheck],
+    failed: Vec<Failed>,
+    summary: Summary,
+    seconds: f64,
+}
+
+#[derive(Serialize)]
+struct ModelRow {
+    name: String,
+    thresholds: campro_eval::manifest::Thresholds,
+}
+
+#[derive(Serialize)]
+struct Failed {
+    path: String,
+    error: String,
+}
+
+/// The summary line's numbers.
+#[derive(Serialize)]
+struct Summary {
+    photos: usize,
+    faces: usize,
+    /// Faces linkable by any model under any view, at FAR 1e-3 and 1e-2.
+    linkable: [usize; 2],
+    /// Of those, the faces whose similarity is also above every stranger's in that view
+    /// (campro_eval::check::ViewCheck::strangers): linked to the person, not to any face.
+    linkable_specifically: [usize; 2],
+    /// The highest similarity − threshold (FAR 1e-3) over every face, view and model.
+    worst_margin: Option<f32>,
+    worst_similarity: Option<f32>,
+    worst_threshold: Option<f32>,
+    worst_model: Option<String>,
+    worst_view: Option<String>,
+    /// The best rank of a true person over every face, view and model (1: found first).
+    worst_rank: Option<usize>,
+    /// Faces found in raw and lost by the detector in at least one view.
+    lost_by_detector: usize,
+    /// Faces cut by the photo's edge (listed, not scored: campro_eval::check::MIN_INSIDE).
+    at_edge: usize,
+    photos_without_faces: usize,
+    grey_photos: usize,
+}
+
+fn summary(photos: &[PhotoCheck], judges: &[Judge], views: &[Condition]) -> Summary {
+    let faces: Vec<&FaceCheck> = photos.iter().flat_map(|p| &p.faces).collect();
+    let linkable = FARS.map(|far| faces.iter().filter(|f| f.linkable(judges, far)).count());
+    let linkable_specifically = FARS.map(|far| faces.iter().filter(|f| f.linkable_specifically(judges, far)).count());
+    let worst = faces.iter().filter_map(|f| f.worst(judges, FARS[0]).map(|w| (f, w))).max_by(|a, b| a.1 .2.total_cmp(&b.1 .2));
+    Summary {
+        photos: photos.len(),
+        faces: faces.len(),
+        linkable,
+        linkable_specifically,
+        worst_margin: worst.map(|w| w.1 .2),
+        worst_similarity: worst.map(|(f, (v, m, _))| f.views[v].similarity[m]),
+        worst_threshold: worst.map(|(_, (_, m, _))| judges[m].thresholds.far_1e3),
+        worst_model: worst.map(|(_, (_, m, _))| judges[m].embedder.name().to_string()),
+        worst_view: worst.map(|(_, (v, _, _))| views[v].name.clone()),
+        worst_rank: faces.iter().filter_map(|f| f.best_rank()).min(),
+        lost_by_detector: faces.iter().filter(|f| !f.at_edge && f.views.iter().any(|v| !v.found)).count(),
+        at_edge: faces.iter().filter(|f| f.at_edge).count(),
+        photos_without_faces: photos.iter().filter(|p| p.faces.is_empty()).count(),
+        grey_photos: photos.iter().filter(|p| p.grey).count(),
+    }
+}
+
+/// Two decimals without the leading zero, as similarities are usually written (.21).
+fn sim(v: f32) -> String {
+    let s = format!("{v:.2}");
+    s.replacen("0.", ".", 1)
+}
+
+/// The verdict line of one photo.
+fn photo_line(p: &PhotoCheck, judges: &[Judge], views: &[Condition], gallery: usize) -> String {
+    let name = escape(&p.path.display().to_string());
+    let who = p.person.as_ref().map(|n| format!(" ({})", escape(n))).unwrap_or_default();
+    let grey = if p.grey { " [grey-scale photo: CamPro protects grey scenes less than colour ones]" } else { "" };
+    if p.faces.is_empty() {
+        return format!("{name}{who}: no face found{grey}");
+    }
+    let n = p.faces.len();
+    let link: Vec<usize> = FARS.iter().map(|&far| p.faces.iter().filter(|f| f.linkable(judges, far)).count()).collect();
+    let specific = p.faces.iter().filter(|f| f.linkable_specifically(judges, FARS[0])).count();
+    let faces = if n == 1 { "face" } else { "faces" };
+    let verdict = match (link[0], link[1]) {
+        (0, 0) => format!("{n} {faces}, none linkable at FAR 1e-2"),
+        (0, l) => format!("{n} {faces}, none linkable at FAR 1e-3, {l} at 1e-2"),
+        (l, _) if specific < l => format!("{n} {faces}, {l} LINKABLE at FAR 1e-3 ({} no more than to strangers)", l - specific),
+        (l, _) => format!("{n} {faces}, {l} LINKABLE at FAR 1e-3"),
+    };
+    let worst = p.faces.iter().filter_map(|f| f.worst(judges, FARS[0]).map(|w| (f, w))).max_by(|a, b| a.1 .2.total_cmp(&b.1 .2));
+    let mut line = format!("{name}{who}: {verdict}");
+    if let Some((f, (v, m, _))) = worst {
+        let _ = write!(
+            line,
+            " (worst similarity {} against {}, {}, {})",
+            sim(f.views[v].similarity[m]),
+            sim(judges[m].thresholds.far_1e3),
+            judges[m].embedder.name(),
+            views[v].name
+        );
+    }
+    if let Some(r) = p.faces.iter().filter_map(|f| f.best_rank()).min() {
+        let _ = write!(line, "; worst rank {r} of {gallery}");
+    }
+    let scored: Vec<&FaceCheck> = p.faces.iter().filter(|f| !f.at_edge).collect();
+    let lost = scored.iter().filter(|f| f.views.iter().any(|v| !v.found)).count();
+    if lost > 0 {
+        let _ = write!(line, "; {lost} of {} not found by the detector in some view", scored.len());
+    }
+    let edge = p.faces.len() - scored.len();
+    if edge > 0 {
+        let _ = write!(line, "; {edge} at the photo's edge, not scored");
+    }
+    line + grey
+}
+
+fn summary_line(s: &Summary, judges: &[Judge], gallery: usize) -> String {
+    let mut line = format!(
+        "{} of {} faces linkable at FAR 1e-3 ({} at 1e-2) on {} model{}",
+        s.linkable[0],
+        s.faces - s.at_edge,
+        s.linkable[1],
+        judges.len(),
+        if judges.len() == 1 { "" } else { "s" }
+    );
+    if s.linkable[0] > s.linkable_specifically[0] {
+        let _ = write!(
+            line,
+            " ({} of them no more similar to their own raw face than to a stranger's: low-quality faces)",
+            s.linkable[0] - s.linkable_specifically[0]
+        );
+    }
+    if let (Some(v), Some(t)) = (s.worst_similarity, s.worst_threshold) {
+        let _ = write!(line, "; worst similarity {} against threshold {}", sim(v), sim(t));
+    }
+    if let Some(r) = s.worst_rank {
+        let _ = write!(line, "; worst rank {r} of {gallery}");
+    }
+    if s.at_edge > 0 {
+        let _ = write!(line, "; {} faces at a photo's edge not scored", s.at_edge);
+    }
+    if s.photos_without_faces > 0 {
+        let _ = write!(line, "; {} of {} photos without a face", s.photos_without_faces, s.photos);
+    }
+    line
+}
+
+/// `campro check`.
+pub fn run(a: CheckArgs) -> Result<i32> {
+    let start = std::time::Instant::now();
+    let p = crate::load_params(&a.params)?;
+    if let Some(out) = &a.output {
+        crate::check_output_folder(out, a.force, "--output")?;
+    }
+    let out_for_inputs = a.output.clone().unwrap_or_else(|| PathBuf::from(".campro-check-no-output"));
+    let photos = photos_of(&a, &out_for_inputs)?;
+    let models = a.data.models_dir();
+    if !models.is_dir() {
+        bail!(
+            "the models folder {}: no such folder; check runs the face models of the shared data folder: pass --shared DIR or set CAMPRO_SHARED (default ../shared), or --models DIR",
+            crate::shown(&models)
+        );
+    }
+    let detector = FaceDetector::new(crate::models::load(&a.face_detector, &models)?)?;
+    let embedders: Vec<Embedder> =
+        a.face_models.iter().map(|n| Ok(Embedder::new(crate::models::load(n, &models)?)?)).collect::<Result<_>>()?;
+    let judges: Vec<Judge> = embedders.iter().map(Judge::new).collect::<campro_eval::Result<_>>()?;
+    let mut notes = Vec::new();
+    let views = views_of(&a, &p, &models, &photos, &mut notes)?;
+    if views.is_empty() {
+        bail!("--view: no view to check");
+    }
+    let budget = Budget::global();
+    let bar = indicatif::ProgressBar::new(photos.len() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("check {bar:40} {pos}/{len} {elapsed_precise} eta {eta}").expect("valid template"),
+    );
+    let results: Vec<Result<PhotoCheck>> = photos
+        .par_iter()
+        .map(|ph| {
+            let warn = |w: &str| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(&ph.path)));
+            let r = campro_eval::image_file::read(&ph.path, budget, &|_, _| 0, &warn)
+                .map_err(anyhow::Error::from)
+                .and_then(|(img, _lease)| {
+                    Ok(check::check_photo(&ph.path, ph.person.clone(), &img.into_rgb8(), &detector, &judges, &views)?)
+                });
+            bar.inc(1);
+            r
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut checked = Vec::new();
+    let mut failed = Vec::new();
+    for (ph, r) in photos.iter().zip(results) {
+        match r {
+            Ok(c) => checked.push(c),
+            Err(e) => {
+                let line = crate::about(&ph.path, &e);
+                eprintln!("error: {line}");
+                failed.push(Failed { path: ph.path.display().to_string(), error: line });
+            }
+        }
+    }
+    // Distractors: LFW identities none of the persons checked is named after.
+    let mut distractors = Vec::new();
+    if a.distractors > 0 {
+        let dir = a.lfw.clone().unwrap_or_else(|| a.data.shared_dir().join("data/lfw"));
+        match campro_eval::data::Lfw::open(&dir) {
+            Ok(lfw) => {
+                let names: Vec<String> = checked.iter().filter_map(|p| p.person.clone()).collect();
+                distractors = check::lfw_distractors(&lfw, a.distractors, &names, &detector, &judges)?;
+            }
+            Err(e) if a.lfw.is_none() => {
+                notes.push(format!("no LFW distractors ({}): the gallery holds only the photos checked", crate::one_line(&e.into())))
+            }
+            Err(e) => return Err(anyhow::Error::from(e).context("--lfw")),
+        }
+    }
+    let gallery = check::rank_all(&mut checked, &distractors, judges.len());
+    let s = summary(&checked, &judges, &views);
+    let report = CheckReport {
+        params: format!("{} ({})", crate::shown(&a.params), p.name),
+        models: judges.iter().map(|j| ModelRow { name: j.embedder.name().to_string(), thresholds: j.thresholds }).collect(),
+        views: views.iter().map(|v| v.name.clone()).collect(),
+        gallery,
+        distractors: distractors.len(),
+        notes: &notes,
+        photos: &checked,
+        failed,
+        summary: s,
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    if let Some(out) = &a.output {
+        write_report(out, &report, &judges, &views)?;
+    }
+    if a.format == Report::Json {
+        say!("{}", serde_json::to_string(&report)?);
+    } else {
+        for n in &notes {
+            eprintln!("note: {n}");
+        }
+        for ph in &checked {
+            say!("{}", photo_line(ph, &judges, &views, gallery));
+        }
+        say!("{}", summary_line(&report.summary, &judges, gallery));
+        if let Some(out) = &a.output {
+            eprintln!("report: {}", crate::shown(&out.join("index.html")));
+        }
+    }
+    if !report.failed.is_empty() {
+        bail!("{} of {} photos could not be checked", report.failed.len(), photos.len());
+    }
+    let linkable = match a.fail_above {
+        Some(far) if far <= FARS[0] => report.summary.linkable[0],
+        Some(_) => report.summary.linkable[1],
+        None => 0,
+    };
+    Ok(if linkable > 0 { LINKABLE_EXIT } else { 0 })
+}
+
+/// The crop file of face `k` of photo `i` under `view` (`raw` for the raw face).
+fn crop_name(i: usize, k: usize, view: &str) -> String {
+    format!("faces/photo{:04}-face{}-{view}.png", i + 1, k + 1)
+}
+
+fn png(img: &RgbImage) -> Result<Vec<u8>> {
+    let mut v = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut v), image::ImageFormat::Png)?;
+    Ok(v)
+}
+
+/// index.html, check.json, check.csv and the crops, each written atomically.
+fn write_report(out: &Path, r: &CheckReport, judges: &[Judge], views: &[Condition]) -> Result<()> {
+    for (i, p) in r.photos.iter().enumerate() {
+        for (k, f) in p.faces.iter().enumerate() {
+            write_atomic(&out.join(crop_name(i, k, "raw")), &png(&f.crop)?, true)?;
+            for v in &f.views {
+                write_atomic(&out.join(crop_name(i, k, &v.view)), &png(&v.crop)?, true)?;
+            }
+        }
+    }
+    write_atomic(&out.join("check.json"), (serde_json::to_string_pretty(r)? + "\n").as_bytes(), true)?;
+    use campro_eval::table::{Cell, Column, Table};
+    let mut t = Table::new(
+        [
+            ("photo", 0), ("person", 0), ("face", 0), ("view", 0), ("model", 0), ("similarity", 4),
+            ("threshold_far_1e-3", 4), ("threshold_far_1e-2", 4), ("linkable_far_1e-3", 0), ("linkable_far_1e-2", 0),
+            ("found_by_detector", 0), ("rank", 0), ("gallery", 0),
+        ]
+        .map(|(k, d)| Column::new(k, k, d)),
+    );
+    for p in r.photos {
+        for (k, f) in p.faces.iter().enumerate() {
+            for v in &f.views {
+                for (m, j) in judges.iter().enumerate() {
+                    let s = v.similarity[m];
+                    t.push(vec![
+                        Cell::text(p.path.display().to_string()),
+                        Cell::text(p.person.clone().unwrap_or_default()),
+                        ((k + 1) as f64).into(),
+                        Cell::text(&v.view),
+                        Cell::text(j.embedder.name()),
+                        f64::from(s).into(),
+                        f64::from(j.thresholds.far_1e3).into(),
+                        f64::from(j.thresholds.far_1e2).into(),
+                        Cell::text((s > j.thresholds.far_1e3).to_string()),
+                        Cell::text((s > j.thresholds.far_1e2).to_string()),
+                        Cell::text(v.found.to_string()),
+                        Cell::opt(v.rank[m].map(|x| x as f64)),
+                        (r.gallery as f64).into(),
+                    ]);
+                }
+            }
+        }
+    }
+    write_atomic(&out.join("check.csv"), t.csv().as_bytes(), true)?;
+    write_atomic(&out.join("index.html"), index_html(r, judges, views, out).as_bytes(), true)?;
+    Ok(())
+}
+
+/// The report page: the summary, then per photo its verdict and, per face, the raw crop
+/// beside each view's with every model's similarity against its threshold.
+fn index_html(r: &CheckReport, judges: &[Judge], views: &[Condition], out: &Path) -> String {
+    let mut h = String::new();
+    let e = html_escape;
+    let _ = write!(
+        h,
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>campro check: {}</title>\n<style>\
+body{{font-family:system-ui,sans-serif;margin:1.5em;max-width:72em}}table{{border-collapse:collapse;margin:.5em 0}}\
+td,th{{border:1px solid #ccc;padding:.3em .5em;text-align:center;vertical-align:top}}img{{width:112px;image-rendering:pixelated}}\
+.link{{color:#b00;font-weight:bold}}.safe{{color:#070}}.lost{{color:#a60}}.verdict{{font-family:monospace}}\
+</style></head><body>\n<h1>campro check</h1>\n",
+        e(&r.params)
+    );
+    let _ = writeln!(h, "<p class=\"verdict\">{}</p>", e(&summary_line(&r.summary, judges, r.gallery)));
+    let _ = writeln!(
+        h,
+        "<p>Preset {}. A face is <span class=\"link\">linkable</span> when a model's cosine similarity of the raw face and a view is above its threshold at the false-accept rate (FAR): a face-recognition system would then say “same person”. Rank: where the true person comes in a gallery of {} raw identities ({} LFW distractors); 1 is found first.</p>",
+        e(&r.params),
+        r.gallery,
+        r.distractors
+    );
+    let _ = writeln!(h, "<table><tr><th>model</th><th>threshold at FAR 1e-3</th><th>at 1e-2</th><th>calibrated on</th></tr>");
+    for m in &r.models {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{} LFW pairs of different people</td></tr>",
+            e(&m.name),
+            m.thresholds.far_1e3,
+            m.thresholds.far_1e2,
+            m.thresholds.impostor_pairs
+        );
+    }
+    h.push_str("</table>\n");
+    for n in r.notes {
+        let _ = writeln!(h, "<p>Note: {}</p>", e(n));
+    }
+    for f in &r.failed {
+        let _ = writeln!(h, "<p class=\"link\">Not checked: {}</p>", e(&f.error));
+    }
+    for (i, p) in r.photos.iter().enumerate() {
+        let _ = writeln!(h, "<h2>{}</h2>\n<p class=\"verdict\">{}</p>", e(&p.path.display().to_string()), e(&photo_line(p, judges, views, r.gallery)));
+        for (k, f) in p.faces.iter().enumerate() {
+            if f.at_edge {
+                let _ = writeln!(h, "<p class=\"lost\">Face {}: cut by the photo's edge, not scored (its alignment is mostly black).</p>", k + 1);
+            }
+            let _ = write!(h, "<table><tr><th>face {}{}</th>", k + 1, if f.is_person { " (the person)" } else { "" });
+            for v in &f.views {
+                let _ = write!(h, "<th>{}</th>", e(&v.view));
+            }
+            h.push_str("</tr>\n<tr>");
+            let img = |name: String, alt: &str| format!("<img src=\"{}\" alt=\"{}\">", href(&out.join(&name), out), e(alt));
+            let _ = write!(h, "<td>{}<br>raw</td>", img(crop_name(i, k, "raw"), "raw face"));
+            for v in &f.views {
+                let _ = write!(h, "<td>{}", img(crop_name(i, k, &v.view), &v.view));
+                if !v.found {
+                    h.push_str("<br><span class=\"lost\">not found by the detector</span>");
+                }
+                for (m, j) in judges.iter().enumerate() {
+                    let s = v.similarity[m];
+                    let class = if s > j.thresholds.far_1e2 { "link" } else { "safe" };
+                    let rank = v.rank[m].map(|x| format!(", rank {x}")).unwrap_or_default();
+                    let strangers = v.strangers[m].map(|x| format!(", strangers up to {}", sim(x))).unwrap_or_default();
+                    let _ = write!(
+                        h,
+                        "<br><span class=\"{class}\">{}: {} vs {}{rank}{strangers}</span>",
+                        e(j.embedder.name()),
+                        sim(s),
+                        sim(j.thresholds.far_1e3)
+                    );
+                }
+                h.push_str("</td>");
+            }
+            h.push_str("</tr></table>\n");
+        }
+    }
+    h.push_str("</body></html>\n");
+    h
+}

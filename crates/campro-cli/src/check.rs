@@ -27,7 +27,8 @@ struct Photo {
 
 /// Every photo of `a`: loose files, folders (their subfolders are persons), `--person`.
 fn photos_of(a: &CheckArgs, out: &Path) -> Result<Vec<Photo>> {
-    let which = crate::simulate::Reads { reads: &crate::simulate::is_image, otherwise: "not a PNG, JPEG, TIFF or WebP file" };
+    let which =
+        crate::simulate::Reads { reads: &crate::simulate::is_image, otherwise: "not a PNG, JPEG, TIFF or WebP file" };
     let list = |inputs: &[PathBuf]| -> Result<Vec<PathBuf>> {
         let found = crate::simulate::collect_inputs(inputs, out, &|p| p.to_path_buf(), &which)?;
         for (i, why) in &found.skipped {
@@ -52,14 +53,18 @@ fn photos_of(a: &CheckArgs, out: &Path) -> Result<Vec<Photo>> {
         }
         for d in dirs {
             let name = d.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-            photos.extend(list(std::slice::from_ref(&d))?.into_iter().map(|path| Photo { path, person: Some(name.clone()) }));
+            photos.extend(
+                list(std::slice::from_ref(&d))?.into_iter().map(|path| Photo { path, person: Some(name.clone()) }),
+            );
         }
     }
     for (name, dir) in &a.persons {
         if !dir.is_dir() {
             bail!("--person {name}={}: not a folder", crate::shown(dir));
         }
-        photos.extend(list(std::slice::from_ref(dir))?.into_iter().map(|path| Photo { path, person: Some(name.clone()) }));
+        photos.extend(
+            list(std::slice::from_ref(dir))?.into_iter().map(|path| Photo { path, person: Some(name.clone()) }),
+        );
     }
     if photos.is_empty() {
         bail!("no PNG, JPEG, TIFF or WebP photo among the inputs: nothing to check");
@@ -68,7 +73,13 @@ fn photos_of(a: &CheckArgs, out: &Path) -> Result<Vec<Photo>> {
 }
 
 /// The views of `a` (default: every one the preset has), as conditions on a raw photo.
-fn views_of(a: &CheckArgs, p: &campro::Params, models: &Path, photos: &[Photo], notes: &mut Vec<String>) -> Result<Vec<Condition>> {
+fn views_of(
+    a: &CheckArgs,
+    p: &campro::Params,
+    models: &Path,
+    photos: &[Photo],
+    notes: &mut Vec<String>,
+) -> Result<Vec<Condition>> {
     let asked = !a.views.is_empty();
     let wanted = |v: ViewArg| !asked || a.views.contains(&v);
     let captured = crate::eval::params_condition("captured".into(), p.clone());
@@ -104,7 +115,9 @@ fn views_of(a: &CheckArgs, p: &campro::Params, models: &Path, photos: &[Photo], 
             notes.push(format!("restoration fitted on {} images of {}", v.len().min(200), crate::shown(&dir)));
             v
         } else {
-            notes.push("restoration fitted on the photos checked themselves (no COCO prior): the strongest attacker".into());
+            notes.push(
+                "restoration fitted on the photos checked themselves (no COCO prior): the strongest attacker".into(),
+            );
             photos.iter().map(|p| p.path.clone()).collect()
         };
         prior_paths.truncate(200);
@@ -194,7 +207,8 @@ fn summary(photos: &[PhotoCheck], judges: &[Judge], views: &[Condition]) -> Summ
     let faces: Vec<&FaceCheck> = photos.iter().flat_map(|p| &p.faces).collect();
     let linkable = FARS.map(|far| faces.iter().filter(|f| f.linkable(judges, far)).count());
     let linkable_specifically = FARS.map(|far| faces.iter().filter(|f| f.linkable_specifically(judges, far)).count());
-    let worst = faces.iter().filter_map(|f| f.worst(judges, FARS[0]).map(|w| (f, w))).max_by(|a, b| a.1 .2.total_cmp(&b.1 .2));
+    let worst =
+        faces.iter().filter_map(|f| f.worst(judges, FARS[0]).map(|w| (f, w))).max_by(|a, b| a.1 .2.total_cmp(&b.1 .2));
     Summary {
         photos: photos.len(),
         faces: faces.len(),
@@ -234,10 +248,16 @@ fn photo_line(p: &PhotoCheck, judges: &[Judge], views: &[Condition], gallery: us
     let verdict = match (link[0], link[1]) {
         (0, 0) => format!("{n} {faces}, none linkable at FAR 1e-2"),
         (0, l) => format!("{n} {faces}, none linkable at FAR 1e-3, {l} at 1e-2"),
-        (l, _) if specific < l => format!("{n} {faces}, {l} LINKABLE at FAR 1e-3 ({} no more than to strangers)", l - specific),
+        (l, _) if specific < l => {
+            format!("{n} {faces}, {l} LINKABLE at FAR 1e-3 ({} no more than to strangers)", l - specific)
+        }
         (l, _) => format!("{n} {faces}, {l} LINKABLE at FAR 1e-3"),
     };
-    let worst = p.faces.iter().filter_map(|f| f.worst(judges, FARS[0]).map(|w| (f, w))).max_by(|a, b| a.1 .2.total_cmp(&b.1 .2));
+    let worst = p
+        .faces
+        .iter()
+        .filter_map(|f| f.worst(judges, FARS[0]).map(|w| (f, w)))
+        .max_by(|a, b| a.1 .2.total_cmp(&b.1 .2));
     let mut line = format!("{name}{who}: {verdict}");
     if let Some((f, (v, m, _))) = worst {
         let _ = write!(
@@ -323,7 +343,8 @@ pub fn run(a: CheckArgs) -> Result<i32> {
     let budget = Budget::global();
     let bar = indicatif::ProgressBar::new(photos.len() as u64);
     bar.set_style(
-        indicatif::ProgressStyle::with_template("check {bar:40} {pos}/{len} {elapsed_precise} eta {eta}").expect("valid template"),
+        indicatif::ProgressStyle::with_template("check {bar:40} {pos}/{len} {elapsed_precise} eta {eta}")
+            .expect("valid template"),
     );
     let results: Vec<Result<PhotoCheck>> = photos
         .par_iter()
@@ -360,9 +381,10 @@ pub fn run(a: CheckArgs) -> Result<i32> {
                 let names: Vec<String> = checked.iter().filter_map(|p| p.person.clone()).collect();
                 distractors = check::lfw_distractors(&lfw, a.distractors, &names, &detector, &judges)?;
             }
-            Err(e) if a.lfw.is_none() => {
-                notes.push(format!("no LFW distractors ({}): the gallery holds only the photos checked", crate::one_line(&e.into())))
-            }
+            Err(e) if a.lfw.is_none() => notes.push(format!(
+                "no LFW distractors ({}): the gallery holds only the photos checked",
+                crate::one_line(&e.into())
+            )),
             Err(e) => return Err(anyhow::Error::from(e).context("--lfw")),
         }
     }
@@ -370,7 +392,10 @@ pub fn run(a: CheckArgs) -> Result<i32> {
     let s = summary(&checked, &judges, &views);
     let report = CheckReport {
         params: format!("{} ({})", crate::shown(&a.params), p.name),
-        models: judges.iter().map(|j| ModelRow { name: j.embedder.name().to_string(), thresholds: j.thresholds }).collect(),
+        models: judges
+            .iter()
+            .map(|j| ModelRow { name: j.embedder.name().to_string(), thresholds: j.thresholds })
+            .collect(),
         views: views.iter().map(|v| v.name.clone()).collect(),
         gallery,
         distractors: distractors.len(),
@@ -433,9 +458,19 @@ fn write_report(out: &Path, r: &CheckReport, judges: &[Judge], views: &[Conditio
     use campro_eval::table::{Cell, Column, Table};
     let mut t = Table::new(
         [
-            ("photo", 0), ("person", 0), ("face", 0), ("view", 0), ("model", 0), ("similarity", 4),
-            ("threshold_far_1e-3", 4), ("threshold_far_1e-2", 4), ("linkable_far_1e-3", 0), ("linkable_far_1e-2", 0),
-            ("found_by_detector", 0), ("rank", 0), ("gallery", 0),
+            ("photo", 0),
+            ("person", 0),
+            ("face", 0),
+            ("view", 0),
+            ("model", 0),
+            ("similarity", 4),
+            ("threshold_far_1e-3", 4),
+            ("threshold_far_1e-2", 4),
+            ("linkable_far_1e-3", 0),
+            ("linkable_far_1e-2", 0),
+            ("found_by_detector", 0),
+            ("rank", 0),
+            ("gallery", 0),
         ]
         .map(|(k, d)| Column::new(k, k, d)),
     );
@@ -490,7 +525,10 @@ td,th{{border:1px solid #ccc;padding:.3em .5em;text-align:center;vertical-align:
         r.gallery,
         r.distractors
     );
-    let _ = writeln!(h, "<table><tr><th>model</th><th>threshold at FAR 1e-3</th><th>at 1e-2</th><th>calibrated on</th></tr>");
+    let _ = writeln!(
+        h,
+        "<table><tr><th>model</th><th>threshold at FAR 1e-3</th><th>at 1e-2</th><th>calibrated on</th></tr>"
+    );
     for m in &r.models {
         let _ = writeln!(
             h,
@@ -509,7 +547,12 @@ td,th{{border:1px solid #ccc;padding:.3em .5em;text-align:center;vertical-align:
         let _ = writeln!(h, "<p class=\"link\">Not checked: {}</p>", e(&f.error));
     }
     for (i, p) in r.photos.iter().enumerate() {
-        let _ = writeln!(h, "<h2>{}</h2>\n<p class=\"verdict\">{}</p>", e(&p.path.display().to_string()), e(&photo_line(p, judges, views, r.gallery)));
+        let _ = writeln!(
+            h,
+            "<h2>{}</h2>\n<p class=\"verdict\">{}</p>",
+            e(&p.path.display().to_string()),
+            e(&photo_line(p, judges, views, r.gallery))
+        );
         for (k, f) in p.faces.iter().enumerate() {
             if f.at_edge {
                 let _ = writeln!(h, "<p class=\"lost\">Face {}: cut by the photo's edge, not scored (its alignment is mostly black).</p>", k + 1);
@@ -519,7 +562,8 @@ td,th{{border:1px solid #ccc;padding:.3em .5em;text-align:center;vertical-align:
                 let _ = write!(h, "<th>{}</th>", e(&v.view));
             }
             h.push_str("</tr>\n<tr>");
-            let img = |name: String, alt: &str| format!("<img src=\"{}\" alt=\"{}\">", href(&out.join(&name), out), e(alt));
+            let img =
+                |name: String, alt: &str| format!("<img src=\"{}\" alt=\"{}\">", href(&out.join(&name), out), e(alt));
             let _ = write!(h, "<td>{}<br>raw</td>", img(crop_name(i, k, "raw"), "raw face"));
             for v in &f.views {
                 let _ = write!(h, "<td>{}", img(crop_name(i, k, &v.view), &v.view));

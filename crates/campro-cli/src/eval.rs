@@ -447,7 +447,13 @@ pub fn run(cmd: EvalCmd) -> Result<()> {
 
 /// `eval thresholds`: each model's calibration as a JSON line on stdout (its `thresholds`
 /// object is what the manifest's task.thresholds holds).
-fn run_thresholds(data: &crate::args::DataArgs, lfw: Option<&Path>, detector: &str, models: &[String], folds: usize) -> Result<()> {
+fn run_thresholds(
+    data: &crate::args::DataArgs,
+    lfw: Option<&Path>,
+    detector: &str,
+    models: &[String],
+    folds: usize,
+) -> Result<()> {
     let lfw_dir = lfw.map(Path::to_path_buf).unwrap_or_else(|| data.shared_dir().join("data/lfw"));
     let lfw = data::Lfw::open(&lfw_dir).with_context(|| "reading LFW (set --lfw or --shared)")?;
     let dir = data.models_dir();

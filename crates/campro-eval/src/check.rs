@@ -107,11 +107,8 @@ pub fn calibrate(lfw: &Lfw, detector: &FaceDetector, embedder: &Embedder, folds:
     let far_1e2 = threshold_above(&mut impostors, FARS[1]).ok_or_else(none)?;
     let thresholds = Thresholds { far_1e3, far_1e2, impostor_pairs, folds };
     let index = |p: &PathBuf| paths.binary_search(p).ok().and_then(|i| embedded[i].as_ref());
-    let same: Vec<f32> = pairs
-        .iter()
-        .filter(|p| p.same)
-        .filter_map(|p| Some(cosine(index(&p.a)?, index(&p.b)?)))
-        .collect();
+    let same: Vec<f32> =
+        pairs.iter().filter(|p| p.same).filter_map(|p| Some(cosine(index(&p.a)?, index(&p.b)?))).collect();
     let share = |t: f32| same.iter().filter(|&&s| s > t).count() as f64 / same.len().max(1) as f64;
     Ok(Calibration {
         model: embedder.name().to_string(),
@@ -196,7 +193,8 @@ impl FaceCheck {
     /// Whether any view is linkable by any model at `far` (a face at the edge never is: it
     /// is not scored).
     pub fn linkable(&self, judges: &[Judge], far: f64) -> bool {
-        !self.at_edge && self.views.iter().any(|v| v.similarity.iter().zip(judges).any(|(s, j)| *s > j.thresholds.at(far)))
+        !self.at_edge
+            && self.views.iter().any(|v| v.similarity.iter().zip(judges).any(|(s, j)| *s > j.thresholds.at(far)))
     }
 
     /// Whether it is linkable at `far` by a similarity also above every stranger's in that
@@ -204,7 +202,11 @@ impl FaceCheck {
     pub fn linkable_specifically(&self, judges: &[Judge], far: f64) -> bool {
         !self.at_edge
             && self.views.iter().any(|v| {
-                v.similarity.iter().zip(judges).zip(&v.strangers).any(|((s, j), st)| *s > j.thresholds.at(far) && st.is_none_or(|x| *s > x))
+                v.similarity
+                    .iter()
+                    .zip(judges)
+                    .zip(&v.strangers)
+                    .any(|((s, j), st)| *s > j.thresholds.at(far) && st.is_none_or(|x| *s > x))
             })
     }
 
@@ -326,7 +328,14 @@ pub fn check_photo(
             });
         }
     }
-    Ok(PhotoCheck { path: path.to_path_buf(), person, width: img.width(), height: img.height(), grey: is_grey(img), faces: checks })
+    Ok(PhotoCheck {
+        path: path.to_path_buf(),
+        person,
+        width: img.width(),
+        height: img.height(),
+        grey: is_grey(img),
+        faces: checks,
+    })
 }
 
 /// A gallery entry: an identity and its raw embedding per model.
@@ -436,7 +445,13 @@ pub fn rank_all(photos: &mut [PhotoCheck], distractors: &[Entry], models: usize)
 
 /// `n` LFW identities (the first in name order that are not `exclude`d, one photo each, its
 /// central face) as distractors, embedded by every model. Photos without a face are skipped.
-pub fn lfw_distractors(lfw: &Lfw, n: usize, exclude: &[String], detector: &FaceDetector, judges: &[Judge]) -> Result<Vec<Entry>> {
+pub fn lfw_distractors(
+    lfw: &Lfw,
+    n: usize,
+    exclude: &[String],
+    detector: &FaceDetector,
+    judges: &[Judge],
+) -> Result<Vec<Entry>> {
     let picked: Vec<(&String, &PathBuf)> = lfw
         .people
         .iter()
@@ -449,8 +464,10 @@ pub fn lfw_distractors(lfw: &Lfw, n: usize, exclude: &[String], detector: &FaceD
         .map(|(name, path)| {
             let img = read_rgb8(path)?;
             let Some(face) = central_face(&detector.detect(&img)?, img.width(), img.height()) else { return Ok(None) };
-            let embeddings =
-                judges.iter().map(|j| j.embedder.embed(&j.embedder.align(&img, &face.landmarks))).collect::<Result<_>>()?;
+            let embeddings = judges
+                .iter()
+                .map(|j| j.embedder.embed(&j.embedder.align(&img, &face.landmarks)))
+                .collect::<Result<_>>()?;
             Ok(Some(Entry { identity: (*name).clone(), embeddings }))
         })
         .collect::<Result<_>>()?;
@@ -515,9 +532,30 @@ mod tests {
         let unit = |a: f32| vec![a.cos(), a.sin()];
         // Two persons, A with two photos, B with one; and a distractor.
         let mut photos = vec![
-            PhotoCheck { path: "a1".into(), person: Some("A".into()), width: 1, height: 1, grey: false, faces: vec![face(unit(0.0), vec![unit(1.0)])] },
-            PhotoCheck { path: "a2".into(), person: Some("A".into()), width: 1, height: 1, grey: false, faces: vec![face(unit(0.9), vec![unit(0.9)])] },
-            PhotoCheck { path: "b1".into(), person: Some("B".into()), width: 1, height: 1, grey: false, faces: vec![face(unit(1.2), vec![unit(0.0)])] },
+            PhotoCheck {
+                path: "a1".into(),
+                person: Some("A".into()),
+                width: 1,
+                height: 1,
+                grey: false,
+                faces: vec![face(unit(0.0), vec![unit(1.0)])],
+            },
+            PhotoCheck {
+                path: "a2".into(),
+                person: Some("A".into()),
+                width: 1,
+                height: 1,
+                grey: false,
+                faces: vec![face(unit(0.9), vec![unit(0.9)])],
+            },
+            PhotoCheck {
+                path: "b1".into(),
+                person: Some("B".into()),
+                width: 1,
+                height: 1,
+                grey: false,
+                faces: vec![face(unit(1.2), vec![unit(0.0)])],
+            },
         ];
         let d = [Entry { identity: "D".into(), embeddings: vec![unit(3.0)] }];
         let n = rank_all(&mut photos, &d, 1);

@@ -180,7 +180,10 @@ impl Manifest {
                 if let Some(t) = thresholds {
                     let cos = |v: f32| (-1.0..=1.0).contains(&v);
                     if !cos(t.far_1e3) || !cos(t.far_1e2) || t.far_1e3 < t.far_1e2 {
-                        return bad("task.thresholds", "far_1e-3 and far_1e-2 must be cosines in [-1, 1], far_1e-3 >= far_1e-2");
+                        return bad(
+                            "task.thresholds",
+                            "far_1e-3 and far_1e-2 must be cosines in [-1, 1], far_1e-3 >= far_1e-2",
+                        );
                     }
                     if !(1..=10).contains(&t.folds) || t.impostor_pairs == 0 {
                         return bad("task.thresholds", "folds must be in 1..=10 and impostor_pairs at least 1");

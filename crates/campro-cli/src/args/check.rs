@@ -72,7 +72,10 @@ pub enum ViewArg {
 fn parse_person(s: &str) -> Result<(String, PathBuf), String> {
     let (name, dir) = s.split_once('=').ok_or_else(|| format!("must be NAME=DIR, got {}", super::shown_arg(s)))?;
     if name.is_empty() || name.chars().any(char::is_control) || name.len() > 200 {
-        return Err(format!("NAME must be 1 to 200 characters without control characters, got {}", super::shown_arg(name)));
+        return Err(format!(
+            "NAME must be 1 to 200 characters without control characters, got {}",
+            super::shown_arg(name)
+        ));
     }
     if dir.is_empty() {
         return Err(format!("DIR must not be empty, got {}", super::shown_arg(s)));

@@ -11,8 +11,8 @@ mod params;
 mod simulate;
 mod train;
 
-pub use check::{CheckArgs, ViewArg};
 pub use bench::{BenchArgs, BenchEnhancerArgs, BenchTrainArgs, BenchWhat, StepArg, StressArgs};
+pub use check::{CheckArgs, ViewArg};
 pub use convert::{CompareArgs, ConvertArgs, DeviceArgs, FileTargetArgs, Format};
 pub use eval::{AttackArg, Common, EnrolArg, EvalCmd, LossArg, PrivacyArgs, RetrainArgs, UtilityArgs};
 pub use inspect::InspectArgs;

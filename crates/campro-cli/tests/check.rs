@@ -1,0 +1,213 @@
+//! `campro check` on held-out LFW photos: presets that do not protect are said to, a learnt
+//! preset hides the faces as captured, and every kind of photo (no face, grey-scale, a
+//! hostile person name) gets its own line and a page whose images all open.
+
+mod common;
+use common::{bundled, campro, fails_with};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+const FACES: [&str; 4] = [
+    "data/lfw/images_deepfunneled/Ben_Affleck/Ben_Affleck_0001.jpg",
+    "data/lfw/images_deepfunneled/Ben_Affleck/Ben_Affleck_0002.jpg",
+    "data/lfw/images_deepfunneled/Sophia_Loren/Sophia_Loren_0002.jpg",
+    "data/lfw/images_deepfunneled/Sophia_Loren/Sophia_Loren_0003.jpg",
+];
+
+fn shared() -> Option<PathBuf> {
+    let mut needs =
+        vec!["models/yunet_s_640_640.onnx", "models/faceplugin_fr_feature.onnx", "models/mobilefacenet_casia.onnx"];
+    needs.extend(FACES);
+    campro_testkit::shared_root(&needs)
+}
+
+/// Two persons' folders (Ben, Sophia; two held-out photos each) under `dir`.
+fn persons(shared: &Path, dir: &Path) -> PathBuf {
+    let root = dir.join("photos");
+    for (k, f) in FACES.iter().enumerate() {
+        let person = root.join(if k < 2 { "Ben" } else { "Sophia" });
+        std::fs::create_dir_all(&person).unwrap();
+        std::fs::copy(shared.join(f), person.join(Path::new(f).file_name().unwrap())).unwrap();
+    }
+    root
+}
+
+fn json_run(args: &[&std::ffi::OsStr]) -> (Option<i32>, Value, String) {
+    let out = campro().args(args).args(["--format", "json"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!err.contains("panicked"), "{err}");
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}: {err}"));
+    (out.status.code(), v, err)
+}
+
+#[test]
+fn presets_that_do_not_protect_are_said_to() {
+    let Some(shared) = shared() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let photos = persons(&shared, dir.path());
+    for preset in ["identity.json", "srgb-passthrough.json"] {
+        let params = bundled(preset);
+        let (code, v, err) = json_run(&[
+            "check".as_ref(),
+            params.as_os_str(),
+            photos.as_os_str(),
+            "--shared".as_ref(),
+            shared.as_os_str(),
+            "--view".as_ref(),
+            "captured".as_ref(),
+            "--distractors".as_ref(),
+            "5".as_ref(),
+            "--fail-above".as_ref(),
+            "1e-3".as_ref(),
+        ]);
+        let s = &v["summary"];
+        let faces = s["faces"].as_u64().unwrap() - s["at_edge"].as_u64().unwrap();
+        assert!(faces >= 4, "{preset}: {v}");
+        // Every face is linkable by its own raw photo, and the exit status says so.
+        assert_eq!(s["linkable"][0].as_u64().unwrap(), faces, "{preset}: {s}");
+        assert_eq!(code, Some(3), "{preset}: {err}");
+        // The person is found first among the persons and the distractors.
+        assert_eq!(s["worst_rank"], 1, "{preset}");
+        assert!(v["gallery"].as_u64().unwrap() >= 2 + 5, "two persons and five distractors at least: {}", v["gallery"]);
+    }
+}
+
+/// Every `src="..."` of an HTML page.
+fn sources(html: &str) -> Vec<String> {
+    html.split("src=\"").skip(1).map(|r| r[..r.find('"').unwrap()].to_string()).collect()
+}
+
+#[test]
+fn a_learnt_preset_hides_faces_as_captured_and_every_photo_gets_its_line() {
+    let Some(shared) = shared() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let photos = persons(&shared, dir.path());
+    // A loose grey-scale face and a photo without a face beside the persons.
+    let loose = dir.path().join("loose");
+    std::fs::create_dir_all(&loose).unwrap();
+    let face = image::open(shared.join(FACES[0])).unwrap().grayscale().to_rgb8();
+    face.save(loose.join("grey.png")).unwrap();
+    image::RgbImage::from_fn(160, 120, |x, y| image::Rgb([(x * 3 % 256) as u8, (y * 5 % 256) as u8, 90]))
+        .save(loose.join("no face.png"))
+        .unwrap();
+    // A person named like markup: shown, never run.
+    let hostile = "<b>x</b>\"&";
+    let out = dir.path().join("report");
+    let params = bundled("campro-omega-0.5-hour.json");
+    let sophia = photos.join("Sophia");
+    let run = campro()
+        .arg("check")
+        .arg(&params)
+        .arg(photos.join("Ben"))
+        .arg(&loose)
+        .arg("--person")
+        .arg(format!("{hostile}={}", sophia.display()))
+        .arg("--shared")
+        .arg(&shared)
+        .args(["--distractors", "10", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    let text = String::from_utf8_lossy(&run.stdout);
+    let line = |needle: &str| {
+        text.lines().find(|l| l.contains(needle)).unwrap_or_else(|| panic!("no line with {needle:?}: {text}"))
+    };
+    assert!(line("no face.png").ends_with("no face found"), "{text}");
+    assert!(line("grey.png").contains("grey-scale photo"), "{text}");
+    assert!(line("Sophia_Loren_0002").contains("(<b>x</b>\"&)"), "{text}");
+    assert!(text.lines().last().unwrap().contains("faces linkable at FAR 1e-3"), "{text}");
+
+    let v: Value = serde_json::from_slice(&std::fs::read(out.join("check.json")).unwrap()).unwrap();
+    let views: Vec<&str> = v["views"].as_array().unwrap().iter().map(|x| x.as_str().unwrap()).collect();
+    assert_eq!(views, ["captured", "enhanced", "restored"], "the preset ships an enhancer, no restorer");
+    let models = v["models"].as_array().unwrap().len();
+    let photos_v = v["photos"].as_array().unwrap();
+    assert_eq!(photos_v.len(), 6);
+    // As captured, no colour face is linkable at FAR 1e-3 by either model.
+    let mut rows = 0;
+    for p in photos_v {
+        let grey = p["grey"].as_bool().unwrap();
+        assert_eq!(grey, p["path"].as_str().unwrap().ends_with("grey.png"));
+        for f in p["faces"].as_array().unwrap() {
+            rows += f["views"].as_array().unwrap().len() * models;
+            if grey || f["at_edge"].as_bool().unwrap() {
+                continue;
+            }
+            let captured = &f["views"][0];
+            for (s, t) in captured["similarity"].as_array().unwrap().iter().zip(v["models"].as_array().unwrap()) {
+                assert!(s.as_f64().unwrap() <= t["thresholds"]["far_1e-3"].as_f64().unwrap(), "{}: {s}", p["path"]);
+            }
+        }
+    }
+    let csv = std::fs::read_to_string(out.join("check.csv")).unwrap();
+    assert!(csv.starts_with("photo,person,face,view,model,similarity,threshold_far_1e-3"), "{csv}");
+    assert_eq!(csv.lines().count(), 1 + rows);
+
+    // The page: the name escaped, every image present in the report folder.
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(html.contains("&lt;b&gt;x&lt;/b&gt;&quot;&amp;") && !html.contains(hostile), "name not escaped");
+    let srcs = sources(&html);
+    assert_eq!(
+        srcs.len(),
+        rows / models + v["summary"]["faces"].as_u64().unwrap() as usize,
+        "a raw crop per face and one per view"
+    );
+    for s in &srcs {
+        assert!(!s.contains("..") && !s.starts_with('/'), "{s}");
+        let file = out.join(percent_decode(s));
+        let img = image::open(&file).unwrap_or_else(|e| panic!("{s}: {e}"));
+        assert_eq!(img.width(), 112, "{s}: the first model's crop");
+    }
+}
+
+fn percent_decode(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' {
+            out.push(u8::from_str_radix(&s[i + 1..i + 3], 16).unwrap());
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).unwrap()
+}
+
+#[test]
+fn bad_check_arguments_get_one_line() {
+    let params = bundled("campro-omega-0.5.json");
+    fails_with(campro().arg("check").arg(&params).args(["--person", "nobody"]), "--person");
+    fails_with(campro().arg("check").arg(&params).args(["x.jpg", "--fail-above", "0.5"]), "must be 1e-3 or 1e-2");
+    let Some(shared) = shared() else { return };
+    // A face model whose manifest has no thresholds is named, with the command that calibrates it.
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = dir.path().join("mine.json");
+    let model = shared.join("models/faceplugin_fr_feature.onnx");
+    std::fs::write(
+        &manifest,
+        serde_json::json!({
+            "name": "mine", "file": model,
+            "input": { "width": 112, "height": 112, "channels": "rgb", "mean": [127, 127, 127], "std": [128, 128, 128] },
+            "task": { "kind": "face_embedder", "output": "output",
+                      "template": [[38.2946, 51.6963], [73.5318, 51.5014], [56.0252, 71.7366], [41.5493, 92.3655], [70.7299, 92.2041]] }
+        })
+        .to_string(),
+    )
+    .unwrap();
+    fails_with(
+        campro()
+            .arg("check")
+            .arg(&params)
+            .arg(shared.join(FACES[0]))
+            .arg("--shared")
+            .arg(&shared)
+            .arg("--face-model")
+            .arg(&manifest),
+        "campro eval thresholds",
+    );
+}

@@ -33,6 +33,7 @@ pub mod file;
 pub mod lut3d;
 pub mod params;
 pub mod pipeline;
+pub mod provenance;
 pub mod rational;
 pub mod targets;
 pub mod tone_curve;

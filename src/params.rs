@@ -263,9 +263,9 @@ impl Params {
     /// `"grey": {"rated": true, ...}` ([`GREY_RATING`]), written with the figures that rate
     /// it. Without it, tools do not call a grey image protected.
     pub fn rated_for_grey(&self) -> bool {
-        self.provenance.get(GREY_RATING).and_then(|g| g.get("rated")).and_then(|r| r.as_bool()) == Some(true)
+        self.provenance_fields().is_ok_and(|p| p.grey_rated)
     }
 }
 
 /// The provenance key of a set's rating for grey input ([`Params::rated_for_grey`]).
-pub const GREY_RATING: &str = "grey";
+pub const GREY_RATING: &str = crate::provenance::GREY;

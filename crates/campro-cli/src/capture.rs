@@ -174,8 +174,8 @@ impl Network {
     /// The provenance key, the file suffix (`PARAMS.KEY.onnx`) and the manifest's kind.
     pub fn key(self) -> &'static str {
         match self {
-            Network::Enhancer => "enhancer",
-            Network::Restorer => "restorer",
+            Network::Enhancer => campro::provenance::ENHANCER,
+            Network::Restorer => campro::provenance::RESTORER,
         }
     }
 }
@@ -208,14 +208,19 @@ pub fn network_of(params_path: &Path, p: &Params, which: Network) -> Result<camp
         })?;
         return Ok(campro_eval::enhance::Enhancer::from_bytes(bytes, params_path)?);
     }
-    let file = p.provenance.get(key).and_then(|e| e.get("onnx")).and_then(|f| f.as_str()).ok_or_else(|| {
+    let fields = p.provenance_fields().map_err(|e| anyhow!("{}: {e}", params_path.display()))?;
+    let named = match which {
+        Network::Enhancer => fields.enhancer,
+        Network::Restorer => fields.restorer,
+    };
+    let file = named.map(|n| n.onnx).ok_or_else(|| {
         anyhow!(
             "{}: provenance.{key}.onnx: missing (this preset has no {key}; train one with campro train-enhancer{})",
             params_path.display(),
             if which == Network::Restorer { " and data.faces = \"restore\"" } else { "" }
         )
     })?;
-    Ok(campro_eval::enhance::Enhancer::load(&beside(params_path, &format!("provenance.{key}.onnx"), file)?)?)
+    Ok(campro_eval::enhance::Enhancer::load(&beside(params_path, &format!("provenance.{key}.onnx"), &file)?)?)
 }
 
 /// The file a preset's provenance names (`field`): a bare file name beside the preset,

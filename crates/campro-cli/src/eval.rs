@@ -114,6 +114,19 @@ fn face_models(a: &PrivacyArgs, models: &Path) -> Result<FaceModels> {
     })
 }
 
+/// The typed provenance of a parameter file's JSON `text` (read without the rest of the
+/// file's rules: an identity list or a detector is all that is wanted of it).
+fn provenance_of(path: &Path, text: &str) -> Result<campro::provenance::Provenance> {
+    let v: serde_json::Value = serde_json::from_str(text).with_context(|| path.display().to_string())?;
+    let empty = serde_json::Map::new();
+    let m = match v.get("provenance") {
+        None | Some(serde_json::Value::Null) => &empty,
+        Some(serde_json::Value::Object(m)) => m,
+        Some(_) => bail!("{}: provenance: must be an object", crate::shown(path)),
+    };
+    campro::provenance::Provenance::read(m).map_err(|e| anyhow!("{}: {e}", crate::shown(path)))
+}
+
 /// Identity names from a trained parameter file (held-out identities) or a list file.
 fn read_identities(path: &Path) -> Result<Vec<String>> {
     let text = match crate::presets::named(path) {
@@ -121,20 +134,12 @@ fn read_identities(path: &Path) -> Result<Vec<String>> {
         None => campro::file::read_text_capped(path, 16 << 20, "an identity list (--identities)")?,
     };
     let names: Vec<String> = if text.trim_start().starts_with('{') {
-        let v: serde_json::Value = serde_json::from_str(&text).with_context(|| path.display().to_string())?;
-        let list = v.pointer("/provenance/data/validation_identities").and_then(|l| l.as_array()).ok_or_else(|| {
+        provenance_of(path, &text)?.validation_identities.ok_or_else(|| {
             anyhow!(
                 "{}: provenance.data.validation_identities: missing (not a parameter file from campro train)",
                 path.display()
             )
-        })?;
-        list.iter()
-            .map(|n| {
-                n.as_str()
-                    .map(str::to_string)
-                    .ok_or_else(|| anyhow!("{}: validation_identities: names must be strings", crate::shown(path)))
-            })
-            .collect::<Result<_>>()?
+        })?
     } else {
         text.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('#')).map(str::to_string).collect()
     };
@@ -358,9 +363,8 @@ pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBu
             Some(preset) => preset.json.to_string(),
             None => campro::file::read_text_capped(path, campro::params::MAX_JSON_BYTES as u64, "a parameter file")?,
         };
-        let v: serde_json::Value = serde_json::from_str(&text)?;
-        if let Some(m) = v.pointer("/provenance/detector/manifest").and_then(|m| m.as_str()) {
-            let manifest = crate::capture::beside(path, "provenance.detector.manifest", m)?;
+        if let Some(m) = provenance_of(path, &text)?.detector.and_then(|d| d.manifest) {
+            let manifest = crate::capture::beside(path, "provenance.detector.manifest", &m)?;
             if !manifest.is_file() {
                 bail!("{}: provenance.detector.manifest: {} not found", crate::shown(path), crate::shown(&manifest));
             }

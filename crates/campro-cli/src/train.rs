@@ -131,7 +131,7 @@ pub fn train(a: &TrainArgs) -> Result<()> {
     let mut params = out.params(&cfg, &name, &config.display().to_string())?;
     if let Some(det) = &out.detector {
         let entry = write_detector(det, output, &params.name, force)?;
-        params.provenance.insert("detector".into(), entry);
+        params.provenance.insert(campro::provenance::DETECTOR.into(), entry);
     }
     write_atomic(output, params.to_json().as_bytes(), force)?;
     eprintln!(
@@ -260,7 +260,7 @@ pub fn finetune_detector(a: &FinetuneDetectorArgs) -> Result<()> {
         "detector": cfg.detector, "seed": cfg.seed, "adapter_fit_error": fit,
         "mean_loss_last_50": tail.iter().map(|r| r.loss).sum::<f64>() / tail.len().max(1) as f64,
     });
-    params.provenance.insert("detector".into(), entry);
+    params.provenance.insert(campro::provenance::DETECTOR.into(), entry);
     write_atomic(params_path, params.to_json().as_bytes(), true)?;
     eprintln!(
         "fine-tuned the detector {} steps on {} images in {:.0} s -> {}",
@@ -273,8 +273,7 @@ pub fn finetune_detector(a: &FinetuneDetectorArgs) -> Result<()> {
 }
 /// LFW identities a trained parameter set held out (`provenance.data.validation_identities`).
 fn held_out_identities(params: &campro::Params) -> Option<Vec<String>> {
-    let list = params.provenance.get("data")?.get("validation_identities")?.as_array()?;
-    list.iter().map(|v| v.as_str().map(str::to_string)).collect()
+    params.provenance_fields().ok()?.validation_identities
 }
 
 pub fn train_enhancer(a: &TrainEnhancerArgs) -> Result<()> {

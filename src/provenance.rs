@@ -1,0 +1,185 @@
+//! What other code reads from a parameter set's `provenance`, typed and read in one place.
+//!
+//! The provenance object stays the file's free-form record (optimiser config, checkpoint,
+//! seeds, figures: [`Params::provenance`], written back byte for byte); the fields below are
+//! the contract between the crates that write them (`campro train`, `train-enhancer`,
+//! `finetune-detector`, the grey rating) and those that read them (`simulate --enhance`,
+//! `eval`, `check`, records). Every key is named here once. A field that is present but of
+//! the wrong shape is an error naming it; an absent one is `None`.
+
+use crate::params::Params;
+use serde_json::{Map, Value};
+
+/// `provenance.enhancer`: the image enhancer shown to people (`{"onnx": FILE, ...}`).
+pub const ENHANCER: &str = "enhancer";
+/// `provenance.restorer`: the attacker's restoration network trained against the set.
+pub const RESTORER: &str = "restorer";
+/// `provenance.detector`: the person detector fine-tuned behind the set's camera
+/// (`{"onnx": FILE, "manifest": FILE, ...}`).
+pub const DETECTOR: &str = "detector";
+/// `provenance.data`: what training read; its `validation_identities` are the LFW identities
+/// held out of training.
+pub const DATA: &str = "data";
+/// `provenance.data.validation_identities`.
+pub const VALIDATION_IDENTITIES: &str = "validation_identities";
+/// `provenance.validation`: the held-out validation of training; its `best_round` is the
+/// round whose parameters were kept.
+pub const VALIDATION: &str = "validation";
+/// `provenance.validation.best_round`.
+pub const BEST_ROUND: &str = "best_round";
+/// `provenance.grey`: the set's rating for grey input (`{"rated": true, ...}`).
+pub const GREY: &str = "grey";
+/// A network's or detector's file field (a bare file name beside the parameter file).
+pub const ONNX: &str = "onnx";
+/// A fine-tuned detector's manifest field (a bare file name beside the parameter file).
+pub const MANIFEST: &str = "manifest";
+
+/// A file a provenance field names: a file name meant to lie beside the parameter file
+/// (the caller resolves and checks it).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct Named {
+    /// The network's ONNX file.
+    pub onnx: String,
+    /// The model manifest beside it (fine-tuned detectors).
+    pub manifest: Option<String>,
+}
+
+/// The typed fields of a provenance; everything else is in [`Params::provenance`].
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Provenance {
+    /// [`ENHANCER`].
+    pub enhancer: Option<Named>,
+    /// [`RESTORER`].
+    pub restorer: Option<Named>,
+    /// [`DETECTOR`].
+    pub detector: Option<Named>,
+    /// LFW identities held out of training.
+    pub validation_identities: Option<Vec<String>>,
+    /// The training round whose parameters were kept.
+    pub best_round: Option<u64>,
+    /// Rated for grey input.
+    pub grey_rated: bool,
+}
+
+/// A provenance field of the wrong shape: the field's path and the rule.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BadField {
+    /// The field's path below `provenance`.
+    pub field: String,
+    /// What it must be.
+    pub rule: &'static str,
+}
+
+impl std::fmt::Display for BadField {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "provenance.{}: {}", self.field, self.rule)
+    }
+}
+
+impl std::error::Error for BadField {}
+
+fn bad<T>(field: impl Into<String>, rule: &'static str) -> Result<T, BadField> {
+    Err(BadField { field: field.into(), rule })
+}
+
+/// The object at `key` (`None`: absent or null).
+fn object<'a>(m: &'a Map<String, Value>, key: &str, path: &str) -> Result<Option<&'a Map<String, Value>>, BadField> {
+    match m.get(key) {
+        None | Some(Value::Null) => Ok(None),
+        Some(Value::Object(o)) => Ok(Some(o)),
+        Some(_) => bad(path, "must be an object"),
+    }
+}
+
+fn named(m: &Map<String, Value>, key: &str) -> Result<Option<Named>, BadField> {
+    let Some(o) = object(m, key, key)? else { return Ok(None) };
+    let string = |f: &str| match o.get(f) {
+        None | Some(Value::Null) => Ok(None),
+        Some(Value::String(s)) => Ok(Some(s.clone())),
+        Some(_) => bad(format!("{key}.{f}"), "must be a string"),
+    };
+    // An entry without its file (a record of a run that wrote none) names nothing.
+    let Some(onnx) = string(ONNX)? else { return Ok(None) };
+    Ok(Some(Named { onnx, manifest: string(MANIFEST)? }))
+}
+
+impl Provenance {
+    /// Reads the typed fields of `m` (a parameter set's provenance).
+    pub fn read(m: &Map<String, Value>) -> Result<Self, BadField> {
+        let validation_identities = match object(m, DATA, DATA)?.and_then(|d| d.get(VALIDATION_IDENTITIES)) {
+            None | Some(Value::Null) => None,
+            Some(Value::Array(a)) => Some(
+                a.iter()
+                    .map(|v| v.as_str().map(str::to_string))
+                    .collect::<Option<Vec<_>>>()
+                    .map_or_else(|| bad("data.validation_identities", "must be an array of names"), Ok)?,
+            ),
+            Some(_) => return bad("data.validation_identities", "must be an array of names"),
+        };
+        let best_round = match object(m, VALIDATION, VALIDATION)?.and_then(|v| v.get(BEST_ROUND)) {
+            None | Some(Value::Null) => None,
+            Some(v) => Some(v.as_u64().map_or_else(|| bad("validation.best_round", "must be a whole number"), Ok)?),
+        };
+        let grey_rated = match object(m, GREY, GREY)?.and_then(|g| g.get("rated")) {
+            None | Some(Value::Null) => false,
+            Some(Value::Bool(b)) => *b,
+            Some(_) => return bad("grey.rated", "must be true or false"),
+        };
+        Ok(Self {
+            enhancer: named(m, ENHANCER)?,
+            restorer: named(m, RESTORER)?,
+            detector: named(m, DETECTOR)?,
+            validation_identities,
+            best_round,
+            grey_rated,
+        })
+    }
+}
+
+impl Params {
+    /// The typed fields of this set's provenance ([`Provenance::read`]).
+    pub fn provenance_fields(&self) -> Result<Provenance, BadField> {
+        Provenance::read(&self.provenance)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn read(v: Value) -> Result<Provenance, BadField> {
+        Provenance::read(v.as_object().unwrap())
+    }
+
+    #[test]
+    fn typed_fields_by_hand() {
+        let p = read(json!({
+            "enhancer": {"onnx": "p.enhancer.onnx", "steps": 60},
+            "detector": {"onnx": "p.detector.onnx", "manifest": "p.detector.json"},
+            "data": {"validation_identities": ["A_B", "C_D"], "person_images": 2},
+            "validation": {"best_round": 12},
+            "grey": {"rated": true},
+            "config": {"seed": 1}
+        }))
+        .unwrap();
+        assert_eq!(p.enhancer, Some(Named { onnx: "p.enhancer.onnx".into(), manifest: None }));
+        assert_eq!(p.detector.unwrap().manifest.as_deref(), Some("p.detector.json"));
+        assert_eq!(p.restorer, None);
+        assert_eq!(p.validation_identities.unwrap(), ["A_B", "C_D"]);
+        assert_eq!(p.best_round, Some(12));
+        assert!(p.grey_rated);
+        assert_eq!(read(json!({})).unwrap(), Provenance::default());
+        assert_eq!(read(json!({"enhancer": {"steps": 3}, "validation": {"best_round": null}})).unwrap(), Provenance::default());
+    }
+
+    #[test]
+    fn a_field_of_the_wrong_shape_is_named() {
+        let e = |v: Value| read(v).unwrap_err().to_string();
+        assert_eq!(e(json!({"enhancer": "x.onnx"})), "provenance.enhancer: must be an object");
+        assert_eq!(e(json!({"restorer": {"onnx": 3}})), "provenance.restorer.onnx: must be a string");
+        assert_eq!(e(json!({"data": {"validation_identities": ["a", 1]}})), "provenance.data.validation_identities: must be an array of names");
+        assert_eq!(e(json!({"validation": {"best_round": -1}})), "provenance.validation.best_round: must be a whole number");
+        assert_eq!(e(json!({"grey": {"rated": "yes"}})), "provenance.grey.rated: must be true or false");
+    }
+}

@@ -99,6 +99,20 @@ pub fn shown(path: &Path) -> String {
 /// Reads the regular file at `path`, at most `limit` bytes; `role` names what it is
 /// read as in the error.
 pub fn read_capped(path: &Path, limit: u64, role: &'static str) -> Result<Vec<u8>, FileError> {
+    let io = |source| FileError::Io { path: shown(path), source };
+    let file = open_regular(path)?;
+    let mut out = Vec::new();
+    file.take(limit.saturating_add(1)).read_to_end(&mut out).map_err(io)?;
+    if out.len() as u64 > limit {
+        return Err(FileError::TooLarge { path: shown(path), role, limit });
+    }
+    Ok(out)
+}
+
+/// Opens `path` for reading if it is a regular file (a link to one counts): a FIFO, a
+/// device or a folder is refused before it is opened and checked again once open (opened
+/// non-blocking, so a FIFO swapped in meanwhile cannot hang the open).
+pub fn open_regular(path: &Path) -> Result<std::fs::File, FileError> {
     let shown = || shown(path);
     let io = |source| FileError::Io { path: shown(), source };
     // Follows links: a link to a regular file is read as that file.
@@ -118,12 +132,7 @@ pub fn read_capped(path: &Path, limit: u64, role: &'static str) -> Result<Vec<u8
     if let Some(what) = kind_of(meta.file_type()) {
         return Err(FileError::NotRegular { path: shown(), what });
     }
-    let mut out = Vec::new();
-    file.take(limit.saturating_add(1)).read_to_end(&mut out).map_err(io)?;
-    if out.len() as u64 > limit {
-        return Err(FileError::TooLarge { path: shown(), role, limit });
-    }
-    Ok(out)
+    Ok(file)
 }
 
 /// [`read_capped`] as UTF-8 text.

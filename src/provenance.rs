@@ -170,7 +170,10 @@ mod tests {
         assert_eq!(p.best_round, Some(12));
         assert!(p.grey_rated);
         assert_eq!(read(json!({})).unwrap(), Provenance::default());
-        assert_eq!(read(json!({"enhancer": {"steps": 3}, "validation": {"best_round": null}})).unwrap(), Provenance::default());
+        assert_eq!(
+            read(json!({"enhancer": {"steps": 3}, "validation": {"best_round": null}})).unwrap(),
+            Provenance::default()
+        );
     }
 
     #[test]
@@ -178,8 +181,14 @@ mod tests {
         let e = |v: Value| read(v).unwrap_err().to_string();
         assert_eq!(e(json!({"enhancer": "x.onnx"})), "provenance.enhancer: must be an object");
         assert_eq!(e(json!({"restorer": {"onnx": 3}})), "provenance.restorer.onnx: must be a string");
-        assert_eq!(e(json!({"data": {"validation_identities": ["a", 1]}})), "provenance.data.validation_identities: must be an array of names");
-        assert_eq!(e(json!({"validation": {"best_round": -1}})), "provenance.validation.best_round: must be a whole number");
+        assert_eq!(
+            e(json!({"data": {"validation_identities": ["a", 1]}})),
+            "provenance.data.validation_identities: must be an array of names"
+        );
+        assert_eq!(
+            e(json!({"validation": {"best_round": -1}})),
+            "provenance.validation.best_round: must be a whole number"
+        );
         assert_eq!(e(json!({"grey": {"rated": "yes"}})), "provenance.grey.rated: must be true or false");
     }
 }

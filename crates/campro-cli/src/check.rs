@@ -75,6 +75,7 @@ fn photos_of(a: &CheckArgs, out: &Path) -> Result<Vec<Photo>> {
 /// The views of `a` (default: every one the preset has), as conditions on a raw photo.
 fn views_of(
     a: &CheckArgs,
+    params: &Path,
     p: &campro::Params,
     models: &Path,
     photos: &[Photo],
@@ -89,7 +90,7 @@ fn views_of(
         views.push(captured.clone());
     }
     if wanted(ViewArg::Enhanced) {
-        match crate::capture::enhancer_of(&a.params, p, a.scale, models) {
+        match crate::capture::enhancer_of(params, p, a.scale, models) {
             Ok(e) => {
                 let pr = protect.clone();
                 let e = std::sync::Arc::new(e);
@@ -133,7 +134,7 @@ fn views_of(
         views.push(Condition::new("restored", move |img: &RgbImage| r.apply(&pr(img))));
     }
     if wanted(ViewArg::RestoreNet) {
-        match crate::capture::network_of(&a.params, p, crate::capture::Network::Restorer) {
+        match crate::capture::network_of(params, p, crate::capture::Network::Restorer) {
             Ok(net) => {
                 let net = net.with_scale(a.scale.enhance_scale);
                 let pr = protect.clone();
@@ -315,10 +316,115 @@ fn summary_line(s: &Summary, judges: &[Judge], gallery: usize) -> String {
     line
 }
 
+/// `campro check --record RECORD FILE`: FILE is the output its record names (same
+/// SHA-256), or its raw input (then the camera runs again with the record's settings and the
+/// new output's SHA-256 must be the record's). 0 when it verifies, [`LINKABLE_EXIT`] when not.
+fn verify_record(a: &CheckArgs, record: &Path) -> Result<i32> {
+    let files: Vec<&PathBuf> = a.params.iter().chain(&a.photos).collect();
+    let [file] = files[..] else {
+        bail!("--record: give one file to verify (the output or its raw input), got {}", files.len())
+    };
+    let r = crate::record::read(record)?;
+    let (h, _) = crate::record::sha256_file(file)?;
+    let what = format!(
+        "preset {} (SHA-256 {}), campro {}, path {}, {}-bit, bound {} LSB",
+        escape(&r.preset.name),
+        &r.preset.sha256[..12],
+        escape(&r.campro_version),
+        escape(&r.path),
+        r.bit_depth,
+        r.bound_lsb
+    );
+    if h == r.output.sha256 {
+        say!("{}: the output its record names: {what}", crate::shown(file));
+        return Ok(0);
+    }
+    if h != r.input.sha256 {
+        say!(
+            "{}: NOT what its record names: its SHA-256 is neither the output's ({}) nor the input's ({})",
+            crate::shown(file),
+            escape(&r.output.name),
+            escape(&r.input.name)
+        );
+        return Ok(LINKABLE_EXIT);
+    }
+    // The raw input: the camera again, as recorded.
+    let given = PathBuf::from(&r.preset.given);
+    let bytes = crate::record::preset_bytes(&given)
+        .with_context(|| format!("the record's preset {}", escape(&r.preset.given)))?;
+    if crate::record::sha256(&bytes) != r.preset.sha256 {
+        bail!(
+            "the record's preset {}: its SHA-256 is not the record's (the preset changed since): nothing to compare",
+            escape(&r.preset.given)
+        );
+    }
+    let p = crate::load_params(&given)?;
+    let enhancer = if r.enhancer_sha256.is_some() {
+        let e = crate::record::enhancer_bytes(&given, &p)?;
+        if r.enhancer_sha256.as_deref() != Some(crate::record::sha256(&e).as_str()) {
+            bail!("the record's enhancer: its SHA-256 is not the record's (the enhancer changed since)");
+        }
+        Some(crate::capture::enhancer_of(&given, &p, a.scale, &a.data.models_dir())?)
+    } else {
+        None
+    };
+    let metadata = match r.metadata.as_str() {
+        "strip" => crate::metadata::Policy::Strip,
+        "keep" => crate::metadata::Policy::Keep,
+        "keep-safe" => crate::metadata::Policy::KeepSafe,
+        other => bail!("{}: metadata: must be strip, keep-safe or keep, got {}", crate::shown(record), escape(other)),
+    };
+    let dir = tempfile::tempdir()?;
+    let out = dir.path().join(
+        Path::new(&r.output.name)
+            .file_name()
+            .ok_or_else(|| anyhow!("{}: output.name: must be a file name", crate::shown(record)))?,
+    );
+    let enc = crate::video::Encoding { codec: "libx264".into(), crf: Some(18), bitrate: None, preset: None };
+    let o = crate::simulate::Options {
+        depth: if r.bit_depth == 16 { campro::pipeline::Depth::Sixteen } else { campro::pipeline::Depth::Eight },
+        existing: crate::simulate::Existing::Refuse,
+        jobs: None,
+        enc: &enc,
+        enhancer: enhancer.as_ref(),
+        json: false,
+        quality: r.jpeg_quality.unwrap_or(95),
+        image_format: crate::simulate::ImageFormat::of(&out),
+        frames: crate::video::FrameFormat { size: None, rate: None, stall: None },
+        max_frames: None,
+        allow_grey: true,
+        metadata,
+        record: None,
+    };
+    crate::simulate::simulate(&p, std::slice::from_ref(file), &out, &o)?;
+    let (again, _) = crate::record::sha256_file(&out)?;
+    if again == r.output.sha256 {
+        say!(
+            "{}: its raw input; run again it gives the output its record names ({}): {what}",
+            crate::shown(file),
+            escape(&r.output.name)
+        );
+        Ok(0)
+    } else {
+        say!(
+            "{}: its raw input; run again it does NOT give the recorded output {} (SHA-256 {} instead of {}): {what}",
+            crate::shown(file),
+            escape(&r.output.name),
+            &again[..12],
+            &r.output.sha256[..12]
+        );
+        Ok(LINKABLE_EXIT)
+    }
+}
+
 /// `campro check`.
 pub fn run(a: CheckArgs) -> Result<i32> {
+    if let Some(record) = &a.record {
+        return verify_record(&a, record);
+    }
     let start = std::time::Instant::now();
-    let p = crate::load_params(&a.params)?;
+    let params = a.params.clone().ok_or_else(|| anyhow!("PARAMS: required"))?;
+    let p = crate::load_params(&params)?;
     if let Some(out) = &a.output {
         crate::check_output_folder(out, a.force, "--output")?;
     }
@@ -336,7 +442,7 @@ pub fn run(a: CheckArgs) -> Result<i32> {
         a.face_models.iter().map(|n| Ok(Embedder::new(crate::models::load(n, &models)?)?)).collect::<Result<_>>()?;
     let judges: Vec<Judge> = embedders.iter().map(Judge::new).collect::<campro_eval::Result<_>>()?;
     let mut notes = Vec::new();
-    let views = views_of(&a, &p, &models, &photos, &mut notes)?;
+    let views = views_of(&a, &params, &p, &models, &photos, &mut notes)?;
     if views.is_empty() {
         bail!("--view: no view to check");
     }
@@ -391,7 +497,7 @@ pub fn run(a: CheckArgs) -> Result<i32> {
     let gallery = check::rank_all(&mut checked, &distractors, judges.len());
     let s = summary(&checked, &judges, &views);
     let report = CheckReport {
-        params: format!("{} ({})", crate::shown(&a.params), p.name),
+        params: format!("{} ({})", crate::shown(&params), p.name),
         models: judges
             .iter()
             .map(|j| ModelRow { name: j.embedder.name().to_string(), thresholds: j.thresholds })

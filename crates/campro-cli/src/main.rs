@@ -16,6 +16,7 @@ mod models;
 mod output;
 mod params;
 mod presets;
+mod record;
 mod retrain;
 mod simulate;
 mod stress;

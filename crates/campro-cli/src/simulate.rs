@@ -150,7 +150,7 @@ impl ImageFormat {
     }
 
     /// The format a path names by its ending.
-    fn of(path: &Path) -> Option<Self> {
+    pub(crate) fn of(path: &Path) -> Option<Self> {
         match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
             "png" => Some(Self::Png),
             "jpg" | "jpeg" => Some(Self::Jpeg),
@@ -254,6 +254,8 @@ pub struct Options<'a> {
     pub allow_grey: bool,
     /// What image outputs keep of their inputs' metadata.
     pub metadata: crate::metadata::Policy,
+    /// Write a record beside each output (`--record`).
+    pub record: Option<&'a crate::record::RunRecord>,
 }
 
 /// What `-` and device paths mean among the inputs and for the output: one video stream.
@@ -448,12 +450,21 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         allow_grey,
         metadata,
         skip_existing,
+        record,
         format,
     } = a;
     let enc = video::Encoding { codec, crf: Some(crf), bitrate, preset };
     let p = crate::load_params(&params)?;
     let enhancer =
         if enhance { Some(crate::capture::enhancer_of(&params, &p, scale, &data.models_dir())?) } else { None };
+    let record = if record {
+        let enhancer_bytes = if enhance { Some(crate::record::enhancer_bytes(&params, &p)?) } else { None };
+        let depth = if enhance || matches!(bit_depth, BitDepth::Eight) { 8 } else { 16 };
+        let policy = serde_json::to_value(metadata)?.as_str().unwrap_or_default().to_string();
+        Some(crate::record::RunRecord::new(&params, &p, enhancer_bytes.as_deref(), depth, policy)?)
+    } else {
+        None
+    };
     let options = Options {
         depth: match bit_depth {
             BitDepth::Eight => Depth::Eight,
@@ -474,6 +485,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         max_frames: frames,
         allow_grey,
         metadata,
+        record: record.as_ref(),
     };
     simulate(&p, &inputs, &output, &options)
 }
@@ -565,6 +577,13 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
             } else {
                 paths.one(i, out, &|w| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(i))))
             };
+            let r = r.and_then(|grey| {
+                if let Some(rec) = o.record {
+                    let jpeg = matches!(ImageFormat::of(out), Some(ImageFormat::Jpeg)).then_some(o.quality);
+                    rec.write(i, out, jpeg, force)?;
+                }
+                Ok(grey)
+            });
             match r {
                 Ok(grey) => {
                     let mut r = record(i, out, "written", started, None);
@@ -620,7 +639,14 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
                 sixteen: o.depth == Depth::Sixteen,
                 max_frames: o.max_frames,
             };
-            pool.install(|| video::simulate(&job, &Source::File(i.clone()), &Sink::File(out.clone()), &warn))
+            pool.install(|| video::simulate(&job, &Source::File(i.clone()), &Sink::File(out.clone()), &warn)).and_then(
+                |done| {
+                    if let Some(rec) = o.record {
+                        rec.write(i, &out, None, force)?;
+                    }
+                    Ok(done)
+                },
+            )
         };
         match r {
             Ok(done) => {

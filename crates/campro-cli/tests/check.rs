@@ -211,3 +211,63 @@ fn bad_check_arguments_get_one_line() {
         "campro eval thresholds",
     );
 }
+
+#[test]
+fn a_record_beside_each_output_verifies_the_output_and_its_raw_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let raw = dir.path().join("raw.png");
+    image::RgbImage::from_fn(64, 48, |x, y| image::Rgb([(x * 4) as u8, (y * 5) as u8, ((x + y) * 2) as u8]))
+        .save(&raw)
+        .unwrap();
+    let out = dir.path().join("out.png");
+    let run =
+        campro().args(["simulate", "campro-omega-0.5"]).arg(&raw).arg("-o").arg(&out).arg("--record").output().unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let record = dir.path().join("out.png.campro.json");
+    let r: Value = serde_json::from_slice(&std::fs::read(&record).unwrap()).unwrap();
+    assert_eq!(r["preset"]["name"], "campro-omega-0.5");
+    assert_eq!(r["path"], "camera");
+    assert_eq!(r["bound_lsb"], 0.5);
+    // The preset's hash is that of its bundled JSON (the same bytes as params/).
+    let bytes = std::fs::read(bundled("campro-omega-0.5.json")).unwrap();
+    use sha2::Digest;
+    let hex: String = sha2::Sha256::digest(&bytes).iter().map(|b| format!("{b:02x}")).collect();
+    assert_eq!(r["preset"]["sha256"], hex.as_str());
+    let hex_of = |p: &Path| -> String {
+        sha2::Sha256::digest(std::fs::read(p).unwrap()).iter().map(|b| format!("{b:02x}")).collect()
+    };
+    assert_eq!(r["output"]["sha256"], hex_of(&out).as_str());
+    assert_eq!(r["input"]["sha256"], hex_of(&raw).as_str());
+
+    let verify = |file: &Path| {
+        let o = campro().arg("check").arg("--record").arg(&record).arg(file).output().unwrap();
+        assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
+        (o.status.code(), String::from_utf8_lossy(&o.stdout).into_owned())
+    };
+    let (code, text) = verify(&out);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(text.contains("the output its record names"), "{text}");
+    let (code, text) = verify(&raw);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(text.contains("run again it gives the output its record names"), "{text}");
+    // One changed pixel in the output: not what the record says.
+    let mut img = image::open(&out).unwrap().to_rgb8();
+    img.put_pixel(0, 0, image::Rgb([1, 2, 3]));
+    let forged = dir.path().join("forged.png");
+    img.save(&forged).unwrap();
+    let (code, text) = verify(&forged);
+    assert_eq!(code, Some(3), "{text}");
+    assert!(text.contains("NOT what its record names"), "{text}");
+    // A record whose hash is no hash: one line naming the field.
+    let mut bad = r.clone();
+    bad["output"]["sha256"] = "zz".into();
+    let bad_path = dir.path().join("bad.campro.json");
+    std::fs::write(&bad_path, bad.to_string()).unwrap();
+    fails_with(campro().arg("check").arg("--record").arg(&bad_path).arg(&out), "output.sha256: must be 64 hex digits");
+    let mut extra = r.clone();
+    extra["surprise"] = 1.into();
+    std::fs::write(&bad_path, extra.to_string()).unwrap();
+    fails_with(campro().arg("check").arg("--record").arg(&bad_path).arg(&out), "unknown field");
+    // A second run without --force does not replace the record either.
+    fails_with(campro().args(["simulate", "campro-omega-0.5"]).arg(&raw).arg("-o").arg(&out).arg("--record"), "exists");
+}

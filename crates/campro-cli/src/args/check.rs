@@ -7,12 +7,18 @@ use std::path::PathBuf;
 /// `campro check`.
 #[derive(Args)]
 pub struct CheckArgs {
-    #[arg(help = PARAMS_HELP)]
-    pub params: PathBuf,
+    #[arg(help = PARAMS_HELP, required_unless_present = "record")]
+    pub params: Option<PathBuf>,
     /// Photos or folders (recursive). A folder with subfolders counts each subfolder as one
     /// person's photos (re-identified among everyone's); loose photos are each their own.
-    #[arg(required_unless_present = "persons")]
+    #[arg(required_unless_present_any = ["persons", "record"])]
     pub photos: Vec<PathBuf>,
+    /// Verify a file against the record `simulate --record` wrote beside it: `campro check
+    /// --record OUT.jpg.campro.json FILE` (FILE the output: its hash; FILE the raw input:
+    /// the camera run again and its output's hash compared). Exit status 3 if it is not
+    /// what the record says.
+    #[arg(long, value_name = "RECORD", conflicts_with_all = ["persons", "output", "fail_above"])]
+    pub record: Option<PathBuf>,
     /// One person's photos, NAME=DIR (repeatable).
     #[arg(long = "person", value_name = "NAME=DIR", value_parser = parse_person)]
     pub persons: Vec<(String, PathBuf)>,

@@ -88,6 +88,11 @@ pub struct SimulateArgs {
     /// Leave outputs that exist and skip their inputs (re-runs do only what is missing).
     #[arg(long, conflicts_with = "force")]
     pub skip_existing: bool,
+    /// Write NAME.EXT.campro.json beside each output: the preset's name and SHA-256,
+    /// campro's version, the path and its error bound, the input's and the output's
+    /// SHA-256 (`campro check --record` verifies a file against it).
+    #[arg(long)]
+    pub record: bool,
     /// Progress on stderr only, or also one JSON object on stdout: each input's output,
     /// status (written, skipped, failed) and time.
     #[arg(long, value_enum, default_value_t = Report::Text)]

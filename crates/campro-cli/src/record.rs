@@ -1,0 +1,210 @@
+//! The record beside a protected file (`simulate --record`: `NAME.EXT.campro.json`): which
+//! preset (name and SHA-256), which campro, which path and its stated error bound, and the
+//! SHA-256 of the input and the output; and its verification (`campro check --record`).
+
+use anyhow::{anyhow, bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+
+/// The record format's version.
+pub const RECORD_VERSION: u32 = 1;
+
+/// A record file's largest size: it is a few hundred bytes.
+const MAX_RECORD_BYTES: u64 = 64 << 10;
+
+/// What a record says of the preset.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PresetRecord {
+    /// The parameter set's own name.
+    pub name: String,
+    /// What was given on the command line (a bundled preset's name, or a file).
+    pub given: String,
+    /// SHA-256 of the parameter file's bytes (a bundled preset: its JSON as built in).
+    pub sha256: String,
+    /// The training round kept, where the set was trained.
+    pub best_round: Option<u64>,
+}
+
+/// A file a record names.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FileRecord {
+    /// Its file name (no folder: the record lies beside the output).
+    pub name: String,
+    pub sha256: String,
+    pub bytes: u64,
+}
+
+/// One protected output's record.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Record {
+    pub campro_record: u32,
+    pub campro_version: String,
+    pub preset: PresetRecord,
+    /// `camera` (the desktop pipeline: the exact 8-bit tables or the 16-bit reference
+    /// path), or `camera+enhancer` (then the preset's enhancer on the camera's 8-bit output).
+    pub path: String,
+    /// Output bits per channel.
+    pub bit_depth: u8,
+    /// The camera path's stated bound against the f64 reference: rounding to the output
+    /// code only, 8-bit or 16-bit LSB of `bit_depth` (docs/accuracy-and-speed.md). The
+    /// enhancer, a network, has none: `enhancer_sha256` names it.
+    pub bound_lsb: f64,
+    pub enhancer_sha256: Option<String>,
+    /// JPEG quality (1..=100) where the output is a JPEG.
+    pub jpeg_quality: Option<u8>,
+    /// What the output kept of the input's metadata (`--metadata`).
+    pub metadata: String,
+    pub input: FileRecord,
+    pub output: FileRecord,
+}
+
+/// The hex SHA-256 of `bytes`.
+pub fn sha256(bytes: &[u8]) -> String {
+    Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The hex SHA-256 of a regular file, read in pieces (no size limit: only hashed).
+pub fn sha256_file(path: &Path) -> Result<(String, u64)> {
+    use std::io::Read;
+    let f = campro::file::open_regular(path).with_context(|| crate::shown(path))?;
+    let mut r = std::io::BufReader::with_capacity(1 << 20, f);
+    let mut h = Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    let mut n = 0u64;
+    loop {
+        let k = r.read(&mut buf).with_context(|| crate::shown(path))?;
+        if k == 0 {
+            break;
+        }
+        h.update(&buf[..k]);
+        n += k as u64;
+    }
+    Ok((h.finalize().iter().map(|b| format!("{b:02x}")).collect(), n))
+}
+
+/// The bytes a PARAMS argument names: a bundled preset's JSON, or the file's.
+pub fn preset_bytes(given: &Path) -> Result<Vec<u8>> {
+    if let Some(p) = crate::presets::named(given) {
+        return Ok(p.json.as_bytes().to_vec());
+    }
+    Ok(campro::file::read_capped(given, campro::params::MAX_JSON_BYTES as u64, "a parameter file")?)
+}
+
+/// The bytes of the enhancer the preset `given` names (a bundled preset's built-in one, or
+/// the file its provenance names beside it), for its hash.
+pub fn enhancer_bytes(given: &Path, p: &campro::Params) -> Result<Vec<u8>> {
+    if let Some(preset) = crate::presets::named(given) {
+        return preset
+            .enhancer
+            .map(<[u8]>::to_vec)
+            .ok_or_else(|| anyhow!("{}: this bundled preset has no enhancer", preset.name));
+    }
+    let named = p.provenance_fields().map_err(|e| anyhow!("{}: {e}", crate::shown(given)))?.enhancer;
+    let file = named.ok_or_else(|| anyhow!("{}: provenance.enhancer.onnx: missing", crate::shown(given)))?.onnx;
+    let path = crate::capture::beside(given, "provenance.enhancer.onnx", &file)?;
+    Ok(campro::file::read_capped(&path, 1 << 30, "an enhancer")?)
+}
+
+/// Where the record of `output` lies: `output` with `.campro.json` appended to its name.
+pub fn path_of(output: &Path) -> PathBuf {
+    let mut name = output.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(".campro.json");
+    output.with_file_name(name)
+}
+
+/// What every record of one run shares.
+#[derive(Debug, Clone)]
+pub struct RunRecord {
+    pub preset: PresetRecord,
+    pub enhancer_sha256: Option<String>,
+    pub bit_depth: u8,
+    pub metadata: String,
+}
+
+impl RunRecord {
+    /// The run's part of the records: the preset `given` (read again to hash it) and `p`.
+    pub fn new(
+        given: &Path,
+        p: &campro::Params,
+        enhancer: Option<&[u8]>,
+        bit_depth: u8,
+        metadata: String,
+    ) -> Result<Self> {
+        let bytes = preset_bytes(given)?;
+        Ok(Self {
+            preset: PresetRecord {
+                name: p.name.clone(),
+                given: given.display().to_string(),
+                sha256: sha256(&bytes),
+                best_round: p.provenance_fields().ok().and_then(|f| f.best_round),
+            },
+            enhancer_sha256: enhancer.map(sha256),
+            bit_depth,
+            metadata,
+        })
+    }
+
+    /// Writes the record of `output` (made from `input`) beside it.
+    pub fn write(&self, input: &Path, output: &Path, jpeg_quality: Option<u8>, force: bool) -> Result<()> {
+        let file = |p: &Path| -> Result<FileRecord> {
+            let (sha256, bytes) = sha256_file(p)?;
+            Ok(FileRecord {
+                name: p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+                sha256,
+                bytes,
+            })
+        };
+        let r = Record {
+            campro_record: RECORD_VERSION,
+            campro_version: env!("CARGO_PKG_VERSION").to_string(),
+            preset: self.preset.clone(),
+            path: if self.enhancer_sha256.is_some() { "camera+enhancer" } else { "camera" }.to_string(),
+            bit_depth: self.bit_depth,
+            bound_lsb: 0.5,
+            enhancer_sha256: self.enhancer_sha256.clone(),
+            jpeg_quality,
+            metadata: self.metadata.clone(),
+            input: file(input)?,
+            output: file(output)?,
+        };
+        crate::write_atomic(&path_of(output), (serde_json::to_string_pretty(&r)? + "\n").as_bytes(), force)
+    }
+}
+
+/// Reads a record (a regular file of at most 64 KB, every field checked).
+pub fn read(path: &Path) -> Result<Record> {
+    let text = campro::file::read_text_capped(path, MAX_RECORD_BYTES, "a campro record")?;
+    let de = &mut serde_json::Deserializer::from_str(&text);
+    let r: Record = serde_path_to_error::deserialize(de)
+        .map_err(|e| anyhow!("{}: {}: {}", crate::shown(path), e.path(), e.inner()))?;
+    if r.campro_record != RECORD_VERSION {
+        bail!("{}: campro_record: must be {RECORD_VERSION}, got {}", crate::shown(path), r.campro_record);
+    }
+    for (field, h) in
+        [("preset.sha256", &r.preset.sha256), ("input.sha256", &r.input.sha256), ("output.sha256", &r.output.sha256)]
+    {
+        if h.len() != 64 || !h.bytes().all(|b| b.is_ascii_hexdigit()) {
+            bail!("{}: {field}: must be 64 hex digits", crate::shown(path));
+        }
+    }
+    Ok(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sha256_of_abc_is_the_fips_vector() {
+        assert_eq!(sha256(b"abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+    }
+
+    #[test]
+    fn the_record_lies_beside_its_output() {
+        assert_eq!(path_of(Path::new("out/IMG_1.jpg")), Path::new("out/IMG_1.jpg.campro.json"));
+    }
+}

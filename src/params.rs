@@ -259,6 +259,11 @@ impl Params {
         s
     }
 
+    /// The typed fields of this set's provenance ([`crate::provenance::Provenance::read`]).
+    pub fn provenance_fields(&self) -> Result<crate::provenance::Provenance, crate::provenance::BadField> {
+        crate::provenance::Provenance::read(&self.provenance)
+    }
+
     /// Whether the set is rated for grey input ([`crate::chroma`]): its provenance holds
     /// `"grey": {"rated": true, ...}` ([`GREY_RATING`]), written with the figures that rate
     /// it. Without it, tools do not call a grey image protected.

@@ -1,13 +1,12 @@
 //! What other code reads from a parameter set's `provenance`, typed and read in one place.
 //!
 //! The provenance object stays the file's free-form record (optimiser config, checkpoint,
-//! seeds, figures: [`Params::provenance`], written back byte for byte); the fields below are
+//! seeds, figures: `Params::provenance`, written back byte for byte); the fields below are
 //! the contract between the crates that write them (`campro train`, `train-enhancer`,
 //! `finetune-detector`, the grey rating) and those that read them (`simulate --enhance`,
 //! `eval`, `check`, records). Every key is named here once. A field that is present but of
 //! the wrong shape is an error naming it; an absent one is `None`.
 
-use crate::params::Params;
 use serde_json::{Map, Value};
 
 /// `provenance.enhancer`: the image enhancer shown to people (`{"onnx": FILE, ...}`).
@@ -44,7 +43,7 @@ pub struct Named {
     pub manifest: Option<String>,
 }
 
-/// The typed fields of a provenance; everything else is in [`Params::provenance`].
+/// The typed fields of a provenance; everything else stays in `Params::provenance`.
 #[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
 pub struct Provenance {
     /// [`ENHANCER`].
@@ -133,13 +132,6 @@ impl Provenance {
             best_round,
             grey_rated,
         })
-    }
-}
-
-impl Params {
-    /// The typed fields of this set's provenance ([`Provenance::read`]).
-    pub fn provenance_fields(&self) -> Result<Provenance, BadField> {
-        Provenance::read(&self.provenance)
     }
 }
 

@@ -447,11 +447,7 @@ pub fn run(a: CheckArgs) -> Result<i32> {
         bail!("--view: no view to check");
     }
     let budget = Budget::global();
-    let bar = indicatif::ProgressBar::new(photos.len() as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("check {bar:40} {pos}/{len} {elapsed_precise} eta {eta}")
-            .expect("valid template"),
-    );
+    let bar = crate::output::count_bar("check", photos.len() as u64);
     let results: Vec<Result<PhotoCheck>> = photos
         .par_iter()
         .map(|ph| {

@@ -359,11 +359,7 @@ pub fn inspect(
     }
     let fast = Exact8::new(p);
     let budget = Budget::global();
-    let bar = indicatif::ProgressBar::new(images.len() as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("inspect {bar:40} {pos}/{len} {elapsed_precise} eta {eta}")
-            .expect("valid template"),
-    );
+    let bar = crate::output::count_bar("inspect", images.len() as u64);
     let results: Vec<Result<Value>> = images
         .par_iter()
         .map(|(i, o)| {

@@ -97,6 +97,20 @@ macro_rules! say {
 
 /// Writes `bytes` to `path` whole or not at all ([`campro_eval::atomic::write`]). Refuses
 /// to replace `path` unless `force` (checked once, at the rename).
+/// A progress bar over `n` items on stderr, `label` before it (empty: none), with the
+/// elapsed time and the time left.
+pub(crate) fn count_bar(label: &str, n: u64) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(n);
+    let sep = if label.is_empty() { "" } else { " " };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(&format!(
+            "{label}{sep}{{bar:40}} {{pos}}/{{len}} {{elapsed_precise}} eta {{eta}}"
+        ))
+        .expect("valid template"),
+    );
+    bar
+}
+
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()> {
     output_result(path, campro_eval::atomic::write(path, bytes, force))
 }

@@ -552,14 +552,10 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
         o.existing,
     )?;
     let bar = if images.len() > 4 {
-        indicatif::ProgressBar::new(images.len() as u64)
+        crate::output::count_bar("", images.len() as u64)
     } else {
         indicatif::ProgressBar::hidden()
     };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta}")
-            .expect("valid template"),
-    );
     let budget = Budget::global();
     let failed = AtomicUsize::new(0);
     let paths = Paths { capture: &capture, budget, depth: o.depth, force, quality: o.quality, metadata: o.metadata };

@@ -158,16 +158,21 @@ class Camera2Test {
         cam.close()
     }
 
-    @Test
-    fun withoutPerFrameControlNoAutoFramesInterleaveAndAccessErrorsStopClosed() {
-        val chars = supportedCharacteristics(syncLatency = 2)
+    /** A camera metered and probed on a device with `SYNC_MAX_LATENCY` [syncLatency]: its next result is a protected one. */
+    private fun metered(syncLatency: Int): Pair<CamProCamera2, FakeSession> {
+        val chars = supportedCharacteristics(syncLatency = syncLatency)
         val dev = openDevice(chars)
-        val states = mutableListOf<ProtectionState>()
-        val cam = camera(chars, states)
+        val cam = camera(chars, mutableListOf())
         val fake = FakeSession(dev)
         cam.onConfigured(dev, fake)
         cam.onResult(CamProCamera2.METERING, converged())
         passProbe(cam, fake)
+        return cam to fake
+    }
+
+    @Test
+    fun withoutPerFrameControlNoAutoFramesInterleaveAndAccessErrorsStopClosed() {
+        val (cam, fake) = metered(syncLatency = 2)
         assertEquals(listOf(CamProCamera2.PROTECTED), fake.repeated.last().map { it.tag })
         cam.onResult(CamProCamera2.PROTECTED, honoured(1))
         assertEquals(ProtectionState.Protected, cam.pipeline.state)
@@ -181,14 +186,7 @@ class Camera2Test {
 
     @Test
     fun lostBuffersAreNotTakenForMismatchedTimestamps() {
-        val chars = supportedCharacteristics(syncLatency = 0)
-        val dev = openDevice(chars)
-        val states = mutableListOf<ProtectionState>()
-        val cam = camera(chars, states)
-        val fake = FakeSession(dev)
-        cam.onConfigured(dev, fake)
-        cam.onResult(CamProCamera2.METERING, converged())
-        passProbe(cam, fake)
+        val (cam, _) = metered(syncLatency = 0)
         val limit = cam.pipeline.gate.unmatchedLimit
         // The app holds every image: each protected capture starts, loses its buffer, and its result verifies.
         for (n in 1L..(2L * limit)) {

@@ -306,15 +306,17 @@ class GlueTest {
         return manager
     }
 
+    /** A CameraX camera whose Camera2 id is [id], its control [control]. */
+    private fun cameraOf(id: String, control: RecordingControl) = object : Camera {
+        override val cameraControl: CameraControl = control
+        override val cameraInfo: CameraInfo = FakeInfo(id)
+    }
+
     @Test
     fun cameraXBindOwnsTheBindingAndRestartsWithEachSession() {
         val direct = Executor { it.run() }
         val control = RecordingControl()
-        val camera = object : Camera {
-            override val cameraControl: CameraControl = control
-            override val cameraInfo: CameraInfo = FakeInfo("7")
-        }
-        val provider = RecordingProvider(camera)
+        val provider = RecordingProvider(cameraOf("7", control))
         val x = CamProCameraX(session, direct, deliver = { it.close() })
         val owner = object : LifecycleOwner {}
         x.bind(provider, owner, CameraSelector.DEFAULT_BACK_CAMERA, cameraManager("7", supportedCharacteristics()), direct) { it.setImageQueueDepth(1) }
@@ -344,12 +346,8 @@ class GlueTest {
     fun cameraXBindOnAnUnsupportedCameraDeliversNothing() {
         val direct = Executor { it.run() }
         val control = RecordingControl()
-        val camera = object : Camera {
-            override val cameraControl: CameraControl = control
-            override val cameraInfo: CameraInfo = FakeInfo("8")
-        }
         val x = CamProCameraX(session, direct, deliver = { it.close() })
-        x.bind(RecordingProvider(camera), object : LifecycleOwner {}, CameraSelector.DEFAULT_FRONT_CAMERA, cameraManager("8", supportedCharacteristics(syncLatency = -1)), direct)
+        x.bind(RecordingProvider(cameraOf("8", control)), object : LifecycleOwner {}, CameraSelector.DEFAULT_FRONT_CAMERA, cameraManager("8", supportedCharacteristics(syncLatency = -1)), direct)
         val s = x.state
         assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("SYNC_MAX_LATENCY"))
         assertTrue("nothing sent to an unsupported camera", control.sent.isEmpty())

@@ -531,32 +531,15 @@ mod tests {
     fn ranks_against_identity_templates() {
         let unit = |a: f32| vec![a.cos(), a.sin()];
         // Two persons, A with two photos, B with one; and a distractor.
-        let mut photos = vec![
-            PhotoCheck {
-                path: "a1".into(),
-                person: Some("A".into()),
-                width: 1,
-                height: 1,
-                grey: false,
-                faces: vec![face(unit(0.0), vec![unit(1.0)])],
-            },
-            PhotoCheck {
-                path: "a2".into(),
-                person: Some("A".into()),
-                width: 1,
-                height: 1,
-                grey: false,
-                faces: vec![face(unit(0.9), vec![unit(0.9)])],
-            },
-            PhotoCheck {
-                path: "b1".into(),
-                person: Some("B".into()),
-                width: 1,
-                height: 1,
-                grey: false,
-                faces: vec![face(unit(1.2), vec![unit(0.0)])],
-            },
-        ];
+        let photo = |path: &str, person: &str, raw: f32, view: f32| PhotoCheck {
+            path: path.into(),
+            person: Some(person.into()),
+            width: 1,
+            height: 1,
+            grey: false,
+            faces: vec![face(unit(raw), vec![unit(view)])],
+        };
+        let mut photos = vec![photo("a1", "A", 0.0, 1.0), photo("a2", "A", 0.9, 0.9), photo("b1", "B", 1.2, 0.0)];
         let d = [Entry { identity: "D".into(), embeddings: vec![unit(3.0)] }];
         let n = rank_all(&mut photos, &d, 1);
         assert_eq!(n, 3, "A, B and the distractor");

@@ -648,7 +648,20 @@ td,th{{border:1px solid #ccc;padding:.3em .5em;text-align:center;vertical-align:
     for f in &r.failed {
         let _ = writeln!(h, "<p class=\"link\">Not checked: {}</p>", e(&f.error));
     }
-    for (i, p) in r.photos.iter().enumerate() {
+    // Photos with a linkable face first (at 1e-3, then 1e-2), then the rest in their order.
+    let flag = |p: &PhotoCheck| {
+        if p.faces.iter().any(|f| f.linkable(judges, FARS[0])) {
+            0
+        } else if p.faces.iter().any(|f| f.linkable(judges, FARS[1])) {
+            1
+        } else {
+            2
+        }
+    };
+    let mut order: Vec<usize> = (0..r.photos.len()).collect();
+    order.sort_by_key(|&i| flag(&r.photos[i]));
+    for i in order {
+        let p = &r.photos[i];
         let _ = writeln!(
             h,
             "<h2>{}</h2>\n<p class=\"verdict\">{}</p>",

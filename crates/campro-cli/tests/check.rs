@@ -160,6 +160,14 @@ fn a_learnt_preset_hides_faces_as_captured_and_every_photo_gets_its_line() {
         let img = image::open(&file).unwrap_or_else(|e| panic!("{s}: {e}"));
         assert_eq!(img.width(), 112, "{s}: the first model's crop");
     }
+    // In a real browser: every image loads, and the hostile name made no element.
+    if let Some(browser) = common::browser() {
+        let seen = common::open_in_browser(browser, &out.join("index.html"));
+        assert!(
+            seen.starts_with(&format!("RESULT images={} broken=0 scripts=0 bold=0 title=campro check", srcs.len())),
+            "{seen}"
+        );
+    }
 }
 
 fn percent_decode(s: &str) -> String {

@@ -126,3 +126,60 @@ pub fn run_with_peak(cmd: &mut std::process::Command, limit: std::time::Duration
     };
     (output, usage.ru_maxrss as u64)
 }
+
+/// Debian's headless Chromium, if installed; without it a browser test skips with a message,
+/// except under `CI=true` (where `.ci/run` installs it), where it fails.
+pub fn browser() -> Option<&'static str> {
+    const BROWSER: &str = "chromium-headless-shell";
+    let ok = std::process::Command::new(BROWSER).arg("--version").output().is_ok_and(|o| o.status.success());
+    if !ok {
+        assert!(std::env::var("CI").as_deref() != Ok("true"), "CI=true but {BROWSER} is missing (.ci/run installs it)");
+        eprintln!("SKIP: {BROWSER} not on PATH (apt-get install {BROWSER})");
+        return None;
+    }
+    Some(BROWSER)
+}
+
+/// Opens `page` (an HTML file) in the headless browser inside a frame and returns what the
+/// loaded page holds: its images (with how many did not load, and their `src`), its
+/// `<script>` and `<b>` elements, and its title.
+pub fn open_in_browser(browser: &str, page: &Path) -> String {
+    let dir = page.parent().unwrap();
+    let harness = dir.join(".harness.html");
+    let name = page.file_name().unwrap().to_string_lossy();
+    std::fs::write(
+        &harness,
+        format!(
+            r#"<!doctype html><html><body><script>
+const f = document.createElement('iframe');
+f.src = encodeURIComponent({name:?});
+f.onload = () => {{
+  const d = f.contentDocument;
+  const imgs = [...d.images];
+  const broken = imgs.filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.getAttribute('src'));
+  const out = document.createElement('pre');
+  out.textContent = 'RES' + 'ULT images=' + imgs.length + ' broken=' + broken.length + ' scripts=' + d.scripts.length + ' bold=' + d.querySelectorAll('b').length + ' title=' + d.title + ' ' + broken.join(' ');
+  document.body.appendChild(out);
+}};
+document.body.appendChild(f);
+</script></body></html>"#
+        ),
+    )
+    .unwrap();
+    let out = std::process::Command::new(browser)
+        .args([
+            "--no-sandbox",
+            "--disable-gpu",
+            "--allow-file-access-from-files",
+            "--virtual-time-budget=20000",
+            "--dump-dom",
+        ])
+        .arg(format!("file://{}", harness.display()))
+        .output()
+        .unwrap();
+    std::fs::remove_file(&harness).unwrap();
+    let dom = String::from_utf8_lossy(&out.stdout).into_owned();
+    let line =
+        dom.lines().find(|l| l.contains("RESULT images=")).unwrap_or_else(|| panic!("the page did not load: {dom}"));
+    line[line.find("RESULT").unwrap()..].to_string()
+}

@@ -117,6 +117,11 @@ fn inspect_writes_pictures_json_and_an_index_whose_links_open() {
             panels.iter().map(|p| p["faces"].as_array().unwrap().len() + p["people"].as_array().unwrap().len()).sum();
         assert_eq!(found > 0, drawn > 0, "{link}: {found} detections, {drawn} drawn pixels");
     }
+    // In a real browser every picture of the page loads.
+    if let Some(browser) = common::browser() {
+        let seen = common::open_in_browser(browser, &out.join("index.html"));
+        assert!(seen.starts_with("RESULT images=2 broken=0 scripts=0 "), "{seen}");
+    }
     // The LFW photo's raw panel shows the face YuNet finds, near the centre of the 250x250 image.
     let fj: Value = serde_json::from_slice(&std::fs::read(out.join("Aaron_Eckhart_0001.json")).unwrap()).unwrap();
     let b = &fj["panels"][0]["faces"][0]["bbox"];

@@ -83,7 +83,18 @@ fn views_of(
 ) -> Result<Vec<Condition>> {
     let asked = !a.views.is_empty();
     let wanted = |v: ViewArg| !asked || a.views.contains(&v);
-    let captured = crate::eval::params_condition("captured".into(), p.clone());
+    let on_device = a.device.capture_result.is_some()
+        || a.device.device_ccm.is_some()
+        || a.device.ct.is_some()
+        || a.matrix_frac_bits.is_some()
+        || a.lut_size.is_some();
+    let captured = if on_device {
+        let (c, note) = device_condition(p, a)?;
+        notes.push(note);
+        c
+    } else {
+        crate::eval::params_condition("captured".into(), p.clone())
+    };
     let protect = captured.protect.clone().ok_or_else(|| anyhow!("the captured view has no camera"))?;
     let mut views = Vec::new();
     if wanted(ViewArg::Captured) {
@@ -148,6 +159,55 @@ fn views_of(
         }
     }
     Ok(views)
+}
+
+/// The camera one device runs (`--capture-result` and the HAL flags): CamPro's Camera2
+/// values for its transform, as its HAL treats them ([`campro::targets::camera2::device`]),
+/// on 8-bit sRGB photos fed as `campro compare` feeds them (each pixel turned into the
+/// sensor RGB the device would have seen, `M_dev^-1 · degamma(pixel)`), rounded to 8 bits;
+/// and a note with the values' stated bound against the ideal preset.
+fn device_condition(p: &campro::Params, a: &CheckArgs) -> Result<(Condition, String)> {
+    use campro::targets::Target;
+    let (m, options) = crate::convert::device_setup(p, &a.device)?;
+    let model =
+        campro::emulate::DeviceModel { matrix_frac_bits: a.matrix_frac_bits, lut_size: a.lut_size.map(|n| n as usize) };
+    let cam = campro::targets::camera2::Camera2::new(m, options, model);
+    let bytes = cam.export(p, None)?;
+    let (matrix, curve, _) = campro::targets::camera2::values_from_json(&bytes)?;
+    let bound = cam.emulate(p, &bytes, None)?.first().and_then(|c| c.bound);
+    let isp = campro::targets::camera2::device(matrix, curve, &model);
+    let inv = campro::ccm::inverse(&m)
+        .ok_or_else(|| anyhow!("the device's transform is singular: no sensor RGB can be synthesised from a photo"))?;
+    let table: Vec<f64> = (0..=255).map(|c| campro::pipeline::degamma(c as f64 / 255.0, p.degamma)).collect();
+    let note = format!(
+        "captured as the device would: its transform and HAL emulated ({}; values' bound against the ideal preset {})",
+        [
+            a.device.capture_result.as_ref().map(|f| format!("capture result {}", crate::shown(f))),
+            a.matrix_frac_bits.map(|b| format!("matrix to {b} fractional bits")),
+            a.lut_size.map(|n| format!("a {n}-entry curve LUT")),
+        ]
+        .into_iter()
+        .flatten()
+        .collect::<Vec<_>>()
+        .join(", "),
+        bound.map_or("not stated".into(), |b| format!("{:.3} LSB", b * 255.0))
+    );
+    let c = Condition::new("captured", move |img: &RgbImage| {
+        use campro::emulate::Emulator;
+        let mut out = img.clone();
+        out.as_mut().par_chunks_mut(3 * 1024).for_each(|chunk| {
+            for px in chunk.chunks_exact_mut(3) {
+                let sensor =
+                    campro::ccm::apply(&inv, [table[px[0] as usize], table[px[1] as usize], table[px[2] as usize]]);
+                let o = isp.sensor_to_output(sensor);
+                for (d, v) in px.iter_mut().zip(o) {
+                    *d = (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+                }
+            }
+        });
+        out
+    });
+    Ok((c, note))
 }
 
 /// The whole check, as `--format json` prints it and check.json holds.

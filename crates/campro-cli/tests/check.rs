@@ -279,3 +279,47 @@ fn a_record_beside_each_output_verifies_the_output_and_its_raw_input() {
     // A second run without --force does not replace the record either.
     fails_with(campro().args(["simulate", "campro-omega-0.5"]).arg(&raw).arg("-o").arg(&out).arg("--record"), "exists");
 }
+
+#[test]
+fn a_device_is_checked_as_its_hal_applies_the_values() {
+    let Some(shared) = shared() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let photos = persons(&shared, dir.path());
+    let similarities = |extra: &[&str]| -> (Vec<f64>, Value) {
+        let mut args: Vec<&std::ffi::OsStr> = vec!["check".as_ref(), "campro-omega-0.5".as_ref(), photos.as_os_str()];
+        args.extend([
+            "--shared".as_ref(),
+            shared.as_os_str(),
+            "--view".as_ref(),
+            "captured".as_ref(),
+            "--distractors".as_ref(),
+            "0".as_ref(),
+        ]);
+        args.extend(extra.iter().map(std::ffi::OsStr::new));
+        let (code, v, err) = json_run(&args);
+        assert!(code == Some(0) || code == Some(3), "{err}");
+        let s = v["photos"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|p| {
+                p["faces"].as_array().unwrap().iter().map(|f| f["views"][0]["similarity"][0].as_f64().unwrap())
+            })
+            .collect();
+        (s, v)
+    };
+    let (ideal, _) = similarities(&[]);
+    // An exact device reporting the identity: the emulator (f64, per pixel) gives the exact
+    // 8-bit pipeline's pictures, so the same similarities.
+    let (exact, v) = similarities(&["--matrix-frac-bits", "52"]);
+    assert!(v["notes"][0].as_str().unwrap().contains("bound against the ideal preset 0.000 LSB"), "{}", v["notes"]);
+    assert_eq!(ideal.len(), exact.len());
+    for (a, b) in ideal.iter().zip(&exact) {
+        assert!((a - b).abs() < 2e-3, "{ideal:?} vs {exact:?}");
+    }
+    // A device that resamples the curve to 8 entries runs another camera: faces come back.
+    let (crude, v) = similarities(&["--lut-size", "8"]);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    assert!(mean(&crude) > mean(&ideal) + 0.1, "{crude:?} vs {ideal:?}");
+    assert!(v["summary"]["linkable"][0].as_u64().unwrap() > 0, "{}", v["summary"]);
+}

@@ -51,6 +51,17 @@ pub struct CheckArgs {
     /// SHARED/data/coco-person/images, else the photos checked: the strongest attacker).
     #[arg(long, value_name = "DIR")]
     pub restore_prior: Option<PathBuf>,
+    /// Check what one device applies instead of the ideal preset: CamPro's Camera2 values
+    /// for its transform (--capture-result or --device-ccm), as its HAL treats them
+    /// (--matrix-frac-bits, --lut-size), emulated on each photo as `campro compare` does.
+    #[command(flatten)]
+    pub device: super::DeviceArgs,
+    /// The device's HAL rounds matrix entries to this many fractional bits (0 to 52).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=52))]
+    pub matrix_frac_bits: Option<u32>,
+    /// The device's HAL resamples the curve to a LUT of this many entries (2 to 65536).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(2..=65536))]
+    pub lut_size: Option<u32>,
     /// Exit with status 3 when any face is linkable at this false-accept rate (1e-3 or 1e-2).
     #[arg(long, value_name = "FAR", value_parser = parse_far)]
     pub fail_above: Option<f64>,

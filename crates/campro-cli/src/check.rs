@@ -80,6 +80,7 @@ fn views_of(
     models: &Path,
     photos: &[Photo],
     notes: &mut Vec<String>,
+    failures: &crate::eval::Failures,
 ) -> Result<Vec<Condition>> {
     let asked = !a.views.is_empty();
     let wanted = |v: ViewArg| !asked || a.views.contains(&v);
@@ -103,12 +104,16 @@ fn views_of(
     if wanted(ViewArg::Enhanced) {
         match crate::capture::enhancer_of(params, p, a.scale, models) {
             Ok(e) => {
-                let pr = protect.clone();
+                let (pr, f) = (protect.clone(), failures.clone());
                 let e = std::sync::Arc::new(e);
-                // An enhancement that fails shows the captured picture: the check then scores that.
+                // A view cannot fail inside the scoring: an enhancement that fails is recorded
+                // (the check is then refused) and the captured picture passed on.
                 views.push(Condition::new("enhanced", move |img: &RgbImage| {
                     let c = pr(img);
-                    crate::capture::enhance(&e, &c).unwrap_or(c)
+                    crate::capture::enhance(&e, &c).unwrap_or_else(|err| {
+                        f.record(format!("the enhanced view: {}", crate::one_line(&err)));
+                        c
+                    })
                 }));
             }
             Err(e) if !asked => notes.push(format!("enhanced view left out: {}", crate::one_line(&e))),
@@ -148,10 +153,13 @@ fn views_of(
         match crate::capture::network_of(params, p, crate::capture::Network::Restorer) {
             Ok(net) => {
                 let net = net.with_scale(a.scale.enhance_scale);
-                let pr = protect.clone();
+                let (pr, f) = (protect.clone(), failures.clone());
                 views.push(Condition::new("restore-net", move |img: &RgbImage| {
                     let c = pr(img);
-                    net.enhance(&c).unwrap_or(c)
+                    net.enhance(&c).unwrap_or_else(|err| {
+                        f.record(format!("the restore-net view: {err}"));
+                        c
+                    })
                 }));
             }
             Err(e) if !asked => notes.push(format!("restore-net view left out: {}", crate::one_line(&e))),
@@ -502,7 +510,8 @@ pub fn run(a: CheckArgs) -> Result<i32> {
         a.face_models.iter().map(|n| Ok(Embedder::new(crate::models::load(n, &models)?)?)).collect::<Result<_>>()?;
     let judges: Vec<Judge> = embedders.iter().map(Judge::new).collect::<campro_eval::Result<_>>()?;
     let mut notes = Vec::new();
-    let views = views_of(&a, &params, &p, &models, &photos, &mut notes)?;
+    let failures = crate::eval::Failures::default();
+    let views = views_of(&a, &params, &p, &models, &photos, &mut notes, &failures)?;
     if views.is_empty() {
         bail!("--view: no view to check");
     }
@@ -522,6 +531,8 @@ pub fn run(a: CheckArgs) -> Result<i32> {
         })
         .collect();
     bar.finish_and_clear();
+    // A view that failed on a photo scored another picture under its name: no report.
+    failures.check()?;
     let mut checked = Vec::new();
     let mut failed = Vec::new();
     for (ph, r) in photos.iter().zip(results) {

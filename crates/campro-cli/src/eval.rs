@@ -25,12 +25,12 @@ use std::path::{Path, PathBuf};
 pub(crate) struct Failures(std::sync::Arc<std::sync::Mutex<Option<String>>>);
 
 impl Failures {
-    fn record(&self, what: String) {
+    pub(crate) fn record(&self, what: String) {
         self.0.lock().unwrap_or_else(|p| p.into_inner()).get_or_insert(what);
     }
 
     /// An error if any enhancement failed.
-    fn check(&self) -> Result<()> {
+    pub(crate) fn check(&self) -> Result<()> {
         match self.0.lock().unwrap_or_else(|p| p.into_inner()).as_ref() {
             Some(e) => bail!("{e}"),
             None => Ok(()),

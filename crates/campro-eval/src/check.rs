@@ -290,9 +290,10 @@ pub fn check_photo(
             raw,
         });
     }
-    for v in views {
+    // A photo without a face has nothing to score: no view runs on it.
+    for v in views.iter().filter(|_| !faces.is_empty()) {
         let pic = v.apply(img);
-        let found_here: Vec<Face> = if faces.is_empty() { Vec::new() } else { detector.detect(&pic)? };
+        let found_here: Vec<Face> = detector.detect(&pic)?;
         for (f, c) in faces.iter().zip(&mut checks) {
             let found = found_here
                 .iter()

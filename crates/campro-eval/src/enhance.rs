@@ -97,6 +97,18 @@ pub const RESTORED: &str = "restored";
 pub const UNGATED: &str = "ungated";
 /// The face gate's probability map (1, 1, H, W).
 pub const GATE: &str = "gate";
+/// Prefix of every node and initialiser of the restoration stage (`campro-train` writes
+/// them, [`network_only`] strips them).
+pub const RESTORE_PREFIX: &str = "restore.";
+/// The restoration stage's table: (entries, 3) 8-bit output codes.
+pub const RESTORE_TABLE: &str = "restore.table";
+/// The restoration stage's bins: 768 floats, 256 per channel.
+pub const RESTORE_BINS: &str = "restore.bins";
+/// Prefix of the gate's pixelation nodes (the blocks the gate blends toward).
+pub const GATE_PIX: &str = "gate.pix";
+/// The gate blend's nodes, in order: `ungated · -1`, `toward + that`, `gate · that`;
+/// the output is `ungated + gate.move`.
+pub const GATE_BLEND: [&str; 3] = ["gate.neg", "gate.diff", "gate.move"];
 
 /// What a file's graph holds besides its input and output, for the reduced path.
 #[derive(Debug, Clone, Default)]
@@ -448,8 +460,8 @@ impl RestoreTable {
 
     fn from_graph(graph: &tract_onnx::pb::GraphProto) -> Option<Self> {
         let init = |name: &str| graph.initializer.iter().find(|t| t.name == name);
-        let table = init("restore.table").filter(|t| t.data_type == 2 && t.raw_data.len() == 3 * Self::ENTRIES)?;
-        let bins = init("restore.bins").filter(|t| t.data_type == 1)?;
+        let table = init(RESTORE_TABLE).filter(|t| t.data_type == 2 && t.raw_data.len() == 3 * Self::ENTRIES)?;
+        let bins = init(RESTORE_BINS).filter(|t| t.data_type == 1)?;
         let floats: Vec<f32> = if bins.raw_data.is_empty() {
             bins.float_data.clone()
         } else {
@@ -524,12 +536,10 @@ fn averaged_down(img: &[f32], pw: usize, ph: usize, size: (usize, usize), f: usi
 fn network_only(proto: &tract_onnx::pb::ModelProto, gated: bool) -> tract_onnx::pb::ModelProto {
     let mut m = proto.clone();
     if let Some(g) = m.graph.as_mut() {
-        let front = |o: &str| o == RESTORED || o.starts_with("restore.");
-        let blend = |o: &str| {
-            gated && (o == OUTPUT || o.starts_with("gate.pix") || ["gate.neg", "gate.diff", "gate.move"].contains(&o))
-        };
+        let front = |o: &str| o == RESTORED || o.starts_with(RESTORE_PREFIX);
+        let blend = |o: &str| gated && (o == OUTPUT || o.starts_with(GATE_PIX) || GATE_BLEND.contains(&o));
         g.node.retain(|n| !n.output.iter().any(|o| front(o) || blend(o)));
-        g.initializer.retain(|t| !t.name.starts_with("restore."));
+        g.initializer.retain(|t| !t.name.starts_with(RESTORE_PREFIX));
         if let Some(i) = g.input.first_mut() {
             i.name = RESTORED.into();
         }

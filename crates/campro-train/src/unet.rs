@@ -27,15 +27,11 @@
 //! inference is one pass with no batch statistics.
 
 use crate::config::{FaceTarget, PixelLoss, UnetConfig};
+pub use campro_eval::enhance::GATE;
 pub use campro_eval::enhance::{INPUT, MULTIPLE_KEY, OUTPUT};
+// The node names the reader parses (campro_eval::enhance), from where it defines them.
+use campro_eval::enhance::{GATE_BLEND, GATE_PIX, RESTORED, RESTORE_BINS, RESTORE_TABLE, UNGATED};
 use campro_nn::onnx_net::{conv_attrs, f32_tensor, ints_attr, node, string_attr, GraphError, OnnxNet};
-/// The restoration stage's output, the U-Net's input when there is one
-/// ([`Unet::onnx_bytes_with_table`]).
-const RESTORED: &str = "restored";
-/// The face gate's probability map (B, 1, H, W), 0..1, when the U-Net has one.
-pub const GATE: &str = "gate";
-/// The U-Net's output before the face gate's blend in a written file.
-const UNGATED: &str = "ungated";
 /// The face gate's logit at start: sigmoid(−4) ≈ 0.018, nearly off.
 const GATE_BIAS: f32 = -4.0;
 /// Channels of the face gate's deep branch.
@@ -226,17 +222,17 @@ impl Unet {
             let pool = vec![ints_attr("kernel_shape", vec![n, n]), ints_attr("strides", vec![n, n])];
             graph.node.extend([
                 node("AveragePool", &[UNGATED], "gate.pix.low", pool),
-                node("Resize", &["gate.pix.low", "", "gate.pix.scales"], "gate.pix", nearest()),
+                node("Resize", &["gate.pix.low", "", "gate.pix.scales"], GATE_PIX, nearest()),
             ]);
-            "gate.pix"
+            GATE_PIX
         } else {
             INPUT
         };
         graph.node.extend([
-            node("Mul", &[UNGATED, "gate.minus1"], "gate.neg", vec![]),
-            node("Add", &[toward, "gate.neg"], "gate.diff", vec![]),
-            node("Mul", &[GATE, "gate.diff"], "gate.move", vec![]),
-            node("Add", &[UNGATED, "gate.move"], OUTPUT, vec![]),
+            node("Mul", &[UNGATED, "gate.minus1"], GATE_BLEND[0], vec![]),
+            node("Add", &[toward, GATE_BLEND[0]], GATE_BLEND[1], vec![]),
+            node("Mul", &[GATE, GATE_BLEND[1]], GATE_BLEND[2], vec![]),
+            node("Add", &[UNGATED, GATE_BLEND[2]], OUTPUT, vec![]),
         ]);
     }
 
@@ -270,7 +266,7 @@ impl Unet {
             t.raw_data = v.iter().flat_map(|x| x.to_le_bytes()).collect();
             t
         };
-        let mut lut = f32_tensor("restore.table", vec![SIDE.pow(3) as i64, 3], &[]);
+        let mut lut = f32_tensor(RESTORE_TABLE, vec![SIDE.pow(3) as i64, 3], &[]);
         lut.data_type = 2; // uint8
         lut.raw_data = table.entries.iter().flatten().copied().collect();
         // Channel c's level v at c · 256 + v: its bin times SIDE^(2 − c).
@@ -282,7 +278,7 @@ impl Unet {
             lut,
             int64("restore.axes", vec![1], &[4]),
             int64("restore.offset", vec![1, 3, 1, 1], &[0, 256, 512]),
-            f32_tensor("restore.bins", vec![768], &bins),
+            f32_tensor(RESTORE_BINS, vec![768], &bins),
             f32_tensor("restore.255", vec![], &[255.0]),
             f32_tensor("restore.0", vec![], &[0.0]),
             f32_tensor("restore.inv255", vec![], &[1.0 / 255.0]),

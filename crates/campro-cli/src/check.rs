@@ -272,12 +272,20 @@ struct Summary {
     grey_photos: usize,
 }
 
+/// Of `faces`, the one whose view and model come closest to (or furthest past) the threshold
+/// at FAR 1e-3, with that (view, model, similarity − threshold).
+fn worst_face<'f>(
+    faces: impl Iterator<Item = &'f FaceCheck>,
+    judges: &[Judge],
+) -> Option<(&'f FaceCheck, (usize, usize, f32))> {
+    faces.filter_map(|f| f.worst(judges, FARS[0]).map(|w| (f, w))).max_by(|a, b| a.1 .2.total_cmp(&b.1 .2))
+}
+
 fn summary(photos: &[PhotoCheck], judges: &[Judge], views: &[Condition]) -> Summary {
     let faces: Vec<&FaceCheck> = photos.iter().flat_map(|p| &p.faces).collect();
     let linkable = FARS.map(|far| faces.iter().filter(|f| f.linkable(judges, far)).count());
     let linkable_specifically = FARS.map(|far| faces.iter().filter(|f| f.linkable_specifically(judges, far)).count());
-    let worst =
-        faces.iter().filter_map(|f| f.worst(judges, FARS[0]).map(|w| (f, w))).max_by(|a, b| a.1 .2.total_cmp(&b.1 .2));
+    let worst = worst_face(faces.iter().copied(), judges);
     Summary {
         photos: photos.len(),
         faces: faces.len(),
@@ -322,11 +330,7 @@ fn photo_line(p: &PhotoCheck, judges: &[Judge], views: &[Condition], gallery: us
         }
         (l, _) => format!("{n} {faces}, {l} LINKABLE at FAR 1e-3"),
     };
-    let worst = p
-        .faces
-        .iter()
-        .filter_map(|f| f.worst(judges, FARS[0]).map(|w| (f, w)))
-        .max_by(|a, b| a.1 .2.total_cmp(&b.1 .2));
+    let worst = worst_face(p.faces.iter(), judges);
     let mut line = format!("{name}{who}: {verdict}");
     if let Some((f, (v, m, _))) = worst {
         let _ = write!(

@@ -62,28 +62,22 @@ pub struct Record {
     pub output: FileRecord,
 }
 
-/// The hex SHA-256 of `bytes`.
-pub fn sha256(bytes: &[u8]) -> String {
-    Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+/// A digest as lowercase hex.
+fn hex(digest: &[u8]) -> String {
+    digest.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// The hex SHA-256 of a regular file, read in pieces (no size limit: only hashed).
+/// The hex SHA-256 of `bytes`.
+pub fn sha256(bytes: &[u8]) -> String {
+    hex(&Sha256::digest(bytes))
+}
+
+/// The hex SHA-256 of a regular file and its size, streamed (no size limit: only hashed).
 pub fn sha256_file(path: &Path) -> Result<(String, u64)> {
-    use std::io::Read;
-    let f = campro::file::open_regular(path).with_context(|| crate::shown(path))?;
-    let mut r = std::io::BufReader::with_capacity(1 << 20, f);
+    let mut f = campro::file::open_regular(path).with_context(|| crate::shown(path))?;
     let mut h = Sha256::new();
-    let mut buf = vec![0u8; 1 << 20];
-    let mut n = 0u64;
-    loop {
-        let k = r.read(&mut buf).with_context(|| crate::shown(path))?;
-        if k == 0 {
-            break;
-        }
-        h.update(&buf[..k]);
-        n += k as u64;
-    }
-    Ok((h.finalize().iter().map(|b| format!("{b:02x}")).collect(), n))
+    let n = std::io::copy(&mut f, &mut h).with_context(|| crate::shown(path))?;
+    Ok((hex(&h.finalize()), n))
 }
 
 /// The bytes a PARAMS argument names: a bundled preset's JSON, or the file's.

@@ -156,7 +156,7 @@ fn a_learnt_preset_hides_faces_as_captured_and_every_photo_gets_its_line() {
     );
     for s in &srcs {
         assert!(!s.contains("..") && !s.starts_with('/'), "{s}");
-        let file = out.join(percent_decode(s));
+        let file = out.join(percent_encoding::percent_decode_str(s).decode_utf8().unwrap().as_ref());
         let img = image::open(&file).unwrap_or_else(|e| panic!("{s}: {e}"));
         assert_eq!(img.width(), 112, "{s}: the first model's crop");
     }
@@ -168,22 +168,6 @@ fn a_learnt_preset_hides_faces_as_captured_and_every_photo_gets_its_line() {
             "{seen}"
         );
     }
-}
-
-fn percent_decode(s: &str) -> String {
-    let b = s.as_bytes();
-    let mut out = Vec::new();
-    let mut i = 0;
-    while i < b.len() {
-        if b[i] == b'%' {
-            out.push(u8::from_str_radix(&s[i + 1..i + 3], 16).unwrap());
-            i += 3;
-        } else {
-            out.push(b[i]);
-            i += 1;
-        }
-    }
-    String::from_utf8(out).unwrap()
 }
 
 #[test]

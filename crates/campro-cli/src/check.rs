@@ -3,7 +3,7 @@
 //! an HTML page with the face crops) is written here.
 
 use crate::args::{CheckArgs, Report, ViewArg};
-use crate::inspect::{href, html_escape};
+use crate::page::{self, href, html_escape};
 use crate::{escape, say, write_atomic};
 use anyhow::{anyhow, bail, Context, Result};
 use campro_eval::check::{self, FaceCheck, Judge, PhotoCheck, FARS};
@@ -685,16 +685,11 @@ fn write_report(out: &Path, r: &CheckReport, judges: &[Judge], views: &[Conditio
 fn index_html(r: &CheckReport, judges: &[Judge], views: &[Condition], out: &Path) -> String {
     let mut h = String::new();
     let e = html_escape;
-    let _ = write!(
-        h,
-        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>campro check: {}</title>\n<style>\
-body{{font-family:system-ui,sans-serif;margin:1.5em;max-width:72em}}table{{border-collapse:collapse;margin:.5em 0}}\
-td,th{{border:1px solid #ccc;padding:.3em .5em;text-align:center;vertical-align:top}}img{{width:112px;image-rendering:pixelated}}\
-.link{{color:#b00;font-weight:bold}}.safe{{color:#070}}.lost{{color:#a60}}.verdict{{font-family:monospace}}\
-</style></head><body>\n<h1>campro check</h1>\n",
-        e(&r.params)
-    );
-    let _ = writeln!(h, "<p class=\"verdict\">{}</p>", e(&summary_line(&r.summary, judges, r.gallery)));
+    h.push_str(&page::head(&format!("campro check: {}", r.params)));
+    h.push_str("<h1>campro check</h1>\n");
+    let alarm =
+        if r.summary.linkable.iter().any(|&n| n > 0) { " class=\"alarm verdict\"" } else { " class=\"verdict\"" };
+    let _ = writeln!(h, "<p id=\"summary\"{alarm}>{}</p>", e(&summary_line(&r.summary, judges, r.gallery)));
     let _ = writeln!(
         h,
         "<p>Preset {}. A face is <span class=\"link\">linkable</span> when a model's cosine similarity of the raw face and a view is above its threshold at the false-accept rate (FAR): a face-recognition system would then say “same person”. Rank: where the true person comes in a gallery of {} raw identities ({} LFW distractors); 1 is found first.</p>",
@@ -739,7 +734,8 @@ td,th{{border:1px solid #ccc;padding:.3em .5em;text-align:center;vertical-align:
         let p = &r.photos[i];
         let _ = writeln!(
             h,
-            "<h2>{}</h2>\n<p class=\"verdict\">{}</p>",
+            "<section class=\"row{}\" id=\"photo{i}\"><h2>{}</h2>\n<p class=\"verdict\">{}</p>",
+            if flag(p) < 2 { " flag" } else { "" },
             e(&p.path.display().to_string()),
             e(&photo_line(p, judges, views, r.gallery))
         );
@@ -747,18 +743,19 @@ td,th{{border:1px solid #ccc;padding:.3em .5em;text-align:center;vertical-align:
             if f.at_edge {
                 let _ = writeln!(h, "<p class=\"lost\">Face {}: cut by the photo's edge, not scored (its alignment is mostly black).</p>", k + 1);
             }
-            let _ = write!(h, "<table><tr><th>face {}{}</th>", k + 1, if f.is_person { " (the person)" } else { "" });
+            let zoom = format!("photo{i}face{k}");
+            let src = |view: &str| href(&out.join(crop_name(i, k, view)), out);
+            let face = format!("face {}{}", k + 1, if f.is_person { " (the person)" } else { "" });
+            let _ = write!(
+                h,
+                "<div class=\"figs\">{}",
+                page::crop(&src("raw"), "raw face", &zoom, &format!("{}: raw", e(&face)))
+            );
+            let mut big = page::big(&src("raw"), "raw face", Some(336));
             for v in &f.views {
-                let _ = write!(h, "<th>{}</th>", e(&v.view));
-            }
-            h.push_str("</tr>\n<tr>");
-            let img =
-                |name: String, alt: &str| format!("<img src=\"{}\" alt=\"{}\">", href(&out.join(&name), out), e(alt));
-            let _ = write!(h, "<td>{}<br>raw</td>", img(crop_name(i, k, "raw"), "raw face"));
-            for v in &f.views {
-                let _ = write!(h, "<td>{}", img(crop_name(i, k, &v.view), &v.view));
+                let mut caption = e(&v.view);
                 if !v.found {
-                    h.push_str("<br><span class=\"lost\">not found by the detector</span>");
+                    caption.push_str("<br><span class=\"lost\">not found by the detector</span>");
                 }
                 for (m, j) in judges.iter().enumerate() {
                     let s = v.similarity[m];
@@ -766,17 +763,27 @@ td,th{{border:1px solid #ccc;padding:.3em .5em;text-align:center;vertical-align:
                     let rank = v.rank[m].map(|x| format!(", rank {x}")).unwrap_or_default();
                     let strangers = v.strangers[m].map(|x| format!(", strangers up to {}", sim(x))).unwrap_or_default();
                     let _ = write!(
-                        h,
+                        caption,
                         "<br><span class=\"{class}\">{}: {} vs {}{rank}{strangers}</span>",
                         e(j.embedder.name()),
                         sim(s),
                         sim(j.thresholds.far_1e3)
                     );
                 }
-                h.push_str("</td>");
+                h.push_str(&page::crop(&src(&v.view), &v.view, &zoom, &caption));
+                big.push_str(&page::big(&src(&v.view), &v.view, Some(336)));
             }
-            h.push_str("</tr></table>\n");
+            h.push_str("</div>\n");
+            let views: Vec<&str> = f.views.iter().map(|v| v.view.as_str()).collect();
+            h.push_str(&page::lightbox(
+                &zoom,
+                &e(&format!("{face}: raw | {}", views.join(" | "))),
+                &big,
+                &format!("photo{i}"),
+            ));
+            h.push('\n');
         }
+        h.push_str("</section>\n");
     }
     h.push_str("</body></html>\n");
     h

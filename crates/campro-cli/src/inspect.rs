@@ -9,7 +9,7 @@
 
 use crate::args::{InspectArgs, Report};
 use crate::simulate::{self, Budget};
-use crate::{escape, say, write_atomic};
+use crate::{escape, page, say, write_atomic};
 use anyhow::{anyhow, bail, Result};
 use campro::pipeline::fast::Exact8;
 use campro::Params;
@@ -52,26 +52,25 @@ pub fn thickness(w: u32, h: u32) -> u32 {
     (w.min(h) / 160).max(2)
 }
 
-/// Draws `bbox` (`[x0, y0, x1, y1]`, image pixels) as a hollow rectangle `t` pixels thick,
-/// growing inwards, inside a black ring one pixel wide (visible on any protected colour);
-/// boxes reaching outside the image are clipped.
+/// Draws `bbox` (`[x0, y0, x1, y1]`, image pixels) as a hollow rectangle `t` pixels thick
+/// growing *outwards*, inside a black ring one pixel wide (visible on any protected colour),
+/// so what the box marks (a small face above all) is never covered; boxes reaching outside
+/// the image are clipped.
 fn draw_box(img: &mut RgbImage, bbox: [f32; 4], t: u32, colour: Rgb<u8>) {
     use imageproc::rect::Rect;
     let [x0, y0, x1, y1] = bbox.map(|v| if v.is_finite() { v.clamp(-1e6, 1e6).round() as i32 } else { 0 });
-    if x1 - x0 > 0 && y1 - y0 > 0 {
-        let ring = Rect::at(x0 - 1, y0 - 1).of_size((x1 - x0 + 2) as u32, (y1 - y0 + 2) as u32);
-        imageproc::drawing::draw_hollow_rect_mut(img, ring, Rgb([0, 0, 0]));
+    if x1 - x0 <= 0 || y1 - y0 <= 0 {
+        return;
     }
-    for i in 0..t as i32 {
-        let (w, h) = (x1 - x0 - 2 * i, y1 - y0 - 2 * i);
-        if w <= 0 || h <= 0 {
-            break;
-        }
-        imageproc::drawing::draw_hollow_rect_mut(img, Rect::at(x0 + i, y0 + i).of_size(w as u32, h as u32), colour);
+    let ring = |i: i32| Rect::at(x0 - i, y0 - i).of_size((x1 - x0 + 2 * i) as u32, (y1 - y0 + 2 * i) as u32);
+    for i in 1..=t as i32 {
+        imageproc::drawing::draw_hollow_rect_mut(img, ring(i), colour);
     }
+    imageproc::drawing::draw_hollow_rect_mut(img, ring(t as i32 + 1), Rgb([0, 0, 0]));
 }
 
-/// The panel with its detections drawn on.
+/// The panel with its detections' boxes drawn around them (landmarks stay in the JSON: dots
+/// on a small face hide what one needs to judge).
 fn drawn(p: &Panel) -> RgbImage {
     let mut img = p.image.clone();
     let t = thickness(img.width(), img.height());
@@ -80,12 +79,6 @@ fn drawn(p: &Panel) -> RgbImage {
     }
     for f in &p.faces {
         draw_box(&mut img, f.bbox, t, FACE_COLOUR);
-        for l in f.landmarks {
-            if l.iter().all(|v| v.is_finite()) {
-                let at = (l[0].round() as i32, l[1].round() as i32);
-                imageproc::drawing::draw_filled_circle_mut(&mut img, at, t as i32 + 1, FACE_COLOUR);
-            }
-        }
     }
     img
 }
@@ -117,36 +110,6 @@ fn panel_json(p: &Panel) -> Value {
         })).collect::<Vec<_>>(),
         "people": p.people.iter().map(|d| json!({"bbox": d.bbox.map(round2), "score": round2(d.score)})).collect::<Vec<_>>(),
     })
-}
-
-/// What a URL path segment keeps as is: RFC 3986's unreserved characters.
-const SEGMENT: &percent_encoding::AsciiSet =
-    &percent_encoding::NON_ALPHANUMERIC.remove(b'-').remove(b'.').remove(b'_').remove(b'~');
-
-/// `path` relative to `root` as a URL path (each segment percent-encoded).
-pub(crate) fn href(path: &Path, root: &Path) -> String {
-    let rel = path.strip_prefix(root).unwrap_or(path);
-    rel.components()
-        .map(|c| percent_encoding::utf8_percent_encode(&c.as_os_str().to_string_lossy(), SEGMENT).to_string())
-        .collect::<Vec<_>>()
-        .join("/")
-}
-
-/// `text` safe inside HTML text and double-quoted attributes.
-pub fn html_escape(text: &str) -> String {
-    let mut s = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => s.push_str("&amp;"),
-            '<' => s.push_str("&lt;"),
-            '>' => s.push_str("&gt;"),
-            '"' => s.push_str("&quot;"),
-            '\'' => s.push_str("&#39;"),
-            c if c.is_control() => s.push('\u{fffd}'),
-            c => s.push(c),
-        }
-    }
-    s
 }
 
 /// Inspects one image: detections on raw and protected, the picture and its JSON written.
@@ -195,7 +158,9 @@ fn one(
     Ok(v)
 }
 
-/// The index page: a row per image with its picture, counts and JSON link.
+/// The index page: the summary first, then a section per image (those that still show faces
+/// after the camera first, most faces first), each panel a captioned figure at a useful size
+/// that opens the whole picture in a lightbox.
 fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, String)], out: &Path) -> String {
     let panels: Vec<String> = items
         .first()
@@ -203,13 +168,7 @@ fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, Stri
         .map(|a| a.iter().filter_map(|p| p["panel"].as_str().map(str::to_string)).collect())
         .unwrap_or_else(|| vec!["raw".into(), "protected".into()]);
     let arrows = panels.join(" &rarr; ");
-    let mut s = String::from(
-        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>campro inspect</title>\n\
-         <style>body{font-family:sans-serif;margin:1em}img{max-width:100%;height:auto}\
-         td,th{padding:.3em .6em;vertical-align:top;text-align:left}\
-         .face{color:#c0c}.person{color:#080}tr.flag{background:#fee}.warn{color:#a00;font-weight:bold}\
-         </style></head><body>\n",
-    );
+    let mut s = page::head("campro inspect");
     // The summary a reader needs first: faces and people per panel over all images, and
     // the images where a face is still found after the camera (flagged, listed first).
     let total = |what| {
@@ -220,7 +179,8 @@ fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, Stri
     };
     let flagged = items.iter().filter(|(_, v)| shows_faces(v, panels.len())).count();
     s += &format!(
-        "<p id=\"summary\">{} images. Faces found, {arrows}: <b class=\"face\">{}</b>; people: <b class=\"person\">{}</b>. {}</p>\n",
+        "<h1>campro inspect</h1>\n<p id=\"summary\"{}>{} images. Faces found, {arrows}: <b class=\"face\">{}</b>; people: <b class=\"person\">{}</b>. {}</p>\n",
+        if flagged > 0 { " class=\"alarm\"" } else { "" },
         items.len(),
         total("faces"),
         total("people"),
@@ -235,48 +195,64 @@ fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, Stri
         }
     );
     s += &format!(
-        "<h1>campro inspect</h1>\n<p>Parameters: {}. Panels, left to right: {}. \
-         <span class=\"face\">Faces</span> (YuNet, with landmarks) and <span class=\"person\">people</span> \
-         (the person detector) found on each.</p>\n<table>\n\
-         <tr><th>image</th><th>faces {arrows}</th><th>people {arrows}</th><th>detections</th></tr>\n",
-        html_escape(params),
+        "<p>Parameters: {}. Panels, left to right: {}. <span class=\"face\">Faces</span> (YuNet) and \
+         <span class=\"person\">people</span> (the person detector) found on each are boxed around, never over, \
+         what was found. Click a panel for the whole picture at full size; the JSON beside each image has the \
+         boxes, scores and face landmarks.</p>\n",
+        page::html_escape(params),
         panels.join(", ")
     );
-    // Flagged images first, then in input order (a stable sort).
-    let mut order: Vec<&(PathBuf, Value)> = items.iter().collect();
-    order.sort_by_key(|(_, v)| !shows_faces(v, panels.len()));
-    for (picture, v) in order {
+    // Flagged images first, the most faces after the camera first; then in input order.
+    let mut order: Vec<(usize, &(PathBuf, Value))> = items.iter().enumerate().collect();
+    order.sort_by_key(|(_, (_, v))| std::cmp::Reverse(faces_after(v, panels.len())));
+    for (i, (picture, v)) in order {
         let flag = shows_faces(v, panels.len());
-        let counts =
-            |what| (0..panels.len()).map(|k| count(v, k, what).to_string()).collect::<Vec<_>>().join(" &rarr; ");
-        let link = href(picture, out);
-        let json_link = href(&picture.with_extension("json"), out);
-        let name = html_escape(&href_name(picture, out));
+        let link = page::href(picture, out);
+        let json_link = page::href(&picture.with_extension("json"), out);
+        let name = page::html_escape(&href_name(picture, out));
+        let size = (v["width"].as_u64().unwrap_or(1) as u32, v["height"].as_u64().unwrap_or(1) as u32);
+        let (row, zoom) = (format!("row{i}"), format!("zoom{i}"));
         s += &format!(
-            "<tr{}><td><a href=\"{link}\"><img src=\"{link}\" alt=\"{name}\" width=\"640\"></a><br>{name}</td>\
-             <td class=\"face\">{}{}</td><td class=\"person\">{}</td>\
-             <td><a href=\"{json_link}\">JSON</a></td></tr>\n",
-            if flag { " class=\"flag\"" } else { "" },
-            counts("faces"),
-            if flag { "<br><span class=\"warn\">faces found after the camera</span>" } else { "" },
-            counts("people"),
+            "<section class=\"row{}\" id=\"{row}\"><h2>{name}{} <a href=\"{json_link}\">JSON</a></h2><div class=\"figs\">",
+            if flag { " flag" } else { "" },
+            if flag { " <span class=\"warn\">faces found after the camera</span>" } else { "" },
         );
+        for (k, p) in panels.iter().enumerate() {
+            let (f, n) = (count(v, k, "faces"), count(v, k, "people"));
+            let warn = if k > 0 && f > 0 { " warn" } else { "" };
+            let caption = format!(
+                "<b>{}</b>: <span class=\"face{warn}\">{f} face{}</span>, <span class=\"person\">{n} {}</span>",
+                page::html_escape(p),
+                if f == 1 { "" } else { "s" },
+                if n == 1 { "person" } else { "people" }
+            );
+            let alt = format!("{} ({p})", href_name(picture, out));
+            s += &page::panel(&link, &alt, size, GAP, panels.len(), k, &zoom, &caption);
+        }
+        s += "</div></section>\n";
+        let whole = page::big(&link, &href_name(picture, out), None);
+        s += &page::lightbox(&zoom, &format!("{name}: {}", panels.join(" | ")), &whole, &row);
+        s += "\n";
     }
-    s += "</table>\n";
     if !failed.is_empty() {
         s += "<h2>Failed</h2>\n<ul>\n";
         for (i, e) in failed {
-            s += &format!("<li>{}: {}</li>\n", html_escape(&i.display().to_string()), html_escape(e));
+            s += &format!("<li>{}: {}</li>\n", page::html_escape(&i.display().to_string()), page::html_escape(e));
         }
         s += "</ul>\n";
     }
     s + "</body></html>\n"
 }
 
+/// The most faces any panel after the first (the raw photo) of an image's JSON has found.
+fn faces_after(v: &Value, panels: usize) -> usize {
+    (1..panels).map(|k| count(v, k, "faces")).max().unwrap_or(0)
+}
+
 /// Whether any panel after the first (the raw photo) of an image's JSON has a face found:
 /// the camera, or the enhanced view, shows a face a detector finds.
 fn shows_faces(v: &Value, panels: usize) -> bool {
-    (1..panels).any(|k| count(v, k, "faces") > 0)
+    faces_after(v, panels) > 0
 }
 
 /// How many `what` ("faces" or "people") panel `panel` of an image's JSON lists.
@@ -355,7 +331,7 @@ pub fn inspect(
     }
     let images = found.jobs;
     if images.is_empty() {
-        bail!("no PNG, JPEG or TIFF file among the inputs: nothing to inspect");
+        bail!("no PNG, JPEG, TIFF or WebP file among the inputs: nothing to inspect");
     }
     let fast = Exact8::new(p);
     let budget = Budget::global();
@@ -393,7 +369,7 @@ pub fn inspect(
         "confidence": det.confidence,
         "panels": panel_names,
         "images": done.iter().map(|(o, v)| json!({
-            "input": v["input"], "picture": href(o, out), "json": href(&o.with_extension("json"), out),
+            "input": v["input"], "picture": page::href(o, out), "json": page::href(&o.with_extension("json"), out),
             "faces": (0..panel_names.len()).map(|k| count(v, k, "faces")).collect::<Vec<_>>(),
             "people": (0..panel_names.len()).map(|k| count(v, k, "people")).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
@@ -428,23 +404,30 @@ mod tests {
     use super::*;
 
     #[test]
-    fn boxes_are_drawn_inwards_and_clipped() {
-        let mut img = RgbImage::from_pixel(20, 10, Rgb([9, 9, 9]));
-        draw_box(&mut img, [2.0, 3.0, 8.0, 9.0], 2, PERSON_COLOUR);
-        // Outer ring: x 2..=7, y 3..=8; second ring x 3..=6, y 4..=7; inside untouched.
-        assert_eq!(img[(2, 3)], PERSON_COLOUR);
-        assert_eq!(img[(7, 8)], PERSON_COLOUR);
-        assert_eq!(img[(3, 4)], PERSON_COLOUR);
-        assert_eq!(img[(4, 5)], Rgb([9, 9, 9]));
-        // The black ring just outside: x 1 and 8, y 2 and 9; beyond it untouched.
-        assert_eq!(img[(8, 3)], Rgb([0, 0, 0]));
-        assert_eq!(img[(1, 3)], Rgb([0, 0, 0]));
-        assert_eq!(img[(5, 9)], Rgb([0, 0, 0]));
-        assert_eq!(img[(9, 3)], Rgb([9, 9, 9]));
-        assert_eq!(img[(0, 3)], Rgb([9, 9, 9]));
+    fn boxes_are_drawn_outwards_and_clipped() {
+        let mut img = RgbImage::from_pixel(20, 12, Rgb([9, 9, 9]));
+        draw_box(&mut img, [4.0, 4.0, 10.0, 8.0], 2, PERSON_COLOUR);
+        // The box covers x 4..=9, y 4..=7: all of it untouched; rings at 1 and 2 pixels
+        // outside (x 3 and 2, 10 and 11), then the black ring at 3 (x 1 and 12).
+        for y in 4..8 {
+            for x in 4..10 {
+                assert_eq!(img[(x, y)], Rgb([9, 9, 9]), "({x}, {y})");
+            }
+        }
+        assert_eq!(img[(3, 5)], PERSON_COLOUR);
+        assert_eq!(img[(2, 5)], PERSON_COLOUR);
+        assert_eq!(img[(10, 5)], PERSON_COLOUR);
+        assert_eq!(img[(11, 5)], PERSON_COLOUR);
+        assert_eq!(img[(6, 3)], PERSON_COLOUR);
+        assert_eq!(img[(6, 9)], PERSON_COLOUR);
+        assert_eq!(img[(1, 5)], Rgb([0, 0, 0]));
+        assert_eq!(img[(12, 5)], Rgb([0, 0, 0]));
+        assert_eq!(img[(6, 1)], Rgb([0, 0, 0]));
+        assert_eq!(img[(0, 5)], Rgb([9, 9, 9]));
+        assert_eq!(img[(13, 5)], Rgb([9, 9, 9]));
         // Partly outside and non-finite: no panic, the visible part drawn.
-        draw_box(&mut img, [-5.0, -5.0, 25.0, 5.0], 1, FACE_COLOUR);
-        assert_eq!(img[(10, 4)], FACE_COLOUR);
+        draw_box(&mut img, [-5.0, 2.0, 25.0, 5.0], 1, FACE_COLOUR);
+        assert_eq!(img[(15, 1)], FACE_COLOUR);
         draw_box(&mut img, [f32::NAN, 0.0, f32::INFINITY, 3.0], 3, FACE_COLOUR);
     }
 
@@ -478,15 +461,12 @@ mod tests {
         let (c, p, st) =
             (html.find("class.png").unwrap(), html.find("portrait.png").unwrap(), html.find("street.png").unwrap());
         assert!(c < p && p < st, "{html}");
-        assert_eq!(html.matches("<tr class=\"flag\">").count(), 1);
+        assert_eq!(html.matches("<section class=\"row flag\"").count(), 1);
+        // Each panel is a captioned figure opening the lightbox of its picture.
+        assert_eq!(html.matches("<figure>").count(), 9);
+        assert!(html.contains("<b>enhanced</b>: <span class=\"face warn\">32 faces</span>"), "{html}");
+        assert_eq!(html.matches("class=\"lb\"").count(), 3);
         let clean = index_html("p", &items[..1], &[], Path::new("/o"));
         assert!(clean.contains("No face is found in any picture after the camera."), "{clean}");
-    }
-
-    #[test]
-    fn links_and_text_are_escaped() {
-        let out = Path::new("/o");
-        assert_eq!(href(Path::new("/o/a b/x\"<y>.png"), out), "a%20b/x%22%3Cy%3E.png");
-        assert_eq!(html_escape("<a href='x'>&\"\u{1b}"), "&lt;a href=&#39;x&#39;&gt;&amp;&quot;\u{fffd}");
     }
 }

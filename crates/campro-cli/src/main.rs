@@ -14,6 +14,7 @@ mod man;
 mod metadata;
 mod models;
 mod output;
+mod page;
 mod params;
 mod presets;
 mod record;

@@ -151,8 +151,8 @@ fn a_learnt_preset_hides_faces_as_captured_and_every_photo_gets_its_line() {
     let srcs = sources(&html);
     assert_eq!(
         srcs.len(),
-        rows / models + v["summary"]["faces"].as_u64().unwrap() as usize,
-        "a raw crop per face and one per view"
+        2 * (rows / models + v["summary"]["faces"].as_u64().unwrap() as usize),
+        "a raw crop per face and one per view, each in its figure and in the face's lightbox"
     );
     for s in &srcs {
         assert!(!s.contains("..") && !s.starts_with('/'), "{s}");

@@ -1,6 +1,6 @@
 //! `campro inspect` on shared images: the index page's links open, each picture is raw |
-//! protected with the detections drawn only where the JSON says, and the protected panel is
-//! the exact pipeline's output.
+//! protected with the detections boxed only around what the JSON says (never over a face),
+//! and the protected panel is the exact pipeline's output.
 
 mod common;
 use common::{bundled, campro, fails_with};
@@ -8,7 +8,7 @@ use image::RgbImage;
 use serde_json::Value;
 use std::path::Path;
 
-/// Every `href="..."` and `src="..."` value of an HTML page.
+/// Every `href="..."` and `src="..."` value of an HTML page but links inside it (`#id`).
 fn links(html: &str) -> Vec<String> {
     let mut out = Vec::new();
     for attr in ["href=\"", "src=\""] {
@@ -16,30 +16,27 @@ fn links(html: &str) -> Vec<String> {
         while let Some(i) = rest.find(attr) {
             rest = &rest[i + attr.len()..];
             let end = rest.find('"').expect("closed attribute");
-            out.push(rest[..end].to_string());
+            if !rest.starts_with('#') {
+                out.push(rest[..end].to_string());
+            }
             rest = &rest[end..];
         }
     }
     out
 }
 
-/// Whether (x, y) is within `margin` pixels of anything drawn for this panel's detections.
+/// Whether (x, y) is within `margin` pixels outside a box drawn for this panel's detections
+/// (boxes are drawn around what they mark, outwards).
 fn near_drawing(panel: &Value, x: f32, y: f32, margin: f32) -> bool {
     let near_box = |b: &Value| {
         let b: Vec<f32> = b.as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
         let inside_outer = x >= b[0] - margin && x <= b[2] + margin && y >= b[1] - margin && y <= b[3] + margin;
-        let inside_inner = x > b[0] + margin && x < b[2] - margin && y > b[1] + margin && y < b[3] - margin;
-        inside_outer && !inside_inner
+        let inside_box = x > b[0] + 1.0 && x < b[2] - 1.0 && y > b[1] + 1.0 && y < b[3] - 1.0;
+        inside_outer && !inside_box
     };
     let faces = panel["faces"].as_array().unwrap();
     let people = panel["people"].as_array().unwrap();
-    faces.iter().any(|f| {
-        near_box(&f["bbox"])
-            || f["landmarks"].as_array().unwrap().iter().any(|l| {
-                let (lx, ly) = (l[0].as_f64().unwrap() as f32, l[1].as_f64().unwrap() as f32);
-                (lx - x).abs() <= margin && (ly - y).abs() <= margin
-            })
-    }) || people.iter().any(|d| near_box(&d["bbox"]))
+    faces.iter().any(|f| near_box(&f["bbox"])) || people.iter().any(|d| near_box(&d["bbox"]))
 }
 
 #[test]
@@ -70,11 +67,12 @@ fn inspect_writes_pictures_json_and_an_index_whose_links_open() {
     assert_eq!(printed["images"].as_array().unwrap().len(), 2);
     assert_eq!(printed, serde_json::from_slice::<Value>(&std::fs::read(out.join("index.json")).unwrap()).unwrap());
 
-    // Every link of the page opens a file inside the output folder: 2 pictures (href and
-    // src) and 2 JSONs.
+    // Every link of the page opens a file inside the output folder: per image its picture
+    // twice (a panel each) and once in the lightbox, and its JSON.
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
     let links = links(&html);
-    assert_eq!(links.len(), 6, "{links:?}");
+    assert_eq!(links.len(), 8, "{links:?}");
+    assert_eq!(html.matches("<figcaption>").count(), 4, "a captioned figure per panel");
     let p = params.to_str().unwrap();
     let fast =
         campro::pipeline::fast::Exact8::new(Box::leak(Box::new(campro::Params::from_file(Path::new(p)).unwrap())));
@@ -96,8 +94,8 @@ fn inspect_writes_pictures_json_and_an_index_whose_links_open() {
         let panels = json["panels"].as_array().unwrap();
         assert_eq!(panels[0]["panel"], "raw");
         assert_eq!(panels[1]["panel"], "protected");
-        // Away from the drawn boxes and landmarks each panel is its image, pixel for pixel;
-        // on them it is not (something was drawn).
+        // Away from the drawn boxes each panel is its image, pixel for pixel (inside every
+        // box too: a face is never drawn over); on them it is not (something was drawn).
         let (mut checked, mut drawn) = (0, 0);
         for y in 0..h {
             for x in 0..w {
@@ -120,7 +118,7 @@ fn inspect_writes_pictures_json_and_an_index_whose_links_open() {
     // In a real browser every picture of the page loads.
     if let Some(browser) = common::browser() {
         let seen = common::open_in_browser(browser, &out.join("index.html"));
-        assert!(seen.starts_with("RESULT images=2 broken=0 scripts=0 "), "{seen}");
+        assert!(seen.starts_with("RESULT images=6 broken=0 scripts=0 "), "{seen}");
     }
     // The LFW photo's raw panel shows the face YuNet finds, near the centre of the 250x250 image.
     let fj: Value = serde_json::from_slice(&std::fs::read(out.join("Aaron_Eckhart_0001.json")).unwrap()).unwrap();

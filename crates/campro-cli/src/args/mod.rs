@@ -55,8 +55,9 @@ pub enum Cmd {
     )]
     Demo(DemoArgs),
     /// Look at what a parameter set does to your images: raw | protected side by side with
-    /// the faces (YuNet) and people (person detector) found on each, a JSON of the
-    /// detections per image, and OUTPUT/index.html linking them.
+    /// the faces (YuNet) and people (person detector) found on each boxed around them, a JSON
+    /// of the detections per image, and OUTPUT/index.html: a summary, then the images that
+    /// still show faces after the camera first.
     #[command(
         after_help = "Examples:\n  campro inspect campro-omega-0.5 photos/ -o look/ --enhance   # then open look/index.html"
     )]

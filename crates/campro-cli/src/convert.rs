@@ -268,8 +268,20 @@ fn device_gains(d: &DeviceArgs) -> Result<Option<[f32; 4]>> {
         return Ok(Some([g[0], g[1], g[2], g[3]]));
     }
     let Some(f) = &d.capture_result else { return Ok(None) };
-    let text = campro::file::read_text_capped(f, 1 << 20, "a capture result")?;
+    let text = read_capture_result(f)?;
     camera2::gains_from_capture_result(&text).map_err(|e| anyhow!("--capture-result {}: {e}", crate::shown(f)))
+}
+
+/// The text of `--capture-result` (at most 1 MiB); one line naming the flag, and for a
+/// missing file where one comes from, when it cannot be read.
+fn read_capture_result(f: &Path) -> Result<String> {
+    campro::file::read_text_capped(f, 1 << 20, "a capture result").map_err(|e| {
+        let missing = !f.exists();
+        anyhow!(
+            "--capture-result {e}{}",
+            if missing { " (a phone's capture result is saved as docs/commands.md shows)" } else { "" }
+        )
+    })
 }
 
 /// What `convert` and `compare` say (on stderr, after their output) when no device
@@ -289,7 +301,7 @@ pub fn device_setup(p: &Params, d: &DeviceArgs) -> Result<(Mat3, Options)> {
     let m = if let Some(v) = &d.device_ccm {
         [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]]
     } else if let Some(f) = &d.capture_result {
-        let text = campro::file::read_text_capped(f, 1 << 20, "a capture result")?;
+        let text = read_capture_result(f)?;
         camera2::device_transform_from_capture_result(&text)
             .map_err(|e| anyhow!("--capture-result {}: {e}", crate::shown(f)))?
     } else if let Some(ct) = d.ct {

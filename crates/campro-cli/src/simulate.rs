@@ -272,6 +272,13 @@ fn stream_job(inputs: &[PathBuf], out: &Path, o: &Options) -> Result<Option<(Sou
             None
         }
     };
+    // A camera or loopback device named but absent: one line saying so, before any rule
+    // about what else was asked of it.
+    for d in inputs.iter().map(|i| i.as_path()).chain([out]) {
+        if d.starts_with("/dev") && !d.exists() {
+            bail!("{}: no such device (a camera is /dev/videoN: ls /dev/video* lists them; an output device comes from v4l2loopback)", crate::shown(d));
+        }
+    }
     let stream_in = inputs.iter().find_map(|i| source_of(i));
     let stream_out = if is_dash(out) {
         Some(Sink::Stdout)

@@ -139,15 +139,47 @@ pub fn input_protocols(listing: &str) -> Vec<String> {
         .collect()
 }
 
+/// The demuxers `ffmpeg -demuxers` lists (lines `` D  name  description``; `D` or `DE`).
+pub fn demuxers(listing: &str) -> Vec<String> {
+    listing
+        .lines()
+        .filter_map(|l| {
+            let mut w = l.split_whitespace();
+            let flags = w.next()?;
+            (flags.starts_with('D') && flags.chars().all(|c| c == 'D' || c == 'E')).then(|| w.next()).flatten()
+        })
+        .flat_map(|names| names.split(',').map(str::to_ascii_lowercase).collect::<Vec<_>>())
+        .collect()
+}
+
+/// What ffmpeg needs to read `scheme`: a demuxer for RTSP (which is a demuxer there, not a
+/// protocol; `rtsps` also needs TLS), an input protocol for every other scheme.
+fn needs(scheme: &str) -> (&'static str, &str) {
+    match scheme {
+        "rtsp" | "rtsps" => ("demuxer", "rtsp"),
+        s => ("protocol", s),
+    }
+}
+
 /// Checks that this machine's ffmpeg reads `scheme`: one line naming it when not.
 pub fn check_protocol(scheme: &str) -> Result<()> {
-    let out = ffmpeg()?.arg("-protocols").stdin(Stdio::null()).output()?;
-    let listed = input_protocols(&String::from_utf8_lossy(&out.stdout));
-    if listed.iter().any(|p| p == scheme) {
-        Ok(())
+    let listing = |flag: &str| -> Result<String> {
+        let out = ffmpeg()?.args(["-hide_banner", flag]).stdin(Stdio::null()).output()?;
+        Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+    };
+    let (kind, name) = needs(scheme);
+    let mut has = if kind == "demuxer" {
+        demuxers(&listing("-demuxers")?).iter().any(|d| d == name)
     } else {
-        bail!("{scheme}://: this machine's ffmpeg does not read that protocol (ffmpeg -protocols lists what it reads)")
+        input_protocols(&listing("-protocols")?).iter().any(|p| p == name)
+    };
+    if scheme == "rtsps" {
+        has &= input_protocols(&listing("-protocols")?).iter().any(|p| p == "tls");
     }
+    if !has {
+        bail!("{scheme}://: this machine's ffmpeg does not read that (ffmpeg -demuxers and -protocols list what it reads)")
+    }
+    Ok(())
 }
 
 /// Whether `path` is a character device (a V4L2 camera or loopback output), Unix only.
@@ -1023,6 +1055,11 @@ mod tests {
         assert_eq!(url_scheme(Path::new("-")), None);
         let listing = "Supported file protocols:\nInput:\n  file\n  http\n  rtsp\nOutput:\n  file\n  srt\n";
         assert_eq!(input_protocols(listing), ["file", "http", "rtsp"]);
+        // RTSP is a demuxer to ffmpeg (Debian's ffmpeg 5.1 lists no rtsp protocol).
+        let listing = "File formats:\n D. = Demuxing supported\n --\n D  rtsp            RTSP input\n DE mov,mp4,m4a   QuickTime / MOV\n  E mp3           MP3\n";
+        assert_eq!(demuxers(listing), ["rtsp", "mov", "mp4", "m4a"]);
+        assert_eq!(needs("rtsp"), ("demuxer", "rtsp"));
+        assert_eq!(needs("srt"), ("protocol", "srt"));
     }
 
     use super::*;

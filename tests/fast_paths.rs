@@ -2,7 +2,7 @@
 //! dense 16-bit samples, held to its stated error.
 
 use campro::compare::random_pixels;
-use campro::pipeline::fast::{Exact8, F32Path};
+use campro::pipeline::fast::{Engine, Exact8, F32Path};
 use campro::pipeline::{Depth, Prepared};
 use campro::{Params, ToneCurve};
 
@@ -68,7 +68,8 @@ fn exact8_is_bit_identical_to_the_reference_on_every_code_triple() {
     let mut got = vec![0u8; src.len()];
     for p in sets() {
         Prepared::new(&p, Depth::Eight).run(&src16, &mut want, Depth::Eight);
-        for fast in [Exact8::new(&p), Exact8::new(&p).scalar()] {
+        // Every engine that runs on this CPU for these parameters.
+        for fast in Engine::ALL.into_iter().filter_map(|e| Exact8::new(&p).with_engine(e)) {
             let fell = fast.run(&src, &mut got);
             let diff = want.iter().zip(&got).filter(|(a, b)| **a != **b as u16).count();
             assert_eq!(diff, 0, "{} ({:?}): {diff} samples differ", p.name, fast.engine());
@@ -102,17 +103,19 @@ fn avx512_cpu() -> bool {
 
 #[test]
 fn block_engine_is_chosen_where_it_applies() {
-    use campro::pipeline::fast::Engine;
     let s = sets();
-    let want = if avx512_cpu() { Engine::Avx512 } else { Engine::Scalar };
+    let tables = |e: Engine| matches!(e, Engine::Scalar | Engine::Avx2);
     for p in &s[..4] {
-        assert_eq!(Exact8::new(p).engine(), want, "{}", p.name);
+        let e = Exact8::new(p).engine();
+        assert!(if avx512_cpu() { e == Engine::Avx512 } else { tables(e) }, "{}: {e:?}", p.name);
         assert_eq!(Exact8::new(p).scalar().engine(), Engine::Scalar);
+        assert_eq!(Exact8::new(p).with_engine(Engine::Avx512).is_some(), avx512_cpu());
     }
-    // Non-uniform knots, or more than 32: the scalar tables.
-    assert_eq!(Exact8::new(&s[4]).engine(), Engine::Scalar);
+    // Non-uniform knots, or more than 32: the tables (AVX2 or scalar), never AVX-512.
+    assert!(tables(Exact8::new(&s[4]).engine()));
+    assert!(Exact8::new(&s[4]).with_engine(Engine::Avx512).is_none());
     let fine = Params::new(campro::ccm::IDENTITY, ToneCurve::from_fn(33, |t| t * t), 2.2).unwrap();
-    assert_eq!(Exact8::new(&fine).engine(), Engine::Scalar);
+    assert!(tables(Exact8::new(&fine).engine()));
 }
 
 /// A curve ending exactly on a rounding tie (255 · 0.5 = 127.5) at either end, and a

@@ -22,6 +22,8 @@
 //!   skips the curve; both are exact.
 
 #[cfg(target_arch = "x86_64")]
+mod avx2;
+#[cfg(target_arch = "x86_64")]
 mod avx512;
 
 use super::{degamma, Depth, Prepared};
@@ -31,19 +33,29 @@ use crate::tone_curve::ToneCurve;
 
 /// Cells of [`Exact8`]'s output table over [0, 1] (2^16; the last cell holds t = 1).
 const FINE: usize = 1 << 16;
+/// Entries of the cell table: FINE + 1 cells and a padding entry, so that a 32-bit gather
+/// of the last cell (the AVX2 engine's) stays inside it.
+const CELLS: usize = FINE + 2;
 /// Marks a cell whose pixels take the reference path. A cell below it holds its code.
 const AMBIGUOUS: u16 = 0x100;
 /// Marks a split cell: the low 15 bits index [`Exact8`]'s splits.
 const SPLIT: u16 = 0x8000;
+/// Pixels a block of [`Exact8`]'s portable engine looks up before it decides the ones that
+/// need more.
+const LANES: usize = 16;
 /// Most split cells a table holds (indices below [`SPLIT`]).
 const MAX_SPLITS: usize = 0x7FFF;
 
 /// A cell holding exactly one rounding boundary of the reference's output, at curve input
 /// `t*`: every input below `t*` gives `below`, every input from `t*` on gives `above`. Its
-/// pixels whose f32 input lies within the error bound of `t*` (between `lo` and `hi`) take
-/// the reference; the others are decided by comparing the f32 input with `lo` and `hi`.
+/// pixels whose f32 input lies within the error bound of `t*` (between `lo` and `hi`) have
+/// that one input recomputed as the reference computes it (f64, same operations) and
+/// compared with `t*`, no curve evaluated; the others are decided by comparing the f32
+/// input with `lo` and `hi`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Split {
+    /// `t*`, the least f64 input (in bit order, within the cell) whose code is `above`.
+    at: f64,
     /// `t* - delta`, rounded down to f32: an f32 input below it is surely below `t*`.
     lo: f32,
     /// `t* + delta`, rounded up to f32: an f32 input from it on is surely at or above `t*`.
@@ -74,19 +86,49 @@ impl Elision {
     }
 }
 
+/// Whether the AVX2 engine beats the scalar tables on this CPU: both timed once per
+/// process on 16,384 pixels of a fixed scene through a fixed steep preset (best of three,
+/// about a millisecond in all). Either is bit-identical, so the choice changes speed only.
+fn gathers_pay() -> bool {
+    static PAYS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *PAYS.get_or_init(|| {
+        let curve = ToneCurve::from_fn(32, |t| 0.5 + 0.45 * (9.0 * t).sin());
+        let m = [[1.2, -0.3, 0.1], [-0.2, 1.1, 0.1], [0.1, -0.4, 1.3]];
+        let Ok(p) = Params::new(m, curve, 2.2) else { return false };
+        let src: Vec<u8> = (0..3 * 16384u32).map(|i| (i.wrapping_mul(2654435761) >> 24) as u8).collect();
+        let mut dst = vec![0u8; src.len()];
+        let mut time = |e: Engine| {
+            let Some(x) = Exact8::build(&p, Some(e)) else { return f64::INFINITY };
+            (0..3)
+                .map(|_| {
+                    let t = std::time::Instant::now();
+                    x.run(&src, &mut dst);
+                    t.elapsed().as_secs_f64()
+                })
+                .fold(f64::INFINITY, f64::min)
+        };
+        time(Engine::Avx2) < time(Engine::Scalar)
+    })
+}
+
 /// 8-bit RGB in, 8-bit RGB out, bit-identical to [`Prepared::run`] with 8-bit output.
 #[derive(Debug, Clone)]
 pub struct Exact8<'a> {
     reference: Prepared<'a>,
     /// `terms[256 * j + x] = (CCM[0][j], CCM[1][j], CCM[2][j], 0) · degamma(x / 255)`.
-    terms: Vec<[f32; 4]>,
-    /// FINE + 1 cells: the output code, [`AMBIGUOUS`], or [`SPLIT`] | an index into `splits`.
-    cells: Vec<u16>,
+    /// Fixed-size, so that an index `256 * j + u8` needs no bounds check.
+    terms: Box<[[f32; 4]; 3 * 256]>,
+    /// FINE + 1 cells: the output code, [`AMBIGUOUS`], or [`SPLIT`] | an index into `splits`;
+    /// then a padding entry ([`CELLS`]). Fixed-size, so that an index clamped to `FINE`
+    /// needs no bounds check.
+    cells: Box<[u16; CELLS]>,
     splits: Vec<Split>,
     ambiguous: usize,
     elision: Elision,
     #[cfg(target_arch = "x86_64")]
     simd: Option<avx512::Kernel>,
+    /// The engine [`Exact8::run`] uses.
+    engine: Engine,
 }
 
 /// Pixels of one [`Exact8::run`] redone by the f64 reference.
@@ -99,22 +141,77 @@ pub struct Fallbacks {
     pub ambiguous: usize,
 }
 
-/// Which engine [`Exact8::run`] uses for whole blocks.
+/// Which engine [`Exact8::run`] uses for whole blocks. All are bit-identical to the
+/// reference; they differ in speed only.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Engine {
-    /// One pixel at a time through the tables (any CPU, any curve).
+    /// The tables, 16 pixels a block with their fallbacks queued after it (any CPU, any
+    /// curve; the fast path on ARM, where LLVM lowers its four-lane sums to NEON).
     Scalar,
+    /// The tables, eight pixels a step by gathers (x86-64 with AVX2; any curve).
+    Avx2,
     /// 64 pixels per step with AVX-512 (x86-64; uniform curve of <= 32 knots).
     Avx512,
 }
 
+/// The environment variable that picks an engine (`scalar`, `avx2` or `avx512`), for
+/// timing and testing each on one machine; unset, the fastest that runs is used.
+pub const ENGINE_VARIABLE: &str = "CAMPRO_ENGINE";
+
+impl Engine {
+    /// Every engine, slowest first.
+    pub const ALL: [Engine; 3] = [Engine::Scalar, Engine::Avx2, Engine::Avx512];
+
+    /// Whether this CPU runs it for some parameter set (AVX-512 also needs a uniform curve
+    /// of at most 32 knots: [`Exact8::runs`] says for one).
+    pub fn runs_here(self) -> bool {
+        match self {
+            Engine::Scalar => true,
+            #[cfg(target_arch = "x86_64")]
+            Engine::Avx2 => avx2::available(),
+            #[cfg(target_arch = "x86_64")]
+            Engine::Avx512 => avx512::supported(),
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => false,
+        }
+    }
+
+    /// Its name, as [`ENGINE_VARIABLE`] takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Engine::Scalar => "scalar",
+            Engine::Avx2 => "avx2",
+            Engine::Avx512 => "avx512",
+        }
+    }
+
+    /// The engine [`ENGINE_VARIABLE`] names: None when unset; the line saying what it takes
+    /// when it names none.
+    pub fn from_env() -> Result<Option<Engine>, String> {
+        match std::env::var(ENGINE_VARIABLE) {
+            Err(std::env::VarError::NotPresent) => Ok(None),
+            Ok(v) => Engine::ALL.into_iter().find(|e| e.name() == v).map(Some).ok_or_else(|| {
+                format!("{ENGINE_VARIABLE}={}: not an engine (scalar, avx2 or avx512)", v.escape_debug())
+            }),
+            Err(_) => Err(format!("{ENGINE_VARIABLE}: not UTF-8 (scalar, avx2 or avx512)")),
+        }
+    }
+}
+
 impl<'a> Exact8<'a> {
-    /// Builds the tables (about a millisecond).
+    /// Builds the tables (about a millisecond) for the engine [`ENGINE_VARIABLE`] asks for
+    /// where it runs here, else the fastest here.
     pub fn new(params: &'a Params) -> Self {
+        Self::build(params, None).expect("the scalar engine runs everywhere")
+    }
+
+    /// The tables on `engine` (None: the choice of [`Exact8::new`]); None where it does
+    /// not run.
+    fn build(params: &'a Params, engine: Option<Engine>) -> Option<Self> {
         let reference = Prepared::new(params, Depth::Eight);
         let d: Vec<f64> = (0..256).map(|c| degamma(c as f64 / 255.0, params.degamma)).collect();
         let m = &params.ccm;
-        let mut terms = vec![[0f32; 4]; 3 * 256];
+        let mut terms = Box::new([[0f32; 4]; 3 * 256]);
         for j in 0..3 {
             for x in 0..256 {
                 terms[256 * j + x] = [(m[0][j] * d[x]) as f32, (m[1][j] * d[x]) as f32, (m[2][j] * d[x]) as f32, 0.0];
@@ -126,7 +223,10 @@ impl<'a> Exact8<'a> {
         let row = crate::ccm::norm_inf(m);
         let delta = 3.0 * row * f32::EPSILON as f64 / 2.0 * 1.0000001 + 1e-12;
         let (cells, splits, ambiguous) = cell_table(&params.tone_curve, delta);
-        Self {
+        let mut cells = cells;
+        cells.push(0);
+        let cells: Box<[u16; CELLS]> = cells.into_boxed_slice().try_into().expect("FINE + 1 cells and a pad");
+        let mut e = Self {
             #[cfg(target_arch = "x86_64")]
             simd: avx512::Kernel::new(params, &d),
             reference,
@@ -135,37 +235,65 @@ impl<'a> Exact8<'a> {
             splits,
             ambiguous,
             elision: Elision::of(params),
+            engine: Engine::Scalar,
+        };
+        // The engine asked for where it runs here, else AVX-512 where it runs, else the
+        // faster of AVX2 and the scalar tables on this CPU (gathers are slower than scalar
+        // loads on some: AMD Zen 1 takes 1.4x as long with them).
+        if let Some(fixed) = engine {
+            return e.with_engine(fixed);
+        }
+        let asked = Engine::from_env().ok().flatten().filter(|&a| e.runs(a));
+        e.engine = match asked {
+            Some(a) => a,
+            None if e.runs(Engine::Avx512) => Engine::Avx512,
+            None if e.runs(Engine::Avx2) && gathers_pay() => Engine::Avx2,
+            None => Engine::Scalar,
+        };
+        Some(e)
+    }
+
+    /// Whether `engine` runs on this CPU for these parameters.
+    pub fn runs(&self, engine: Engine) -> bool {
+        match engine {
+            Engine::Scalar => true,
+            #[cfg(target_arch = "x86_64")]
+            Engine::Avx2 => avx2::available(),
+            #[cfg(target_arch = "x86_64")]
+            Engine::Avx512 => self.simd.is_some(),
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => false,
         }
     }
 
-    /// The same path restricted to the scalar engine (for comparisons and tests).
-    pub fn scalar(mut self) -> Self {
-        #[cfg(target_arch = "x86_64")]
-        {
-            self.simd = None;
-        }
-        self
+    /// The same path on `engine`; None where it does not run ([`Exact8::runs`]).
+    pub fn with_engine(mut self, engine: Engine) -> Option<Self> {
+        self.runs(engine).then(|| {
+            self.engine = engine;
+            self
+        })
     }
 
-    /// The engine [`Exact8::run`] uses on this CPU for these parameters.
+    /// The same path on the scalar engine (for comparisons and tests).
+    pub fn scalar(self) -> Self {
+        self.with_engine(Engine::Scalar).expect("the scalar engine runs everywhere")
+    }
+
+    /// The engine [`Exact8::run`] uses.
     pub fn engine(&self) -> Engine {
-        #[cfg(target_arch = "x86_64")]
-        if self.simd.is_some() {
-            return Engine::Avx512;
-        }
-        Engine::Scalar
+        self.engine
     }
 
     /// Fraction of the output table's cells whose pixels all take the reference path
     /// (a cell with more than one rounding boundary, or a knot, inside).
     pub fn fallback_fraction(&self) -> f64 {
-        self.ambiguous as f64 / self.cells.len() as f64
+        self.ambiguous as f64 / (FINE + 1) as f64
     }
 
     /// Fraction of the output table's cells that hold one rounding boundary: only their
     /// pixels within the error bound of it take the reference.
     pub fn split_fraction(&self) -> f64 {
-        self.splits.len() as f64 / self.cells.len() as f64
+        self.splits.len() as f64 / (FINE + 1) as f64
     }
 
     /// Stages this parameter set lets the path skip.
@@ -179,42 +307,109 @@ impl<'a> Exact8<'a> {
         self.pixel_flagged(rgb).0
     }
 
-    /// One pixel, and whether it took the reference path.
+    /// The table entries of one pixel and its three curve inputs: a code below
+    /// [`AMBIGUOUS`] per channel where the cell decides alone. Written for every CPU: fixed
+    /// tables indexed by bytes and by a cell clamped to [`FINE`] need no bounds checks, the
+    /// four-lane sums (the fourth is padding) lower to SSE or NEON, and the float-to-cell
+    /// conversion has no saturation fix-ups (its input is in [0, FINE]).
     #[inline(always)]
-    fn pixel_flagged(&self, rgb: [u8; 3]) -> ([u8; 3], bool) {
-        let (a, b, c) =
-            (&self.terms[rgb[0] as usize], &self.terms[256 + rgb[1] as usize], &self.terms[512 + rgb[2] as usize]);
-        // Four lanes (the fourth is padding) so the sums, clamps and conversions vectorise.
+    fn lookup(&self, rgb: [u8; 3]) -> ([u16; 3], [f32; 4]) {
+        let terms = &*self.terms;
+        let (a, b, c) = (&terms[rgb[0] as usize], &terms[256 + rgb[1] as usize], &terms[512 + rgb[2] as usize]);
         let mut t = [0f32; 4];
-        let mut idx = [0i32; 4];
         #[allow(clippy::manual_clamp)] // max/min vectorise to maxps/minps; no NaN can occur
         for k in 0..4 {
             t[k] = (a[k] + b[k] + c[k]).max(0.0).min(1.0);
-            idx[k] = (t[k] * FINE as f32) as i32;
         }
-        let e = [self.cells[idx[0] as usize], self.cells[idx[1] as usize], self.cells[idx[2] as usize]];
+        let cell = |t: f32| {
+            // SAFETY: t is in [0, 1] (clamped above; the terms are finite), so t · FINE is
+            // in [0, 65536], finite and within u32.
+            let i = unsafe { (t * FINE as f32).to_int_unchecked::<u32>() } as usize;
+            self.cells[i.min(FINE)]
+        };
+        ([cell(t[0]), cell(t[1]), cell(t[2])], t)
+    }
+
+    /// One pixel, and whether it took the reference path.
+    #[inline(always)]
+    fn pixel_flagged(&self, rgb: [u8; 3]) -> ([u8; 3], bool) {
+        let (e, t) = self.lookup(rgb);
         if (e[0] | e[1] | e[2]) < AMBIGUOUS {
             return ([e[0] as u8, e[1] as u8, e[2] as u8], false);
         }
-        // A split cell decides by its boundary unless the input is within the bound of it.
+        self.decide(rgb, e, t)
+    }
+
+    /// A pixel whose table entries `e` (for curve inputs `t`) hold a split or an ambiguous
+    /// cell: a split cell decides by its boundary, and where the f32 input is within the
+    /// bound of it, by the reference's own f64 input against the boundary; an ambiguous
+    /// cell by the whole f64 reference. The flag says whether f64 was needed.
+    #[cold]
+    fn decide(&self, rgb: [u8; 3], e: [u16; 3], t: [f32; 4]) -> ([u8; 3], bool) {
+        if e.contains(&AMBIGUOUS) {
+            return (self.exact(rgb), true);
+        }
         let mut out = [0u8; 3];
+        let mut exact: Option<[f64; 3]> = None;
         for k in 0..3 {
             out[k] = match e[k] {
                 code if code < AMBIGUOUS => code as u8,
-                AMBIGUOUS => return (self.exact(rgb), true),
                 split => {
                     let s = &self.splits[(split & !SPLIT) as usize];
                     if t[k] < s.lo {
                         s.below
                     } else if t[k] >= s.hi {
                         s.above
+                    } else if exact.get_or_insert_with(|| self.curve_inputs(rgb))[k] < s.at {
+                        s.below
                     } else {
-                        return (self.exact(rgb), true);
+                        s.above
                     }
                 }
             };
         }
-        (out, false)
+        (out, exact.is_some())
+    }
+
+    /// The reference's curve inputs for a pixel, bit for bit: its f64 degamma table, the
+    /// matrix by [`ccm::apply`], clipped by [`super::clip01`] (what [`super::from_linear`]
+    /// hands the curve).
+    fn curve_inputs(&self, rgb: [u8; 3]) -> [f64; 3] {
+        let r = &self.reference;
+        super::clip01(ccm::apply(&r.params.ccm, rgb.map(|c| r.degamma[c as usize])))
+    }
+
+    /// The portable engine on whole blocks of [`LANES`] pixels: each block's codes are
+    /// looked up and stored without a branch, the pixels that need more (a split or
+    /// ambiguous cell, 0.01 to 0.3% of a photo for the bundled presets) queued and decided
+    /// after the block. Returns the pixels the reference redid and the bytes done.
+    fn run_blocks(&self, src: &[u8], dst: &mut [u8]) -> (usize, usize) {
+        const BLOCK: usize = 3 * LANES;
+        let mut fell = 0;
+        let mut queue = [0u8; LANES];
+        let whole = src.len() / BLOCK * BLOCK;
+        for (s, d) in src[..whole].chunks_exact(BLOCK).zip(dst[..whole].chunks_exact_mut(BLOCK)) {
+            let s: &[u8; BLOCK] = s.try_into().expect("a whole block");
+            let d: &mut [u8; BLOCK] = d.try_into().expect("a whole block");
+            let mut n = 0;
+            for p in 0..LANES {
+                let (e, _) = self.lookup([s[3 * p], s[3 * p + 1], s[3 * p + 2]]);
+                d[3 * p] = e[0] as u8;
+                d[3 * p + 1] = e[1] as u8;
+                d[3 * p + 2] = e[2] as u8;
+                queue[n] = p as u8;
+                n += ((e[0] | e[1] | e[2]) >= AMBIGUOUS) as usize;
+            }
+            for &p in &queue[..n] {
+                let p = 3 * p as usize;
+                let rgb = [s[p], s[p + 1], s[p + 2]];
+                let (e, t) = self.lookup(rgb);
+                let (o, f) = self.decide(rgb, e, t);
+                fell += f as usize;
+                d[p..p + 3].copy_from_slice(&o);
+            }
+        }
+        (fell, whole)
     }
 
     /// Interleaved RGB8 in and out; `src.len() == dst.len()`, a multiple of 3. Uses
@@ -225,12 +420,21 @@ impl<'a> Exact8<'a> {
         #[allow(unused_mut)]
         let (mut src, mut dst) = (src, dst);
         #[cfg(target_arch = "x86_64")]
-        if let Some(k) = &self.simd {
+        if let (Engine::Avx512, Some(k)) = (self.engine, &self.simd) {
             let whole = src.len() / avx512::BLOCK_BYTES * avx512::BLOCK_BYTES;
             fell.flagged = k.run(&src[..whole], &mut dst[..whole]);
             (src, dst) = (&src[whole..], &mut dst[whole..]);
         }
-        for (s, d) in src.chunks_exact(3).zip(dst.chunks_exact_mut(3)) {
+        #[cfg(target_arch = "x86_64")]
+        if self.engine != Engine::Scalar && avx2::available() {
+            // SAFETY: AVX2 is detected.
+            let (redone, whole) = unsafe { avx2::run(self, src, dst) };
+            fell.ambiguous += redone;
+            (src, dst) = (&src[whole..], &mut dst[whole..]);
+        }
+        let (blocks, done) = self.run_blocks(src, dst);
+        fell.ambiguous += blocks;
+        for (s, d) in src[done..].chunks_exact(3).zip(dst[done..].chunks_exact_mut(3)) {
             let (o, f) = self.pixel_flagged([s[0], s[1], s[2]]);
             fell.ambiguous += f as usize;
             d.copy_from_slice(&o);
@@ -434,7 +638,7 @@ fn split_at(curve: &ToneCurve, lo: f64, hi: f64, delta: f64) -> Option<Split> {
         }
     }
     let t = f64::from_bits(h);
-    Some(Split { lo: f32_down(t - delta), hi: f32_up(t + delta), below: a as u8, above: b as u8 })
+    Some(Split { at: t, lo: f32_down(t - delta), hi: f32_up(t + delta), below: a as u8, above: b as u8 })
 }
 
 /// The largest f32 not above `v`.

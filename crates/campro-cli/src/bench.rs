@@ -148,39 +148,51 @@ pub fn run(params: &Params, quick: bool) -> Vec<Row> {
         mean_lsb: e.1,
         note: fb,
     });
-    // A row per engine: the AVX-512 one where the CPU and the curve allow it, said otherwise.
-    if exact.engine() != campro::pipeline::fast::Engine::Avx512 {
-        rows.push(Row {
-            group: "image",
-            name: "exact 8-bit, AVX-512 engine, 1 thread".into(),
-            time: Time::None,
-            max_lsb: f64::NAN,
-            mean_lsb: f64::NAN,
-            note:
-                "not on this CPU or curve (needs AVX-512 F, BW, DQ and VBMI, and a uniform curve of at most 32 knots)"
-                    .into(),
-        });
+    // A row per engine and frame (the bench frame, and a COCO photo where the shared data
+    // has one): time, ns a pixel, against a copy, and the pixels sent to the reference.
+    let photo = coco_frame(w, h);
+    let frames: Vec<(&str, &[u8])> =
+        std::iter::once(("bench frame", frame.as_slice())).chain(photo.as_deref().map(|p| ("COCO photo", p))).collect();
+    for engine in campro::pipeline::fast::Engine::ALL {
+        let name = format!("exact 8-bit, {} engine, 1 thread", engine.name());
+        let Some(x) = Exact8::new(params).with_engine(engine) else {
+            rows.push(Row {
+                group: "engine",
+                name,
+                time: Time::None,
+                max_lsb: f64::NAN,
+                mean_lsb: f64::NAN,
+                note: match engine {
+                    campro::pipeline::fast::Engine::Avx512 => "not on this CPU or curve (needs AVX-512 F, BW, DQ and VBMI, and a uniform curve of at most 32 knots)",
+                    _ => "not on this CPU",
+                }
+                .into(),
+            });
+            continue;
+        };
+        x.run(&sample, &mut sample_out);
+        let e = err8(&sample_out, &want);
+        for (what, f) in &frames {
+            let t = median(runs, || {
+                x.run(black_box(f), &mut out);
+            });
+            let fell = x.run(f, &mut out);
+            rows.push(Row {
+                group: "engine",
+                name: format!("{name}, {what}"),
+                time: ms(t),
+                max_lsb: e.0,
+                mean_lsb: e.1,
+                note: format!(
+                    "{:.2} ns/px, {}; {:.3}% px to the reference",
+                    t * 1e9 / (w * h) as f64,
+                    ratio(t),
+                    (fell.flagged + fell.ambiguous) as f64 / px
+                ),
+            });
+        }
     }
     let scalar = Exact8::new(params).scalar();
-    let t = median(runs, || {
-        scalar.run(black_box(&frame), &mut out);
-    });
-    let fell = scalar.run(&frame, &mut out);
-    let fb = format!(
-        "{}; {:.3}% px to the reference ({:.2}% of cells split at one rounding boundary, {:.3}% ambiguous)",
-        ratio(t),
-        fell.ambiguous as f64 / px,
-        100.0 * scalar.split_fraction(),
-        100.0 * scalar.fallback_fraction()
-    );
-    rows.push(Row {
-        group: "image",
-        name: "exact 8-bit, scalar tables, 1 thread".into(),
-        time: ms(t),
-        max_lsb: e.0,
-        mean_lsb: e.1,
-        note: fb,
-    });
     let t = median(runs, || {
         scalar.run_runs(black_box(&frame), &mut out);
     });
@@ -427,6 +439,26 @@ pub fn table(rows: &[Row]) -> Table {
 /// The table as one JSON object: the frame size and the rows.
 pub fn json(rows: &[Row]) -> serde_json::Value {
     serde_json::json!({ "frame": [1920, 1080], "rows": table(rows).json() })
+}
+
+/// A 1920x1080 frame tiled from a COCO photo of the shared data folder ($CAMPRO_SHARED or
+/// ../shared), where it is there: real pixels, whose share sent to the reference differs
+/// from the synthetic frame's.
+fn coco_frame(w: usize, h: usize) -> Option<Vec<u8>> {
+    let path = crate::args::shared_dir(None).join("data/coco-person/images/000000000785.jpg");
+    let budget = campro_eval::image_file::Budget::new(256 << 20);
+    let (img, _lease) =
+        campro_eval::image_file::read(&path, &budget, &campro_eval::image_file::no_work, &|_| {}).ok()?;
+    let img = img.into_rgb8();
+    let (iw, ih) = (img.width() as usize, img.height() as usize);
+    let mut f = vec![0u8; w * h * 3];
+    for y in 0..h {
+        for x in 0..w {
+            let p = img.get_pixel((x % iw) as u32, (y % ih) as u32);
+            f[3 * (y * w + x)..3 * (y * w + x) + 3].copy_from_slice(&p.0);
+        }
+    }
+    Some(f)
 }
 
 /// `campro bench` (without a subcommand): the table for `--params` or, by default, a set

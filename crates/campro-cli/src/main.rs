@@ -75,6 +75,19 @@ fn main() {
 }
 
 fn run(cli: Cli) -> Result<()> {
+    // CAMPRO_ENGINE (the exact 8-bit path's engine, for timing each) is read once here: a
+    // value that names no engine is refused, one this CPU lacks is said.
+    match campro::pipeline::fast::Engine::from_env() {
+        Err(line) => anyhow::bail!("{line}"),
+        Ok(Some(e)) if !campro::pipeline::fast::Engine::runs_here(e) => {
+            eprintln!(
+                "warning: {}={}: not on this CPU; the fastest engine that runs is used",
+                campro::pipeline::fast::ENGINE_VARIABLE,
+                e.name()
+            )
+        }
+        _ => {}
+    }
     match cli.cmd {
         Cmd::Validate(a) => params::validate(&a),
         Cmd::Completions { shell } => {

@@ -20,7 +20,6 @@ use campro::pipeline::{Depth, Prepared};
 use campro::Params;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// The file endings read as images.
 const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff", "webp"];
@@ -109,13 +108,14 @@ pub(crate) fn collect_inputs(
 }
 
 /// Where an input goes: a video keeps its container; an image keeps its format, or takes
-/// `format` when one is asked; a JPEG or WebP at 16 bits becomes a PNG (neither has a
-/// 16-bit form); anything else becomes PNG.
+/// `format` when one is asked; a HEIC photo (not written here) becomes a JPEG; a JPEG or
+/// WebP at 16 bits becomes a PNG (neither has a 16-bit form); anything else becomes PNG.
 fn output_for(path: &Path, depth: Depth, format: Option<ImageFormat>) -> PathBuf {
     if video::is_video(path) {
         return path.to_path_buf();
     }
-    match format.or(ImageFormat::of(path)) {
+    let own = if campro_eval::heif::named_heif(path) { Some(ImageFormat::Jpeg) } else { ImageFormat::of(path) };
+    match format.or(own) {
         Some(f @ (ImageFormat::Jpeg | ImageFormat::Webp)) if depth == Depth::Eight => {
             path.with_extension(f.ending(path))
         }
@@ -162,17 +162,19 @@ impl ImageFormat {
 }
 
 /// Why a file a command does not read is passed over: `otherwise`, except HEIC/HEIF (every
-/// iPhone's photos), which gets a line saying what to do.
+/// iPhone's photos) on a machine without libheif, which gets the line saying what to do.
 fn skip_reason(path: &Path, otherwise: &'static str) -> &'static str {
-    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
-        Some("heic" | "heif") => {
-            "HEIC is not read by campro: convert it to JPEG or PNG first (e.g. heif-convert IMG.HEIC IMG.jpg)"
-        }
-        _ => otherwise,
+    if campro_eval::heif::named_heif(path) {
+        return campro_eval::heif::MISSING;
     }
+    otherwise
 }
 
+/// Whether `path` names an image read here: by its ending, HEIC/HEIF where libheif is.
 pub(crate) fn is_image(path: &Path) -> bool {
+    if campro_eval::heif::named_heif(path) {
+        return campro_eval::heif::available();
+    }
     path.extension()
         .and_then(|e| e.to_str())
         .map(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
@@ -217,18 +219,107 @@ pub enum Existing {
     Skip,
 }
 
-/// One input's outcome, for `--format json`.
-fn record(
+/// What became of one input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Status {
+    Written,
+    /// Its output was there already (`--skip-existing`).
+    Skipped,
+    Failed,
+}
+
+/// One input's outcome: a line of `--format json`'s `files`.
+#[derive(Debug, Clone, serde::Serialize)]
+#[serde(rename_all = "camelCase")]
+pub struct Outcome {
+    pub input: String,
+    pub output: String,
+    pub status: Status,
+    /// Wall time of this input, milliseconds (one decimal).
+    pub ms: f64,
+    /// The one-line error of a failed input; null otherwise.
+    pub error: Option<String>,
+    /// Frames written (videos and streams).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames: Option<u64>,
+    /// Frames a second sustained, and what the camera stage alone could do (streams).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub capacity_fps: Option<f64>,
+    /// What the run let through and says so (grey input under `--allow-grey`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<&'static str>,
+}
+
+/// `--format json`: the output, the counts (from the outcomes) and each input's outcome.
+#[derive(Debug, serde::Serialize)]
+struct RunReport {
+    output: String,
+    written: usize,
+    skipped: usize,
+    failed: usize,
+    files: Vec<Outcome>,
+}
+
+impl RunReport {
+    fn new(output: &str, mut files: Vec<Outcome>) -> Self {
+        files.sort_by(|a, b| a.input.cmp(&b.input));
+        let n = |s| files.iter().filter(|f| f.status == s).count();
+        RunReport {
+            output: output.into(),
+            written: n(Status::Written),
+            skipped: n(Status::Skipped),
+            failed: n(Status::Failed),
+            files,
+        }
+    }
+}
+
+/// The one outcome path of every output (an image, a video file, a stream): skipped when
+/// it exists under `--skip-existing`, refused when it exists without `--force`, else made by
+/// `make` and its record written (`--record`; `jpeg`: the output's JPEG quality). Timed; a
+/// failure's line names `input`. Nothing is printed here.
+fn settle<T>(
     input: &Path,
     output: &Path,
-    status: &str,
-    started: std::time::Instant,
-    error: Option<String>,
-) -> serde_json::Value {
-    serde_json::json!({
-        "input": input.display().to_string(), "output": output.display().to_string(), "status": status,
-        "ms": (started.elapsed().as_secs_f64() * 1000.0 * 10.0).round() / 10.0, "error": error,
-    })
+    existing: Existing,
+    record: Option<&crate::record::RunRecord>,
+    jpeg: Option<u8>,
+    make: impl FnOnce() -> Result<T>,
+) -> (Outcome, Option<T>) {
+    let started = std::time::Instant::now();
+    let exists = output.exists();
+    let r = if existing == Existing::Skip && exists {
+        None
+    } else if existing != Existing::Replace && exists {
+        Some(Err(anyhow!("{} exists (use --force to overwrite, or --skip-existing)", crate::shown(output))))
+    } else {
+        Some(make().and_then(|made| {
+            if let Some(rec) = record {
+                rec.write(input, output, jpeg, existing == Existing::Replace)?;
+            }
+            Ok(made)
+        }))
+    };
+    let (status, error, made) = match r {
+        None => (Status::Skipped, None, None),
+        Some(Ok(made)) => (Status::Written, None, Some(made)),
+        Some(Err(e)) => (Status::Failed, Some(crate::about(input, &e)), None),
+    };
+    let outcome = Outcome {
+        input: input.display().to_string(),
+        output: output.display().to_string(),
+        status,
+        ms: (started.elapsed().as_secs_f64() * 1e4).round() / 10.0,
+        error,
+        frames: None,
+        fps: None,
+        capacity_fps: None,
+        warnings: Vec::new(),
+    };
+    (outcome, made)
 }
 
 /// How `simulate` runs.
@@ -352,22 +443,13 @@ fn single_file(inputs: &[PathBuf], out: &Path) -> Result<Option<(PathBuf, PathBu
     Ok(Some((input.clone(), out.to_path_buf())))
 }
 
-/// One video stream: `source` into `sink`.
+/// One video stream: `source` into `sink`, through [`settle`] when the sink is a file.
 fn stream(capture: &Capture, source: &Source, sink: &Sink, o: &Options, pool: &rayon::ThreadPool) -> Result<()> {
-    let started = std::time::Instant::now();
-    let (input, output) = (PathBuf::from(source.shown()), PathBuf::from(sink_shown(sink)));
-    if let Sink::File(f) = sink {
-        if o.existing == Existing::Skip && f.exists() {
-            eprintln!("skipped {}: {} is already there", source.shown(), crate::shown(f));
-            if o.json {
-                print_json(&input, vec![record(&input, f, "skipped", started, None)], 0, 1)?;
-            }
-            return Ok(());
-        }
-        if o.existing != Existing::Replace && f.exists() {
-            bail!("{} exists (use --force to overwrite, or --skip-existing)", crate::shown(f));
-        }
-        if matches!(source, Source::File(i) if std::fs::canonicalize(i).ok() == std::fs::canonicalize(f).ok()) {
+    if o.record.is_some() {
+        bail!("--record: a record holds its input's hash, and standard input, a camera or a network stream is no file; simulate a file, or record the stream to a file first");
+    }
+    if let (Source::File(i), Sink::File(f)) = (source, sink) {
+        if file_key(i) == file_key(f) {
             bail!("--output: writing {} would replace its input", crate::shown(f));
         }
     }
@@ -379,24 +461,28 @@ fn stream(capture: &Capture, source: &Source, sink: &Sink, o: &Options, pool: &r
         max_frames: o.max_frames,
     };
     let warn = |w: &str| eprintln!("warning: {}: {w}", source.shown());
-    match pool.install(|| video::simulate(&job, source, sink, &warn)) {
-        Ok(done) => {
-            eprintln!("{}", summary(&source.shown(), &sink_shown(sink), &done));
-            if o.json {
-                let mut r = record(&input, &output, "written", started, None);
-                r["frames"] = done.frames.into();
-                r["fps"] = ((done.fps * 10.0).round() / 10.0).into();
-                r["capacityFps"] = ((done.capacity * 10.0).round() / 10.0).into();
-                print_json(&output, vec![r], 0, 0)?;
-            }
-            Ok(())
-        }
-        Err(e) => {
-            if o.json {
-                print_json(&output, vec![record(&input, &output, "failed", started, Some(crate::one_line(&e)))], 1, 0)?;
-            }
-            Err(e)
-        }
+    let run = || pool.install(|| video::simulate(&job, source, sink, &warn));
+    let input = PathBuf::from(source.shown());
+    // Standard output and a device are streams, not files that could be there already.
+    let (mut outcome, done) = match sink {
+        Sink::File(f) => settle(&input, f, o.existing, None, None, run),
+        _ => settle(&input, Path::new(&sink_shown(sink)), Existing::Replace, None, None, run),
+    };
+    if let Some(done) = &done {
+        eprintln!("{}", summary(&source.shown(), &sink_shown(sink), done));
+        outcome.frames = Some(done.frames);
+        outcome.fps = Some((done.fps * 10.0).round() / 10.0);
+        outcome.capacity_fps = Some((done.capacity * 10.0).round() / 10.0);
+    } else if outcome.status == Status::Skipped {
+        eprintln!("skipped {}: {} is already there", source.shown(), outcome.output);
+    }
+    let error = outcome.error.clone();
+    if o.json {
+        print_json(&RunReport::new(&sink_shown(sink), vec![outcome]))?;
+    }
+    match error {
+        Some(line) => bail!("{line}"),
+        None => Ok(()),
     }
 }
 
@@ -419,16 +505,9 @@ fn summary(input: &str, output: &str, done: &video::Outcome) -> String {
     format!("simulated {} frames of {input} into {output} ({rate}{bits})", done.frames)
 }
 
-/// The `--format json` object.
-fn print_json(out: &Path, mut files: Vec<serde_json::Value>, failed: usize, skipped: usize) -> Result<()> {
-    files.sort_by(|a, b| a["input"].as_str().cmp(&b["input"].as_str()));
-    let written = files.len() - failed - skipped;
-    crate::say!(
-        "{}",
-        serde_json::to_string_pretty(&serde_json::json!({
-            "output": out.display().to_string(), "written": written, "skipped": skipped, "failed": failed, "files": files,
-        }))?
-    );
+/// Prints the `--format json` object on stdout.
+fn print_json(report: &RunReport) -> Result<()> {
+    crate::say!("{}", serde_json::to_string_pretty(report)?);
     Ok(())
 }
 
@@ -502,9 +581,6 @@ pub fn run(a: SimulateArgs) -> Result<()> {
 /// input (written, skipped, failed, with its time) as one JSON object on stdout.
 pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Result<()> {
     let force = o.existing == Existing::Replace;
-    let records = std::sync::Mutex::new(Vec::new());
-    let note = |v: serde_json::Value| records.lock().unwrap_or_else(|p| p.into_inner()).push(v);
-    let skipped = AtomicUsize::new(0);
     let threads = crate::args::cores_for("--jobs", o.jobs);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
     // The 16-bit degamma table (65536 powers) is built only if a 16-bit image turns up.
@@ -564,54 +640,31 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
         indicatif::ProgressBar::hidden()
     };
     let budget = Budget::global();
-    let failed = AtomicUsize::new(0);
     let paths = Paths { capture: &capture, budget, depth: o.depth, force, quality: o.quality, metadata: o.metadata };
-    pool.install(|| {
-        images.par_iter().for_each(|(i, out)| {
-            let started = std::time::Instant::now();
-            if o.existing == Existing::Skip && out.exists() {
-                skipped.fetch_add(1, Ordering::Relaxed);
-                note(record(i, out, "skipped", started, None));
-                bar.inc(1);
-                return;
-            }
-            let r = if !force && out.exists() {
-                Err(anyhow!("{} exists (use --force to overwrite, or --skip-existing)", crate::shown(out)))
-            } else {
-                paths.one(i, out, &|w| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(i))))
-            };
-            let r = r.and_then(|grey| {
-                if let Some(rec) = o.record {
-                    let jpeg = matches!(ImageFormat::of(out), Some(ImageFormat::Jpeg)).then_some(o.quality);
-                    rec.write(i, out, jpeg, force)?;
+    let mut outcomes: Vec<Outcome> = pool.install(|| {
+        images
+            .par_iter()
+            .map(|(i, out)| {
+                let jpeg = matches!(ImageFormat::of(out), Some(ImageFormat::Jpeg)).then_some(o.quality);
+                let warn = |w: &str| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(i)));
+                let (mut outcome, grey) = settle(i, out, o.existing, o.record, jpeg, || paths.one(i, out, &warn));
+                if grey == Some(true) {
+                    outcome.warnings.push(crate::capture::GREY_ALLOWED);
                 }
-                Ok(grey)
-            });
-            match r {
-                Ok(grey) => {
-                    let mut r = record(i, out, "written", started, None);
-                    if grey {
-                        r["warnings"] = serde_json::json!([crate::capture::GREY_ALLOWED]);
-                    }
-                    note(r)
-                }
-                Err(e) => {
-                    let line = crate::about(i, &e);
+                if let Some(line) = &outcome.error {
                     bar.suspend(|| eprintln!("error: {line}"));
-                    failed.fetch_add(1, Ordering::Relaxed);
-                    note(record(i, out, "failed", started, Some(line)));
                 }
-            }
-            bar.inc(1);
-        })
+                bar.inc(1);
+                outcome
+            })
+            .collect()
     });
     bar.finish_and_clear();
-    let mut failed = failed.into_inner();
-    let mut skipped = skipped.into_inner();
     if !images.is_empty() {
-        let done = images.len() - failed - skipped;
+        let n = |s| outcomes.iter().filter(|f: &&Outcome| f.status == s).count();
+        let skipped = n(Status::Skipped);
         let note = if skipped > 0 { format!(" ({skipped} skipped: already there)") } else { String::new() };
-        eprintln!("simulated {done} of {} images into {}{note}", images.len(), crate::shown(out));
+        eprintln!("simulated {} of {} images into {}{note}", n(Status::Written), images.len(), crate::shown(out));
     }
     // Videos one after another, each frame on every core.
     for (i, wanted) in &videos {
@@ -625,52 +678,27 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
             );
         }
         let warn = |w: &str| eprintln!("warning: {}: {w}", crate::shown(i));
-        let started = std::time::Instant::now();
-        if o.existing == Existing::Skip && out.exists() {
-            skipped += 1;
-            eprintln!("skipped {}: {} is already there", crate::shown(i), crate::shown(&out));
-            note(record(i, &out, "skipped", started, None));
-            continue;
-        }
-        let r = if !force && out.exists() {
-            Err(anyhow!("{} exists (use --force to overwrite, or --skip-existing)", crate::shown(&out)))
-        } else {
-            let job = video::Job {
-                capture: &capture,
-                enc,
-                force,
-                sixteen: o.depth == Depth::Sixteen,
-                max_frames: o.max_frames,
-            };
-            pool.install(|| video::simulate(&job, &Source::File(i.clone()), &Sink::File(out.clone()), &warn)).and_then(
-                |done| {
-                    if let Some(rec) = o.record {
-                        rec.write(i, &out, None, force)?;
-                    }
-                    Ok(done)
-                },
-            )
-        };
-        match r {
-            Ok(done) => {
-                eprintln!("{}", summary(&crate::shown(i), &crate::shown(&out), &done));
-                let mut r = record(i, &out, "written", started, None);
-                r["frames"] = done.frames.into();
-                note(r);
+        let job =
+            video::Job { capture: &capture, enc, force, sixteen: o.depth == Depth::Sixteen, max_frames: o.max_frames };
+        let (mut outcome, done) = settle(i, &out, o.existing, o.record, None, || {
+            pool.install(|| video::simulate(&job, &Source::File(i.clone()), &Sink::File(out.clone()), &warn))
+        });
+        match (&done, &outcome.error) {
+            (Some(done), _) => {
+                eprintln!("{}", summary(&crate::shown(i), &crate::shown(&out), done));
+                outcome.frames = Some(done.frames);
             }
-            Err(e) => {
-                let line = crate::about(i, &e);
-                eprintln!("error: {line}");
-                failed += 1;
-                note(record(i, &out, "failed", started, Some(line)));
-            }
+            (None, Some(line)) => eprintln!("error: {line}"),
+            (None, None) => eprintln!("skipped {}: {} is already there", crate::shown(i), crate::shown(&out)),
         }
+        outcomes.push(outcome);
     }
+    let report = RunReport::new(&out.display().to_string(), outcomes);
     if o.json {
-        print_json(out, records.into_inner().unwrap_or_else(|p| p.into_inner()), failed, skipped)?;
+        print_json(&report)?;
     }
-    if failed > 0 {
-        bail!("{failed} input(s) failed");
+    if report.failed > 0 {
+        bail!("{} input(s) failed", report.failed);
     }
     Ok(())
 }
@@ -798,5 +826,72 @@ pub fn encode_png(samples: &[u16], w: u32, h: u32, depth: Depth) -> Result<Vec<u
             encode(ImageFormat::Png, Samples::Eight(&eight), w, h, 100, &Default::default())
         }
         Depth::Sixteen => encode(ImageFormat::Png, Samples::Sixteen(samples), w, h, 100, &Default::default()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `settle` with a `make` that writes "new" into the output and counts its calls.
+    fn settled(out: &Path, existing: Existing, calls: &std::cell::Cell<u32>) -> Outcome {
+        let make = || {
+            calls.set(calls.get() + 1);
+            write_atomic(out, b"new", existing == Existing::Replace)
+        };
+        settle(Path::new("in.png"), out, existing, None, None, make).0
+    }
+
+    #[test]
+    fn one_outcome_path_skips_refuses_or_replaces_what_is_there() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out.png");
+        let calls = std::cell::Cell::new(0);
+        // Absent: made under every policy.
+        let first = settled(&out, Existing::Refuse, &calls);
+        assert_eq!((first.status, calls.get()), (Status::Written, 1));
+        assert_eq!(std::fs::read(&out).unwrap(), b"new");
+        std::fs::write(&out, b"old").unwrap();
+        // There: skipped untouched, refused untouched with the one line, or replaced.
+        let skipped = settled(&out, Existing::Skip, &calls);
+        assert_eq!((skipped.status, skipped.error.as_deref(), calls.get()), (Status::Skipped, None, 1));
+        let refused = settled(&out, Existing::Refuse, &calls);
+        assert_eq!((refused.status, calls.get()), (Status::Failed, 1));
+        let line = refused.error.unwrap();
+        assert!(line.starts_with("in.png: ") && line.contains("exists (use --force"), "{line}");
+        assert_eq!(std::fs::read(&out).unwrap(), b"old");
+        let replaced = settled(&out, Existing::Replace, &calls);
+        assert_eq!((replaced.status, calls.get()), (Status::Written, 2));
+        assert_eq!(std::fs::read(&out).unwrap(), b"new");
+        // A failing `make`: its line names the input.
+        let (failed, made) =
+            settle(Path::new("x.png"), &dir.path().join("y.png"), Existing::Refuse, None, None, || -> Result<()> {
+                bail!("broken")
+            });
+        assert_eq!((failed.status, failed.error.as_deref(), made), (Status::Failed, Some("x.png: broken"), None));
+    }
+
+    #[test]
+    fn the_json_report_counts_its_outcomes_and_names_keys_as_before() {
+        let o = |input: &str, status| Outcome {
+            input: input.into(),
+            output: "o".into(),
+            status,
+            ms: 1.0,
+            error: None,
+            frames: (input == "a.mp4").then_some(3),
+            fps: None,
+            capacity_fps: (input == "a.mp4").then_some(2.5),
+            warnings: Vec::new(),
+        };
+        let r =
+            RunReport::new("out", vec![o("c", Status::Failed), o("a.mp4", Status::Written), o("b", Status::Skipped)]);
+        assert_eq!((r.written, r.skipped, r.failed), (1, 1, 1));
+        let v = serde_json::to_value(&r).unwrap();
+        assert_eq!(v["files"][0]["input"], "a.mp4", "sorted by input");
+        assert_eq!(v["files"][0]["capacityFps"], 2.5);
+        assert_eq!(v["files"][0]["frames"], 3);
+        assert!(v["files"][1].get("frames").is_none() && v["files"][1]["error"].is_null());
+        assert_eq!(v["files"][2]["status"], "failed");
     }
 }

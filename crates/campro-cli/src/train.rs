@@ -83,15 +83,6 @@ pub fn train(a: &TrainArgs) -> Result<()> {
         );
     }
     let cfg = campro_train::config::Config::load(config)?;
-    // Before any output is touched: each input the configuration names exists, or one line
-    // names its key (the repository's configurations name ../shared from its root).
-    if let Some((key, path)) = cfg.inputs().into_iter().find(|(_, p)| !p.exists()) {
-        bail!(
-            "{} {key} = {}: no such file or folder (a configuration's paths are relative to the folder campro runs in; the repository's configurations run from its root, with ../shared beside it)",
-            crate::shown(config),
-            crate::shown(path)
-        );
-    }
     let init = match &a.init {
         Some(p) => Some(campro_train::train::Initial::from_params(&load_params(p)?, &p.display().to_string())?),
         None => None,

@@ -1141,9 +1141,8 @@ fn eval_frontier_plots_the_points_and_refuses_bad_ones() {
     fails_with(&mut frontier(d, "h"), "is a directory; only regular files are read");
 }
 
-/// Sidecars beside photos (`a.txt` by `a.png`, Lightroom's `IMG_1.xmp`) are skipped with a
-/// warning each and never collide with the outputs: the photos are written. A HEIC copy is
-/// skipped with a line of its own (convert it first).
+/// Sidecars beside photos (`a.txt` by `a.png`, Lightroom's `IMG_1.xmp`, `x.webp.txt`) are
+/// skipped with a warning each and never collide with the outputs: the photos are written.
 #[test]
 fn sidecars_are_skipped_not_a_collision() {
     let dir = tempfile::tempdir().unwrap();
@@ -1154,7 +1153,7 @@ fn sidecars_are_skipped_not_a_collision() {
             .save(photos.join(format!("{name}.png")))
             .unwrap();
     }
-    for side in ["a.txt", "IMG_1.xmp", "x.HEIC"] {
+    for side in ["a.txt", "IMG_1.xmp", "x.webp.txt"] {
         std::fs::write(photos.join(side), b"sidecar").unwrap();
     }
     let out = dir.path().join("out");
@@ -1171,7 +1170,7 @@ fn sidecars_are_skipped_not_a_collision() {
     for name in ["a.png", "IMG_1.png", "x.png"] {
         assert!(out.join(name).is_file(), "{name} not written: {err}");
     }
-    for side in ["a.txt", "IMG_1.xmp"] {
+    for side in ["a.txt", "IMG_1.xmp", "x.webp.txt"] {
         assert!(
             err.contains(&format!(
                 "skipping {}: not a PNG, JPEG, TIFF, WebP or video file",
@@ -1181,11 +1180,44 @@ fn sidecars_are_skipped_not_a_collision() {
         );
         assert!(!out.join(side).exists());
     }
-    assert!(
-        err.contains(&format!("skipping {}: HEIC is not read by campro: convert it", photos.join("x.HEIC").display())),
-        "{err}"
-    );
     assert!(!err.contains("would both be written"), "{err}");
+}
+
+/// An iPhone's HEIC photo (the eval crate's fixture: orientation 6 as a HEIF rotation) is read
+/// through libheif and written as an upright JPEG; without libheif it is skipped with the
+/// one line that says what to install, and the rest of the folder is done.
+#[test]
+fn a_heic_photo_becomes_an_upright_jpeg_or_gets_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let photos = dir.path().join("photos");
+    std::fs::create_dir(&photos).unwrap();
+    let fixture = campro_testkit::workspace_root().join("crates/campro-eval/tests/data/quadrants-exif6.heic");
+    std::fs::copy(fixture, photos.join("IMG_0001.HEIC")).unwrap();
+    image::RgbImage::from_pixel(8, 8, image::Rgb([90, 120, 200])).save(photos.join("b.png")).unwrap();
+    let out = dir.path().join("out");
+    // --allow-grey: the fixture's five flat colours each sit at a brightness of their own,
+    // which the grey measure rightly calls a function of brightness.
+    let run = campro()
+        .arg("simulate")
+        .arg("campro-omega-0.5")
+        .arg(&photos)
+        .arg("-o")
+        .arg(&out)
+        .arg("--allow-grey")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(out.join("b.png").is_file(), "{err}");
+    if campro_eval::heif::available() {
+        let img = image::open(out.join("IMG_0001.jpg")).unwrap_or_else(|e| panic!("{e}: {err}"));
+        assert_eq!((img.width(), img.height()), (48, 64), "upright, as the rotation says");
+        assert!(!err.contains("libheif"), "{err}");
+    } else {
+        assert!(std::env::var("CI").as_deref() != Ok("true"), "CI=true but libheif is missing");
+        assert!(err.contains("IMG_0001.HEIC: HEIC needs the system's libheif"), "{err}");
+        assert!(!out.join("IMG_0001.jpg").exists());
+    }
 }
 
 /// A WebP photo is read and written back as a lossless WebP: its pixels are the camera's

@@ -74,8 +74,11 @@ fn newcomer(shared: &Path) -> tempfile::TempDir {
     let d = dir.path();
     std::fs::create_dir_all(d.join("photos")).unwrap();
     std::fs::create_dir_all(d.join("bin")).unwrap();
-    std::fs::copy(shared.join("data/lfw/images_deepfunneled/Aaron_Eckhart/Aaron_Eckhart_0001.jpg"), d.join("photos/portrait.jpg"))
-        .unwrap();
+    std::fs::copy(
+        shared.join("data/lfw/images_deepfunneled/Aaron_Eckhart/Aaron_Eckhart_0001.jpg"),
+        d.join("photos/portrait.jpg"),
+    )
+    .unwrap();
     std::fs::copy(shared.join("data/coco-person/images/000000000785.jpg"), d.join("photos/street.png.jpg")).unwrap();
     // A PNG street scene: the README's first simulate keeps each input's format.
     image::open(d.join("photos/street.png.jpg")).unwrap().save(d.join("photos/street.png")).unwrap();
@@ -183,5 +186,4 @@ fn the_command_guides_examples_run_from_an_empty_folder() {
 fn continuation_lines_are_one_example() {
     let md = "text\n```sh\na \\\n  b | \\\n  c\nd # e\n```\n```kotlin\nx\n```\n";
     assert_eq!(examples(md), ["a   b |   c", "d # e"]);
-
 }

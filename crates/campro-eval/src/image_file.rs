@@ -84,7 +84,7 @@ impl Drop for Lease<'_> {
     }
 }
 
-fn image_error(path: &Path, message: impl Into<String>) -> EvalError {
+pub(crate) fn image_error(path: &Path, message: impl Into<String>) -> EvalError {
     EvalError::Image { path: path.into(), message: message.into() }
 }
 
@@ -127,6 +127,9 @@ pub fn read<'b>(
 /// at most [`MAX_FILE_BYTES`]), nothing decoded: what a caller sizes its memory by first.
 pub fn dimensions(path: &Path) -> Result<(u32, u32)> {
     let bytes = campro::file::read_capped(path, MAX_FILE_BYTES, "an image")?;
+    if crate::heif::is_heif(&bytes) {
+        return crate::heif::dimensions(path, &bytes);
+    }
     header_reader(path, &bytes)?.into_dimensions().map_err(|e| image_error(path, header_message(&e)))
 }
 
@@ -185,6 +188,9 @@ fn decoded<'b>(
     metadata: bool,
 ) -> Result<(image::DynamicImage, Lease<'b>, Metadata)> {
     use image::ImageDecoder;
+    if crate::heif::is_heif(bytes) {
+        return crate::heif::decode(path, bytes, budget, work, warn, metadata);
+    }
     if let Some(n) = extra_frames(bytes) {
         warn(&format!("{n}; only the first is read"));
     }

@@ -291,17 +291,20 @@ pub fn parse<T: serde::de::DeserializeOwned + Rules>(text: &str, origin: &str) -
 }
 
 impl Config {
-    /// The files and folders a training reads, by key: the face model, LFW and the models
-    /// folder, and the detector and COCO when the utility player plays (`protector.omega`
+    /// The files and folders a training reads, by key: LFW, the models folder and the face
+    /// model, and the detector and COCO when the utility player plays (`protector.omega`
     /// above 0). Relative paths are relative to the folder campro runs in.
     pub fn inputs(&self) -> Vec<(&'static str, &Path)> {
         let mut v = vec![
-            ("attacker.checkpoint", self.attacker.checkpoint.as_path()),
             ("data.lfw", self.data.lfw.as_path()),
             ("data.models", self.data.models.as_path()),
+            ("attacker.checkpoint", self.attacker.checkpoint.as_path()),
         ];
         if self.protector.omega > 0.0 {
-            v.extend([("detector.model", self.detector.model.as_path()), ("detector.data", self.detector.data.as_path())]);
+            v.extend([
+                ("detector.model", self.detector.model.as_path()),
+                ("detector.data", self.detector.data.as_path()),
+            ]);
         }
         v
     }

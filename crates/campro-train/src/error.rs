@@ -17,6 +17,9 @@ pub enum TrainError {
     Eval(#[from] campro_eval::EvalError),
     #[error("{0}")]
     Unsupported(String),
+    /// An input the configuration names is not there (its key and path).
+    #[error("{key} = {path}: no such file or folder (a configuration's paths are relative to the folder campro runs in; the repository's configurations run from its root, with ../shared beside it)")]
+    Missing { key: &'static str, path: String },
     #[error("training diverged: {0}")]
     Diverged(String),
     #[error(transparent)]

@@ -363,6 +363,10 @@ fn accuracy(logits: &Tensor, y: &Tensor) -> candle_core::Result<f64> {
 /// Runs the optimisation described by `cfg`; `on_row` sees every log line as it happens.
 pub fn run(cfg: &Config, opts: &RunOptions, mut on_row: impl FnMut(&LogRow)) -> Result<Outcome, TrainError> {
     crate::cost::check(&crate::cost::train_step(cfg), cfg.budget.memory)?;
+    // Each input named, before any is read: one line for the first that is not there.
+    if let Some((key, path)) = cfg.inputs().into_iter().find(|(_, p)| !p.exists()) {
+        return Err(TrainError::Missing { key, path: path.display().to_string() });
+    }
     let start = std::time::Instant::now();
     let game = Game::new(cfg, opts)?;
     let Resumed { first_round, mut log, earlier_seconds, best, best_tensors } = match &opts.resume {

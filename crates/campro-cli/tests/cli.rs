@@ -1183,20 +1183,39 @@ fn sidecars_are_skipped_not_a_collision() {
     assert!(!err.contains("would both be written"), "{err}");
 }
 
-/// An iPhone's HEIC photo (the eval crate's fixture: orientation 6 as a HEIF rotation) is read
-/// through libheif and written as an upright JPEG; without libheif it is skipped with the
-/// one line that says what to install, and the rest of the folder is done.
+/// A phone's folder in one run: an iPhone's HEIC photo (the eval crate's fixture:
+/// orientation 6 as a HEIF rotation), a JPEG stored sideways with EXIF orientation 6, a
+/// WebP, and sidecars (Lightroom's `.xmp`, a `notes.txt`). The HEIC is read through libheif
+/// and written as an upright JPEG (without libheif: skipped with the one line that says
+/// what to install), the JPEG comes out turned, the WebP stays a WebP, the sidecars are
+/// skipped with a warning each, and the run succeeds.
 #[test]
-fn a_heic_photo_becomes_an_upright_jpeg_or_gets_one_line() {
+fn a_phone_folder_goes_through_upright_in_one_run() {
     let dir = tempfile::tempdir().unwrap();
     let photos = dir.path().join("photos");
     std::fs::create_dir(&photos).unwrap();
     let fixture = campro_testkit::workspace_root().join("crates/campro-eval/tests/data/quadrants-exif6.heic");
     std::fs::copy(fixture, photos.join("IMG_0001.HEIC")).unwrap();
-    image::RgbImage::from_pixel(8, 8, image::Rgb([90, 120, 200])).save(photos.join("b.png")).unwrap();
+    // A 20x10 JPEG with an APP1 Exif block saying orientation 6 (little-endian TIFF, one entry).
+    let img = image::RgbImage::from_fn(20, 10, |x, y| image::Rgb([(x * 12) as u8, (y * 20) as u8, 120]));
+    let mut plain = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut plain), image::ImageFormat::Jpeg).unwrap();
+    let mut exif = b"Exif\0\0II*\0\x08\0\0\0\x01\0".to_vec();
+    exif.extend_from_slice(&[0x12, 0x01, 3, 0, 1, 0, 0, 0, 6, 0, 0, 0, 0, 0, 0, 0]);
+    let mut tagged = plain[..2].to_vec();
+    tagged.extend_from_slice(&[0xff, 0xe1]);
+    tagged.extend_from_slice(&((exif.len() + 2) as u16).to_be_bytes());
+    tagged.extend_from_slice(&exif);
+    tagged.extend_from_slice(&plain[2..]);
+    std::fs::write(photos.join("IMG_0002.JPG"), &tagged).unwrap();
+    image::RgbImage::from_fn(12, 8, |x, y| image::Rgb([90, (x * 20) as u8, (y * 30) as u8]))
+        .save(photos.join("IMG_0003.webp"))
+        .unwrap();
+    std::fs::write(photos.join("IMG_0002.xmp"), b"<x:xmpmeta/>").unwrap();
+    std::fs::write(photos.join("notes.txt"), b"holiday").unwrap();
     let out = dir.path().join("out");
-    // --allow-grey: the fixture's five flat colours each sit at a brightness of their own,
-    // which the grey measure rightly calls a function of brightness.
+    // --allow-grey: the HEIC fixture's five flat colours each sit at a brightness of their
+    // own, which the grey measure rightly calls a function of brightness.
     let run = campro()
         .arg("simulate")
         .arg("campro-omega-0.5")
@@ -1208,7 +1227,13 @@ fn a_heic_photo_becomes_an_upright_jpeg_or_gets_one_line() {
         .unwrap();
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "{err}");
-    assert!(out.join("b.png").is_file(), "{err}");
+    let jpeg = image::open(out.join("IMG_0002.JPG")).unwrap_or_else(|e| panic!("{e}: {err}"));
+    assert_eq!((jpeg.width(), jpeg.height()), (10, 20), "turned by its EXIF orientation");
+    assert_eq!(image::open(out.join("IMG_0003.webp")).unwrap().width(), 12);
+    for side in ["IMG_0002.xmp", "notes.txt"] {
+        assert!(err.contains(&format!("skipping {}", photos.join(side).display())), "{err}");
+        assert!(!out.join(side).exists());
+    }
     if campro_eval::heif::available() {
         let img = image::open(out.join("IMG_0001.jpg")).unwrap_or_else(|e| panic!("{e}: {err}"));
         assert_eq!((img.width(), img.height()), (48, 64), "upright, as the rotation says");

@@ -7,8 +7,7 @@
 //! 10-bit photo is rounded by libheif). Its size is read from the header and checked
 //! against the caller's memory budget before anything is decoded.
 
-use crate::error::Result;
-use crate::image_file::{image_error, peak_bytes, Budget, Lease, Metadata, Work};
+use crate::error::{EvalError, Result};
 use std::ffi::{c_char, c_int, c_void, CStr};
 use std::path::Path;
 use std::sync::OnceLock;
@@ -21,7 +20,11 @@ pub const MISSING: &str = "HEIC needs the system's libheif, which is not on this
 
 /// Bytes a pixel of a HEIC photo holds while it is decoded and handed over: libheif's
 /// Y'CbCr planes (at most 3, 4:4:4) and its RGB picture (3), and the copy returned (3).
-const DECODE_BYTES_PER_PIXEL: u64 = 9;
+pub const DECODE_BYTES_PER_PIXEL: u64 = 9;
+
+fn image_error(path: &Path, message: impl Into<String>) -> EvalError {
+    EvalError::Image { path: path.into(), message: message.into() }
+}
 
 /// libheif's `enum heif_colorspace`: `heif_colorspace_RGB`.
 const COLORSPACE_RGB: c_int = 1;
@@ -180,14 +183,23 @@ impl Drop for Owned<'_> {
     }
 }
 
-/// Reads the HEIF file `bytes` up to its primary picture's handle: the picture's width and
-/// height as displayed (after rotation), nothing decoded.
-fn open<'a>(path: &Path, bytes: &'a [u8]) -> Result<(Owned<'a>, u32, u32)> {
+/// A HEIF file read up to its primary picture, nothing decoded yet: its size (as displayed,
+/// after rotation), alpha, EXIF and ICC, then [`Heif::decode`]. Borrows the file's bytes,
+/// which libheif reads without a copy.
+pub struct Heif<'a> {
+    o: Owned<'a>,
+    path: &'a Path,
+    /// Width and height as displayed, pixels.
+    pub size: (u32, u32),
+}
+
+/// Reads `bytes` (the file `path`, named in errors) up to its primary picture.
+pub fn open<'a>(path: &'a Path, bytes: &'a [u8]) -> Result<Heif<'a>> {
     let api = api().map_err(|e| image_error(path, e))?;
     let fail = |what: &str, e: &HeifError| image_error(path, format!("{what}: {}", message(e)));
     // SAFETY: every call follows heif.h: the context outlives the handle and image (`Owned`
-    // drops them in order), and `bytes` outlives every read of the context (the caller
-    // holds it while `Owned` lives, which its lifetime says).
+    // drops them in order), and `bytes` outlives every read of the context (`Heif` borrows
+    // it for as long as `Owned` lives).
     unsafe {
         let mut o = Owned {
             api,
@@ -211,74 +223,65 @@ fn open<'a>(path: &Path, bytes: &'a [u8]) -> Result<(Owned<'a>, u32, u32)> {
         if w <= 0 || h <= 0 {
             return Err(image_error(path, format!("the picture is {w} x {h} pixels")));
         }
-        Ok((o, w as u32, h as u32))
+        Ok(Heif { o, path, size: (w as u32, h as u32) })
     }
 }
 
-/// The width and height of the HEIF file `bytes`' primary picture as displayed.
-pub fn dimensions(path: &Path, bytes: &[u8]) -> Result<(u32, u32)> {
-    open(path, bytes).map(|(_, w, h)| (w, h))
-}
+impl Heif<'_> {
+    /// Whether the picture has an alpha channel (dropped by [`Heif::decode`]).
+    pub fn has_alpha(&self) -> bool {
+        // SAFETY: the handle is valid while `self` lives.
+        unsafe { (self.o.api.handle_has_alpha)(self.o.handle) != 0 }
+    }
 
-/// Decodes the HEIF file `bytes` (`path` names it in errors): its primary picture as 8-bit
-/// RGB with libheif's transformations applied, its memory taken from `budget` (with the
-/// caller's `work`) before anything is decoded; with `metadata`, its EXIF (TIFF-structured)
-/// and raw ICC profile. `warn` hears of a dropped alpha channel.
-pub fn decode<'b>(
-    path: &Path,
-    bytes: &[u8],
-    budget: &'b Budget,
-    work: Work,
-    warn: &dyn Fn(&str),
-    metadata: bool,
-) -> Result<(image::DynamicImage, Lease<'b>, Metadata)> {
-    let (o, w, h) = open(path, bytes)?;
-    let api = o.api;
-    let fail = |what: &str, e: &HeifError| image_error(path, format!("{what}: {}", message(e)));
-    // SAFETY: as in `open`; planes are read within the stride and size libheif gives.
-    unsafe {
-        let mut o = o;
-        let decoded = (w as u64 * h as u64).saturating_mul(DECODE_BYTES_PER_PIXEL);
-        let need = peak_bytes(w, h, decoded, work(w, h));
-        let lease = budget.take(need).ok_or_else(|| {
-            image_error(
-                path,
-                format!(
-                    "the image is {w} x {h} pixels, needing {} MiB to process; the limit is {} MiB (a decompression bomb, or split it)",
-                    need >> 20,
-                    budget.total() >> 20
-                ),
-            )
-        })?;
-        if (api.handle_has_alpha)(o.handle) != 0 {
-            warn("its alpha channel is dropped (the output is RGB)");
+    /// The first EXIF block, TIFF-structured (at most 1 MiB; None where there is none).
+    pub fn exif(&self) -> Option<Vec<u8>> {
+        // SAFETY: the handle is valid while `self` lives.
+        unsafe { exif(self.o.api, self.o.handle) }
+    }
+
+    /// The raw ICC profile (at most 1 MiB; None for an nclx colour description).
+    pub fn icc(&self) -> Option<Vec<u8>> {
+        // SAFETY: the handle is valid while `self` lives.
+        unsafe { icc(self.o.api, self.o.handle) }
+    }
+
+    /// The picture as 8-bit RGB with libheif's transformations applied: about
+    /// [`DECODE_BYTES_PER_PIXEL`] bytes a pixel at its peak, which the caller has checked.
+    pub fn decode(mut self) -> Result<image::RgbImage> {
+        let (api, path, (w, h)) = (self.o.api, self.path, self.size);
+        // SAFETY: the handle is valid; the plane is read within the stride and size libheif
+        // gives, checked against the handle's.
+        unsafe {
+            let e = (api.decode_image)(
+                self.o.handle,
+                &mut self.o.image,
+                COLORSPACE_RGB,
+                CHROMA_INTERLEAVED_RGB,
+                std::ptr::null(),
+            );
+            if e.code != 0 {
+                return Err(image_error(path, format!("its picture could not be decoded: {}", message(&e))));
+            }
+            let (iw, ih) = (
+                (api.image_width)(self.o.image, CHANNEL_INTERLEAVED),
+                (api.image_height)(self.o.image, CHANNEL_INTERLEAVED),
+            );
+            let mut stride: c_int = 0;
+            let plane = (api.plane)(self.o.image, CHANNEL_INTERLEAVED, &mut stride);
+            if plane.is_null() || iw as u32 != w || ih as u32 != h || (stride as i64) < 3 * w as i64 {
+                return Err(image_error(
+                    path,
+                    format!("libheif gave a {iw} x {ih} picture (stride {stride}) for a {w} x {h} one"),
+                ));
+            }
+            let row = 3 * w as usize;
+            let mut rgb = Vec::with_capacity(row * h as usize);
+            for y in 0..h as usize {
+                rgb.extend_from_slice(std::slice::from_raw_parts(plane.add(y * stride as usize), row));
+            }
+            Ok(image::RgbImage::from_raw(w, h, rgb).expect("w x h x 3 bytes"))
         }
-        let meta = if metadata {
-            Metadata { exif: exif(api, o.handle), icc: icc(api, o.handle) }
-        } else {
-            Metadata::default()
-        };
-        let e = (api.decode_image)(o.handle, &mut o.image, COLORSPACE_RGB, CHROMA_INTERLEAVED_RGB, std::ptr::null());
-        if e.code != 0 {
-            return Err(fail("its picture could not be decoded", &e));
-        }
-        let (iw, ih) =
-            ((api.image_width)(o.image, CHANNEL_INTERLEAVED), (api.image_height)(o.image, CHANNEL_INTERLEAVED));
-        let mut stride: c_int = 0;
-        let plane = (api.plane)(o.image, CHANNEL_INTERLEAVED, &mut stride);
-        if plane.is_null() || iw as u32 != w || ih as u32 != h || (stride as i64) < 3 * w as i64 {
-            return Err(image_error(
-                path,
-                format!("libheif gave a {iw} x {ih} picture (stride {stride}) for a {w} x {h} one"),
-            ));
-        }
-        let row = 3 * w as usize;
-        let mut rgb = Vec::with_capacity(row * h as usize);
-        for y in 0..h as usize {
-            rgb.extend_from_slice(std::slice::from_raw_parts(plane.add(y * stride as usize), row));
-        }
-        let img = image::RgbImage::from_raw(w, h, rgb).expect("w x h x 3 bytes");
-        Ok((image::DynamicImage::ImageRgb8(img), lease, meta))
     }
 }
 

@@ -84,7 +84,7 @@ impl Drop for Lease<'_> {
     }
 }
 
-pub(crate) fn image_error(path: &Path, message: impl Into<String>) -> EvalError {
+fn image_error(path: &Path, message: impl Into<String>) -> EvalError {
     EvalError::Image { path: path.into(), message: message.into() }
 }
 
@@ -128,7 +128,7 @@ pub fn read<'b>(
 pub fn dimensions(path: &Path) -> Result<(u32, u32)> {
     let bytes = campro::file::read_capped(path, MAX_FILE_BYTES, "an image")?;
     if crate::heif::is_heif(&bytes) {
-        return crate::heif::dimensions(path, &bytes);
+        return crate::heif::open(path, &bytes).map(|h| h.size);
     }
     header_reader(path, &bytes)?.into_dimensions().map_err(|e| image_error(path, header_message(&e)))
 }
@@ -189,7 +189,7 @@ fn decoded<'b>(
 ) -> Result<(image::DynamicImage, Lease<'b>, Metadata)> {
     use image::ImageDecoder;
     if crate::heif::is_heif(bytes) {
-        return crate::heif::decode(path, bytes, budget, work, warn, metadata);
+        return heif_decoded(path, bytes, budget, work, warn, metadata);
     }
     if let Some(n) = extra_frames(bytes) {
         warn(&format!("{n}; only the first is read"));
@@ -201,14 +201,7 @@ fn decoded<'b>(
     let (w, h) = decoder.dimensions();
     let need = peak_bytes(w, h, decoder.total_bytes(), work(w, h));
     if need > budget.total() {
-        return Err(image_error(
-            path,
-            format!(
-                "the image is {w} x {h} pixels, needing {} MiB to process; the limit is {} MiB (a decompression bomb, or split it)",
-                need >> 20,
-                budget.total() >> 20
-            ),
-        ));
+        return Err(too_large(path, w, h, need, budget));
     }
     let mut limits = image::Limits::default();
     limits.max_alloc = Some(need);
@@ -230,6 +223,41 @@ fn decoded<'b>(
     let mut img = image::DynamicImage::from_decoder(decoder).map_err(|e| image_error(path, e.to_string()))?;
     img.apply_orientation(orientation);
     Ok((img, lease, meta))
+}
+
+/// [`decoded`] for a HEIC/HEIF file, through the system's libheif ([`crate::heif`]): its
+/// size read first and its memory taken from `budget` before anything is decoded; the
+/// picture as libheif displays it (its rotation applied, so no EXIF orientation is).
+fn heif_decoded<'b>(
+    path: &Path,
+    bytes: &[u8],
+    budget: &'b Budget,
+    work: Work,
+    warn: &dyn Fn(&str),
+    metadata: bool,
+) -> Result<(image::DynamicImage, Lease<'b>, Metadata)> {
+    let heif = crate::heif::open(path, bytes)?;
+    let (w, h) = heif.size;
+    let decoded = (w as u64 * h as u64).saturating_mul(crate::heif::DECODE_BYTES_PER_PIXEL);
+    let need = peak_bytes(w, h, decoded, work(w, h));
+    let lease = budget.take(need).ok_or_else(|| too_large(path, w, h, need, budget))?;
+    if heif.has_alpha() {
+        warn("its alpha channel is dropped (the output is RGB)");
+    }
+    let meta = if metadata { Metadata { exif: heif.exif(), icc: heif.icc() } } else { Metadata::default() };
+    Ok((image::DynamicImage::ImageRgb8(heif.decode()?), lease, meta))
+}
+
+/// The refusal of an image needing `need` bytes, more than `budget` holds.
+fn too_large(path: &Path, w: u32, h: u32, need: u64, budget: &Budget) -> EvalError {
+    image_error(
+        path,
+        format!(
+            "the image is {w} x {h} pixels, needing {} MiB to process; the limit is {} MiB (a decompression bomb, or split it)",
+            need >> 20,
+            budget.total() >> 20
+        ),
+    )
 }
 
 /// A header error in words: the image crate's limit errors say "limits exceeded".

@@ -12,12 +12,17 @@ use std::path::{Path, PathBuf};
 use tract_onnx::prelude::*;
 use tract_onnx::tract_core::internal::{bail, format_err};
 
-/// Name of the enhancer's input (captured RGB in [0, 1]).
-pub const INPUT: &str = "captured";
-/// Name of the enhancer's output (enhanced RGB, about [0, 1]).
-pub const OUTPUT: &str = "enhanced";
-/// ONNX metadata key: height and width must be multiples of its value (a power of two).
-pub const MULTIPLE_KEY: &str = "campro.multiple";
+mod names;
+mod planes;
+mod table;
+mod threads;
+pub use names::*;
+use planes::*;
+pub use planes::{cropped_rgb8, padded_chw};
+use table::RestoreTable;
+use threads::in_scope;
+pub use threads::with_threads;
+
 /// Bytes a pixel an enhancement holds at full resolution at [`Scale::Auto`] on images
 /// from 2560 x 1440 (the network at a quarter of each side), the face guard included,
 /// beyond what the memory budget already counts for the pipeline and the decoded image
@@ -90,25 +95,6 @@ enum Outputs {
     /// ungated output and the gate out (or the output, without a gate).
     Network,
 }
-
-/// The restoration stage's output in a campro enhancer with a table.
-pub const RESTORED: &str = "restored";
-/// The U-Net's output before the face gate's blend.
-pub const UNGATED: &str = "ungated";
-/// The face gate's probability map (1, 1, H, W).
-pub const GATE: &str = "gate";
-/// Prefix of every node and initialiser of the restoration stage (`campro-train` writes
-/// them, [`network_only`] strips them).
-pub const RESTORE_PREFIX: &str = "restore.";
-/// The restoration stage's table: (entries, 3) 8-bit output codes.
-pub const RESTORE_TABLE: &str = "restore.table";
-/// The restoration stage's bins: 768 floats, 256 per channel.
-pub const RESTORE_BINS: &str = "restore.bins";
-/// Prefix of the gate's pixelation nodes (the blocks the gate blends toward).
-pub const GATE_PIX: &str = "gate.pix";
-/// The gate blend's nodes, in order: `ungated · -1`, `toward + that`, `gate · that`;
-/// the output is `ungated + gate.move`.
-pub const GATE_BLEND: [&str; 3] = ["gate.neg", "gate.diff", "gate.move"];
 
 /// What a file's graph holds besides its input and output, for the reduced path.
 #[derive(Debug, Clone, Default)]
@@ -374,42 +360,6 @@ impl Enhancer {
     }
 }
 
-/// The executor for tract's kernels: the cores of [`with_threads`]' scope, one by default.
-static POOLS: std::sync::Mutex<Vec<(usize, tract_linalg::multithread::Executor)>> = std::sync::Mutex::new(Vec::new());
-
-thread_local! {
-    static THREADS: std::cell::Cell<usize> = const { std::cell::Cell::new(1) };
-}
-
-/// Runs `f` with every enhancer it calls spreading one image's convolutions over `n`
-/// threads (one pool a thread count, made once). For one frame at a time (video); images
-/// processed in parallel are better left at one thread each.
-pub fn with_threads<R>(n: usize, f: impl FnOnce() -> R) -> R {
-    let before = THREADS.with(|t| t.replace(n.max(1)));
-    let r = f();
-    THREADS.with(|t| t.set(before));
-    r
-}
-
-fn in_scope<R>(f: impl FnOnce() -> R) -> R {
-    let n = THREADS.with(|t| t.get());
-    if n <= 1 {
-        return f();
-    }
-    let executor = {
-        let mut pools = POOLS.lock().unwrap_or_else(|p| p.into_inner());
-        match pools.iter().find(|(k, _)| *k == n) {
-            Some((_, e)) => e.clone(),
-            None => {
-                let e = tract_linalg::multithread::Executor::multithread_with_name(n, "campro-enhancer");
-                pools.push((n, e.clone()));
-                e
-            }
-        }
-    };
-    tract_linalg::multithread::multithread_tract_scope(executor, f)
-}
-
 /// Widest activation an enhancer may hold at full resolution, channels: a campro U-Net's
 /// largest is its first decoder's concatenation (twice the first width, at most 64).
 pub const MAX_FULL_RES_CHANNELS: usize = 128;
@@ -434,102 +384,6 @@ fn largest_tensor(model: &TypedModel) -> Option<(String, usize)> {
         .max_by_key(|&(_, b)| b)
 }
 
-/// The top-left `w` x `h` of a (3, `ph`, `pw`) float image in [0, 1] (the enhancer's
-/// output on [`padded_chw`]'s input), rounded to 8 bits and clamped.
-pub fn cropped_rgb8(v: &[f32], pw: usize, ph: usize, w: u32, h: u32) -> RgbImage {
-    let q = |f: f32| (f * 255.0).round().clamp(0.0, 255.0) as u8;
-    RgbImage::from_fn(w, h, |x, y| {
-        let i = y as usize * pw + x as usize;
-        image::Rgb([q(v[i]), q(v[pw * ph + i]), q(v[2 * pw * ph + i])])
-    })
-}
-
-/// campro's per-pixel restoration stage read from its graph's constants
-/// (`restore.bins`: each channel's level already scaled to its place in the index;
-/// `restore.table`: 2^18 RGB entries), computed as the graph does: the entry of
-/// `bins[r] + bins[256 + g] + bins[512 + b]`, times 1/255 in f32 (bit for bit: a test).
-#[derive(Debug, Clone)]
-struct RestoreTable {
-    bins: Vec<u32>,
-    entries: Vec<u8>,
-}
-
-impl RestoreTable {
-    /// Entries of the table: 64 bins a channel, cubed.
-    const ENTRIES: usize = 1 << 18;
-
-    fn from_graph(graph: &tract_onnx::pb::GraphProto) -> Option<Self> {
-        let init = |name: &str| graph.initializer.iter().find(|t| t.name == name);
-        let table = init(RESTORE_TABLE).filter(|t| t.data_type == 2 && t.raw_data.len() == 3 * Self::ENTRIES)?;
-        let bins = init(RESTORE_BINS).filter(|t| t.data_type == 1)?;
-        let floats: Vec<f32> = if bins.raw_data.is_empty() {
-            bins.float_data.clone()
-        } else {
-            bins.raw_data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
-        };
-        // Three channels' places must sum below the table's size: integers in f32.
-        let ok = floats.len() == 768
-            && floats.iter().all(|&v| v >= 0.0 && v.fract() == 0.0 && (v as usize) < Self::ENTRIES)
-            && (0..3)
-                .map(|c| floats[c * 256..(c + 1) * 256].iter().fold(0f32, |m, &v| m.max(v)) as usize)
-                .sum::<usize>()
-                < Self::ENTRIES;
-        ok.then(|| Self { bins: floats.iter().map(|&v| v as u32).collect(), entries: table.raw_data.clone() })
-    }
-
-    /// The restored image as (3, `ph`, `pw`) floats, padded as [`padded_chw`] pads.
-    fn restore(&self, img: &RgbImage, pw: usize, ph: usize) -> Vec<f32> {
-        use rayon::prelude::*;
-        let (w, h) = (img.width() as usize, img.height() as usize);
-        let plane = pw * ph;
-        let inv = 1.0f32 / 255.0;
-        // Each row's entries, channel after channel (one row of each plane), then the rows
-        // put in their planes.
-        let mut rows = vec![0f32; 3 * plane];
-        rows.par_chunks_mut(3 * pw).enumerate().for_each(|(y, row)| {
-            for x in 0..pw {
-                let p = img.get_pixel(x.min(w - 1) as u32, y.min(h - 1) as u32).0;
-                let i = (self.bins[p[0] as usize] + self.bins[256 + p[1] as usize] + self.bins[512 + p[2] as usize])
-                    as usize
-                    * 3;
-                for c in 0..3 {
-                    row[c * pw + x] = self.entries[i + c] as f32 * inv;
-                }
-            }
-        });
-        let mut out = vec![0f32; 3 * plane];
-        for (y, row) in rows.chunks_exact(3 * pw).enumerate() {
-            for c in 0..3 {
-                out[c * plane + y * pw..][..pw].copy_from_slice(&row[c * pw..(c + 1) * pw]);
-            }
-        }
-        out
-    }
-}
-
-/// A (3, `ph`, `pw`) image whose top-left `size` is real, averaged down `f` times a side
-/// (the last block of a row or column averages what it has) into (3, `low.1`, `low.0`),
-/// padded past its own size by repeating its last row and column.
-fn averaged_down(img: &[f32], pw: usize, ph: usize, size: (usize, usize), f: usize, low: (usize, usize)) -> Vec<f32> {
-    use rayon::prelude::*;
-    let (w, h) = size;
-    let (sw, sh) = (w.div_ceil(f), h.div_ceil(f));
-    let (lpw, lph) = low;
-    let mut out = vec![0f32; 3 * lpw * lph];
-    out.par_chunks_mut(lpw).enumerate().for_each(|(row, line)| {
-        let (c, sy) = (row / lph, (row % lph).min(sh - 1));
-        let plane = &img[c * pw * ph..(c + 1) * pw * ph];
-        let (y0, y1) = (sy * f, (sy * f + f).min(h));
-        for (sx, v) in line.iter_mut().enumerate() {
-            let sx = sx.min(sw - 1);
-            let (x0, x1) = (sx * f, (sx * f + f).min(w));
-            let sum: f32 = (y0..y1).map(|y| plane[y * pw + x0..y * pw + x1].iter().sum::<f32>()).sum();
-            *v = sum / ((y1 - y0) * (x1 - x0)) as f32;
-        }
-    });
-    out
-}
-
 /// The file's network alone: the restoration stage's nodes removed and the graph's input
 /// renamed to what they made ([`RESTORED`]); with a gate, the blend removed and the output
 /// renamed [`UNGATED`] (the gate map is read by name).
@@ -550,148 +404,6 @@ fn network_only(proto: &tract_onnx::pb::ModelProto, gated: bool) -> tract_onnx::
         }
     }
     m
-}
-
-/// The face gate's blend, as the file makes it: `ungated + gate · (toward − ungated)`, on
-/// (3, H, W) planes of `plane` pixels and a (1, H, W) gate.
-fn blended(mut ungated: Vec<f32>, gate: &[f32], toward: &[f32], plane: usize) -> Vec<f32> {
-    use rayon::prelude::*;
-    ungated.par_chunks_mut(plane).zip(toward.par_chunks(plane)).for_each(|(line, to)| {
-        for ((v, &t), &g) in line.iter_mut().zip(to).zip(gate) {
-            *v += g * (t - *v);
-        }
-    });
-    ungated
-}
-
-/// Radius of the guided filter's window at low resolution, pixels (a 5 x 5 window).
-const GUIDE_RADIUS: usize = 2;
-/// The guided filter's regulariser (values in 0..1): flatter than this a window is fitted
-/// by its mean.
-const GUIDE_EPS: f32 = 1e-4;
-
-/// Per channel, the coefficients (gain, offset) of the guided filter that fits `output`
-/// as a linear function of `input` in every window, averaged over the windows that hold
-/// each pixel: (3, `lph`, `lpw`) planes whose top-left `size` is real.
-fn guided_coefficients(
-    input: &[f32],
-    output: &[f32],
-    size: (usize, usize),
-    lpw: usize,
-    lph: usize,
-) -> (Vec<f32>, Vec<f32>) {
-    let n = lpw * lph;
-    let (mut gain, mut offset) = (vec![0f32; 3 * n], vec![0f32; 3 * n]);
-    for c in 0..3 {
-        let (i, p) = (&input[c * n..(c + 1) * n], &output[c * n..(c + 1) * n]);
-        let ip: Vec<f32> = i.iter().zip(p).map(|(a, b)| a * b).collect();
-        let ii: Vec<f32> = i.iter().map(|a| a * a).collect();
-        let (mi, mp, mip, mii) =
-            (boxed(i, lpw, size), boxed(p, lpw, size), boxed(&ip, lpw, size), boxed(&ii, lpw, size));
-        let a: Vec<f32> = (0..n).map(|k| (mip[k] - mi[k] * mp[k]) / (mii[k] - mi[k] * mi[k] + GUIDE_EPS)).collect();
-        let b: Vec<f32> = (0..n).map(|k| mp[k] - a[k] * mi[k]).collect();
-        gain[c * n..(c + 1) * n].copy_from_slice(&boxed(&a, lpw, size));
-        offset[c * n..(c + 1) * n].copy_from_slice(&boxed(&b, lpw, size));
-    }
-    (gain, offset)
-}
-
-/// The mean over the (2 [`GUIDE_RADIUS`] + 1)² window around each pixel of a plane (row
-/// stride `stride`), the window cut to the top-left `size`; pixels outside it copy the
-/// nearest inside.
-fn boxed(v: &[f32], stride: usize, size: (usize, usize)) -> Vec<f32> {
-    let (w, h) = size;
-    let r = GUIDE_RADIUS;
-    let mut rows = vec![0f32; v.len()];
-    for y in 0..h {
-        for x in 0..w {
-            let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
-            rows[y * stride + x] = v[y * stride + x0..y * stride + x1].iter().sum::<f32>() / (x1 - x0) as f32;
-        }
-    }
-    let mut out = vec![0f32; v.len()];
-    let lh = v.len() / stride;
-    for y in 0..lh {
-        let yy = y.min(h - 1);
-        let (y0, y1) = (yy.saturating_sub(r), (yy + r + 1).min(h));
-        for x in 0..stride {
-            let xx = x.min(w - 1);
-            out[y * stride + x] = (y0..y1).map(|k| rows[k * stride + xx]).sum::<f32>() / (y1 - y0) as f32;
-        }
-    }
-    out
-}
-
-/// Bilinear taps from `n` full-resolution positions onto `low` positions computed at 1/`f`
-/// resolution: (first, second, weight of the second), between the low-resolution pixel
-/// centres, clamped at the image's edge.
-fn taps(n: usize, low: usize, f: usize) -> Vec<(usize, usize, f32)> {
-    (0..n)
-        .map(|p| {
-            let u = ((p as f32 + 0.5) / f as f32 - 0.5).clamp(0.0, (low - 1) as f32);
-            let i = (u.floor() as usize).min(low.saturating_sub(2));
-            (i, (i + 1).min(low - 1), u - i as f32)
-        })
-        .collect()
-}
-
-/// One full-resolution row of a plane (row stride `stride`) computed at low resolution,
-/// bilinear through the row's tap `row` and the columns' `cols`, handed to `put`.
-fn upsample_row(
-    plane: &[f32],
-    stride: usize,
-    row: (usize, usize, f32),
-    cols: &[(usize, usize, f32)],
-    line: &mut [f32],
-    put: impl Fn(&mut f32, f32),
-) {
-    let (y0, y1, fy) = row;
-    let (top, bottom) = (&plane[y0 * stride..], &plane[y1 * stride..]);
-    for (v, &(x0, x1, fx)) in line.iter_mut().zip(cols) {
-        let t = top[x0] + fx * (top[x1] - top[x0]);
-        let b = bottom[x0] + fx * (bottom[x1] - bottom[x0]);
-        put(v, t + fy * (b - t));
-    }
-}
-
-/// A (3, `ph`, `pw`) image pixelated in `n` x `n` blocks (each block's mean; edge blocks
-/// average what they hold): the gate's target at full resolution.
-fn pixelated(img: &[f32], pw: usize, ph: usize, n: usize) -> Vec<f32> {
-    use rayon::prelude::*;
-    let mut out = vec![0f32; img.len()];
-    // One band of n rows of one channel at a time.
-    out.par_chunks_mut(pw * ph).zip(img.par_chunks(pw * ph)).for_each(|(dst, src)| {
-        dst.par_chunks_mut(pw * n).zip(src.par_chunks(pw * n)).for_each(|(dst, src)| {
-            let rows = dst.len() / pw;
-            for bx in (0..pw).step_by(n) {
-                let x1 = (bx + n).min(pw);
-                let sum: f64 =
-                    (0..rows).map(|y| src[y * pw + bx..y * pw + x1].iter().map(|&v| v as f64).sum::<f64>()).sum();
-                let mean = (sum / (rows * (x1 - bx)) as f64) as f32;
-                for y in 0..rows {
-                    dst[y * pw + bx..y * pw + x1].fill(mean);
-                }
-            }
-        })
-    });
-    out
-}
-
-/// `img` as (3, H', W') floats in [0, 1], H' and W' rounded up to multiples of `multiple` by
-/// repeating the last row and column; returns the data, W' and H'.
-pub fn padded_chw(img: &RgbImage, multiple: usize) -> (Vec<f32>, usize, usize) {
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let (pw, ph) = (w.div_ceil(multiple) * multiple, h.div_ceil(multiple) * multiple);
-    let mut data = vec![0f32; 3 * pw * ph];
-    for y in 0..ph {
-        for x in 0..pw {
-            let p = img.get_pixel(x.min(w - 1) as u32, y.min(h - 1) as u32).0;
-            for c in 0..3 {
-                data[c * pw * ph + y * pw + x] = p[c] as f32 / 255.0;
-            }
-        }
-    }
-    (data, pw, ph)
 }
 
 #[cfg(test)]

@@ -92,10 +92,45 @@ pub fn kill_children() {
 }
 
 /// Spawns `cmd`, registering it for [`kill_children`].
-fn spawn(cmd: &mut Command, what: &str) -> Result<std::process::Child> {
+fn spawn(cmd: &mut Command, what: &str) -> Result<Reaped> {
     let child = cmd.spawn().with_context(|| format!("starting ffmpeg to {what}"))?;
     CHILDREN.lock().unwrap_or_else(|p| p.into_inner()).push(child.id());
-    Ok(child)
+    Ok(Reaped(Some(child)))
+}
+
+/// A running ffmpeg that is killed and reaped when dropped before [`Reaped::wait`]: every
+/// way out of a run (a refusal after the start, an error, a panic unwinding) ends it, and
+/// leaves neither a zombie nor an orphan writing on.
+struct Reaped(Option<std::process::Child>);
+
+impl Reaped {
+    /// Waits for it to end (after its input closed, or a kill) and forgets it.
+    fn wait(mut self) -> Result<std::process::ExitStatus> {
+        let mut child = self.0.take().expect("running until waited for");
+        wait(&mut child)
+    }
+}
+
+impl std::ops::Deref for Reaped {
+    type Target = std::process::Child;
+    fn deref(&self) -> &std::process::Child {
+        self.0.as_ref().expect("running until waited for")
+    }
+}
+
+impl std::ops::DerefMut for Reaped {
+    fn deref_mut(&mut self) -> &mut std::process::Child {
+        self.0.as_mut().expect("running until waited for")
+    }
+}
+
+impl Drop for Reaped {
+    fn drop(&mut self) {
+        if let Some(mut child) = self.0.take() {
+            let _ = child.kill();
+            let _ = wait(&mut child);
+        }
+    }
 }
 
 /// Waits for `child` and forgets it.
@@ -661,13 +696,12 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
     let (tb, width, height) = match first {
         Ok(Clock::Header { tb, width, height }) => (tb, width, height),
         Err(true) => {
-            let _ = decode.kill();
-            let _ = wait(&mut decode);
+            drop(decode);
             bail!("{} gave no frame in {} s (--stall)", source.shown(), stall.unwrap_or_default().as_secs());
         }
         _ => {
-            let _ = decode.kill();
-            let _ = wait(&mut decode);
+            // Ended (killed and reaped) before its stderr is read to its end.
+            drop(decode);
             let err = dec_err.join().unwrap_or_default();
             let hint = match source {
                 Source::Stdin(_) => " (from a pipe, MP4 and MOV need their index first, ffmpeg -movflags +faststart; Matroska, WebM, MPEG-TS and NUT stream as they are; raw frames need --size)",
@@ -676,9 +710,8 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
             bail!("ffmpeg could not decode it: {}{hint}", first_line(&err));
         }
     };
+    // From here every early return ends the decoder as `decode` drops.
     if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
-        let _ = decode.kill();
-        let _ = wait(&mut decode);
         bail!("the video is {width} x {height} pixels; at most {MAX_SIDE} a side");
     }
     // Frames the camera stage takes at once, and the frames in flight around it.
@@ -692,8 +725,6 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         .saturating_add((PUMP_CHUNKS * PUMP_CHUNK) as u64);
     let budget = campro_eval::image_file::Budget::global();
     let Some(_lease) = budget.take(held) else {
-        let _ = decode.kill();
-        let _ = wait(&mut decode);
         bail!(
             "the video is {width} x {height} pixels; its {} frames in flight need {} MiB, over the {} MiB limit",
             in_flight + batch_max,
@@ -893,11 +924,8 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
     if result.is_err() || stopped_early {
         let _ = decode.kill();
     }
-    let dec = wait(&mut decode)?;
-    let enc_status = match &mut encode {
-        Some(e) => Some(wait(e)?),
-        None => None,
-    };
+    let dec = decode.wait()?;
+    let enc_status = encode.map(Reaped::wait).transpose()?;
     let dec_stderr = dec_err.join().unwrap_or_default();
     let _ = pumping.join();
     let enc_stderr = enc_err.join().unwrap_or_default();
@@ -1063,6 +1091,23 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    #[cfg(unix)]
+    fn a_dropped_child_is_killed_and_reaped() {
+        let running = spawn(Command::new("sleep").arg("30"), "wait").unwrap();
+        let pid = running.id();
+        assert!(CHILDREN.lock().unwrap().contains(&pid));
+        let began = std::time::Instant::now();
+        drop(running);
+        // Killed (not waited out) and reaped: no process, no zombie, forgotten.
+        assert!(began.elapsed() < std::time::Duration::from_secs(10));
+        assert!(!std::path::Path::new(&format!("/proc/{pid}")).exists(), "pid {pid} is still there");
+        assert!(!CHILDREN.lock().unwrap().contains(&pid));
+        // Waited for, it is not killed: its status comes back.
+        let done = spawn(&mut Command::new("true"), "finish").unwrap();
+        assert!(done.wait().unwrap().success());
+    }
 
     #[test]
     fn deep_pixel_formats_are_told_from_8_bit_ones() {

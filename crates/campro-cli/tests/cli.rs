@@ -1411,3 +1411,16 @@ fn exif_orientation_turns_the_pixels() {
         }
     }
 }
+
+/// `--record` hashes its input file: a stream (standard input here) has none, so the run is
+/// refused in one line before anything is read, rather than written without its record.
+#[test]
+fn a_record_of_a_stream_is_refused_not_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("live.mkv");
+    fails_with(
+        campro().args(["simulate", "campro-omega-0.5", "-", "-o"]).arg(&out).arg("--record").write_stdin(Vec::new()),
+        "--record: a record holds its input's hash",
+    );
+    assert!(!out.exists());
+}

@@ -1183,6 +1183,21 @@ fn sidecars_are_skipped_not_a_collision() {
     assert!(!err.contains("would both be written"), "{err}");
 }
 
+/// `img` as a JPEG, and the same JPEG stored "sideways": an APP1 Exif block (a
+/// little-endian TIFF header and one IFD entry, Orientation (0x0112) = 6) after its SOI.
+fn sideways_jpeg(img: &image::RgbImage) -> (Vec<u8>, Vec<u8>) {
+    let mut plain = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut plain), image::ImageFormat::Jpeg).unwrap();
+    let mut exif = b"Exif\0\0II*\0\x08\0\0\0\x01\0".to_vec();
+    exif.extend_from_slice(&[0x12, 0x01, 3, 0, 1, 0, 0, 0, 6, 0, 0, 0, 0, 0, 0, 0]);
+    let mut tagged = plain[..2].to_vec();
+    tagged.extend_from_slice(&[0xff, 0xe1]);
+    tagged.extend_from_slice(&((exif.len() + 2) as u16).to_be_bytes());
+    tagged.extend_from_slice(&exif);
+    tagged.extend_from_slice(&plain[2..]);
+    (plain, tagged)
+}
+
 /// A phone's folder in one run: an iPhone's HEIC photo (the eval crate's fixture:
 /// orientation 6 as a HEIF rotation), a JPEG stored sideways with EXIF orientation 6, a
 /// WebP, and sidecars (Lightroom's `.xmp`, a `notes.txt`). The HEIC is read through libheif
@@ -1196,18 +1211,8 @@ fn a_phone_folder_goes_through_upright_in_one_run() {
     std::fs::create_dir(&photos).unwrap();
     let fixture = campro_testkit::workspace_root().join("crates/campro-eval/tests/data/quadrants-exif6.heic");
     std::fs::copy(fixture, photos.join("IMG_0001.HEIC")).unwrap();
-    // A 20x10 JPEG with an APP1 Exif block saying orientation 6 (little-endian TIFF, one entry).
     let img = image::RgbImage::from_fn(20, 10, |x, y| image::Rgb([(x * 12) as u8, (y * 20) as u8, 120]));
-    let mut plain = Vec::new();
-    img.write_to(&mut std::io::Cursor::new(&mut plain), image::ImageFormat::Jpeg).unwrap();
-    let mut exif = b"Exif\0\0II*\0\x08\0\0\0\x01\0".to_vec();
-    exif.extend_from_slice(&[0x12, 0x01, 3, 0, 1, 0, 0, 0, 6, 0, 0, 0, 0, 0, 0, 0]);
-    let mut tagged = plain[..2].to_vec();
-    tagged.extend_from_slice(&[0xff, 0xe1]);
-    tagged.extend_from_slice(&((exif.len() + 2) as u16).to_be_bytes());
-    tagged.extend_from_slice(&exif);
-    tagged.extend_from_slice(&plain[2..]);
-    std::fs::write(photos.join("IMG_0002.JPG"), &tagged).unwrap();
+    std::fs::write(photos.join("IMG_0002.JPG"), sideways_jpeg(&img).1).unwrap();
     image::RgbImage::from_fn(12, 8, |x, y| image::Rgb([90, (x * 20) as u8, (y * 30) as u8]))
         .save(photos.join("IMG_0003.webp"))
         .unwrap();
@@ -1373,16 +1378,7 @@ fn exif_orientation_turns_the_pixels() {
             image::Rgb([30, 60, (y * 20) as u8])
         }
     });
-    let mut plain = Vec::new();
-    img.write_to(&mut std::io::Cursor::new(&mut plain), image::ImageFormat::Jpeg).unwrap();
-    // APP1 Exif: a little-endian TIFF header and one IFD entry, Orientation (0x0112) = 6.
-    let mut exif = b"Exif\0\0II*\0\x08\0\0\0\x01\0".to_vec();
-    exif.extend_from_slice(&[0x12, 0x01, 3, 0, 1, 0, 0, 0, 6, 0, 0, 0, 0, 0, 0, 0]);
-    let mut tagged = plain[..2].to_vec();
-    tagged.extend_from_slice(&[0xff, 0xe1]);
-    tagged.extend_from_slice(&((exif.len() + 2) as u16).to_be_bytes());
-    tagged.extend_from_slice(&exif);
-    tagged.extend_from_slice(&plain[2..]);
+    let (plain, tagged) = sideways_jpeg(&img);
     let (a, b) = (dir.path().join("plain.jpg"), dir.path().join("turned.jpg"));
     std::fs::write(&a, &plain).unwrap();
     std::fs::write(&b, &tagged).unwrap();

@@ -371,6 +371,17 @@ impl<'a> Exact8<'a> {
         (out, exact.is_some())
     }
 
+    /// Decides the pixel at byte `p` of `src` that an engine set aside (its cell holds a
+    /// boundary or is ambiguous) into `dst`; whether f64 was needed.
+    #[inline]
+    fn redo(&self, src: &[u8], dst: &mut [u8], p: usize) -> bool {
+        let rgb = [src[p], src[p + 1], src[p + 2]];
+        let (e, t) = self.lookup(rgb);
+        let (o, f) = self.decide(rgb, e, t);
+        dst[p..p + 3].copy_from_slice(&o);
+        f
+    }
+
     /// The reference's curve inputs for a pixel, bit for bit: its f64 degamma table, the
     /// matrix by [`ccm::apply`], clipped by [`super::clip01`] (what [`super::from_linear`]
     /// hands the curve).
@@ -401,12 +412,7 @@ impl<'a> Exact8<'a> {
                 n += ((e[0] | e[1] | e[2]) >= AMBIGUOUS) as usize;
             }
             for &p in &queue[..n] {
-                let p = 3 * p as usize;
-                let rgb = [s[p], s[p + 1], s[p + 2]];
-                let (e, t) = self.lookup(rgb);
-                let (o, f) = self.decide(rgb, e, t);
-                fell += f as usize;
-                d[p..p + 3].copy_from_slice(&o);
+                fell += self.redo(s, d, 3 * p as usize) as usize;
             }
         }
         (fell, whole)

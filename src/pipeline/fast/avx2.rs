@@ -91,13 +91,8 @@ pub(super) unsafe fn run(e: &Exact8, src: &[u8], dst: &mut [u8]) -> (usize, usiz
         }
         let mut f = flags;
         while f != 0 {
-            let p = 3 * f.trailing_zeros() as usize;
+            fell += e.redo(s, d, 3 * f.trailing_zeros() as usize) as usize;
             f &= f - 1;
-            let rgb = [s[p], s[p + 1], s[p + 2]];
-            let (codes, t) = e.lookup(rgb);
-            let (o, redone) = e.decide(rgb, codes, t);
-            fell += redone as usize;
-            d[p..p + 3].copy_from_slice(&o);
         }
     }
     (fell, whole)

@@ -121,8 +121,14 @@ impl<'p> Capture<'_, 'p> {
     }
 
     /// `dst` = the capture of the `w` x `h` RGB frame `src`; returns whether the frame was
-    /// grey and let through ([`GreyPolicy::check`]).
+    /// grey and let through ([`GreyPolicy::check`]). The enhancer, if any, on this thread.
     pub fn run(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32) -> Result<bool> {
+        self.run_on(src, dst, w, h, 1)
+    }
+
+    /// [`Capture::run`] with the enhancer's network on `threads` threads (one frame at a
+    /// time: video).
+    pub fn run_on(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32, threads: usize) -> Result<bool> {
         let grey = self.grey.check(src)?;
         let row = 3 * w as usize;
         src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| {
@@ -130,7 +136,7 @@ impl<'p> Capture<'_, 'p> {
         });
         if let Some(e) = self.enhancer {
             let captured = image::RgbImage::from_raw(w, h, dst.to_vec()).expect("a whole frame");
-            dst.copy_from_slice(enhance(e, &captured)?.as_raw());
+            dst.copy_from_slice(enhance_on(e, &captured, threads)?.as_raw());
         }
         Ok(grey)
     }
@@ -139,6 +145,11 @@ impl<'p> Capture<'_, 'p> {
 /// The guarded enhancer `e` on a captured image (every face its guard finds hidden),
 /// refused over [`MAX_ENHANCE_PIXELS`] (padded) or [`MAX_ENHANCE_SIDE`].
 pub fn enhance(e: &GuardedEnhancer, captured: &image::RgbImage) -> Result<image::RgbImage> {
+    enhance_on(e, captured, 1)
+}
+
+/// [`enhance`] with the network on `threads` threads.
+pub fn enhance_on(e: &GuardedEnhancer, captured: &image::RgbImage, threads: usize) -> Result<image::RgbImage> {
     let (w, h) = captured.dimensions();
     // What the network holds is the padded image's (a thin picture is padded to the
     // network's multiple: 1 x 1,000,000 becomes 16 x 1,000,000), and the face guard's work
@@ -158,7 +169,7 @@ pub fn enhance(e: &GuardedEnhancer, captured: &image::RgbImage) -> Result<image:
             campro_eval::image_file::DECODE_BUDGET >> 20
         );
     }
-    Ok(e.enhance(captured)?)
+    Ok(e.enhance_on(captured, threads)?)
 }
 
 /// What a parameter set's provenance can name beside it: its enhancer (shown to people) or

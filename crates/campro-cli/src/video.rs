@@ -879,12 +879,13 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
                 // One frame: the enhancer spreads it over the pool's cores as it can.
                 let threads = rayon::current_num_threads();
                 let (src, out) = (&batch[0], &mut outs[0]);
-                campro_eval::enhance::with_threads(threads, || job.capture.run(&src.data, out, width, height).map(drop))
+                job.capture.run_on(&src.data, out, width, height, threads).map(drop)
             } else {
                 use rayon::prelude::*;
-                batch.par_iter().zip(outs.par_iter_mut()).try_for_each(|(src, out)| {
-                    campro_eval::enhance::with_threads(1, || job.capture.run(&src.data, out, width, height).map(drop))
-                })
+                batch
+                    .par_iter()
+                    .zip(outs.par_iter_mut())
+                    .try_for_each(|(src, out)| job.capture.run(&src.data, out, width, height).map(drop))
             };
             busy += began.elapsed();
             if let Err(e) = ran {

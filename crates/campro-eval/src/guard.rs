@@ -184,7 +184,13 @@ impl GuardedEnhancer {
     /// what the guard did; an error (the image is then not to be shown enhanced) when the
     /// enhancer or the guard cannot run.
     pub fn enhance_checked(&self, captured: &RgbImage) -> Result<(RgbImage, Checked)> {
-        let mut shown = self.enhancer.enhance(captured)?;
+        self.enhance_checked_on(captured, 1)
+    }
+
+    /// [`Self::enhance_checked`] with the network on `threads` threads
+    /// ([`Enhancer::enhance_on`]; the guard is the same).
+    pub fn enhance_checked_on(&self, captured: &RgbImage, threads: usize) -> Result<(RgbImage, Checked)> {
+        let mut shown = self.enhancer.enhance_on(captured, threads)?;
         let checked = self.guard.apply(captured, &mut shown)?;
         Ok((shown, checked))
     }
@@ -192,6 +198,11 @@ impl GuardedEnhancer {
     /// [`Self::enhance_checked`]'s image.
     pub fn enhance(&self, captured: &RgbImage) -> Result<RgbImage> {
         Ok(self.enhance_checked(captured)?.0)
+    }
+
+    /// [`Self::enhance_checked_on`]'s image.
+    pub fn enhance_on(&self, captured: &RgbImage, threads: usize) -> Result<RgbImage> {
+        Ok(self.enhance_checked_on(captured, threads)?.0)
     }
 }
 

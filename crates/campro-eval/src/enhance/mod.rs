@@ -20,8 +20,7 @@ pub use names::*;
 use planes::*;
 pub use planes::{cropped_rgb8, padded_chw};
 use table::RestoreTable;
-use threads::in_scope;
-pub use threads::with_threads;
+use threads::on_threads;
 
 /// Bytes a pixel an enhancement holds at full resolution at [`Scale::Auto`] on images
 /// from 2560 x 1440 (the network at a quarter of each side), the face guard included,
@@ -245,11 +244,19 @@ impl Enhancer {
     }
 
     /// Runs `plan` on a (1, 3, `ph`, `pw`) input, returning its outputs as float vectors.
-    fn run(&self, plan: &std::sync::Arc<TypedSimplePlan>, data: &[f32], pw: usize, ph: usize) -> Result<Vec<Vec<f32>>> {
+    fn run(
+        &self,
+        plan: &std::sync::Arc<TypedSimplePlan>,
+        data: &[f32],
+        (pw, ph): (usize, usize),
+        threads: usize,
+    ) -> Result<Vec<Vec<f32>>> {
         let input = Tensor::from_shape(&[1, 3, ph, pw], data).expect("shape matches data");
-        let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| in_scope(|| plan.run(tvec!(input.into())))))
-            .map_err(|_| EvalError::Model { path: self.path.clone(), message: "tract failed while running it".into() })?
-            .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") })?;
+        let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            on_threads(threads, || plan.run(tvec!(input.into())))
+        }))
+        .map_err(|_| EvalError::Model { path: self.path.clone(), message: "tract failed while running it".into() })?
+        .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") })?;
         out.iter()
             .map(|t| {
                 let v = t
@@ -294,16 +301,22 @@ impl Enhancer {
         }
     }
 
-    /// The enhanced image of a captured 8-bit image (same size).
+    /// The enhanced image of a captured 8-bit image (same size), on the calling thread.
     pub fn enhance(&self, img: &RgbImage) -> Result<RgbImage> {
+        self.enhance_on(img, 1)
+    }
+
+    /// [`Enhancer::enhance`] with the network's kernels spread over `threads` threads: for
+    /// one frame at a time (video); images processed in parallel are better at one each.
+    pub fn enhance_on(&self, img: &RgbImage, threads: usize) -> Result<RgbImage> {
         let (w, h) = (img.width() as usize, img.height() as usize);
         let f = self.scale.factor(w, h);
         if f > 1 && w >= f * self.multiple && h >= f * self.multiple && self.unet.is_some() {
-            return self.enhance_reduced(img, f);
+            return self.enhance_reduced(img, f, threads);
         }
         let (data, pw, ph) = padded_chw(img, self.multiple);
         let plan = self.plan(pw, ph, Outputs::Enhanced)?;
-        let out = self.run(&plan, &data, pw, ph)?;
+        let out = self.run(&plan, &data, (pw, ph), threads)?;
         if out[0].len() != 3 * pw * ph {
             return Err(EvalError::Model { path: self.path.clone(), message: "the output is not an RGB image".into() });
         }
@@ -314,7 +327,7 @@ impl Enhancer {
     /// input (the restoration, or the captured image) at full resolution, averaged down;
     /// the network's residual over that input upsampled and added back; the gate's map
     /// upsampled and its blend made at full resolution.
-    fn enhance_reduced(&self, img: &RgbImage, f: usize) -> Result<RgbImage> {
+    fn enhance_reduced(&self, img: &RgbImage, f: usize, threads: usize) -> Result<RgbImage> {
         use rayon::prelude::*;
         let (w, h) = (img.width() as usize, img.height() as usize);
         let (pw, ph) = (w.div_ceil(self.multiple) * self.multiple, h.div_ceil(self.multiple) * self.multiple);
@@ -326,7 +339,7 @@ impl Enhancer {
         let (sw, sh) = (w.div_ceil(f), h.div_ceil(f));
         let (lpw, lph) = (sw.div_ceil(self.multiple) * self.multiple, sh.div_ceil(self.multiple) * self.multiple);
         let low = averaged_down(&base, pw, ph, (w, h), f, (lpw, lph));
-        let mut out = self.run(&self.plan(lpw, lph, Outputs::Network)?, &low, lpw, lph)?.into_iter();
+        let mut out = self.run(&self.plan(lpw, lph, Outputs::Network)?, &low, (lpw, lph), threads)?.into_iter();
         let (Some(ungated_low), gate_low) = (out.next(), out.next()) else {
             return Err(EvalError::Model { path: self.path.clone(), message: "the network gave no output".into() });
         };
@@ -558,7 +571,7 @@ mod tests {
         // Restoration here, the network cut out of the file, the gate's blend here.
         let (pw, ph) = ((w as usize).div_ceil(e.multiple) * e.multiple, (h as usize).div_ceil(e.multiple) * e.multiple);
         let restored = e.parts.table.as_ref().unwrap().restore(&img, pw, ph);
-        let out = e.run(&e.plan(pw, ph, Outputs::Network).unwrap(), &restored, pw, ph).unwrap();
+        let out = e.run(&e.plan(pw, ph, Outputs::Network).unwrap(), &restored, (pw, ph), 1).unwrap();
         let (ungated, gate) = (out[0].clone(), &out[1]);
         let toward = pixelated(&ungated, pw, ph, 16);
         let parts = cropped_rgb8(&blended(ungated, gate, &toward, pw * ph), pw, ph, w, h);

@@ -1,36 +1,22 @@
-//! The thread pool tract's kernels run one enhancement on: a scope's thread count (one by
-//! default), one pool a count, made once.
+//! The thread pools tract's kernels run one enhancement on: one pool a thread count, made
+//! once and kept for the process.
 
-/// The executor for tract's kernels: the cores of [`with_threads`]' scope, one by default.
-pub(super) static POOLS: std::sync::Mutex<Vec<(usize, tract_linalg::multithread::Executor)>> =
-    std::sync::Mutex::new(Vec::new());
+/// The executors made so far, by thread count.
+static POOLS: std::sync::Mutex<Vec<(usize, tract_linalg::multithread::Executor)>> = std::sync::Mutex::new(Vec::new());
 
-thread_local! {
-    static THREADS: std::cell::Cell<usize> = const { std::cell::Cell::new(1) };
-}
-
-/// Runs `f` with every enhancer it calls spreading one image's convolutions over `n`
-/// threads (one pool a thread count, made once). For one frame at a time (video); images
-/// processed in parallel are better left at one thread each.
-pub fn with_threads<R>(n: usize, f: impl FnOnce() -> R) -> R {
-    let before = THREADS.with(|t| t.replace(n.max(1)));
-    let r = f();
-    THREADS.with(|t| t.set(before));
-    r
-}
-
-pub(super) fn in_scope<R>(f: impl FnOnce() -> R) -> R {
-    let n = THREADS.with(|t| t.get());
-    if n <= 1 {
+/// Runs `f` with tract's kernels spreading over `threads` threads (1 or 0: the calling
+/// thread alone, as for images processed in parallel).
+pub(super) fn on_threads<R>(threads: usize, f: impl FnOnce() -> R) -> R {
+    if threads <= 1 {
         return f();
     }
     let executor = {
         let mut pools = POOLS.lock().unwrap_or_else(|p| p.into_inner());
-        match pools.iter().find(|(k, _)| *k == n) {
+        match pools.iter().find(|(k, _)| *k == threads) {
             Some((_, e)) => e.clone(),
             None => {
-                let e = tract_linalg::multithread::Executor::multithread_with_name(n, "campro-enhancer");
-                pools.push((n, e.clone()));
+                let e = tract_linalg::multithread::Executor::multithread_with_name(threads, "campro-enhancer");
+                pools.push((threads, e.clone()));
                 e
             }
         }

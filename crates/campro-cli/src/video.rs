@@ -655,6 +655,113 @@ struct Frame {
     pts: i64,
 }
 
+/// A decoder running: ffmpeg (ended when dropped), the frame timestamps its stderr gives
+/// (the header already read), what it printed, its frames as they are pumped from its
+/// stdout, and the first frame's time base and size.
+struct Decoding {
+    child: Reaped,
+    clock: mpsc::Receiver<Clock>,
+    stderr: std::thread::JoinHandle<Vec<u8>>,
+    frames: Pumped,
+    pumping: std::thread::JoinHandle<()>,
+    tb: (u64, u64),
+    width: u32,
+    height: u32,
+}
+
+/// Starts decoding `source` (16-bit samples when `sixteen`) and waits for its first frame's
+/// header, at most the source's stall limit: one line when it gives none, cannot be
+/// decoded, or is larger than [`MAX_SIDE`] a side (the decoder then ended and reaped).
+fn start_decoding(source: &Source, sixteen: bool) -> Result<Decoding> {
+    let mut decode = spawn(&mut decoder(source, sixteen)?, "decode")?;
+    let (clock_tx, clock_rx) = mpsc::channel();
+    let dec_err = clock(decode.stderr.take().expect("piped"), clock_tx);
+    // Stdout is drained from now on, before the first timestamp: see `pump`.
+    let (chunks, pumping) = pump(decode.stdout.take().expect("piped"));
+    let from = Pumped { rx: chunks, chunk: Vec::new(), at: 0 };
+    // The size and time base arrive with the first decoded frame.
+    let stall = source.stall();
+    let first = match stall {
+        Some(limit) => clock_rx.recv_timeout(limit).map_err(|e| e == mpsc::RecvTimeoutError::Timeout),
+        None => clock_rx.recv().map_err(|_| false),
+    };
+    let (tb, width, height) = match first {
+        Ok(Clock::Header { tb, width, height }) => (tb, width, height),
+        Err(true) => {
+            drop(decode);
+            bail!("{} gave no frame in {} s (--stall)", source.shown(), stall.unwrap_or_default().as_secs());
+        }
+        _ => {
+            // Ended (killed and reaped) before its stderr is read to its end.
+            drop(decode);
+            let err = dec_err.join().unwrap_or_default();
+            let hint = match source {
+                Source::Stdin(_) => " (from a pipe, MP4 and MOV need their index first, ffmpeg -movflags +faststart; Matroska, WebM, MPEG-TS and NUT stream as they are; raw frames need --size)",
+                _ => "",
+            };
+            bail!("ffmpeg could not decode it: {}{hint}", first_line(&err));
+        }
+    };
+    if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
+        bail!("the video is {width} x {height} pixels; at most {MAX_SIDE} a side");
+    }
+    Ok(Decoding { child: decode, clock: clock_rx, stderr: dec_err, frames: from, pumping, tb, width, height })
+}
+
+/// An encoder running (none where raw frames go to standard output): ffmpeg (ended when
+/// dropped), where the frames are written, what it prints, and the temporary file beside the
+/// output that it writes (persisted when the run succeeds) with the output's ending.
+struct Encoder {
+    child: Option<Reaped>,
+    to: Box<dyn Write + Send>,
+    stderr: std::thread::JoinHandle<Vec<u8>>,
+    tmp: Option<campro_eval::atomic::Temporary>,
+    ext: String,
+}
+
+/// Starts the encoder of `width` x `height` frames for `sink` (`raw_out`: none, the frames
+/// go to standard output as they are); says when 4:2:0 pads an odd size.
+fn start_encoder(
+    job: &Job,
+    source: &Source,
+    sink: &Sink,
+    (width, height): (u32, u32),
+    sixteen: bool,
+    raw_out: bool,
+    warn: &dyn Fn(&str),
+) -> Result<Encoder> {
+    let padded = (job.enc.subsampled() && !raw_out) || matches!(sink, Sink::Device(_));
+    if padded && (width % 2 == 1 || height % 2 == 1) {
+        warn(&format!(
+            "{width} x {height}: 4:2:0 video holds even sizes only; written as {} x {} (the last column or row repeated); --codec ffv1 keeps the size",
+            width + width % 2,
+            height + height % 2
+        ));
+    }
+    let ext = match sink {
+        Sink::File(o) => o.extension().and_then(|e| e.to_str()).unwrap_or("mkv").to_string(),
+        _ => "mkv".into(),
+    };
+    let tmp = match sink {
+        Sink::File(o) => Some(
+            campro_eval::atomic::temporary_beside(o, &format!(".{ext}")).with_context(|| o.display().to_string())?,
+        ),
+        _ => None,
+    };
+    let mut encode = if raw_out {
+        None
+    } else {
+        let mut cmd = encoder(job, source, sink, tmp.as_ref().map(|t| t.path()), (width, height), sixteen)?;
+        Some(spawn(&mut cmd, "encode")?)
+    };
+    let to: Box<dyn Write + Send> = match &mut encode {
+        Some(e) => Box::new(e.stdin.take().expect("piped")),
+        None => Box::new(std::io::stdout()),
+    };
+    let enc_err = drain(encode.as_mut().and_then(|e| e.stderr.take()));
+    Ok(Encoder { child: encode, to, stderr: enc_err, tmp, ext })
+}
+
 /// Simulates the camera on `source` into `sink` (an output file the caller checked).
 pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) -> Result<Outcome> {
     let grey_before = job.capture.grey.allowed.load(std::sync::atomic::Ordering::Relaxed);
@@ -681,39 +788,9 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         warn("--codec rawvideo writes 16-bit frames as rgb48le");
     }
     let started = std::time::Instant::now();
-    let mut decode = spawn(&mut decoder(source, sixteen)?, "decode")?;
-    let (clock_tx, clock_rx) = mpsc::channel();
-    let dec_err = clock(decode.stderr.take().expect("piped"), clock_tx);
-    // Stdout is drained from now on, before the first timestamp: see `pump`.
-    let (chunks, pumping) = pump(decode.stdout.take().expect("piped"));
-    let mut from = Pumped { rx: chunks, chunk: Vec::new(), at: 0 };
-    // The size and time base arrive with the first decoded frame.
     let stall = source.stall();
-    let first = match stall {
-        Some(limit) => clock_rx.recv_timeout(limit).map_err(|e| e == mpsc::RecvTimeoutError::Timeout),
-        None => clock_rx.recv().map_err(|_| false),
-    };
-    let (tb, width, height) = match first {
-        Ok(Clock::Header { tb, width, height }) => (tb, width, height),
-        Err(true) => {
-            drop(decode);
-            bail!("{} gave no frame in {} s (--stall)", source.shown(), stall.unwrap_or_default().as_secs());
-        }
-        _ => {
-            // Ended (killed and reaped) before its stderr is read to its end.
-            drop(decode);
-            let err = dec_err.join().unwrap_or_default();
-            let hint = match source {
-                Source::Stdin(_) => " (from a pipe, MP4 and MOV need their index first, ffmpeg -movflags +faststart; Matroska, WebM, MPEG-TS and NUT stream as they are; raw frames need --size)",
-                _ => "",
-            };
-            bail!("ffmpeg could not decode it: {}{hint}", first_line(&err));
-        }
-    };
-    // From here every early return ends the decoder as `decode` drops.
-    if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
-        bail!("the video is {width} x {height} pixels; at most {MAX_SIDE} a side");
-    }
+    let Decoding { child: mut decode, clock: clock_rx, stderr: dec_err, frames: mut from, pumping, tb, width, height } =
+        start_decoding(source, sixteen)?;
     // Frames the camera stage takes at once, and the frames in flight around it.
     let batch_max = if job.capture.enhancer.is_some() && !sixteen { rayon::current_num_threads().max(1) } else { 1 };
     let in_flight = IN_FLIGHT.max(batch_max + 2);
@@ -732,35 +809,8 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
             budget.total() >> 20
         );
     };
-    let padded = (job.enc.subsampled() && !raw_out) || matches!(sink, Sink::Device(_));
-    if padded && (width % 2 == 1 || height % 2 == 1) {
-        warn(&format!(
-            "{width} x {height}: 4:2:0 video holds even sizes only; written as {} x {} (the last column or row repeated); --codec ffv1 keeps the size",
-            width + width % 2,
-            height + height % 2
-        ));
-    }
-    let ext = match sink {
-        Sink::File(o) => o.extension().and_then(|e| e.to_str()).unwrap_or("mkv").to_string(),
-        _ => "mkv".into(),
-    };
-    let tmp = match sink {
-        Sink::File(o) => Some(
-            campro_eval::atomic::temporary_beside(o, &format!(".{ext}")).with_context(|| o.display().to_string())?,
-        ),
-        _ => None,
-    };
-    let mut encode = if raw_out {
-        None
-    } else {
-        let mut cmd = encoder(job, source, sink, tmp.as_ref().map(|t| t.path()), (width, height), sixteen)?;
-        Some(spawn(&mut cmd, "encode")?)
-    };
-    let mut to: Box<dyn Write + Send> = match &mut encode {
-        Some(e) => Box::new(e.stdin.take().expect("piped")),
-        None => Box::new(std::io::stdout()),
-    };
-    let enc_err = drain(encode.as_mut().and_then(|e| e.stderr.take()));
+    let Encoder { child: encode, mut to, stderr: enc_err, tmp, ext } =
+        start_encoder(job, source, sink, (width, height), sixteen, raw_out, warn)?;
     let bar = match probe.as_ref().and_then(|p| p.frames) {
         Some(n) => indicatif::ProgressBar::new(job.max_frames.map_or(n, |m| m.min(n))),
         None => indicatif::ProgressBar::no_length(),

@@ -86,19 +86,17 @@ impl Elision {
     }
 }
 
-/// Whether the AVX2 engine beats the scalar tables on this CPU: both timed once per
-/// process on 16,384 pixels of a fixed scene through a fixed steep preset (best of three,
-/// about a millisecond in all). Either is bit-identical, so the choice changes speed only.
-fn gathers_pay() -> bool {
+/// Whether the AVX2 engine beats the scalar tables on this CPU: `tables` (the first
+/// `Exact8` of the process) run on both over 16,384 pixels of a fixed scene (best of three,
+/// about a millisecond in all), once per process. Either is bit-identical, so the choice
+/// changes speed only.
+fn gathers_pay(tables: &Exact8) -> bool {
     static PAYS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     *PAYS.get_or_init(|| {
-        let curve = ToneCurve::from_fn(32, |t| 0.5 + 0.45 * (9.0 * t).sin());
-        let m = [[1.2, -0.3, 0.1], [-0.2, 1.1, 0.1], [0.1, -0.4, 1.3]];
-        let Ok(p) = Params::new(m, curve, 2.2) else { return false };
         let src: Vec<u8> = (0..3 * 16384u32).map(|i| (i.wrapping_mul(2654435761) >> 24) as u8).collect();
         let mut dst = vec![0u8; src.len()];
-        let mut time = |e: Engine| {
-            let Some(x) = Exact8::build(&p, Some(e)) else { return f64::INFINITY };
+        let mut time = |engine: Engine| {
+            let x = Exact8 { engine, ..tables.clone() };
             (0..3)
                 .map(|_| {
                     let t = std::time::Instant::now();
@@ -202,12 +200,6 @@ impl<'a> Exact8<'a> {
     /// Builds the tables (about a millisecond) for the engine [`ENGINE_VARIABLE`] asks for
     /// where it runs here, else the fastest here.
     pub fn new(params: &'a Params) -> Self {
-        Self::build(params, None).expect("the scalar engine runs everywhere")
-    }
-
-    /// The tables on `engine` (None: the choice of [`Exact8::new`]); None where it does
-    /// not run.
-    fn build(params: &'a Params, engine: Option<Engine>) -> Option<Self> {
         let reference = Prepared::new(params, Depth::Eight);
         let d: Vec<f64> = (0..256).map(|c| degamma(c as f64 / 255.0, params.degamma)).collect();
         let m = &params.ccm;
@@ -240,29 +232,22 @@ impl<'a> Exact8<'a> {
         // The engine asked for where it runs here, else AVX-512 where it runs, else the
         // faster of AVX2 and the scalar tables on this CPU (gathers are slower than scalar
         // loads on some: AMD Zen 1 takes 1.4x as long with them).
-        if let Some(fixed) = engine {
-            return e.with_engine(fixed);
-        }
         let asked = Engine::from_env().ok().flatten().filter(|&a| e.runs(a));
         e.engine = match asked {
             Some(a) => a,
             None if e.runs(Engine::Avx512) => Engine::Avx512,
-            None if e.runs(Engine::Avx2) && gathers_pay() => Engine::Avx2,
+            None if e.runs(Engine::Avx2) && gathers_pay(&e) => Engine::Avx2,
             None => Engine::Scalar,
         };
-        Some(e)
+        e
     }
 
     /// Whether `engine` runs on this CPU for these parameters.
     pub fn runs(&self, engine: Engine) -> bool {
         match engine {
-            Engine::Scalar => true,
-            #[cfg(target_arch = "x86_64")]
-            Engine::Avx2 => avx2::available(),
             #[cfg(target_arch = "x86_64")]
             Engine::Avx512 => self.simd.is_some(),
-            #[cfg(not(target_arch = "x86_64"))]
-            _ => false,
+            other => other.runs_here(),
         }
     }
 

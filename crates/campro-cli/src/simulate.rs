@@ -448,11 +448,6 @@ fn stream(capture: &Capture, source: &Source, sink: &Sink, o: &Options, pool: &r
     if o.record.is_some() {
         bail!("--record: a record holds its input's hash, and standard input, a camera or a network stream is no file; simulate a file, or record the stream to a file first");
     }
-    if let (Source::File(i), Sink::File(f)) = (source, sink) {
-        if file_key(i) == file_key(f) {
-            bail!("--output: writing {} would replace its input", crate::shown(f));
-        }
-    }
     let job = video::Job {
         capture,
         enc: o.enc,

@@ -17,6 +17,14 @@ pub struct Face {
     pub landmarks: [[f32; 2]; 5],
 }
 
+impl Face {
+    /// The same face with every point (box corners, landmarks) mapped by `f`.
+    pub fn mapped(self, f: impl Fn([f32; 2]) -> [f32; 2]) -> Face {
+        let ([x0, y0], [x1, y1]) = (f([self.bbox[0], self.bbox[1]]), f([self.bbox[2], self.bbox[3]]));
+        Face { bbox: [x0, y0, x1, y1], score: self.score, landmarks: self.landmarks.map(&f) }
+    }
+}
+
 /// Decodes one stride of a YuNet head (`n = cols · rows` anchors, row-major) into `out`:
 /// score = sqrt(clamp(cls)·clamp(obj)); centre = (col + dx, row + dy)·s; size = exp(dw, dh)·s;
 /// landmark k = (col + kx, row + ky)·s.
@@ -89,10 +97,35 @@ impl FaceDetector {
     pub fn detect_scaled(&self, img: &RgbImage, scale: f64, threshold: f32) -> Result<Vec<Face>> {
         let (iw, ih) = self.input_size();
         let canvas = letterbox(img, iw as u32, ih as u32, scale, 0);
-        let out = self.model.run(&canvas)?;
+        let faces = self.decode(&self.model.run(&canvas)?, (iw, ih), threshold)?;
+        let inv = (1.0 / scale) as f32;
+        Ok(faces.into_iter().map(|f| f.mapped(|p| [p[0] * inv, p[1] * inv])).collect())
+    }
+
+    /// Every face scoring at least `threshold` in the `[x, y, w, h]` region of `img`, the
+    /// network run at the region's size rounded up to a multiple of its largest stride
+    /// (black beyond the region, as [`Self::detect_scaled`] pads), in `img`'s pixels,
+    /// before NMS. The detector must be fully convolutional (YuNet is: its heads are
+    /// reshaped to `-1` anchors); each size is planned once ([`Model::run_sized`]).
+    pub fn detect_region(&self, img: &RgbImage, region: [u32; 4], threshold: f32) -> Result<Vec<Face>> {
+        let [x, y, w, h] = region;
+        let (cw, ch) = (self.canvas_side(w as usize), self.canvas_side(h as usize));
+        let out = self.model.run_sized(self.model.region_tensor(img, region, (cw, ch)))?;
+        let faces = self.decode(&out, (cw, ch), threshold)?;
+        Ok(faces.into_iter().map(|f| f.mapped(|p| [p[0] + x as f32, p[1] + y as f32])).collect())
+    }
+
+    /// `len` pixels rounded up to a multiple of the largest stride (at least one stride).
+    pub fn canvas_side(&self, len: usize) -> usize {
+        let s = self.strides.iter().copied().max().unwrap_or(1).max(1);
+        len.div_ceil(s).max(1) * s
+    }
+
+    /// The faces of one run on a `cw` x `ch` canvas, in its pixels.
+    fn decode(&self, out: &crate::model::Outputs, (cw, ch): (usize, usize), threshold: f32) -> Result<Vec<Face>> {
         let mut faces = Vec::new();
         for &s in &self.strides {
-            let (cols, rows) = (iw / s, ih / s);
+            let (cols, rows) = (cw / s, ch / s);
             let n = cols * rows;
             decode_yunet_stride(
                 s,
@@ -105,15 +138,7 @@ impl FaceDetector {
                 &mut faces,
             );
         }
-        let inv = (1.0 / scale) as f32;
-        Ok(faces
-            .into_iter()
-            .map(|f| Face {
-                bbox: f.bbox.map(|v| v * inv),
-                score: f.score,
-                landmarks: f.landmarks.map(|p| [p[0] * inv, p[1] * inv]),
-            })
-            .collect())
+        Ok(faces)
     }
 
     /// `faces` after non-maximum suppression at the manifest's IoU, best first.

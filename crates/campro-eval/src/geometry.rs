@@ -35,15 +35,42 @@ fn to_u8(v: f64) -> u8 {
 }
 
 /// Resizes with bilinear interpolation and half-pixel centres (as OpenCV's INTER_LINEAR;
-/// edge pixels are replicated).
+/// edge pixels are replicated). The same f64 arithmetic as [`sample_bilinear`] at each
+/// pixel's source point, so the same bytes, with the columns' and rows' source points and
+/// weights computed once.
 pub fn resize_bilinear(img: &RgbImage, width: u32, height: u32) -> RgbImage {
-    let (sx, sy) = (img.width() as f64 / width as f64, img.height() as f64 / height as f64);
-    let (mx, my) = (img.width() as f64 - 1.0, img.height() as f64 - 1.0);
-    RgbImage::from_fn(width, height, |x, y| {
-        let u = ((x as f64 + 0.5) * sx - 0.5).clamp(0.0, mx);
-        let v = ((y as f64 + 0.5) * sy - 0.5).clamp(0.0, my);
-        Rgb(sample_bilinear(img, u, v, [0; 3]).map(to_u8))
-    })
+    let (iw, ih) = (img.width() as usize, img.height() as usize);
+    if iw == 0 || ih == 0 {
+        return RgbImage::new(width, height);
+    }
+    // Along one axis: the first source index, the next one (the same at the far edge,
+    // where the weight is 0) and the weight of the next.
+    let taps = |out: u32, len: usize| -> Vec<(usize, usize, f64)> {
+        let (scale, max) = (len as f64 / out as f64, len as f64 - 1.0);
+        (0..out)
+            .map(|o| {
+                let u = ((o as f64 + 0.5) * scale - 0.5).clamp(0.0, max);
+                let i = u.floor();
+                (i as usize, (i as usize + 1).min(len - 1), u - i)
+            })
+            .collect()
+    };
+    let (xs, ys) = (taps(width, iw), taps(height, ih));
+    let (raw, stride) = (img.as_raw(), iw * 3);
+    let mut out = vec![0u8; width as usize * height as usize * 3];
+    for (row, &(y0, y1, fy)) in out.chunks_exact_mut(width as usize * 3).zip(&ys) {
+        let (r0, r1) = (&raw[y0 * stride..][..stride], &raw[y1 * stride..][..stride]);
+        for (px, &(x0, x1, fx)) in row.chunks_exact_mut(3).zip(&xs) {
+            for k in 0..3 {
+                let (a, b) = (r0[x0 * 3 + k] as f64, r0[x1 * 3 + k] as f64);
+                let (c, d) = (r1[x0 * 3 + k] as f64, r1[x1 * 3 + k] as f64);
+                let top = a + (b - a) * fx;
+                let bot = c + (d - c) * fx;
+                px[k] = to_u8(top + (bot - top) * fy);
+            }
+        }
+    }
+    RgbImage::from_raw(width, height, out).expect("width x height x 3 bytes")
 }
 
 /// The size (width, height) the image of `dims` takes on a [`letterbox`] canvas.
@@ -193,5 +220,27 @@ mod tests {
         assert_eq!(up.get_pixel(3, 0).0[0], 13);
         assert_eq!(up.get_pixel(0, 0).0[0], 0); // clamped at the edge
         assert_eq!(up.get_pixel(15, 0).0[0], 70);
+    }
+
+    #[test]
+    fn bilinear_resize_samples_every_pixel_at_its_source_point() {
+        // The second implementation: sample_bilinear at each output pixel's source point
+        // (clamped into the image), rounded, on noise, up, down and across both.
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let img = RgbImage::from_fn(37, 23, |_, _| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            Rgb([state as u8, (state >> 8) as u8, (state >> 16) as u8])
+        });
+        for (w, h) in [(59, 37), (16, 11), (37, 23), (60, 9), (1, 1), (100, 1)] {
+            let got = resize_bilinear(&img, w, h);
+            let (sx, sy) = (37.0 / w as f64, 23.0 / h as f64);
+            for (x, y, p) in got.enumerate_pixels() {
+                let u = ((x as f64 + 0.5) * sx - 0.5).clamp(0.0, 36.0);
+                let v = ((y as f64 + 0.5) * sy - 0.5).clamp(0.0, 22.0);
+                assert_eq!(p.0, sample_bilinear(&img, u, v, [0; 3]).map(to_u8), "{w} x {h} at ({x}, {y})");
+            }
+        }
     }
 }

@@ -11,13 +11,14 @@
 //! faces from about [`NATIVE_MIN_FACE`] pixels wide at the scale it is shown. So the image
 //! is searched on a pyramid: first enlarged so that a [`MIN_FACE`]-pixel face becomes a
 //! [`NATIVE_MIN_FACE`]-pixel one, then halved level after level until the whole image fits
-//! one input. Each level is cut into input-sized tiles overlapping by [`OVERLAP`] pixels,
-//! so every face up to that size lies whole in one tile, and larger ones are whole at a
-//! later level (where they are half as big); so a level keeps only its finds up to that
-//! size (the last level, the whole image, keeps every size): larger finds at the fine
-//! levels were textures, not faces. Edges: tiles are placed inside the level
-//! image; the last tile of a row or column is aligned to its far edge, and a level smaller
-//! than the input is padded with black (the detector's own letterbox).
+//! one input. Each level is cut into tiles of at most [`TILE`] pixels overlapping by
+//! [`OVERLAP`] pixels, so every face up to that size lies whole in one tile, and larger ones
+//! are whole at a later level (where they are half as big); so a level keeps only its finds
+//! up to that size (the last level, the whole image, keeps every size): larger finds at the
+//! fine levels were textures, not faces. The detector is fully convolutional and runs on a
+//! whole tile at once, at the tile's size rounded up to a multiple of its largest stride.
+//! Edges: tiles are placed inside the level image, the last of a row or column aligned to
+//! its far edge; the rounding pads a tile with black (the detector's own letterbox).
 
 use crate::enhance::Enhancer;
 use crate::error::Result;
@@ -30,10 +31,21 @@ use serde::Serialize;
 /// Smallest face the guard promises to find, pixels of width in the image it checks.
 pub const MIN_FACE: f64 = 10.0;
 /// The face width (pixels, at the scale shown to the detector) from which YuNet finds
-/// faces reliably; the pyramid's first level enlarges [`MIN_FACE`] to it.
+/// faces reliably; the pyramid's first level enlarges [`MIN_FACE`] to it. Measured on LFW
+/// faces pasted into a 1280 x 720 COCO scene (`docs/enhancer.md`, "The guard's cost"): at
+/// the image's own scale YuNet found 93.0% of 10-pixel and 94.7% of 11-pixel faces, at 1.6x
+/// all 612 and 525 of 528; from 12 pixels 99.3% and more either way.
 pub const NATIVE_MIN_FACE: f64 = 16.0;
 /// Overlap of neighbouring tiles of a level, pixels of that level.
 pub const OVERLAP: usize = 160;
+/// Largest tile, pixels of its level (width, height): the detector runs on a whole tile at
+/// once (its size rounded up to a multiple of 32), so a 720p frame's enlarged level (2048 x
+/// 1152) is two tiles of 2048 x 656, not eight of 640 x 640. Wide and at most 1.5 million
+/// pixels because that is where tract runs YuNet fastest here (one thread: 141–162 ms a
+/// million pixels for 1104 x 672 to 2048 x 720; 255–265 for tiles taller than wide such as
+/// 1120 x 1152, 198–211 from 2.4 million pixels). YuNet holds about 100 bytes a pixel it runs
+/// on (a 2048 x 1152 input peaked at 236 MB resident), so a tile about 150 MB.
+pub const TILE: (usize, usize) = (2048, 720);
 /// Detection score from which the guard hides a region: below the detector's own
 /// threshold (0.6 for YuNet), since a miss shows a face and a false alarm only pixelates
 /// a patch of background.
@@ -89,63 +101,67 @@ impl FaceGuard {
     /// Every face scoring at least [`THRESHOLD`] at any scale of the pyramid (module docs),
     /// in `img`'s pixels, before suppression (overlapping finds all kept).
     pub fn find(&self, img: &RgbImage) -> Result<Vec<Face>> {
-        let (w, h) = img.dimensions();
-        if w as u64 * h as u64 > MAX_PIXELS {
-            return Err(crate::EvalError::Invalid(format!(
-                "the face guard checks images of at most {MAX_PIXELS} pixels; this one is {w} x {h}"
-            )));
+        self.find_all(&[img])
+    }
+
+    /// [`Self::find`] over several images (of the same scene: their finds together), their
+    /// pyramid levels and tiles one pool of work.
+    pub fn find_all(&self, images: &[&RgbImage]) -> Result<Vec<Face>> {
+        for img in images {
+            let (w, h) = img.dimensions();
+            if w as u64 * h as u64 > MAX_PIXELS {
+                return Err(crate::EvalError::Invalid(format!(
+                    "the face guard checks images of at most {MAX_PIXELS} pixels; this one is {w} x {h}"
+                )));
+            }
         }
         let (iw, ih) = self.detector.input_size();
-        let levels: Vec<(f64, RgbImage)> = pyramid(w, h, iw, ih)
-            .into_par_iter()
-            .map(|s| {
-                let (lw, lh) = level_size(w, h, s);
-                (s, if (lw, lh) == (w, h) { img.clone() } else { resize_bilinear(img, lw, lh) })
-            })
-            .collect();
-        let jobs: Vec<(usize, u32, u32)> = levels
+        // (image, scale, whether it is the image's last level)
+        let wanted: Vec<(usize, f64, bool)> = images
             .iter()
             .enumerate()
-            .flat_map(|(l, (_, level))| {
-                let (lw, lh) = (level.width() as usize, level.height() as usize);
-                tiles(lw, iw)
-                    .into_iter()
-                    .flat_map(move |x| tiles(lh, ih).into_iter().map(move |y| (l, x as u32, y as u32)))
+            .flat_map(|(k, img)| {
+                let scales = pyramid(img.width(), img.height(), iw, ih);
+                let n = scales.len();
+                scales.into_iter().enumerate().map(move |(l, s)| (k, s, l + 1 == n))
             })
+            .collect();
+        let levels: Vec<RgbImage> = wanted
+            .par_iter()
+            .map(|&(k, s, _)| {
+                let img = images[k];
+                let (lw, lh) = level_size(img.width(), img.height(), s);
+                if (lw, lh) == img.dimensions() {
+                    img.clone()
+                } else {
+                    resize_bilinear(img, lw, lh)
+                }
+            })
+            .collect();
+        let jobs: Vec<(usize, [u32; 4])> = levels
+            .iter()
+            .enumerate()
+            .flat_map(|(l, level)| {
+                let (xs, ys) = (tiles(level.width() as usize, TILE.0), tiles(level.height() as usize, TILE.1));
+                xs.into_iter().flat_map(move |(x, w)| ys.clone().into_iter().map(move |(y, h)| (l, [x, y, w, h])))
+            })
+            .map(|(l, [x, y, w, h])| (l, [x as u32, y as u32, w as u32, h as u32]))
             .collect();
         let found = jobs
             .par_iter()
-            .map(|&(l, x, y)| {
-                let (s, level) = (levels[l].0, &levels[l].1);
-                let tile = image::imageops::crop_imm(
-                    level,
-                    x,
-                    y,
-                    (iw as u32).min(level.width() - x),
-                    (ih as u32).min(level.height() - y),
-                )
-                .to_image();
+            .map(|&(l, region)| {
+                let (_, s, last) = wanted[l];
                 let inv = (1.0 / s) as f32;
                 // A level answers for faces up to OVERLAP pixels (whole in one of its
                 // tiles); bigger ones are the next level's, where they are half as big, and
                 // bigger finds here were textures (300-pixel "faces" on enhanced walls).
                 // The last level, the whole image, answers for every size.
-                let last = l + 1 == levels.len();
                 Ok(self
                     .detector
-                    .detect_scaled(&tile, 1.0, THRESHOLD)?
+                    .detect_region(&levels[l], region, THRESHOLD)?
                     .into_iter()
                     .filter(|f| last || (f.bbox[2] - f.bbox[0]).max(f.bbox[3] - f.bbox[1]) <= OVERLAP as f32)
-                    .map(|f| Face {
-                        bbox: [
-                            (f.bbox[0] + x as f32) * inv,
-                            (f.bbox[1] + y as f32) * inv,
-                            (f.bbox[2] + x as f32) * inv,
-                            (f.bbox[3] + y as f32) * inv,
-                        ],
-                        score: f.score,
-                        landmarks: f.landmarks.map(|p| [(p[0] + x as f32) * inv, (p[1] + y as f32) * inv]),
-                    })
+                    .map(|f| f.mapped(|p| [p[0] * inv, p[1] * inv]))
                     .collect::<Vec<_>>())
             })
             .collect::<Result<Vec<_>>>()?;
@@ -162,8 +178,7 @@ impl FaceGuard {
                 shown.dimensions()
             )));
         }
-        let mut faces = self.find(shown)?;
-        faces.extend(self.find(captured)?);
+        let faces = self.find_all(&[shown, captured])?;
         let hidden: Vec<[u32; 4]> =
             faces.iter().filter_map(|f| widened(f.bbox, shown.width(), shown.height())).collect();
         for (f, r) in faces.iter().zip(&hidden) {
@@ -226,15 +241,19 @@ fn level_size(w: u32, h: u32, s: f64) -> (u32, u32) {
     (((w as f64 * s).round() as u32).max(1), ((h as f64 * s).round() as u32).max(1))
 }
 
-/// Tile origins along a side of `len` pixels for tiles of `tile` pixels overlapping by
-/// [`OVERLAP`]: 0, then steps of `tile - OVERLAP`, the last aligned to the far edge.
-pub fn tiles(len: usize, tile: usize) -> Vec<usize> {
-    if len <= tile {
-        return vec![0];
+/// Tiles along a side of `len` pixels, as (origin, length): as few as fit in `max` pixels
+/// each (more than [`OVERLAP`]) with neighbours overlapping by at least [`OVERLAP`], all of
+/// one length (the last aligned to the far edge), so a level's tiles share one planned
+/// network size.
+pub fn tiles(len: usize, max: usize) -> Vec<(usize, usize)> {
+    if len <= max {
+        return vec![(0, len)];
     }
-    let step = tile.saturating_sub(OVERLAP).max(1);
-    let mut out: Vec<usize> = (0..).map(|i| i * step).take_while(|&x| x + tile < len).collect();
-    out.push(len - tile);
+    let n = (len - OVERLAP).div_ceil(max - OVERLAP);
+    let side = (len + (n - 1) * OVERLAP).div_ceil(n);
+    let step = side - OVERLAP;
+    let mut out: Vec<(usize, usize)> = (0..n - 1).map(|i| (i * step, side)).collect();
+    out.push((len - side, side));
     out
 }
 
@@ -302,16 +321,24 @@ mod tests {
 
     #[test]
     fn tiles_cover_the_side_with_overlap() {
-        assert_eq!(tiles(500, 640), vec![0]);
-        assert_eq!(tiles(640, 640), vec![0]);
-        // step 480: 0, 480, then the far edge 1280 - 640 = 640.
-        assert_eq!(tiles(1280, 640), vec![0, 480, 640]);
-        // Every pixel is covered and neighbours overlap by at least OVERLAP.
-        for len in [641, 1000, 1919, 4032] {
-            let t = tiles(len, 640);
-            assert_eq!(*t.last().unwrap() + 640, len);
-            for w in t.windows(2) {
-                assert!(w[0] + 640 >= w[1] + OVERLAP, "{len}: {t:?}");
+        assert_eq!(tiles(500, 640), vec![(0, 500)]);
+        assert_eq!(tiles(720, 720), vec![(0, 720)]);
+        // 1152 (a 720p frame's enlarged height) in 720: two tiles of (1152 + 160) / 2 = 656.
+        assert_eq!(tiles(1152, 720), vec![(0, 656), (496, 656)]);
+        // 4032 + 160 * 3 over four tiles of at most 1280: 1128, stepping 968.
+        assert_eq!(tiles(4032, 1280), vec![(0, 1128), (968, 1128), (1936, 1128), (2904, 1128)]);
+        // Every pixel is covered, neighbours overlap by at least OVERLAP, no tile is longer
+        // than the limit, and no fewer tiles would do.
+        for max in [640, 720, 2048] {
+            for len in [1, 721, 1281, 1440, 1919, 2433, 4032, 6144, 9999] {
+                let t = tiles(len, max);
+                assert_eq!(t[0].0, 0);
+                assert_eq!(t.last().unwrap().0 + t.last().unwrap().1, len);
+                assert!(t.iter().all(|&(_, side)| side <= max && side == t[0].1), "{len}: {t:?}");
+                for w in t.windows(2) {
+                    assert!(w[0].0 + w[0].1 >= w[1].0 + OVERLAP, "{len}: {t:?}");
+                }
+                assert!(t.len() == 1 || (t.len() - 1) * max - (t.len() - 2) * OVERLAP < len, "{len}: {t:?}");
             }
         }
     }

@@ -3,47 +3,64 @@
 use crate::error::{EvalError, Result};
 use crate::manifest::{Channels, Manifest};
 use image::RgbImage;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
 use tract_onnx::prelude::*;
+
+/// Largest model file read (bytes): the bundled manifests' models are at most 5 MB.
+pub const MAX_FILE: u64 = 64 << 20;
+
+/// Plans kept per model for sizes other than the manifest's ([`Model::run_sized`]): a video
+/// has one size a pyramid level, a photo folder a few; beyond this the oldest is dropped.
+pub const SIZED_PLANS: usize = 12;
 
 /// A loaded, optimised model plus its manifest. Cheap to share across threads (`run` takes
 /// `&self`).
 pub struct Model {
     pub manifest: Manifest,
-    plan: std::sync::Arc<TypedSimplePlan>,
+    plan: Arc<TypedSimplePlan>,
     outputs: Vec<String>,
+    /// The graph without its recorded intermediate shapes, planned again for other input
+    /// sizes by [`Model::run_sized`] (fully convolutional models only).
+    source: InferenceModel,
+    /// Plans by input (height, width), oldest first, at most [`SIZED_PLANS`].
+    sized: Mutex<Vec<((usize, usize), Arc<TypedSimplePlan>)>>,
 }
 
 impl Model {
-    /// Loads and optimises the model for its manifest's input size (batch 1).
+    /// Loads (at most [`MAX_FILE`] bytes, a regular file) and optimises the model for its
+    /// manifest's input size (batch 1).
     pub fn load(manifest: Manifest) -> Result<Self> {
         let path = manifest.file.clone();
-        let err = |e: TractError| EvalError::Model { path: path.clone(), message: format!("{e:#}") };
         if !path.is_file() {
             return Err(EvalError::Model { path: path.clone(), message: "file not found".into() });
         }
-        let shape = [1, 3, manifest.input.height, manifest.input.width];
-        // tract can panic on a model whose fixed reshapes disagree with the input size:
-        // keep that from escaping as a panic.
-        let built = std::panic::catch_unwind(|| -> TractResult<(std::sync::Arc<TypedSimplePlan>, Vec<String>)> {
-            let model = tract_onnx::onnx().model_for_path(&manifest.file)?;
+        let bytes = campro::file::read_capped(&path, MAX_FILE, "a model (ONNX)")
+            .map_err(|e| EvalError::Model { path: path.clone(), message: e.reason() })?;
+        let err = |e: TractError| EvalError::Model { path: path.clone(), message: format!("{e:#}") };
+        let onnx = tract_onnx::onnx();
+        let mut proto = onnx.proto_model_for_read(&mut &bytes[..]).map_err(err)?;
+        let (model, outputs) = guarded(&path, || {
+            let model = onnx.model_for_proto_model(&proto)?;
             let outputs = model
                 .output_outlets()?
                 .iter()
                 .map(|o| model.outlet_label(*o).map(str::to_string).unwrap_or_else(|| model.node(o.node).name.clone()))
-                .collect();
-            let plan = model.with_input_fact(0, f32::fact(shape).into())?.into_optimized()?.into_runnable()?;
-            Ok((plan, outputs))
-        });
-        let (plan, outputs) = match built {
-            Ok(r) => r.map_err(err)?,
-            Err(_) => {
-                return Err(EvalError::Model {
-                    path,
-                    message: format!("cannot be run at input 1x3x{}x{} (tract refused the shapes)", shape[2], shape[3]),
-                })
+                .collect::<Vec<_>>();
+            Ok((model, outputs))
+        })?;
+        let (h, w) = (manifest.input.height, manifest.input.width);
+        let plan = plan_at(&path, model, h, w)?;
+        // The recorded shapes of intermediate values and outputs hold the manifest's size;
+        // without them tract infers every shape from the input given.
+        if let Some(g) = proto.graph.as_mut() {
+            g.value_info.clear();
+            for o in &mut g.output {
+                o.r#type = None;
             }
-        };
-        Ok(Self { manifest, plan, outputs })
+        }
+        let source = guarded(&path, || onnx.model_for_proto_model(&proto))?;
+        Ok(Self { manifest, plan, outputs, source, sized: Mutex::new(Vec::new()) })
     }
 
     /// The input tensor for an image of exactly the manifest's size.
@@ -54,35 +71,110 @@ impl Model {
             (i.width, i.height),
             "image not resized for the model"
         );
+        self.region_tensor(img, [0, 0, img.width(), img.height()], (i.width, i.height))
+    }
+
+    /// The input tensor of a `cw` x `ch` canvas holding the `[x, y, w, h]` region of `img` at
+    /// its top-left (clipped to the canvas), black (0 before normalisation) elsewhere.
+    pub fn region_tensor(&self, img: &RgbImage, [x, y, w, h]: [u32; 4], (cw, ch): (usize, usize)) -> Tensor {
+        let i = &self.manifest.input;
         let order = match i.channels {
             Channels::Rgb => [0, 1, 2],
             Channels::Bgr => [2, 1, 0],
         };
-        let (w, h) = (i.width, i.height);
-        let mut data = vec![0f32; 3 * w * h];
+        let w = (w.min(img.width().saturating_sub(x)) as usize).min(cw);
+        let h = (h.min(img.height().saturating_sub(y)) as usize).min(ch);
+        let (stride, raw) = (img.width() as usize * 3, img.as_raw());
+        let mut data = vec![0f32; 3 * cw * ch];
         for (c, &src) in order.iter().enumerate() {
             let (m, s) = (i.mean[c], i.std[c]);
-            let plane = &mut data[c * w * h..(c + 1) * w * h];
-            for (d, p) in plane.iter_mut().zip(img.pixels()) {
-                *d = (p.0[src] as f32 - m) / s;
+            let plane = &mut data[c * cw * ch..(c + 1) * cw * ch];
+            plane.fill((0.0 - m) / s);
+            for row in 0..h {
+                let from = &raw[(y as usize + row) * stride + x as usize * 3..][..w * 3];
+                for (d, p) in plane[row * cw..row * cw + w].iter_mut().zip(from.chunks_exact(3)) {
+                    *d = (p[src] as f32 - m) / s;
+                }
             }
         }
-        Tensor::from_shape(&[1, 3, h, w], &data).expect("shape matches data")
+        Tensor::from_shape(&[1, 3, ch, cw], &data).expect("shape matches data")
     }
 
     /// Runs the model on a ready image; outputs by name.
     pub fn run(&self, img: &RgbImage) -> Result<Outputs> {
-        let out = self
-            .plan
-            .run(tvec!(self.tensor(img).into()))
-            .map_err(|e| EvalError::Model { path: self.manifest.file.clone(), message: format!("{e:#}") })?;
+        self.run_sized(self.tensor(img))
+    }
+
+    /// Runs the model on a `1 x 3 x h x w` input of any size its graph accepts (a fully
+    /// convolutional detector: sides multiples of its largest stride), planned once a size
+    /// and kept ([`SIZED_PLANS`]); the manifest's size uses the plan made at loading.
+    pub fn run_sized(&self, input: Tensor) -> Result<Outputs> {
+        let path = &self.manifest.file;
+        let shape = input.shape().to_vec();
+        let [1, 3, h, w] = shape[..] else {
+            return Err(EvalError::Model {
+                path: path.clone(),
+                message: format!("input of shape {shape:?}, not 1x3xHxW"),
+            });
+        };
+        let plan = if (h, w) == (self.manifest.input.height, self.manifest.input.width) {
+            self.plan.clone()
+        } else {
+            let known = self
+                .sized
+                .lock()
+                .map_err(|_| poisoned(path))?
+                .iter()
+                .find(|(k, _)| *k == (h, w))
+                .map(|(_, p)| p.clone());
+            match known {
+                Some(p) => p,
+                None => {
+                    let p = plan_at(path, self.source.clone(), h, w)?;
+                    let mut sized = self.sized.lock().map_err(|_| poisoned(path))?;
+                    if sized.len() >= SIZED_PLANS {
+                        sized.remove(0);
+                    }
+                    sized.push(((h, w), p.clone()));
+                    p
+                }
+            }
+        };
+        let out = guarded(path, || plan.run(tvec!(input.into())))?;
         release_freed_memory();
         Ok(Outputs {
             names: self.outputs.clone(),
             values: out.into_iter().map(|t| t.into_tensor()).collect(),
-            path: self.manifest.file.clone(),
+            path: path.clone(),
         })
     }
+}
+
+/// `model` typed and optimised for a `1 x 3 x h x w` input.
+fn plan_at(path: &Path, model: InferenceModel, h: usize, w: usize) -> Result<Arc<TypedSimplePlan>> {
+    guarded(path, || model.with_input_fact(0, f32::fact([1, 3, h, w]).into())?.into_optimized()?.into_runnable())
+        .map_err(|e| match e {
+            EvalError::Model { path, message } => {
+                EvalError::Model { path, message: format!("cannot be run at input 1x3x{h}x{w}: {message}") }
+            }
+            e => e,
+        })
+}
+
+/// Runs `f`, a tract call, with its error and any panic as a model error: tract can panic
+/// on a graph whose shapes disagree with the input given, and that must not escape.
+fn guarded<T>(path: &Path, f: impl FnOnce() -> TractResult<T>) -> Result<T> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
+        Ok(r) => r.map_err(|e| EvalError::Model { path: path.to_path_buf(), message: format!("{e:#}") }),
+        Err(_) => Err(EvalError::Model {
+            path: path.to_path_buf(),
+            message: "tract failed on it (the shapes disagree)".into(),
+        }),
+    }
+}
+
+fn poisoned(path: &Path) -> EvalError {
+    EvalError::Model { path: path.to_path_buf(), message: "a run of it failed on another thread".into() }
 }
 
 /// Hands the memory freed by a model run back to the system. tract allocates every

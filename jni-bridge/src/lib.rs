@@ -613,6 +613,16 @@ pub extern "system" fn Java_org_campro_hal_HalNative_desktop<'local>(
     .resolve::<ThrowJava>()
 }
 
+/// Called by the VM when it loads the library, before any native method runs: routes `log`
+/// to logcat on Android (so every entry point's messages reach it from the first call on)
+/// and names the JNI version the bridge needs (1.6). Nothing here can panic across the
+/// boundary: a panic while setting up logging is caught and the library loads without it.
+#[unsafe(no_mangle)]
+pub extern "system" fn JNI_OnLoad(_vm: *mut jni::sys::JavaVM, _reserved: *mut std::ffi::c_void) -> jint {
+    let _ = std::panic::catch_unwind(android::init_logging);
+    jni::sys::JNI_VERSION_1_6
+}
+
 /// `org.campro.TestHooks.selfTestPanic(message: String)`: panics inside a native method,
 /// so the host test can check that the panic arrives as a `RuntimeException` and the
 /// library keeps working. Only in builds with the `test-exports` feature (never in the
@@ -631,12 +641,12 @@ pub extern "system" fn Java_org_campro_TestHooks_selfTestPanic<'local>(
     .resolve::<ThrowJava>()
 }
 
-/// Android-only glue: logging to logcat and reading the APK's assets.
-#[cfg(target_os = "android")]
+/// Android-only glue: logging to logcat and reading the APK's assets. Type-checked on the
+/// host with the `android-check` feature.
+#[cfg(any(target_os = "android", feature = "android-check"))]
 mod android {
     use super::{BridgeError, Result};
     use jni::objects::JObject;
-    use jni::refs::Reference;
     use jni::Env;
     use std::ffi::CString;
     use std::io::Read;
@@ -650,7 +660,6 @@ mod android {
     }
 
     pub fn read_asset(env: &mut Env, manager: &JObject, path: &str) -> Result<Vec<u8>> {
-        init_logging();
         // SAFETY: `manager` is a live local reference to an android.content.res.AssetManager
         // for the duration of this native call, and `env` is this thread's JNIEnv.
         let raw = unsafe { ndk_sys::AAssetManager_fromJava(env.get_raw() as *mut _, manager.as_raw() as _) };
@@ -676,11 +685,14 @@ mod android {
     }
 }
 
-#[cfg(not(target_os = "android"))]
+#[cfg(not(any(target_os = "android", feature = "android-check")))]
 mod android {
     use super::{BridgeError, Result};
     use jni::objects::JObject;
     use jni::Env;
+
+    /// Off Android `log` goes wherever the host process sends it (nowhere by default).
+    pub fn init_logging() {}
 
     pub fn read_asset(_env: &mut Env, _manager: &JObject, path: &str) -> Result<Vec<u8>> {
         Err(BridgeError::State(format!(

@@ -45,6 +45,12 @@ impl Yolox {
         self.net.save_onnx(path)
     }
 
+    /// [`Self::save_onnx`] with the weights at half precision
+    /// ([`crate::onnx_net::half_precision`]): what ships beside a parameter set.
+    pub fn save_onnx_half(&self, path: &Path) -> std::result::Result<(), GraphError> {
+        self.net.save_onnx_half(path)
+    }
+
     /// Puts a per-pixel colour adapter with `hidden` units in front of the network:
     /// `x + 255·(W₂·SiLU(W₁·x/255 + b₁) + b₂)` on the BGR 0..255 input, as 1x1 convolutions
     /// in the graph itself (so the written ONNX file carries it). `W₁` is drawn from

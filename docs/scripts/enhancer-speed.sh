@@ -1,20 +1,24 @@
 #!/usr/bin/env bash
-# The enhancer at 720p: frames a second and quality, full resolution against the reduced
-# network (--enhance-scale 2, what auto picks from 1280x720), side by side in one run, with
-# the camera alone as the anchor.
+# The enhancer on video: frames a second at 720p and 1080p beside the anchors of the same
+# run (a plain ffmpeg re-encode, the camera alone), then quality at 720p, full resolution
+# against the reduced network (--enhance-scale 2, what auto picks from 1280x720).
 #
-# Speed: a generated 1280x720 clip of 60 frames through `campro simulate` (camera alone,
-# --enhance-scale 1, --enhance-scale 2); the summary line's "frames a second" is the whole
-# run's (decode, camera, enhancer, H.264 encode). Quality: the first N held-out COCO images
-# (id a multiple of 5, never trained on; about 416 pixels wide in ../shared) upscaled to
-# 1280 wide (lanczos: the size of a 720p frame, but smoother than a camera's) as the raw
-# images, through the camera and the enhancer at each scale; PSNR
-# and SSIM against the raw image (ffmpeg's psnr and ssim filters, on RGB), averaged. The
-# other end, the network seeing a scene half the size it was trained on: `campro eval
-# quality PRESET --enhanced --held-out --enhance-scale 2` against `--enhance-scale 1`.
+# Speed: a generated clip of 60 frames (testsrc2) at each size through `ffmpeg -c:v libx264
+# -crf 18` (the anchor: decode and the same encode), `campro simulate` (camera alone) and
+# `campro simulate --enhance` (the network at auto scale and the face guard over the
+# enhanced and captured frames: what a person is shown), plus --enhance-scale 1 at 720p; the
+# summary line's "frames a second" is the whole run's (decode, camera, enhancer, guard,
+# H.264 encode), and the peak resident memory is /usr/bin/time's. Quality: the first N
+# held-out COCO images (id a multiple of 5, never trained on; about 416 pixels wide in
+# ../shared) upscaled to 1280 wide (lanczos: the size of a 720p frame, but smoother than a
+# camera's) as the raw images, through the camera and the enhancer at each scale; PSNR and
+# SSIM against the raw image (ffmpeg's psnr and ssim filters, on RGB), averaged. The other
+# end, the network seeing a scene half the size it was trained on: `campro eval quality
+# PRESET --enhanced --held-out --enhance-scale 2` against `--enhance-scale 1`.
 #
-# Usage: docs/scripts/enhancer-speed.sh [PRESET] [N]   (default campro-omega-0.5, 40)
-# Needs: a release build (cargo build --release -p campro-cli), ffmpeg, ../shared.
+# Usage: docs/scripts/enhancer-speed.sh [PRESET] [N]   (default campro-omega-0.5, 40; N = 0
+# times only)
+# Needs: a release build (cargo build --release -p campro-cli), ffmpeg, GNU time, ../shared.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/../.." && pwd)"
 campro="$root/target/release/campro"
@@ -24,16 +28,29 @@ shared="${CAMPRO_SHARED:-$root/../shared}"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 
-ffmpeg -hide_banner -v error -f lavfi -i testsrc2=size=1280x720:rate=30 -t 2 -c:v libx264 "$work/clip.mp4"
-echo "| 1280x720, 60 frames | frames a second (whole run) |"
-echo "|---|---|"
-for mode in camera 1 2; do
-  args=(); [ "$mode" != camera ] && args=(--enhance --enhance-scale "$mode")
-  line="$("$campro" simulate "$preset" "$work/clip.mp4" -o "$work/v-$mode" "${args[@]}" 2>&1 | grep '^simulated')"
-  fps="$(sed -E 's/.*\(([0-9.]+) frames a second.*/\1/' <<<"$line")"
-  label="camera alone"; [ "$mode" != camera ] && label="camera + enhancer at scale $mode"
-  echo "| $label | $fps |"
+echo "| 60 frames | frames a second (whole run) | peak memory (MB) |"
+echo "|---|---|---|"
+for size in 1280x720 1920x1080; do
+  clip="$work/clip-$size.mp4"
+  ffmpeg -hide_banner -v error -f lavfi -i "testsrc2=size=$size:rate=30" -t 2 -c:v libx264 "$clip"
+  modes=(ffmpeg camera auto); [ "$size" = 1280x720 ] && modes+=(1)
+  for mode in "${modes[@]}"; do
+    out="$work/v-$size-$mode"
+    t0=$(date +%s.%N)
+    if [ "$mode" = ffmpeg ]; then
+      /usr/bin/time -f "%M" -o "$work/mem" ffmpeg -hide_banner -v error -i "$clip" -c:v libx264 -crf 18 "$out.mp4"
+      fps="$(echo "60 / ($(date +%s.%N) - $t0)" | bc -l)"
+      label="ffmpeg re-encode (H.264 CRF 18)"
+    else
+      args=(); [ "$mode" != camera ] && args=(--enhance --enhance-scale "$mode")
+      line="$(/usr/bin/time -f "%M" -o "$work/mem" "$campro" simulate "$preset" "$clip" -o "$out" "${args[@]}" 2>&1 | grep '^simulated')"
+      fps="$(sed -E 's/.*\(([0-9.]+) frames a second.*/\1/' <<<"$line")"
+      label="campro: camera alone"; [ "$mode" != camera ] && label="campro: camera + enhancer (scale $mode) + face guard"
+    fi
+    printf "| %s, %s | %.1f | %d |\n" "$size" "$label" "$fps" "$(( $(cat "$work/mem") / 1024 ))"
+  done
 done
+[ "$n" -gt 0 ] || exit 0
 
 mkdir -p "$work/raw"
 k=0

@@ -14,6 +14,9 @@ pub const MAX_FILE: u64 = 64 << 20;
 /// has one size a pyramid level, a photo folder a few; beyond this the oldest is dropped.
 pub const SIZED_PLANS: usize = 12;
 
+/// A plan for one input (height, width).
+type SizedPlan = ((usize, usize), Arc<TypedSimplePlan>);
+
 /// A loaded, optimised model plus its manifest. Cheap to share across threads (`run` takes
 /// `&self`).
 pub struct Model {
@@ -24,7 +27,7 @@ pub struct Model {
     /// sizes by [`Model::run_sized`] (fully convolutional models only).
     source: InferenceModel,
     /// Plans by input (height, width), oldest first, at most [`SIZED_PLANS`].
-    sized: Mutex<Vec<((usize, usize), Arc<TypedSimplePlan>)>>,
+    sized: Mutex<Vec<SizedPlan>>,
 }
 
 impl Model {
@@ -37,6 +40,13 @@ impl Model {
         }
         let bytes = campro::file::read_capped(&path, MAX_FILE, "a model (ONNX)")
             .map_err(|e| EvalError::Model { path: path.clone(), message: e.reason() })?;
+        Self::from_bytes(manifest, &bytes)
+    }
+
+    /// [`Model::load`] of a model already in memory (one built into the binary);
+    /// `manifest.file` only names it in errors.
+    pub fn from_bytes(manifest: Manifest, bytes: &[u8]) -> Result<Self> {
+        let path = manifest.file.clone();
         let err = |e: TractError| EvalError::Model { path: path.clone(), message: format!("{e:#}") };
         let onnx = tract_onnx::onnx();
         let mut proto = onnx.proto_model_for_read(&mut &bytes[..]).map_err(err)?;
@@ -235,5 +245,104 @@ impl Outputs {
             .try_as_plain_ram()
             .and_then(|v| v.as_slice::<f32>())
             .map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e}") })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tract_onnx::pb;
+
+    /// A one-`Relu` graph whose recorded shapes (input, an intermediate value, output) all
+    /// say 1 x 3 x 4 x 4, as a file exported at one size records them.
+    fn relu_onnx() -> Vec<u8> {
+        use prost::Message;
+        let info = |name: &str| pb::ValueInfoProto {
+            name: name.into(),
+            r#type: Some(pb::TypeProto {
+                value: Some(pb::type_proto::Value::TensorType(pb::type_proto::Tensor {
+                    elem_type: 1,
+                    shape: Some(pb::TensorShapeProto {
+                        dim: [1, 3, 4, 4]
+                            .map(|d| pb::tensor_shape_proto::Dimension {
+                                value: Some(pb::tensor_shape_proto::dimension::Value::DimValue(d)),
+                                ..Default::default()
+                            })
+                            .to_vec(),
+                    }),
+                })),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let node = |op: &str, i: &str, o: &str| pb::NodeProto {
+            op_type: op.into(),
+            input: vec![i.into()],
+            output: vec![o.into()],
+            ..Default::default()
+        };
+        pb::ModelProto {
+            ir_version: 7,
+            opset_import: vec![pb::OperatorSetIdProto { domain: String::new(), version: 13 }],
+            graph: Some(pb::GraphProto {
+                node: vec![node("Relu", "x", "r"), node("Identity", "r", "y")],
+                input: vec![info("x")],
+                output: vec![info("y")],
+                value_info: vec![info("r")],
+                ..Default::default()
+            }),
+            ..Default::default()
+        }
+        .encode_to_vec()
+    }
+
+    fn model() -> Model {
+        let text = r#"{"name": "relu", "file": "relu.onnx", "input": {"width": 4, "height": 4, "channels": "rgb"},
+                       "task": {"kind": "face_detector", "strides": [1], "score_threshold": 0.5, "nms_iou": 0.3}}"#;
+        let manifest = Manifest::parse(text, Path::new("relu.json"), Path::new(".")).unwrap();
+        Model::from_bytes(manifest, &relu_onnx()).unwrap()
+    }
+
+    #[test]
+    fn a_model_runs_at_sizes_other_than_its_manifest_s_with_plans_kept() {
+        let m = model();
+        let input = |h: usize, w: usize| {
+            let v: Vec<f32> = (0..3 * h * w).map(|i| i as f32 - (3 * h * w / 2) as f32).collect();
+            Tensor::from_shape(&[1, 3, h, w], &v).unwrap()
+        };
+        // At another size the graph's recorded 4 x 4 shapes do not get in the way, and the
+        // output is the Relu of the input.
+        let out = m.run_sized(input(6, 10)).unwrap();
+        let y = out.any("y").unwrap();
+        assert_eq!(y.len(), 180);
+        for (i, &v) in y.iter().enumerate() {
+            assert_eq!(v, (i as f32 - 90.0).max(0.0));
+        }
+        // The manifest's size uses the plan made at loading; the others are kept, the
+        // oldest dropped beyond SIZED_PLANS.
+        m.run_sized(input(4, 4)).unwrap();
+        assert_eq!(m.sized.lock().unwrap().len(), 1);
+        for w in 1..=SIZED_PLANS + 3 {
+            m.run_sized(input(2, w)).unwrap();
+        }
+        let kept: Vec<(usize, usize)> = m.sized.lock().unwrap().iter().map(|(k, _)| *k).collect();
+        assert_eq!(kept, (4..=SIZED_PLANS + 3).map(|w| (2, w)).collect::<Vec<_>>());
+        // A tensor of another rank is refused by name, not a panic.
+        let bad = m.run_sized(Tensor::from_shape(&[3, 4, 4], &[0f32; 48]).unwrap()).err().unwrap();
+        assert!(bad.to_string().contains("not 1x3xHxW"), "{bad}");
+    }
+
+    #[test]
+    fn a_region_tensor_is_the_region_then_black() {
+        let m = model();
+        let img = RgbImage::from_fn(5, 3, |x, y| image::Rgb([(10 * x + y) as u8, 100, 200]));
+        // The 2 x 2 region at (3, 1) on a 4 x 3 canvas: copied top-left, 0 elsewhere
+        // (mean 0, std 1 by default), clipped where the region leaves the image.
+        let t = m.region_tensor(&img, [3, 1, 4, 4], (4, 3));
+        let v = t.try_as_plain_ram().and_then(|v| v.as_slice::<f32>()).unwrap();
+        let at = |c: usize, y: usize, x: usize| v[c * 12 + y * 4 + x];
+        assert_eq!((at(0, 0, 0), at(0, 0, 1), at(0, 1, 0), at(0, 1, 1)), (31.0, 41.0, 32.0, 42.0));
+        assert_eq!((at(1, 0, 0), at(2, 1, 1)), (100.0, 200.0));
+        assert_eq!((at(0, 0, 2), at(0, 2, 0), at(2, 2, 3)), (0.0, 0.0, 0.0));
     }
 }

@@ -329,8 +329,8 @@ fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utili
     for x in conds {
         order.push(x.name.clone());
         let base = x.name.strip_suffix(" enhanced").unwrap_or(&x.name);
-        let Some(manifest) = own.get(base) else { continue };
-        let m = load(&manifest.to_string_lossy(), &c.models_dir())?;
+        let Some(detector) = own.get(base) else { continue };
+        let m = detector.load(&c.models_dir())?;
         let mut y = x.clone();
         if base != x.name {
             y.name = format!("{} (own detector)", x.name);
@@ -354,22 +354,74 @@ fn run_utility(c: &Common, a: &UtilityArgs, conds: &[Condition]) -> Result<utili
     Ok(r)
 }
 
-/// Parameter set name → the manifest of the detector fine-tuned with it, for the sets whose
-/// provenance names one.
-pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, PathBuf>> {
+/// A parameter set's own fine-tuned person detector.
+pub(crate) enum OwnDetector {
+    /// The manifest file its provenance names (`provenance.detector.manifest`).
+    Manifest(PathBuf),
+    /// YOLOX-Nano's bundled manifest with the set's network: the file its provenance names
+    /// (`provenance.detector.onnx`), or the one built into the binary with a bundled preset.
+    Yolox { set: String, file: PathBuf, built_in: Option<&'static [u8]> },
+}
+
+impl OwnDetector {
+    /// The detector, loaded (and said on stderr).
+    pub(crate) fn load(&self, models: &Path) -> Result<campro_eval::model::Model> {
+        match self {
+            OwnDetector::Manifest(m) => crate::models::load(&m.to_string_lossy(), models),
+            OwnDetector::Yolox { set, file, built_in } => {
+                let mut m = crate::models::manifest("yolox-nano", models)?;
+                m.name = format!("yolox-nano fine-tuned ({set})");
+                m.file = file.clone();
+                match built_in {
+                    Some(bytes) => {
+                        eprintln!("loading {} (built in)", m.name);
+                        Ok(campro_eval::model::Model::from_bytes(m, bytes)?)
+                    }
+                    None => {
+                        eprintln!("loading {} ({})", m.name, crate::shown(&m.file));
+                        Ok(campro_eval::model::Model::load(m)?)
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Parameter set name → the detector fine-tuned with it, for the sets whose provenance
+/// names one (a bundled preset's is built in).
+pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, OwnDetector>> {
     let mut own = HashMap::new();
     for path in params {
-        let text = match crate::presets::named(path) {
+        let preset = crate::presets::named(path);
+        if let Some(p) = preset {
+            if let Some(bytes) = p.detector {
+                let file = PathBuf::from(format!("{}.detector.onnx", p.name));
+                own.insert(set_name(path), OwnDetector::Yolox { set: p.name.into(), file, built_in: Some(bytes) });
+                continue;
+            }
+        }
+        let text = match preset {
             Some(preset) => preset.json.to_string(),
             None => campro::file::read_text_capped(path, campro::params::MAX_JSON_BYTES as u64, "a parameter file")?,
         };
-        if let Some(m) = provenance_of(path, &text)?.detector.and_then(|d| d.manifest) {
-            let manifest = crate::capture::beside(path, "provenance.detector.manifest", &m)?;
-            if !manifest.is_file() {
-                bail!("{}: provenance.detector.manifest: {} not found", crate::shown(path), crate::shown(&manifest));
-            }
-            own.insert(set_name(path), manifest);
+        let Some(d) = provenance_of(path, &text)?.detector else { continue };
+        let detector = match &d.manifest {
+            Some(m) => OwnDetector::Manifest(crate::capture::beside(path, "provenance.detector.manifest", m)?),
+            None => OwnDetector::Yolox {
+                set: set_name(path),
+                file: crate::capture::beside(path, "provenance.detector.onnx", &d.onnx)?,
+                built_in: None,
+            },
+        };
+        let file = match &detector {
+            OwnDetector::Manifest(m) => m,
+            OwnDetector::Yolox { file, .. } => file,
+        };
+        if !file.is_file() {
+            let field = if d.manifest.is_some() { "manifest" } else { "onnx" };
+            bail!("{}: provenance.detector.{field}: {} not found", crate::shown(path), crate::shown(file));
         }
+        own.insert(set_name(path), detector);
     }
     Ok(own)
 }

@@ -295,10 +295,10 @@ pub fn run(a: InspectArgs) -> Result<()> {
     let people = crate::models::load(&person_detector, &models)?;
     let own = if own_detector {
         let own = crate::eval::own_detectors(std::slice::from_ref(&params))?;
-        let manifest = own.values().next().ok_or_else(|| {
+        let detector = own.values().next().ok_or_else(|| {
             anyhow!("--own-detector: {} names no fine-tuned detector (provenance.detector)", crate::shown(&params))
         })?;
-        let m = crate::models::load(&manifest.to_string_lossy(), &models)?;
+        let m = detector.load(&models)?;
         Some((m.manifest.name.clone(), campro_eval::person::PersonDetector::new(m)?))
     } else {
         None

@@ -13,6 +13,9 @@ pub struct Preset {
     pub json: &'static str,
     /// `params/NAME.enhancer.onnx`, when present.
     pub enhancer: Option<&'static [u8]>,
+    /// `params/NAME.detector.onnx`, the person detector fine-tuned behind its camera
+    /// (half-precision weights), when present: `eval utility --own-detector`.
+    pub detector: Option<&'static [u8]>,
     /// What to pick it for, in plain words (`campro presets` prints it first).
     pub pick: &'static str,
 }
@@ -22,26 +25,29 @@ pub const PRESETS: &[Preset] = &[
     Preset {
         name: "campro-omega-0.5",
         json: include_str!("../../../params/campro-omega-0.5.json"),
+        detector: Some(include_bytes!("../../../params/campro-omega-0.5.detector.onnx")),
         enhancer: Some(include_bytes!("../../../params/campro-omega-0.5.enhancer.onnx")),
         pick: "Pick this for everyday use: faces are hidden and people are still found, with an enhanced view for people to watch.",
     },
     Preset {
         name: "campro-omega-0.5-distill",
         json: include_str!("../../../params/campro-omega-0.5-distill.json"),
+        detector: Some(include_bytes!("../../../params/campro-omega-0.5-distill.detector.onnx")),
         enhancer: None,
         pick: "Pick this when finding people matters more than hiding faces: it hides faces less well than campro-omega-0.5.",
     },
     Preset {
         name: "campro-omega-0.5-hour",
         json: include_str!("../../../params/campro-omega-0.5-hour.json"),
+        detector: Some(include_bytes!("../../../params/campro-omega-0.5-hour.detector.onnx")),
         enhancer: Some(include_bytes!("../../../params/campro-omega-0.5-hour.enhancer.onnx")),
         pick: "Pick this where hiding faces matters most: the most private camera here, with an enhanced view.",
     },
-    Preset { name: "campro-omega-1", json: include_str!("../../../params/campro-omega-1.json"), enhancer: None, pick: "Detection first: people are found more often, faces are hidden less well. Not for privacy-critical use." },
-    Preset { name: "campro-omega-5", json: include_str!("../../../params/campro-omega-5.json"), enhancer: None, pick: "For experiments only: faces are recognised often in its pictures." },
-    Preset { name: "color-inversion", json: include_str!("../../../params/color-inversion.json"), enhancer: None, pick: "No protection: an example transform that is easily undone. For comparisons." },
-    Preset { name: "identity", json: include_str!("../../../params/identity.json"), enhancer: None, pick: "No protection: the unprotected starting point. For comparisons." },
-    Preset { name: "srgb-passthrough", json: include_str!("../../../params/srgb-passthrough.json"), enhancer: None, pick: "No protection: an ordinary camera's picture. For comparisons." },
+    Preset { name: "campro-omega-1", json: include_str!("../../../params/campro-omega-1.json"), enhancer: None, detector: Some(include_bytes!("../../../params/campro-omega-1.detector.onnx")), pick: "Detection first: people are found more often, faces are hidden less well. Not for privacy-critical use." },
+    Preset { name: "campro-omega-5", json: include_str!("../../../params/campro-omega-5.json"), enhancer: None, detector: Some(include_bytes!("../../../params/campro-omega-5.detector.onnx")), pick: "For experiments only: faces are recognised often in its pictures." },
+    Preset { name: "color-inversion", json: include_str!("../../../params/color-inversion.json"), enhancer: None, detector: None, pick: "No protection: an example transform that is easily undone. For comparisons." },
+    Preset { name: "identity", json: include_str!("../../../params/identity.json"), enhancer: None, detector: None, pick: "No protection: the unprotected starting point. For comparisons." },
+    Preset { name: "srgb-passthrough", json: include_str!("../../../params/srgb-passthrough.json"), enhancer: None, detector: None, pick: "No protection: an ordinary camera's picture. For comparisons." },
 ];
 
 /// The preset `arg` names, when `arg` is not an existing path but a bundled preset's name
@@ -136,6 +142,7 @@ mod tests {
         for p in PRESETS {
             assert_eq!(p.json, std::fs::read_to_string(dir.join(format!("{}.json", p.name))).unwrap());
             assert_eq!(p.enhancer.is_some(), dir.join(format!("{}.enhancer.onnx", p.name)).exists());
+            assert_eq!(p.detector.is_some(), dir.join(format!("{}.detector.onnx", p.name)).exists());
             campro::Params::from_json(p.json).unwrap();
         }
     }

@@ -180,7 +180,8 @@ fn write_log<const N: usize>(l: &Path, csv: &str, charts: [(&str, String); N], f
     Ok(())
 }
 
-/// Writes a fine-tuned detector beside the parameter file `params_path` (`.detector.onnx`)
+/// Writes a fine-tuned detector beside the parameter file `params_path` (`.detector.onnx`,
+/// weights at half precision: 1.8 MB, under the repository's file limit, so presets ship it)
 /// with a manifest `eval utility --person-detector` reads (the bundled one naming the new
 /// file, `.detector.json`); returns the provenance entry naming both.
 fn write_detector(det: &Yolox, params_path: &Path, name: &str, force: bool) -> Result<serde_json::Value> {
@@ -191,7 +192,7 @@ fn write_detector(det: &Yolox, params_path: &Path, name: &str, force: bool) -> R
             bail!("{} exists (use --force to replace it)", crate::shown(p));
         }
     }
-    det.save_onnx(&onnx)?;
+    det.save_onnx_half(&onnx)?;
     let mut m: serde_json::Value = serde_json::from_str(crate::models::YOLOX_MANIFEST)?;
     let file = onnx.file_name().expect("a file name").to_string_lossy().into_owned();
     m["name"] = format!("yolox-nano fine-tuned ({name})").into();

@@ -935,6 +935,34 @@ fn train_writes_params_and_detector_that_eval_reads() {
     );
 }
 
+/// The bundled presets' own detectors: by name from any folder (built into the binary),
+/// and from the repository's parameter file (the ONNX file beside it, no manifest).
+#[test]
+fn a_bundled_preset_s_own_detector_is_built_in() {
+    let Some(models) = campro_testkit::shared("models/yolox_nano.onnx") else { return };
+    let shared = models.parent().unwrap().parent().unwrap().to_path_buf();
+    let dir = tempfile::tempdir().unwrap();
+    let file = campro_testkit::workspace_root().join("params/campro-omega-0.5.json");
+    for (k, preset) in [std::ffi::OsStr::new("campro-omega-0.5"), file.as_os_str()].into_iter().enumerate() {
+        let out = dir.path().join(format!("ev{k}"));
+        let run = campro()
+            .current_dir(dir.path())
+            .args(["eval", "utility"])
+            .arg(preset)
+            .args(["--own-detector", "--limit", "2", "--shared"])
+            .arg(&shared)
+            .arg("-o")
+            .arg(&out)
+            .assert()
+            .success();
+        let err = String::from_utf8_lossy(&run.get_output().stderr).into_owned();
+        let said = if k == 0 { "(built in)" } else { "campro-omega-0.5.detector.onnx" };
+        assert!(err.contains("loading yolox-nano fine-tuned (campro-omega-0.5)") && err.contains(said), "{err}");
+        let md = std::fs::read_to_string(out.join("utility.md")).unwrap();
+        assert!(md.contains("campro-omega-0.5 each with its own fine-tuned detector"), "{md}");
+    }
+}
+
 #[test]
 fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     let Some(models) = campro_testkit::shared("models/yolox_nano.onnx") else { return };
@@ -972,6 +1000,10 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     );
     assert!(d["held_out_images"].as_str().unwrap().contains("% 5 == 0"));
     assert_eq!(std::fs::read_to_string(dir.path().join("ft.csv")).unwrap().lines().count(), 3);
+    // Written at half precision: YOLOX-Nano's 3.66 MB of f32 weights in under 2 MB (the
+    // repository's file limit, so presets ship theirs).
+    let written = std::fs::metadata(dir.path().join("inv.detector.onnx")).unwrap().len();
+    assert!(written < 2_000_000 && written > 1_700_000, "{written} bytes");
     // Existing outputs are kept unless --force.
     fails_with(&mut run(), "exists (use --force");
     run().arg("--force").assert().success();

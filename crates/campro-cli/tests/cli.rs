@@ -1004,6 +1004,18 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     // repository's file limit, so presets ship theirs).
     let written = std::fs::metadata(dir.path().join("inv.detector.onnx")).unwrap().len();
     assert!(written < 2_000_000 && written > 1_700_000, "{written} bytes");
+    // A written (half-precision) detector is a starting point for more fine-tuning.
+    let again = dir.path().join("again.toml");
+    let first = dir.path().join("first.detector.onnx");
+    std::fs::copy(dir.path().join("inv.detector.onnx"), &first).unwrap();
+    std::fs::write(
+        &again,
+        std::fs::read_to_string(dir.path().join("ft.toml")).unwrap().replace(&q(&models), &q(&first)),
+    )
+    .unwrap();
+    let twice = dir.path().join("twice.json");
+    std::fs::copy(&p, &twice).unwrap();
+    campro().arg("finetune-detector").arg(&twice).arg("--config").arg(&again).args(["--steps", "1"]).assert().success();
     // Existing outputs are kept unless --force.
     fails_with(&mut run(), "exists (use --force");
     run().arg("--force").assert().success();

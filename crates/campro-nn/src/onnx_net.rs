@@ -105,7 +105,7 @@ fn read_model(path: &Path) -> std::result::Result<(pb::ModelProto, String), Grap
         .map_err(|e| GraphError::Io { path: p.clone(), message: e.reason() })?;
     let model = pb::ModelProto::decode(bytes.as_slice())
         .map_err(|e| GraphError::Graph { path: p.clone(), message: format!("not an ONNX model: {e}") })?;
-    Ok((model, p))
+    Ok((full_precision(model), p))
 }
 
 /// The f32 initializers of the ONNX file at `path` by name (a
@@ -169,6 +169,32 @@ pub fn half_precision(mut model: pb::ModelProto) -> pb::ModelProto {
     }
     casts.append(&mut graph.node);
     graph.node = casts;
+    model
+}
+
+/// [`half_precision`] undone for training: each `Cast` to f32 of an f16 initializer becomes
+/// an f32 initializer of the cast's output name holding the same values (widening is
+/// exact), so a shipped detector can be fine-tuned further. Other graphs are unchanged.
+pub fn full_precision(mut model: pb::ModelProto) -> pb::ModelProto {
+    let Some(graph) = model.graph.as_mut() else { return model };
+    let halves: HashMap<String, pb::TensorProto> =
+        graph.initializer.iter().filter(|t| t.data_type == 10).map(|t| (t.name.clone(), t.clone())).collect();
+    let mut widened = Vec::new();
+    graph.node.retain(|n| {
+        let to_f32 = n.attribute.iter().any(|a| a.name == "to" && a.i == 1);
+        match (n.op_type.as_str(), n.input.first().and_then(|i| halves.get(i)), &n.output[..]) {
+            ("Cast", Some(t), [out]) if to_f32 && n.input.len() == 1 => {
+                let v: Vec<f32> =
+                    t.raw_data.chunks_exact(2).map(|c| f32::from(half::f16::from_le_bytes([c[0], c[1]]))).collect();
+                widened.push((t.name.clone(), f32_tensor(out, t.dims.clone(), &v)));
+                false
+            }
+            _ => true,
+        }
+    });
+    let gone: Vec<&String> = widened.iter().map(|(from, _)| from).collect();
+    graph.initializer.retain(|t| !gone.contains(&&t.name));
+    graph.initializer.extend(widened.into_iter().map(|(_, t)| t));
     model
 }
 
@@ -606,6 +632,14 @@ mod tests {
             assert!((b - c).abs() <= 1e-6 * (1.0 + c.abs()), "{b} against {c}");
             assert!((a - b).abs() <= 27.0 * 2f32.powi(-11) * 0.5 * 10.0 + 1e-6, "{a} against {b}");
         }
+        // Undone for training: the cast folded into an f32 `w` holding the f16 values.
+        let back = full_precision(half.clone());
+        let g = back.graph.as_ref().unwrap();
+        assert_eq!(g.node.len(), 1, "only the convolution is left");
+        let w = g.initializer.iter().find(|t| t.name == "w").expect("w is f32 again");
+        assert_eq!((w.data_type, floats(w)), (1, rounded.clone()));
+        assert!(g.initializer.iter().all(|t| t.data_type == 1) && g.initializer.len() == 2);
+        assert_eq!(run(&back, &x), b);
         // Out of range or non-finite weights stay f32.
         let mut big = weights.clone();
         big[3] = 70_000.0;

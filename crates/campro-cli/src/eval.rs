@@ -364,6 +364,14 @@ pub(crate) enum OwnDetector {
 }
 
 impl OwnDetector {
+    /// The file it is read from (a built-in one's name).
+    fn file(&self) -> &Path {
+        match self {
+            OwnDetector::Manifest(m) => m,
+            OwnDetector::Yolox { file, .. } => file,
+        }
+    }
+
     /// The detector, loaded (and said on stderr).
     pub(crate) fn load(&self, models: &Path) -> Result<campro_eval::model::Model> {
         match self {
@@ -413,13 +421,9 @@ pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, OwnDet
                 built_in: None,
             },
         };
-        let file = match &detector {
-            OwnDetector::Manifest(m) => m,
-            OwnDetector::Yolox { file, .. } => file,
-        };
-        if !file.is_file() {
+        if !detector.file().is_file() {
             let field = if d.manifest.is_some() { "manifest" } else { "onnx" };
-            bail!("{}: provenance.detector.{field}: {} not found", crate::shown(path), crate::shown(file));
+            bail!("{}: provenance.detector.{field}: {} not found", crate::shown(path), crate::shown(detector.file()));
         }
         own.insert(set_name(path), detector);
     }

@@ -378,7 +378,7 @@ impl OwnDetector {
             OwnDetector::Manifest(m) => crate::models::load(&m.to_string_lossy(), models),
             OwnDetector::Yolox { set, file, built_in } => {
                 let mut m = crate::models::manifest("yolox-nano", models)?;
-                m.name = format!("yolox-nano fine-tuned ({set})");
+                m.name = crate::models::fine_tuned_name(set);
                 m.file = file.clone();
                 match built_in {
                     Some(bytes) => {

@@ -10,6 +10,12 @@ use std::path::Path;
 /// The bundled YOLOX-Nano manifest (also the template of a fine-tuned detector's).
 pub const YOLOX_MANIFEST: &str = include_str!("../../../crates/campro-eval/models/yolox_nano.json");
 
+/// The model name of YOLOX-Nano fine-tuned behind the parameter set `set`'s camera (what
+/// `finetune-detector` writes in its manifest and a built-in detector is loaded as).
+pub(crate) fn fine_tuned_name(set: &str) -> String {
+    format!("yolox-nano fine-tuned ({set})")
+}
+
 /// The shipped manifests (files resolved against `--models`).
 pub(crate) const BUNDLED: [(&str, &str); 4] = [
     ("yunet", include_str!("../../../crates/campro-eval/models/yunet.json")),

@@ -195,7 +195,7 @@ fn write_detector(det: &Yolox, params_path: &Path, name: &str, force: bool) -> R
     det.save_onnx_half(&onnx)?;
     let mut m: serde_json::Value = serde_json::from_str(crate::models::YOLOX_MANIFEST)?;
     let file = onnx.file_name().expect("a file name").to_string_lossy().into_owned();
-    m["name"] = format!("yolox-nano fine-tuned ({name})").into();
+    m["name"] = crate::models::fine_tuned_name(name).into();
     m["file"] = file.clone().into();
     write_atomic(&manifest_path, (serde_json::to_string_pretty(&m)? + "\n").as_bytes(), force)?;
     Ok(

@@ -116,7 +116,7 @@ impl FaceDetector {
     }
 
     /// `len` pixels rounded up to a multiple of the largest stride (at least one stride).
-    pub fn canvas_side(&self, len: usize) -> usize {
+    fn canvas_side(&self, len: usize) -> usize {
         let s = self.strides.iter().copied().max().unwrap_or(1).max(1);
         len.div_ceil(s).max(1) * s
     }

@@ -23,8 +23,8 @@ pub struct Model {
     pub manifest: Manifest,
     plan: Arc<TypedSimplePlan>,
     outputs: Vec<String>,
-    /// The graph without its recorded intermediate shapes, planned again for other input
-    /// sizes by [`Model::run_sized`] (fully convolutional models only).
+    /// The graph without its recorded intermediate shapes, planned for the manifest's size
+    /// and again for other input sizes by [`Model::run_sized`] (fully convolutional models).
     source: InferenceModel,
     /// Plans by input (height, width), oldest first, at most [`SIZED_PLANS`].
     sized: Mutex<Vec<SizedPlan>>,
@@ -50,7 +50,15 @@ impl Model {
         let err = |e: TractError| EvalError::Model { path: path.clone(), message: format!("{e:#}") };
         let onnx = tract_onnx::onnx();
         let mut proto = onnx.proto_model_for_read(&mut &bytes[..]).map_err(err)?;
-        let (model, outputs) = guarded(&path, || {
+        // The recorded shapes of intermediate values and outputs hold one input size; without
+        // them tract infers every shape from the input given, so one graph serves every size.
+        if let Some(g) = proto.graph.as_mut() {
+            g.value_info.clear();
+            for o in &mut g.output {
+                o.r#type = None;
+            }
+        }
+        let (source, outputs) = guarded(&path, || {
             let model = onnx.model_for_proto_model(&proto)?;
             let outputs = model
                 .output_outlets()?
@@ -59,17 +67,7 @@ impl Model {
                 .collect::<Vec<_>>();
             Ok((model, outputs))
         })?;
-        let (h, w) = (manifest.input.height, manifest.input.width);
-        let plan = plan_at(&path, model, h, w)?;
-        // The recorded shapes of intermediate values and outputs hold the manifest's size;
-        // without them tract infers every shape from the input given.
-        if let Some(g) = proto.graph.as_mut() {
-            g.value_info.clear();
-            for o in &mut g.output {
-                o.r#type = None;
-            }
-        }
-        let source = guarded(&path, || onnx.model_for_proto_model(&proto))?;
+        let plan = plan_at(&path, source.clone(), manifest.input.height, manifest.input.width)?;
         Ok(Self { manifest, plan, outputs, source, sized: Mutex::new(Vec::new()) })
     }
 

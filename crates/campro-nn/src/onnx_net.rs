@@ -108,6 +108,12 @@ fn read_model(path: &Path) -> std::result::Result<(pb::ModelProto, String), Grap
     Ok((full_precision(model), p))
 }
 
+/// Writes `model` at `path` (temporary file, then rename).
+fn write_model(path: &Path, model: &pb::ModelProto) -> std::result::Result<(), GraphError> {
+    campro_eval::atomic::write(path, &model.encode_to_vec(), true)
+        .map_err(|e| GraphError::Io { path: path.display().to_string(), message: e.to_string() })
+}
+
 /// The f32 initializers of the ONNX file at `path` by name (a
 /// tensor whose data does not fill its shape is an error naming it). Other types are left
 /// out.
@@ -478,19 +484,13 @@ impl OnnxNet {
 
     /// Writes the model with the current weights as ONNX (temporary file, then rename).
     pub fn save_onnx(&self, path: &Path) -> std::result::Result<(), GraphError> {
-        let p = path.display().to_string();
-        let model = self.current()?;
-        let io = |e: std::io::Error| GraphError::Io { path: p.clone(), message: e.to_string() };
-        campro_eval::atomic::write(path, &model.encode_to_vec(), true).map_err(io)
+        write_model(path, &self.current()?)
     }
 
     /// Writes the model with the current weights as ONNX at half precision
     /// ([`half_precision`]; temporary file, then rename).
     pub fn save_onnx_half(&self, path: &Path) -> std::result::Result<(), GraphError> {
-        let p = path.display().to_string();
-        let model = half_precision(self.current()?);
-        let io = |e: std::io::Error| GraphError::Io { path: p.clone(), message: e.to_string() };
-        campro_eval::atomic::write(path, &model.encode_to_vec(), true).map_err(io)
+        write_model(path, &half_precision(self.current()?))
     }
 
     /// The ONNX model with the current weights.

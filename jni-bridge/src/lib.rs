@@ -34,6 +34,8 @@ use std::fmt;
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::sync::{Arc, LazyLock, Mutex, MutexGuard};
 
+mod still;
+
 /// Layout of the `DoubleArray` report every update fills (`CamProNative.REPORT_*`).
 pub mod report {
     /// 1.0 when the values changed (rebuild the request), else 0.0.
@@ -516,6 +518,100 @@ pub extern "system" fn Java_org_campro_CamProNative_readback<'local>(
         vals[readback::BOUND] = r.bound;
         out.set_region(env, 0, &vals)?;
         Ok(())
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// Largest byte array a still's call copies (a plane or RGB): 64 MP of RGB.
+const MAX_STILL_ARRAY: usize = 3 * still::MAX_PIXELS as usize;
+
+/// A byte array's contents, its length checked before anything is copied.
+fn read_bytes(env: &Env, name: &str, a: &JByteArray) -> Result<Vec<u8>> {
+    non_null(name, a)?;
+    let len = a.len(env)?;
+    if len > MAX_STILL_ARRAY {
+        return Err(BridgeError::Argument(format!("{name}: {len} bytes; the limit is {MAX_STILL_ARRAY}")));
+    }
+    Ok(env.convert_byte_array(a)?)
+}
+
+fn stride(name: &str, v: jint) -> Result<usize> {
+    usize::try_from(v).map_err(|_| BridgeError::Argument(format!("{name}: must be >= 0, got {v}")))
+}
+
+fn side(name: &str, v: jint) -> Result<u32> {
+    u32::try_from(v).map_err(|_| BridgeError::Argument(format!("{name}: must be >= 1, got {v}")))
+}
+
+fn exif_and_quality(orientation: jint, quality: jint) -> Result<(u16, u8)> {
+    let o = u16::try_from(orientation).ok().filter(|o| (1..=8).contains(o)).ok_or_else(|| {
+        BridgeError::Argument(format!("exifOrientation: must be an EXIF orientation 1..=8, got {orientation}"))
+    })?;
+    let q = u8::try_from(quality)
+        .ok()
+        .filter(|q| (1..=100).contains(q))
+        .ok_or_else(|| BridgeError::Argument(format!("quality: must be 1..=100, got {quality}")))?;
+    Ok((o, q))
+}
+
+/// `org.campro.CamProNative.encodeJpegYuv(width, height, y: ByteArray, yRowStride, u: ByteArray,
+/// v: ByteArray, uvRowStride, uvPixelStride, exifOrientation, quality): ByteArray`: a verified
+/// `YUV_420_888` frame's planes as a JPEG whose only metadata is its EXIF orientation
+/// ([`still`]).
+#[unsafe(no_mangle)]
+#[allow(clippy::too_many_arguments)]
+pub extern "system" fn Java_org_campro_CamProNative_encodeJpegYuv<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    width: jint,
+    height: jint,
+    y: JByteArray<'local>,
+    y_row_stride: jint,
+    u: JByteArray<'local>,
+    v: JByteArray<'local>,
+    uv_row_stride: jint,
+    uv_pixel_stride: jint,
+    exif_orientation: jint,
+    quality: jint,
+) -> JByteArray<'local> {
+    env.with_env(|env| -> Result<JByteArray<'local>> {
+        let (yb, ub, vb) = (read_bytes(env, "y", &y)?, read_bytes(env, "u", &u)?, read_bytes(env, "v", &v)?);
+        let frame = still::Yuv420 {
+            width: side("width", width)?,
+            height: side("height", height)?,
+            y: &yb,
+            y_row_stride: stride("yRowStride", y_row_stride)?,
+            u: &ub,
+            v: &vb,
+            uv_row_stride: stride("uvRowStride", uv_row_stride)?,
+            uv_pixel_stride: stride("uvPixelStride", uv_pixel_stride)?,
+        };
+        let rgb = still::yuv420_to_rgb(&frame)?;
+        let (o, q) = exif_and_quality(exif_orientation, quality)?;
+        let jpeg = still::jpeg(&rgb, frame.width, frame.height, o, q)?;
+        Ok(env.byte_array_from_slice(&jpeg)?)
+    })
+    .resolve::<ThrowJava>()
+}
+
+/// `org.campro.CamProNative.encodeJpegRgb(width, height, rgb: ByteArray, exifOrientation,
+/// quality): ByteArray`: interleaved 8-bit RGB as a JPEG whose only metadata is its EXIF
+/// orientation ([`still::jpeg`]).
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_encodeJpegRgb<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    width: jint,
+    height: jint,
+    rgb: JByteArray<'local>,
+    exif_orientation: jint,
+    quality: jint,
+) -> JByteArray<'local> {
+    env.with_env(|env| -> Result<JByteArray<'local>> {
+        let px = read_bytes(env, "rgb", &rgb)?;
+        let (o, q) = exif_and_quality(exif_orientation, quality)?;
+        let jpeg = still::jpeg(&px, side("width", width)?, side("height", height)?, o, q)?;
+        Ok(env.byte_array_from_slice(&jpeg)?)
     })
     .resolve::<ThrowJava>()
 }

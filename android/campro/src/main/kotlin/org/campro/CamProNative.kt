@@ -72,4 +72,18 @@ object CamProNative {
         reportedTransform: IntArray?, reportedCurve: FloatArray?, reportedCount: Int,
         out: DoubleArray?,
     )
+
+    /**
+     * A verified `YUV_420_888` frame's planes (as `Image.getPlanes()` gives them, copied) as a
+     * JPEG whose only metadata is EXIF [exifOrientation] (1..8); [quality] 1..100.
+     */
+    @JvmStatic external fun encodeJpegYuv(
+        width: Int, height: Int,
+        y: ByteArray?, yRowStride: Int,
+        u: ByteArray?, v: ByteArray?, uvRowStride: Int, uvPixelStride: Int,
+        exifOrientation: Int, quality: Int,
+    ): ByteArray
+
+    /** Interleaved 8-bit RGB as a JPEG whose only metadata is EXIF [exifOrientation] (1..8). */
+    @JvmStatic external fun encodeJpegRgb(width: Int, height: Int, rgb: ByteArray?, exifOrientation: Int, quality: Int): ByteArray
 }

@@ -43,6 +43,13 @@ data class Behaviour(
     val loseResultEvery: Int = 0,
     /** Reports the requested transform and curve while applying its own default curve. */
     val echo: Boolean = false,
+    /**
+     * Frames from [faultFrom] until [faultUntil] are made with the device's automatic settings
+     * whatever was asked, and their results say so (a passing fault, e.g. a 3A override: the
+     * HAL recovers).
+     */
+    val faultFrom: Int = -1,
+    val faultUntil: Int = -1,
     /** Reports the requested transform while applying the sensor's own (auto-mode) one. */
     val ignoreTransform: Boolean = false,
     /** The scene is one flat colour (a covered lens, a blank wall). */
@@ -66,7 +73,15 @@ data class Behaviour(
  * promises; after a light change also [before], the protected output under the old light
  * (frames still made with the values metered before the change).
  */
-class SimFrame(val index: Int, val pixels: ByteArray, val expected: ByteArray, val before: ByteArray? = null, private val onClose: () -> Unit = {}) : AutoCloseable {
+class SimFrame(
+    val index: Int,
+    val pixels: ByteArray,
+    val expected: ByteArray,
+    val before: ByteArray? = null,
+    /** The image's timestamp, nanoseconds (the sensor's, unless the HAL offsets it). */
+    val timestampNs: Long = 0,
+    private val onClose: () -> Unit = {},
+) : AutoCloseable {
     private var closed = false
 
     /** Gives its buffer back to the stream (an `Image.close()`); twice is a test failure. */
@@ -177,7 +192,7 @@ class SimulatedHal(
             val tagged = repeating[cursor % repeating.size]
             cursor++
             submitted += tagged
-            val applied = submitted.getOrNull(i - b.latency) ?: Req.Auto
+            val applied = if (i in b.faultFrom until b.faultUntil) Req.Auto else submitted.getOrNull(i - b.latency) ?: Req.Auto
             val sensor = if (b.physicalSwitchAt in 0..i) 1 else 0
             val relit = sensor == 0 && b.lightChangeAt in 0..i
             val device = if (relit) sensors[2] else sensors[sensor]
@@ -247,7 +262,8 @@ class SimulatedHal(
                 return
             }
             open++
-            p.onFrame(ts + b.imageTimestampOffsetNs, SimFrame(i, pixels, expected, before) { open-- })
+            val imageTs = ts + b.imageTimestampOffsetNs
+            p.onFrame(imageTs, SimFrame(i, pixels, expected, before, imageTs) { open-- })
         }
     }
 

@@ -1,0 +1,113 @@
+package org.campro
+
+import java.util.concurrent.Executor
+
+/** How a still ended: its JPEG, or why there is none. */
+sealed class StillResult {
+    /** The JPEG of the verified frame taken at sensor time [timestampNs] (its only metadata: the orientation). */
+    class Taken(val jpeg: ByteArray, val timestampNs: Long) : StillResult()
+
+    /** No still: [reason] says why (the camera stopped, encoding failed, the app cancelled). */
+    data class Failed(val reason: String) : StillResult()
+}
+
+/**
+ * Protected stills: each request takes the **next** frame the gate delivers (a verified
+ * one, made after the request) and encodes it as JPEG; the camera's own JPEG is never used.
+ *
+ * On the frame thread [onFrame] only copies what the encoder needs ([snapshot], e.g. an
+ * `Image`'s planes); encoding and the callback run on [background], so the preview and a
+ * recording never wait for a JPEG. A request waits through transient states (Verifying,
+ * Violated: no frame is delivered meanwhile) and fails on [fail] (the camera stopped, the
+ * app's timeout). Threads: every method is synchronized.
+ */
+class StillCapture<T, S>(
+    /** Copies a borrowed frame (called on the frame thread; must not keep the frame). */
+    private val snapshot: (T) -> S,
+    /** The snapshot's sensor timestamp, nanoseconds. */
+    private val timestampNs: (S) -> Long,
+    /** Encodes a snapshot as JPEG (on [background]). */
+    private val encode: (S) -> ByteArray,
+    private val background: Executor,
+) {
+    private val pending = ArrayList<(StillResult) -> Unit>()
+
+    /** Requests waiting for a frame. */
+    val waiting: Int @Synchronized get() = pending.size
+
+    /** Asks for a still; [callback] runs on the background executor, exactly once. */
+    @Synchronized
+    fun request(callback: (StillResult) -> Unit) {
+        pending += callback
+    }
+
+    /** One verified frame, borrowed: taken by every waiting request (one snapshot, one JPEG). */
+    fun onFrame(frame: T) {
+        val takers = synchronized(this) {
+            if (pending.isEmpty()) return
+            pending.toList().also { pending.clear() }
+        }
+        val snap = try {
+            snapshot(frame)
+        } catch (e: RuntimeException) {
+            return finish(takers, StillResult.Failed("the frame could not be read: ${e.message}"))
+        }
+        background.execute {
+            val result = try {
+                StillResult.Taken(encode(snap), timestampNs(snap))
+            } catch (e: RuntimeException) {
+                StillResult.Failed("JPEG encoding failed: ${e.message}")
+            }
+            takers.forEach { it(result) }
+        }
+    }
+
+    /** Fails every waiting request with [reason]. */
+    fun fail(reason: String) {
+        val takers = synchronized(this) { pending.toList().also { pending.clear() } }
+        if (takers.isNotEmpty()) finish(takers, StillResult.Failed(reason))
+    }
+
+    private fun finish(takers: List<(StillResult) -> Unit>, r: StillResult) {
+        try {
+            background.execute { takers.forEach { it(r) } }
+        } catch (e: java.util.concurrent.RejectedExecutionException) {
+            takers.forEach { it(r) }
+        }
+    }
+}
+
+/** Where each verified frame goes, in this order: stills and the recording borrow it, the preview takes it. */
+class FrameRouter<T>(
+    /** Closes a frame nobody took. */
+    private val close: (T) -> Unit,
+) {
+    /** The preview's renderer: takes ownership (closes the frame); `null`: no preview. */
+    @Volatile
+    var preview: ((T) -> Unit)? = null
+
+    /** The recording under way, if any. */
+    @Volatile
+    var recording: ProtectedRecording<T>? = null
+
+    /** Still requests. */
+    @Volatile
+    var stills: StillCapture<T, *>? = null
+
+    /** Frames routed so far. */
+    @Volatile
+    var routed = 0L
+        private set
+
+    /** One verified frame, owned: borrowed by stills and the recording, then given to the preview or closed. */
+    fun deliver(frame: T) {
+        routed++
+        try {
+            stills?.onFrame(frame)
+            recording?.onFrame(frame)
+        } finally {
+            val p = preview
+            if (p == null) close(frame) else p(frame)
+        }
+    }
+}

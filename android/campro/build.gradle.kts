@@ -28,6 +28,9 @@ android {
 }
 
 dependencies {
+    // CamPro.open ties the camera to a LifecycleOwner and exposes the state as a StateFlow.
+    api("androidx.lifecycle:lifecycle-common:2.8.7")
+    api("org.jetbrains.kotlinx:kotlinx-coroutines-core:1.10.1")
     // CameraX is the app's choice: CamProCameraX compiles against it, apps that use it
     // bring their own CameraX (1.3 or later).
     compileOnly("androidx.camera:camera-core:1.4.1")

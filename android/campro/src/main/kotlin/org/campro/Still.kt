@@ -15,33 +15,33 @@ sealed class StillResult {
  * Protected stills: each request takes the **next** frame the gate delivers (a verified
  * one, made after the request) and encodes it as JPEG; the camera's own JPEG is never used.
  *
- * On the frame thread [onFrame] only copies what the encoder needs ([snapshot], e.g. an
- * `Image`'s planes); encoding and the callback run on [background], so the preview and a
- * recording never wait for a JPEG. A request waits through transient states (Verifying,
- * Violated: no frame is delivered meanwhile) and fails on [fail] (the camera stopped, the
- * app's timeout). Threads: every method is synchronized.
+ * On the frame thread [onFrame] only copies what the encoders need ([snapshot], e.g. an
+ * `Image`'s planes, once for every waiting request); encoding and the callbacks run on
+ * [background], so the preview and a recording never wait for a JPEG. A request waits
+ * through transient states (Verifying, Violated: no frame is delivered meanwhile) and ends
+ * on [cancel] (the app's timeout) or [fail] (the camera stopped). Every request's callback
+ * runs exactly once. Threads: any; the request list is synchronized.
  */
 class StillCapture<T, S>(
     /** Copies a borrowed frame (called on the frame thread; must not keep the frame). */
     private val snapshot: (T) -> S,
     /** The snapshot's sensor timestamp, nanoseconds. */
     private val timestampNs: (S) -> Long,
-    /** Encodes a snapshot as JPEG (on [background]). */
-    private val encode: (S) -> ByteArray,
     private val background: Executor,
 ) {
-    private val pending = ArrayList<(StillResult) -> Unit>()
+    /** One waiting request: its encoder (orientation and quality are the request's) and its callback. */
+    class Request<S> internal constructor(internal val encode: (S) -> ByteArray, internal val callback: (StillResult) -> Unit)
+
+    private val pending = ArrayList<Request<S>>()
 
     /** Requests waiting for a frame. */
     val waiting: Int @Synchronized get() = pending.size
 
-    /** Asks for a still; [callback] runs on the background executor, exactly once. */
+    /** Asks for a still, JPEG-encoded by [encode]; [callback] runs on the background executor, exactly once. */
     @Synchronized
-    fun request(callback: (StillResult) -> Unit) {
-        pending += callback
-    }
+    fun request(encode: (S) -> ByteArray, callback: (StillResult) -> Unit): Request<S> = Request(encode, callback).also { pending += it }
 
-    /** One verified frame, borrowed: taken by every waiting request (one snapshot, one JPEG). */
+    /** One verified frame, borrowed: taken by every waiting request (one snapshot). */
     fun onFrame(frame: T) {
         val takers = synchronized(this) {
             if (pending.isEmpty()) return
@@ -52,14 +52,20 @@ class StillCapture<T, S>(
         } catch (e: RuntimeException) {
             return finish(takers, StillResult.Failed("the frame could not be read: ${e.message}"))
         }
-        background.execute {
-            val result = try {
-                StillResult.Taken(encode(snap), timestampNs(snap))
+        run(takers) { r ->
+            try {
+                StillResult.Taken(r.encode(snap), timestampNs(snap))
             } catch (e: RuntimeException) {
                 StillResult.Failed("JPEG encoding failed: ${e.message}")
             }
-            takers.forEach { it(result) }
         }
+    }
+
+    /** Ends [request] with [reason] if it still waits; returns whether it did. */
+    fun cancel(request: Request<S>, reason: String): Boolean {
+        val removed = synchronized(this) { pending.remove(request) }
+        if (removed) finish(listOf(request), StillResult.Failed(reason))
+        return removed
     }
 
     /** Fails every waiting request with [reason]. */
@@ -68,11 +74,15 @@ class StillCapture<T, S>(
         if (takers.isNotEmpty()) finish(takers, StillResult.Failed(reason))
     }
 
-    private fun finish(takers: List<(StillResult) -> Unit>, r: StillResult) {
+    private fun finish(takers: List<Request<S>>, r: StillResult) = run(takers) { r }
+
+    /** Runs each request's callback with its result on [background] (here when it is shut down). */
+    private fun run(takers: List<Request<S>>, result: (Request<S>) -> StillResult) {
+        val task = Runnable { for (t in takers) t.callback(result(t)) }
         try {
-            background.execute { takers.forEach { it(r) } }
+            background.execute(task)
         } catch (e: java.util.concurrent.RejectedExecutionException) {
-            takers.forEach { it(r) }
+            task.run()
         }
     }
 }

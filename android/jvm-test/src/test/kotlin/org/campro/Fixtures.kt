@@ -106,4 +106,46 @@ object Fixtures {
     }
 
     fun converged(transform: IntArray = PHONE, gains: FloatArray = GAINS) = MeteringReport(1, CamProPipeline.AWB_STATE_CONVERGED, transform, gains)
+
+    /**
+     * A lifecycle the test moves by hand ([moveTo]), dispatching the events between the
+     * states in order to each [androidx.lifecycle.DefaultLifecycleObserver], as
+     * `LifecycleRegistry` does; an observer added late is brought up to the current state.
+     */
+    class TestOwner : androidx.lifecycle.LifecycleOwner {
+        private val registry = object : androidx.lifecycle.Lifecycle() {
+            val observers = ArrayList<androidx.lifecycle.LifecycleObserver>()
+            var state = State.INITIALIZED
+            override val currentState: State get() = state
+            override fun addObserver(observer: androidx.lifecycle.LifecycleObserver) {
+                observers += observer
+                val target = state
+                state = State.INITIALIZED
+                walk(target, listOf(observer))
+            }
+            override fun removeObserver(observer: androidx.lifecycle.LifecycleObserver) { observers -= observer }
+            fun walk(target: State, to: List<androidx.lifecycle.LifecycleObserver>) {
+                val owner = this@TestOwner
+                while (state != target) {
+                    val up = target > state
+                    val next = if (up) State.values()[state.ordinal + 1] else State.values()[state.ordinal - 1]
+                    for (o in to.toList()) {
+                        val d = o as? androidx.lifecycle.DefaultLifecycleObserver ?: continue
+                        when {
+                            up && next == State.CREATED -> d.onCreate(owner)
+                            up && next == State.STARTED -> d.onStart(owner)
+                            up && next == State.RESUMED -> d.onResume(owner)
+                            !up && next == State.STARTED -> d.onPause(owner)
+                            !up && next == State.CREATED -> d.onStop(owner)
+                            !up && next == State.DESTROYED -> d.onDestroy(owner)
+                        }
+                    }
+                    state = next
+                }
+            }
+        }
+        override val lifecycle: androidx.lifecycle.Lifecycle get() = registry
+
+        fun moveTo(state: androidx.lifecycle.Lifecycle.State) = registry.walk(state, registry.observers)
+    }
 }

@@ -318,7 +318,7 @@ class GlueTest {
         val control = RecordingControl()
         val provider = RecordingProvider(cameraOf("7", control))
         val x = CamProCameraX(session, direct, deliver = { it.close() })
-        val owner = object : LifecycleOwner {}
+        val owner = Fixtures.TestOwner()
         x.bind(provider, owner, CameraSelector.DEFAULT_BACK_CAMERA, cameraManager("7", supportedCharacteristics()), direct) { it.setImageQueueDepth(1) }
         // Everything the app bound is unbound first; CamPro's analysis is bound alone, extended (its queue, not the app's).
         assertEquals(listOf("unbindAll", "bind 1"), provider.calls)
@@ -347,7 +347,7 @@ class GlueTest {
         val direct = Executor { it.run() }
         val control = RecordingControl()
         val x = CamProCameraX(session, direct, deliver = { it.close() })
-        x.bind(RecordingProvider(cameraOf("8", control)), object : LifecycleOwner {}, CameraSelector.DEFAULT_FRONT_CAMERA, cameraManager("8", supportedCharacteristics(syncLatency = -1)), direct)
+        x.bind(RecordingProvider(cameraOf("8", control)), Fixtures.TestOwner(), CameraSelector.DEFAULT_FRONT_CAMERA, cameraManager("8", supportedCharacteristics(syncLatency = -1)), direct)
         val s = x.state
         assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("SYNC_MAX_LATENCY"))
         assertTrue("nothing sent to an unsupported camera", control.sent.isEmpty())

@@ -112,12 +112,12 @@ class CaptureOnHalTest {
             val direct = java.util.concurrent.Executor { it.run() }
             val stills = ArrayList<StillResult>()
             var stillFrame: SimFrame? = null
-            router.stills = StillCapture<SimFrame, Pair<SimFrame, ByteArray>>(
+            val stillCapture = StillCapture<SimFrame, Pair<SimFrame, ByteArray>>(
                 snapshot = { f -> stillFrame = f; f to f.pixels.copyOf() },
                 timestampNs = { it.first.timestampNs },
-                encode = { (_, px) -> CamProNative.encodeJpegRgb(side, side, px, Orientation.exifOrientation(90), 100) },
                 background = direct,
             )
+            router.stills = stillCapture
             lateinit var p: CamProPipeline<SimFrame>
             p = CamProPipeline(
                 session, hal, direct, perFrameControl = true, pipelineDepth = 4, imageQueueDepth = 6,
@@ -127,7 +127,7 @@ class CaptureOnHalTest {
             router.recording = recording
             p.start(Fixtures.supported())
             val droppedBefore = p.gate.dropped
-            hal.run(120, p) { i -> if (i == 100) router.stills!!.request { stills += it } }
+            hal.run(120, p) { i -> if (i == 100) stillCapture.request({ (_, px) -> CamProNative.encodeJpegRgb(side, side, px, Orientation.exifOrientation(90), 100) }) { stills += it } }
             assertEquals(ProtectionState.Protected, p.state)
             val summary = recording.stop()
 

@@ -1,0 +1,474 @@
+package org.campro.android
+
+import android.Manifest
+import android.content.Context
+import android.content.pm.PackageManager
+import android.graphics.ImageFormat
+import android.hardware.HardwareBuffer
+import android.hardware.camera2.CameraCaptureSession
+import android.hardware.camera2.CameraCharacteristics
+import android.hardware.camera2.CameraDevice
+import android.hardware.camera2.CameraManager
+import android.hardware.camera2.params.SessionConfiguration
+import android.media.Image
+import android.os.Handler
+import android.os.HandlerThread
+import android.os.Looper
+import android.view.Surface
+import android.view.WindowManager
+import androidx.lifecycle.DefaultLifecycleObserver
+import androidx.lifecycle.LifecycleOwner
+import kotlinx.coroutines.flow.MutableStateFlow
+import kotlinx.coroutines.flow.StateFlow
+import kotlinx.coroutines.flow.asStateFlow
+import org.campro.CamProNative
+import org.campro.DeviceSupport
+import org.campro.FrameRouter
+import org.campro.Orientation
+import org.campro.ProtectedRecording
+import org.campro.ProtectionState
+import org.campro.RecordingSummary
+import org.campro.StillCapture
+import org.campro.StillResult
+import org.campro.Yuv
+import java.io.File
+import java.io.IOException
+import java.nio.file.Files
+import java.nio.file.StandardCopyOption
+import java.util.concurrent.CopyOnWriteArrayList
+import java.util.concurrent.Executor
+import java.util.concurrent.Executors
+import java.util.concurrent.RejectedExecutionException
+
+/** How a recording ended: the file and what it holds, or why there is none. */
+sealed class RecordingResult {
+    class Saved(val file: File, val summary: RecordingSummary) : RecordingResult()
+    data class Failed(val reason: String) : RecordingResult()
+}
+
+/**
+ * A recording under way ([CamProCamera.startRecording]). It ends on [stop] or when the camera
+ * closes (the owner stopped, another app took the camera); either way the recording's
+ * `onEnded` runs once, on the main thread, with the finished file or why there is none.
+ */
+class ActiveRecording internal constructor(
+    /** The file being written (it appears there only once finished). */
+    val output: File,
+    internal val recording: ProtectedRecording<Image>,
+    internal val onEnded: (RecordingResult) -> Unit,
+    private val stopper: (ActiveRecording, String) -> Unit,
+) {
+    /** Ends the recording. */
+    fun stop() = stopper(this, "stopped by the app")
+
+    /** Frames written so far. */
+    val framesWritten: Long get() = recording.framesWritten
+}
+
+/**
+ * A protected camera that owns its lifecycle ([CamPro.open]): opened while its owner is
+ * started, closed when it stops, reopened when the camera becomes available again (another
+ * app in multi-window took it, or camera access priorities changed).
+ *
+ * One protected `YUV_420_888` stream feeds everything: each frame waits in the gate for its
+ * own `CaptureResult` to verify, then goes to stills and a recording (which copy it) and to
+ * the preview (which shows it): [org.campro.FrameRouter]. No surface of the app is ever a
+ * capture target, so no consumer can see a frame the gate did not pass.
+ *
+ * Threads and ownership: camera calls and the fields below marked "camera thread" run on
+ * `campro-camera`; frames, states and the recording on `campro-frames`; JPEG encoding on
+ * `campro-still`; callbacks and the preview on the main thread. [state] may be read anywhere.
+ */
+class CamProCamera internal constructor(
+    private val context: Context,
+    private val owner: LifecycleOwner,
+    val lens: Lens,
+    val preset: Preset,
+    val options: CamProOptions,
+) : AutoCloseable {
+    private val manager: CameraManager = context.getSystemService(CameraManager::class.java)
+        ?: throw IllegalStateException("this device has no CameraManager")
+    private val cameraThread = HandlerThread("campro-camera").apply { start() }
+    private val cameraHandler = Handler(cameraThread.looper)
+    private val cameraExecutor = Executor { if (!cameraHandler.post(it)) throw RejectedExecutionException("the camera is closed") }
+    private val frameThread = HandlerThread("campro-frames").apply { start() }
+    private val frameHandler = Handler(frameThread.looper)
+    private val frameExecutor = Executor { if (!frameHandler.post(it)) throw RejectedExecutionException("the camera is closed") }
+    private val stillExecutor = Executors.newSingleThreadExecutor { r -> Thread(r, "campro-still") }
+    private val main = Handler(Looper.getMainLooper())
+
+    private val mutableState = MutableStateFlow<ProtectionState>(ProtectionState.Stopped("not started: the lifecycle owner has not started"))
+
+    /** The protection state: frames reach the preview, recordings and stills only while [ProtectionState.Protected]. */
+    val state: StateFlow<ProtectionState> = mutableState.asStateFlow()
+
+    private val listeners = CopyOnWriteArrayList<Pair<Executor, (ProtectionState) -> Unit>>()
+
+    /** Verified frames, in order: stills, the recording, the preview. */
+    private val router = FrameRouter<Image> { it.close() }
+
+    private val stills = StillCapture<Image, ImageSnapshot>(ImageSnapshot::of, { it.timestampNs }, stillExecutor)
+
+    // Camera thread.
+    private var wanted = false
+    private var device: CameraDevice? = null
+
+    /** The running Camera2 glue (camera thread writes; the frame thread reads the gate's count). */
+    @Volatile
+    private var campro: CamProCamera2? = null
+    private var cameraId: String? = null
+
+    /** The open stream: size, sensor orientation, facing (written on the camera thread). */
+    @Volatile
+    private var stream: Stream? = null
+
+    private class Stream(val width: Int, val height: Int, val sensorOrientation: Int, val front: Boolean)
+
+    // Main thread.
+    private var preview: CamProPreviewView? = null
+
+    @Volatile
+    private var closed = false
+
+    private val lifecycleObserver = object : DefaultLifecycleObserver {
+        override fun onStart(owner: LifecycleOwner) = onCamera { wanted = true; openCamera() }
+        override fun onStop(owner: LifecycleOwner) = onCamera { wanted = false; closeCamera("paused: the app is not in the foreground") }
+        override fun onDestroy(owner: LifecycleOwner) = close()
+    }
+
+    private val availability = object : CameraManager.AvailabilityCallback() {
+        override fun onCameraAvailable(id: String) {
+            if (id == cameraId || cameraId == null) openCamera()
+        }
+
+        override fun onCameraAccessPrioritiesChanged() = openCamera()
+    }
+
+    init {
+        router.stills = stills
+        manager.registerAvailabilityCallback(availability, cameraHandler)
+        owner.lifecycle.addObserver(lifecycleObserver)
+    }
+
+    /** Adds [listener], called on [executor] with the current state now and every change after. */
+    fun addStateListener(executor: Executor, listener: (ProtectionState) -> Unit) {
+        listeners += executor to listener
+        val now = mutableState.value
+        executor.execute { listener(now) }
+    }
+
+    fun removeStateListener(listener: (ProtectionState) -> Unit) {
+        listeners.removeAll { it.second === listener }
+    }
+
+    /**
+     * Shows the protected stream in [view] (`null`: no preview). Main thread. The view gets
+     * only frames the gate passed, and covers itself unless Protected.
+     */
+    fun setPreview(view: CamProPreviewView?) {
+        checkMain()
+        preview = view
+        val v = view
+        router.preview = if (v == null) null else { image -> v.render(image) }
+        v?.showState(mutableState.value)
+        stream?.let { s -> v?.configure(s.width, s.height, s.sensorOrientation, s.front) }
+    }
+
+    /**
+     * Records verified frames into [output] (MP4, H.264 or HEVC, no audio), from now until
+     * [ActiveRecording.stop] or the camera closes (the owner stopped, the camera was taken):
+     * the file is then finished with what it holds and the frames the gate dropped.
+     * [onEnded] runs once on the main thread when it ends. Throws [IllegalStateException]
+     * when the camera is not open or a recording runs, and [IOException] when [output]
+     * exists without [RecordingOptions.overwrite] or the encoder cannot start.
+     */
+    fun startRecording(
+        output: File,
+        recordingOptions: RecordingOptions = RecordingOptions(),
+        deviceOrientation: Int? = null,
+        onEnded: (RecordingResult) -> Unit = {},
+    ): ActiveRecording {
+        val c = campro ?: throw IllegalStateException("the camera is not open (state: ${mutableState.value})")
+        val s = stream ?: throw IllegalStateException("the camera is not open")
+        check(active == null) { "a recording is under way" }
+        val rotation = Orientation.stillRotation(s.sensorOrientation, deviceOrientation ?: deviceOrientationFromDisplay(), s.front)
+        val encoder = MediaCodecEncoder(output, s.width, s.height, rotation, recordingOptions)
+        val rec = ProtectedRecording(encoder, Image::getTimestamp) { c.pipeline.gate.dropped }
+        val a = ActiveRecording(output, rec, onEnded, ::stopRecording)
+        active = a
+        router.recording = rec
+        return a
+    }
+
+    /** The recording under way, if any. */
+    @Volatile
+    private var active: ActiveRecording? = null
+
+    /** Ends [a] on the frame thread (after the frames already queued), then reports on the main thread; once. */
+    private fun stopRecording(a: ActiveRecording, reason: String) {
+        val task = Runnable {
+            if (!a.recording.isActive) return@Runnable
+            if (router.recording === a.recording) router.recording = null
+            if (active === a) active = null
+            val result = try {
+                val summary = a.recording.stop(reason)
+                if (summary.frames == 0L) RecordingResult.Failed("no verified frame was recorded ($reason)") else RecordingResult.Saved(a.output, summary)
+            } catch (e: IOException) {
+                RecordingResult.Failed(e.message ?: "the recording failed")
+            }
+            main.post { a.onEnded(result) }
+        }
+        try {
+            frameExecutor.execute(task)
+        } catch (e: RejectedExecutionException) {
+            task.run()
+        }
+    }
+
+    /**
+     * Takes the next verified frame as a JPEG into [output] (written atomically; an existing
+     * file is replaced only with [overwrite]). Its only metadata is the EXIF orientation, from
+     * [deviceOrientation] (degrees the device is turned clockwise, e.g. from an
+     * `OrientationEventListener`; default: the display's rotation). [callback] runs on the
+     * main thread: the file's bytes, or why there is none (no verified frame within
+     * [CamProOptions.stillTimeoutMs], the camera closed, the file exists).
+     */
+    fun takePicture(output: File, overwrite: Boolean = false, deviceOrientation: Int? = null, callback: (StillResult) -> Unit) {
+        val s = stream
+        val refused = when {
+            s == null -> "the camera is not open (state: ${mutableState.value})"
+            output.exists() && !overwrite -> "$output exists: pass overwrite = true to replace it"
+            else -> null
+        }
+        if (refused != null || s == null) {
+            main.post { callback(StillResult.Failed(refused ?: "the camera is not open")) }
+            return
+        }
+        val exif = Orientation.exifOrientation(Orientation.stillRotation(s.sensorOrientation, deviceOrientation ?: deviceOrientationFromDisplay(), s.front))
+        val quality = options.jpegQuality
+        val request = stills.request({ snap -> snap.jpeg(exif, quality) }) { r ->
+            val result = if (r is StillResult.Taken) writeAtomically(output, r.jpeg, overwrite)?.let { StillResult.Failed(it) } ?: r else r
+            main.post { callback(result) }
+        }
+        main.postDelayed({
+            stills.cancel(request, "no verified frame within ${options.stillTimeoutMs} ms (state: ${mutableState.value})")
+        }, options.stillTimeoutMs)
+    }
+
+    /** Writes [bytes] to [output] through a temporary file beside it; returns why it failed, or null. */
+    private fun writeAtomically(output: File, bytes: ByteArray, overwrite: Boolean): String? {
+        val part = File(output.absoluteFile.parentFile, ".${output.name}.part")
+        return try {
+            part.writeBytes(bytes)
+            if (!overwrite && output.exists()) throw IOException("$output appeared meanwhile; it is not replaced")
+            val how = if (overwrite) arrayOf(StandardCopyOption.ATOMIC_MOVE, StandardCopyOption.REPLACE_EXISTING) else arrayOf(StandardCopyOption.ATOMIC_MOVE)
+            Files.move(part.toPath(), output.toPath(), *how)
+            null
+        } catch (e: IOException) {
+            part.delete()
+            "the still could not be written: ${e.message}"
+        }
+    }
+
+    /** Stops everything and releases the camera and the threads. Idempotent; any thread. */
+    override fun close() {
+        if (closed) return
+        closed = true
+        manager.unregisterAvailabilityCallback(availability)
+        onMain { owner.lifecycle.removeObserver(lifecycleObserver) }
+        try {
+            cameraHandler.post {
+                wanted = false
+                closeCamera("closed by the app")
+                // After the frame thread has run what closeCamera queued (the reader's close, the last state).
+                frameHandler.post { frameThread.quitSafely() }
+                stillExecutor.shutdown()
+                cameraThread.quitSafely()
+            }
+        } catch (e: RuntimeException) {
+            // The threads are gone already.
+        }
+    }
+
+    // ------------------------------------------------------------------------------------
+    // Camera thread
+
+    private fun onCamera(body: () -> Unit) {
+        if (!closed) cameraHandler.post(body)
+    }
+
+    private fun openCamera() {
+        if (!wanted || closed || campro != null) return
+        try {
+            val ids = manager.cameraIdList.map { it to manager.getCameraCharacteristics(it).get(CameraCharacteristics.LENS_FACING) }
+            val id = CamPro.pick(ids, lens) ?: return publish(ProtectionState.Unsupported("this device has no $lens"))
+            cameraId = id
+            val chars = manager.getCameraCharacteristics(id)
+            val support = chars.camproSupport()
+            if (support is DeviceSupport.Result.Unsupported) return publish(ProtectionState.Unsupported(support.reasons.joinToString("; ")))
+            if (context.checkSelfPermission(Manifest.permission.CAMERA) != PackageManager.PERMISSION_GRANTED) {
+                return publish(ProtectionState.Stopped("the camera permission is not granted"))
+            }
+            val size = chars.camproStreamSize(ImageFormat.YUV_420_888, options.maxWidth, options.maxHeight)
+                ?: return publish(ProtectionState.Unsupported("the camera lists no YUV_420_888 size"))
+            val session = preset.open(context, (support as DeviceSupport.Result.Supported).maxCurvePoints)
+            val c = try {
+                CamProCamera2(
+                    session, chars, cameraHandler, frameExecutor, size.width, size.height,
+                    deliver = router::deliver,
+                    onState = ::publish,
+                    trustMissingKeys = options.trustMissingKeys,
+                    format = ImageFormat.YUV_420_888,
+                    usage = HardwareBuffer.USAGE_CPU_READ_OFTEN or HardwareBuffer.USAGE_GPU_SAMPLED_IMAGE,
+                )
+            } catch (e: RuntimeException) {
+                session.close()
+                throw e
+            }
+            campro = c
+            val s = Stream(size.width, size.height, chars.get(CameraCharacteristics.SENSOR_ORIENTATION) ?: 0, chars.get(CameraCharacteristics.LENS_FACING) == CameraCharacteristics.LENS_FACING_FRONT)
+            stream = s
+            main.post { preview?.configure(s.width, s.height, s.sensorOrientation, s.front) }
+            manager.openCamera(id, cameraExecutor, object : CameraDevice.StateCallback() {
+                override fun onOpened(d: CameraDevice) {
+                    if (campro !== c) return d.close() // closed or reopened meanwhile: not ours any more
+                    device = d
+                    createSession(d, c)
+                }
+
+                override fun onDisconnected(d: CameraDevice) =
+                    lost(c, d, "the camera was taken by another app or disconnected; CamPro reopens it when it is free")
+
+                override fun onError(d: CameraDevice, error: Int) = lost(c, d, errorReason(error))
+            })
+        } catch (e: Exception) {
+            // CameraAccessException, SecurityException, IllegalArgumentException, native errors.
+            closeCamera("cannot open the camera: ${e.message}")
+        }
+    }
+
+    private fun createSession(d: CameraDevice, c: CamProCamera2) {
+        try {
+            d.createCaptureSession(
+                SessionConfiguration(
+                    SessionConfiguration.SESSION_REGULAR, c.outputs(), cameraExecutor,
+                    object : CameraCaptureSession.StateCallback() {
+                        override fun onConfigured(s: CameraCaptureSession) = c.onConfigured(d, s)
+                        override fun onConfigureFailed(s: CameraCaptureSession) = lost(c, d, "the capture session could not be configured")
+                        override fun onClosed(s: CameraCaptureSession) = c.onCameraStopped("the capture session closed")
+                    },
+                ),
+            )
+        } catch (e: Exception) {
+            lost(c, d, "cannot create the capture session: ${e.message}")
+        }
+    }
+
+    /** The camera went away (taken, disconnected, failed): closed until it is available again. */
+    private fun lost(c: CamProCamera2, d: CameraDevice, reason: String) {
+        c.onCameraStopped(reason)
+        if (campro === c) closeCamera(reason) else d.close()
+    }
+
+    /** Closes the camera, stops a recording and fails waiting stills with [reason]; the state becomes Stopped. */
+    private fun closeCamera(reason: String) {
+        val c = campro
+        campro = null
+        stream = null
+        c?.close()
+        c?.session?.close()
+        device?.close()
+        device = null
+        stills.fail(reason)
+        active?.let { stopRecording(it, reason) }
+        // Queued behind the pipeline's own last state on the frame thread, so this one is final.
+        try {
+            frameExecutor.execute { publish(ProtectionState.Stopped(reason)) }
+        } catch (e: RejectedExecutionException) {
+            publish(ProtectionState.Stopped(reason))
+        }
+    }
+
+    private fun errorReason(error: Int): String = when (error) {
+        CameraDevice.StateCallback.ERROR_CAMERA_IN_USE -> "the camera is in use by another app"
+        CameraDevice.StateCallback.ERROR_MAX_CAMERAS_IN_USE -> "too many cameras are open"
+        CameraDevice.StateCallback.ERROR_CAMERA_DISABLED -> "the camera is disabled by a device policy"
+        CameraDevice.StateCallback.ERROR_CAMERA_DEVICE -> "the camera device failed"
+        CameraDevice.StateCallback.ERROR_CAMERA_SERVICE -> "the camera service failed"
+        else -> "camera error $error"
+    }
+
+    // ------------------------------------------------------------------------------------
+    // Any thread
+
+    private fun publish(s: ProtectionState) {
+        if (mutableState.value == s && s !is ProtectionState.Stopped) return
+        mutableState.value = s
+        for ((executor, listener) in listeners) {
+            try {
+                executor.execute { listener(s) }
+            } catch (e: RejectedExecutionException) {
+                // The app's executor is shut down: it no longer listens.
+            }
+        }
+        main.post { preview?.showState(s) }
+    }
+
+    private fun onMain(body: () -> Unit) {
+        if (Looper.myLooper() == Looper.getMainLooper()) body() else main.post(body)
+    }
+
+    private fun checkMain() = check(Looper.myLooper() == Looper.getMainLooper()) { "call on the main thread" }
+
+    /** The device's physical orientation as the display's rotation implies it (a portrait-locked app should pass its own). */
+    private fun deviceOrientationFromDisplay(): Int {
+        @Suppress("DEPRECATION")
+        val rotation = context.getSystemService(WindowManager::class.java)?.defaultDisplay?.rotation ?: Surface.ROTATION_0
+        return when (rotation) {
+            Surface.ROTATION_90 -> 270
+            Surface.ROTATION_180 -> 180
+            Surface.ROTATION_270 -> 90
+            else -> 0
+        }
+    }
+
+    // ------------------------------------------------------------------------------------
+    // Internal, for tests
+
+    /** The Camera2 glue while the camera is open (tests feed it scripted results). */
+    internal val glue: CamProCamera2? get() = campro
+
+    /** The camera thread's looper and the frame thread's (tests idle them). */
+    internal val cameraLooper: Looper get() = cameraThread.looper
+    internal val frameLooper: Looper get() = frameThread.looper
+}
+
+/** A verified frame's planes, copied tightly packed (I420) for the still encoder. */
+internal class ImageSnapshot(
+    val width: Int,
+    val height: Int,
+    val timestampNs: Long,
+    private val y: ByteArray,
+    private val u: ByteArray,
+    private val v: ByteArray,
+) {
+    /** The JPEG: [exifOrientation] is its only metadata. */
+    fun jpeg(exifOrientation: Int, quality: Int): ByteArray {
+        val cw = (width + 1) / 2
+        return CamProNative.encodeJpegYuv(width, height, y, width, u, v, cw, 1, exifOrientation, quality)
+    }
+
+    companion object {
+        fun of(image: Image): ImageSnapshot {
+            val p = image.planes
+            val (w, h) = image.width to image.height
+            val (cw, ch) = (w + 1) / 2 to (h + 1) / 2
+            return ImageSnapshot(
+                w, h, image.timestamp,
+                Yuv.packPlane(p[0].buffer, p[0].rowStride, p[0].pixelStride, w, h),
+                Yuv.packPlane(p[1].buffer, p[1].rowStride, p[1].pixelStride, cw, ch),
+                Yuv.packPlane(p[2].buffer, p[2].rowStride, p[2].pixelStride, cw, ch),
+            )
+        }
+    }
+}

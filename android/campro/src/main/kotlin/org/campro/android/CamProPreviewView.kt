@@ -1,0 +1,182 @@
+package org.campro.android
+
+import android.content.Context
+import android.graphics.Color
+import android.graphics.ImageFormat
+import android.graphics.Matrix
+import android.graphics.SurfaceTexture
+import android.media.Image
+import android.media.ImageWriter
+import android.util.AttributeSet
+import android.view.Surface
+import android.view.TextureView
+import android.view.View
+import android.widget.FrameLayout
+import org.campro.Orientation
+import org.campro.ProtectionState
+
+/**
+ * The protected camera's preview: shows only frames whose own `CaptureResult` verified
+ * (they reach [render] through the camera's gate, and nothing else writes to its surface),
+ * fitted whole into the view (aspect kept), turned for the display's rotation and mirrored
+ * for a front camera.
+ *
+ * While the state is not [ProtectionState.Protected] an opaque cover hides the picture
+ * (show the state yourself: `CamProCamera.state`). The surface is never recreated for a
+ * state change: the cover is the only thing that moves, so the preview comes back on the
+ * first verified frame without a flash or a new buffer queue.
+ *
+ * Threads: [render] runs on the camera's frame thread; everything else on the main thread.
+ * The writer is shared between them under [lock].
+ */
+class CamProPreviewView @JvmOverloads constructor(
+    context: Context,
+    attrs: AttributeSet? = null,
+) : FrameLayout(context, attrs) {
+    private val texture = TextureView(context)
+
+    /** Covers the picture unless Protected (opaque black). */
+    internal val cover = View(context).apply { setBackgroundColor(Color.BLACK) }
+
+    private val lock = Any()
+
+    /** Writes verified frames onto the texture's surface; `null` while there is no surface. Guarded by [lock]. */
+    private var writer: ImageWriter? = null
+    private var surface: Surface? = null
+
+    /** Frames shown and frames closed unshown (no surface yet, or the writer refused them). */
+    @Volatile
+    var framesShown = 0L
+        private set
+
+    @Volatile
+    var framesDropped = 0L
+        private set
+
+    // Main thread only.
+    private var bufferWidth = 0
+    private var bufferHeight = 0
+    private var sensorOrientation = 0
+    private var frontFacing = false
+
+    /** The state the cover shows (main thread). */
+    var state: ProtectionState = ProtectionState.Stopped("no camera")
+        private set
+
+    init {
+        addView(texture, LayoutParams(LayoutParams.MATCH_PARENT, LayoutParams.MATCH_PARENT))
+        addView(cover, LayoutParams(LayoutParams.MATCH_PARENT, LayoutParams.MATCH_PARENT))
+        texture.surfaceTextureListener = object : TextureView.SurfaceTextureListener {
+            override fun onSurfaceTextureAvailable(st: SurfaceTexture, width: Int, height: Int) {
+                attach(st)
+                applyTransform()
+            }
+
+            override fun onSurfaceTextureSizeChanged(st: SurfaceTexture, width: Int, height: Int) = applyTransform()
+
+            override fun onSurfaceTextureDestroyed(st: SurfaceTexture): Boolean {
+                detach()
+                return true
+            }
+
+            override fun onSurfaceTextureUpdated(st: SurfaceTexture) {}
+        }
+    }
+
+    /** The protection state: the picture shows only while Protected (main thread). */
+    fun showState(s: ProtectionState) {
+        state = s
+        cover.visibility = if (s == ProtectionState.Protected) View.GONE else View.VISIBLE
+    }
+
+    /**
+     * The stream this view shows: its buffer size, `SENSOR_ORIENTATION` and whether the
+     * camera faces the user (main thread; the camera calls it when it opens).
+     */
+    fun configure(width: Int, height: Int, sensorOrientationDegrees: Int, front: Boolean) {
+        require(width > 0 && height > 0) { "stream size must be positive, got $width x $height" }
+        val changed = width != bufferWidth || height != bufferHeight
+        bufferWidth = width
+        bufferHeight = height
+        sensorOrientation = sensorOrientationDegrees
+        frontFacing = front
+        if (changed) texture.surfaceTexture?.let { detach(); attach(it) }
+        applyTransform()
+    }
+
+    /**
+     * One verified frame (frame thread): queued onto the surface, which then owns and
+     * closes it; closed here when there is no surface.
+     */
+    fun render(image: Image) {
+        synchronized(lock) {
+            val w = writer
+            if (w != null) {
+                try {
+                    w.queueInputImage(image)
+                    framesShown++
+                    return
+                } catch (e: RuntimeException) {
+                    // The surface went away under us (IllegalStateException) or the format was refused.
+                }
+            }
+            framesDropped++
+        }
+        image.close()
+    }
+
+    private fun attach(st: SurfaceTexture) {
+        if (bufferWidth > 0) st.setDefaultBufferSize(bufferWidth, bufferHeight)
+        val s = Surface(st)
+        val w = try {
+            ImageWriter.newInstance(s, WRITER_IMAGES, ImageFormat.YUV_420_888)
+        } catch (e: RuntimeException) {
+            null // no writer, no picture: frames are closed unshown (fail closed)
+        }
+        synchronized(lock) {
+            surface = s
+            writer = w
+        }
+    }
+
+    private fun detach() {
+        synchronized(lock) {
+            writer?.close()
+            writer = null
+            surface?.release()
+            surface = null
+        }
+    }
+
+    /** The texture's matrix for the current sizes and rotation (main thread). */
+    private fun applyTransform() {
+        if (bufferWidth == 0 || width == 0 || height == 0) return
+        val rotation = Orientation.previewRotation(sensorOrientation, displayRotationDegrees(), frontFacing)
+        texture.setTransform(Matrix().apply { setValues(Orientation.fitTransform(bufferWidth, bufferHeight, width, height, rotation, frontFacing)) })
+    }
+
+    /** The matrix the texture shows the stream with (tests read it). */
+    internal fun textureTransform(): FloatArray = FloatArray(9).also { texture.getTransform(null).getValues(it) }
+
+    private fun displayRotationDegrees(): Int = when (display?.rotation ?: Surface.ROTATION_0) {
+        Surface.ROTATION_90 -> 90
+        Surface.ROTATION_180 -> 180
+        Surface.ROTATION_270 -> 270
+        else -> 0
+    }
+
+    override fun onConfigurationChanged(newConfig: android.content.res.Configuration?) {
+        super.onConfigurationChanged(newConfig)
+        applyTransform() // the display turned under an activity that handles rotation itself
+    }
+
+    override fun onSizeChanged(w: Int, h: Int, oldw: Int, oldh: Int) {
+        super.onSizeChanged(w, h, oldw, oldh)
+        applyTransform()
+    }
+
+    private companion object {
+        /** Buffers between the writer and the texture: one shown, one queued. */
+        const val WRITER_IMAGES = 2
+    }
+}

@@ -439,8 +439,8 @@ class CamProCamera internal constructor(
     internal val glue: CamProCamera2? get() = campro
 
     /** The camera thread's looper and the frame thread's (tests idle them). */
-    internal val cameraLooper: Looper get() = cameraThread.looper
-    internal val frameLooper: Looper get() = frameThread.looper
+    internal val cameraLooper: Looper? get() = cameraThread.looper
+    internal val frameLooper: Looper? get() = frameThread.looper
 }
 
 /** A verified frame's planes, copied tightly packed (I420) for the still encoder. */

@@ -1,0 +1,133 @@
+package org.campro
+
+import org.junit.Assert.assertArrayEquals
+import org.junit.Assert.assertEquals
+import org.junit.Assert.assertTrue
+import org.junit.Test
+import java.nio.ByteBuffer
+
+/** The capture API's plain rules: turns, the preview's fit, YUV plane copies, stills' life cycle. */
+class CaptureLogicTest {
+    private fun assertMatrix(want: DoubleArray, got: FloatArray) {
+        for (i in want.indices) assertEquals("entry $i of ${got.toList()}", want[i], got[i].toDouble(), 1e-4)
+    }
+
+    @Test
+    fun turnsFollowCamera2Rules() {
+        // Back camera, sensor at 90 (most phones): upright in portrait, level when the display turns.
+        assertEquals(90, Orientation.previewRotation(90, 0, false))
+        assertEquals(0, Orientation.previewRotation(90, 90, false))
+        assertEquals(180, Orientation.previewRotation(90, 270, false))
+        // Front camera, sensor at 270.
+        assertEquals(270, Orientation.previewRotation(270, 0, true))
+        assertEquals(0, Orientation.previewRotation(270, 90, true))
+        // Stills: JPEG_ORIENTATION's rule (back sensor + device, front sensor - device).
+        assertEquals(90, Orientation.stillRotation(90, 0, false))
+        assertEquals(180, Orientation.stillRotation(90, 90, false))
+        assertEquals(0, Orientation.stillRotation(90, 270, false))
+        assertEquals(180, Orientation.stillRotation(270, 90, true))
+        assertEquals(listOf(1, 6, 3, 8, 8), listOf(0, 90, 180, 270, -90).map { Orientation.exifOrientation(it) })
+        val e = runCatching { Orientation.exifOrientation(45) }.exceptionOrNull()
+        assertTrue("$e", e is IllegalArgumentException && e.message!!.startsWith("rotation must be a multiple of 90"))
+    }
+
+    /** Hand-derived: a 1280 x 720 back-camera buffer turned 90 in a 1080 x 1920 portrait view fills it; its top-left lands top-right. */
+    @Test
+    fun portraitPreviewOfALandscapeSensorFillsTheView() {
+        val m = Orientation.fitTransform(1280, 720, 1080, 1920, 90, false)
+        // x' = 1080 - 0.5625 y, y' = (1920 / 1080) x.
+        assertMatrix(doubleArrayOf(0.0, -0.5625, 1080.0, 1920.0 / 1080, 0.0, 0.0, 0.0, 0.0, 1.0), m)
+    }
+
+    /** Hand-derived: unturned, mirrored, letterboxed in a square view (bars of 218.75 above and below). */
+    @Test
+    fun mirroredPreviewIsLetterboxedAndCentred() {
+        val m = Orientation.fitTransform(1280, 720, 1000, 1000, 0, true)
+        // Shown 1000 x 562.5 at y = 218.75; x' = 1000 - x, y' = 218.75 + 0.5625 y.
+        assertMatrix(doubleArrayOf(-1.0, 0.0, 1000.0, 0.0, 0.5625, 218.75, 0.0, 0.0, 1.0), m)
+    }
+
+    /** Hand-derived: a front camera at 270 in portrait, mirrored: buffer (u, v) shows at (1 - v, 1 - u). */
+    @Test
+    fun frontCameraAt270IsTurnedThenMirrored() {
+        val m = Orientation.fitTransform(640, 480, 480, 640, 270, true)
+        assertMatrix(doubleArrayOf(0.0, -0.75, 480.0, -640.0 / 480, 0.0, 640.0, 0.0, 0.0, 1.0), m)
+    }
+
+    /** A planar plane with padded rows, copied into a semi-planar one (pixel stride 2) and packed back, is unchanged. */
+    @Test
+    fun planeCopiesHonourEveryStride() {
+        val cols = 5
+        val rows = 3
+        val src = ByteBuffer.allocate(8 * rows)
+        for (r in 0 until rows) for (c in 0 until cols) src.put(r * 8 + c, (10 * r + c).toByte())
+        val interleaved = ByteBuffer.allocate(12 * rows)
+        for (i in 0 until interleaved.capacity()) interleaved.put(i, 99.toByte())
+        Yuv.copyPlane(src, 8, 1, interleaved, 12, 2, cols, rows)
+        for (r in 0 until rows) for (c in 0 until cols) {
+            assertEquals((10 * r + c).toByte(), interleaved.get(r * 12 + 2 * c))
+            assertEquals("the other plane's bytes are left alone", 99.toByte(), interleaved.get(r * 12 + 2 * c + 1))
+        }
+        val packed = Yuv.packPlane(interleaved, 12, 2, cols, rows)
+        assertArrayEquals(ByteArray(cols * rows) { (10 * (it / cols) + it % cols).toByte() }, packed)
+        assertEquals("positions are left as they were", 0, src.position())
+        // A plane read from its buffer's position (a semi-planar image's second plane starts one byte in).
+        interleaved.position(1)
+        assertArrayEquals(ByteArray(cols * rows) { 99 }, Yuv.packPlane(interleaved, 12, 2, cols, rows))
+        val e = runCatching { Yuv.copyPlane(src, 8, 1, ByteBuffer.allocate(10), 5, 1, cols, rows) }.exceptionOrNull()
+        assertTrue("$e", e is IllegalArgumentException && e.message!!.contains("destination plane is too small"))
+    }
+
+    @Test
+    fun stillsTakeOnlyFramesAfterTheirRequestAndEndOnce() {
+        val direct = java.util.concurrent.Executor { it.run() }
+        val snapshots = ArrayList<Int>()
+        val stills = StillCapture<Int, Int>({ snapshots += it; it }, { it.toLong() }, direct)
+        stills.onFrame(1) // nobody asked: not even copied
+        assertEquals(emptyList<Int>(), snapshots)
+        val results = ArrayList<StillResult>()
+        val a = stills.request({ f -> byteArrayOf(f.toByte()) }) { results += it }
+        stills.request({ throw IllegalStateException("boom") }) { results += it }
+        stills.onFrame(2)
+        assertEquals("one copy for both requests", listOf(2), snapshots)
+        assertEquals(2L, (results[0] as StillResult.Taken).timestampNs)
+        assertEquals("JPEG encoding failed: boom", (results[1] as StillResult.Failed).reason)
+        assertTrue("a finished request cannot be cancelled", !stills.cancel(a, "late"))
+        val c = stills.request({ byteArrayOf() }) { results += it }
+        assertTrue(stills.cancel(c, "timed out"))
+        stills.request({ byteArrayOf() }) { results += it }
+        stills.fail("the camera closed")
+        stills.onFrame(3)
+        assertEquals(listOf("timed out", "the camera closed"), results.drop(2).map { (it as StillResult.Failed).reason })
+        assertEquals(0, stills.waiting)
+    }
+
+    @Test
+    fun theRouterLendsFramesThenHandsThemToThePreviewOrClosesThem() {
+        val events = ArrayList<String>()
+        val router = FrameRouter<Int> { events += "close $it" }
+        router.deliver(1)
+        router.preview = { events += "show $it" }
+        val rec = ProtectedRecording(object : VideoEncoder<Int> {
+            override fun encode(frame: Int, presentationUs: Long): Boolean { events += "encode $frame@$presentationUs"; return true }
+            override fun finish(summary: RecordingSummary) {}
+            override fun abandon() {}
+        }, { it * 1000L }, { 0L })
+        router.recording = rec
+        router.deliver(2)
+        router.deliver(5)
+        assertEquals(listOf("close 1", "encode 2@0", "show 2", "encode 5@3", "show 5"), events)
+        assertEquals(3L, router.routed)
+    }
+
+    @Test
+    fun theSummaryIsOneLineOfJson() {
+        val s = RecordingSummary(3, 10, 0, 1, 5_000, 70_000, "the camera said \"stop\"\n")
+        assertEquals(
+            "{\"campro_recording\":1,\"frames\":3,\"frames_failed_check\":10,\"frames_encoder_busy\":0,\"frames_out_of_order\":1," +
+                "\"first_timestamp_ns\":5000,\"last_timestamp_ns\":70000,\"ended_because\":\"the camera said \\\"stop\\\"\\u000a\"}",
+            s.toJson(),
+        )
+        assertEquals(65L, s.durationUs)
+    }
+}

@@ -17,18 +17,11 @@ android {
         sourceCompatibility = JavaVersion.VERSION_17
         targetCompatibility = JavaVersion.VERSION_17
     }
-    // The bundled parameter sets (repository's params/) become assets/params/*.json.
-    sourceSets["main"].assets.srcDir(layout.buildDirectory.dir("paramsAssets"))
 }
-
-val copyParams by tasks.registering(Copy::class) {
-    from(rootProject.file("../params")) { include("*.json") }
-    into(layout.buildDirectory.dir("paramsAssets/params"))
-}
-tasks.named("preBuild") { dependsOn(copyParams) }
 
 dependencies {
-    implementation(project(":campro"))
+    implementation(project(":campro"))   // brings the presets as assets (campro/params)
+    implementation("androidx.activity:activity-ktx:1.9.3")
 }
 
 kotlin {

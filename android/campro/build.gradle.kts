@@ -22,6 +22,9 @@ android {
         targetCompatibility = JavaVersion.VERSION_17
     }
     sourceSets["main"].jniLibs.srcDir(layout.buildDirectory.dir("rustJniLibs"))
+    // The bundled presets (the repository's params/*.json) as assets/campro/params/NAME.json,
+    // which Preset.Named opens; the detectors (.onnx) stay out of the AAR.
+    sourceSets["main"].assets.srcDir(layout.buildDirectory.dir("presetAssets"))
     publishing {
         singleVariant("release") { withSourcesJar() }
     }
@@ -75,7 +78,11 @@ val cargoNdk by tasks.registering(Exec::class) {
     inputs.files(File(repo, "Cargo.toml"), File(repo, "Cargo.lock"), File(repo, "jni-bridge/Cargo.toml"), File(repo, ".cargo/config.toml"))
     outputs.dir(out)
 }
-tasks.named("preBuild") { dependsOn(cargoNdk) }
+val copyPresets by tasks.registering(Copy::class) {
+    from(rootProject.file("../params")) { include("*.json") }
+    into(layout.buildDirectory.dir("presetAssets/campro/params"))
+}
+tasks.named("preBuild") { dependsOn(cargoNdk, copyPresets) }
 
 kotlin {
     compilerOptions { jvmTarget.set(org.jetbrains.kotlin.gradle.dsl.JvmTarget.JVM_17) }

@@ -1,240 +1,176 @@
 package org.campro.sample
 
-// The sample camera app: CamPro on a Camera2 camera, fail closed per frame on screen too.
-// The camera writes protected frames only into CamProCamera2's ImageReader; each frame is
-// shown (ImageWriter onto a SurfaceView) only after its own CaptureResult verified. No
-// display surface is ever a capture target. The "CamPro" switch shows the real state: it is
-// on while frames are protected, and turning CamPro off closes the camera (this app never
-// shows unprotected frames). Android-only plumbing: the decisions live in org.campro.* and
-// the Rust core; views are built in code (no resources to compile).
+// The sample camera app: a protected camera in a few lines of CamPro.open. The preview shows
+// only frames whose own CaptureResult verified (CamProPreviewView covers itself otherwise);
+// photos and videos are made of the same verified frames, never of the camera's own JPEG or
+// an unchecked stream. A device CamPro cannot protect gets a screen that says why, and no
+// camera. Views are built in code (no resources to compile).
 
 import android.Manifest
-import android.graphics.ImageFormat
-import android.app.Activity
 import android.content.pm.PackageManager
-import android.hardware.camera2.CameraCharacteristics
-import android.hardware.camera2.CameraDevice
-import android.hardware.camera2.CameraManager
-import android.hardware.camera2.CameraCaptureSession
-import android.hardware.camera2.params.SessionConfiguration
-import android.media.Image
-import android.media.ImageWriter
 import android.os.Bundle
-import android.os.Handler
-import android.os.HandlerThread
-import android.view.SurfaceHolder
-import android.view.SurfaceView
 import android.view.View
 import android.widget.AdapterView
 import android.widget.ArrayAdapter
+import android.widget.Button
 import android.widget.LinearLayout
 import android.widget.Spinner
-import android.widget.Switch
 import android.widget.TextView
+import androidx.activity.ComponentActivity
 import org.campro.ProtectionState
-import org.campro.android.CamProCamera2
-import org.campro.android.camproStreamSize
-import org.campro.android.camproSupport
-import org.campro.android.openCamProAsset
-import java.util.concurrent.Executor
+import org.campro.StillResult
+import org.campro.android.ActiveRecording
+import org.campro.android.CamPro
+import org.campro.android.CamProCamera
+import org.campro.android.CamProPreviewView
+import org.campro.android.Lens
+import org.campro.android.Preset
+import org.campro.android.RecordingResult
+import java.io.File
+import java.text.SimpleDateFormat
+import java.util.Date
+import java.util.Locale
 
-class MainActivity : Activity() {
-    internal lateinit var preview: SurfaceView
+class MainActivity : ComponentActivity() {
+    internal lateinit var preview: CamProPreviewView
     internal lateinit var statusView: TextView
-    internal lateinit var toggle: Switch
-    private lateinit var spinner: Spinner
+    internal lateinit var photoButton: Button
+    internal lateinit var recordButton: Button
 
-    private val cameraThread = HandlerThread("campro-camera").apply { start() }
-    private val camera = Handler(cameraThread.looper)
-    private val cameraExecutor = Executor { camera.post(it) }
+    /** The "not available" screen: shown instead of the camera when no camera can be protected. */
+    internal lateinit var unsupportedView: TextView
 
-    // Touched only on the camera thread.
-    private var device: CameraDevice? = null
-    private var campro: CamProCamera2? = null
-    private var paramFile = ""
-    private var wantCamPro = true
-
-    // Touched only on the main thread.
-    private var writer: ImageWriter? = null
+    /** The protected camera (main thread). */
+    internal var camera: CamProCamera? = null
+    private var recording: ActiveRecording? = null
+    private var preset: Preset.Named = Preset.RECOMMENDED
     private var permissionAsked = false
-    private var updatingSwitch = false
+    private var state: ProtectionState = ProtectionState.Stopped("not started")
+    private var lastMessage = ""
 
     override fun onCreate(savedInstanceState: Bundle?) {
         super.onCreate(savedInstanceState)
-        preview = SurfaceView(this)
+        preview = CamProPreviewView(this)
         statusView = TextView(this).apply { setPadding(16, 16, 16, 16); textSize = 12f }
-        toggle = Switch(this).apply { text = "CamPro" }
-        spinner = Spinner(this)
+        unsupportedView = TextView(this).apply { setPadding(32, 32, 32, 32); textSize = 16f; visibility = View.GONE }
+        photoButton = Button(this).apply { text = "Photo"; setOnClickListener { takePhoto() } }
+        recordButton = Button(this).apply { text = "Record"; setOnClickListener { toggleRecording() } }
+        val spinner = Spinner(this)
         val bar = LinearLayout(this).apply {
             orientation = LinearLayout.HORIZONTAL
-            addView(toggle)
+            addView(photoButton)
+            addView(recordButton)
             addView(spinner, LinearLayout.LayoutParams(0, LinearLayout.LayoutParams.WRAP_CONTENT, 1f))
         }
         setContentView(
             LinearLayout(this).apply {
                 orientation = LinearLayout.VERTICAL
+                addView(unsupportedView)
                 addView(preview, LinearLayout.LayoutParams(LinearLayout.LayoutParams.MATCH_PARENT, 0, 1f))
                 addView(bar)
                 addView(statusView)
             },
         )
-        preview.visibility = View.INVISIBLE
 
-        val files = (assets.list("params") ?: emptyArray()).filter { it.endsWith(".json") }.sorted()
-        spinner.adapter = ArrayAdapter(this, android.R.layout.simple_spinner_dropdown_item, files)
-        // The recommended learnt preset by default.
-        spinner.setSelection(maxOf(0, files.indexOf("campro-omega-0.5.json")))
-        paramFile = files.getOrElse(spinner.selectedItemPosition) { "" }
+        // Checked before anything opens: a device CamPro cannot protect never shows a camera.
+        val check = CamPro.checkDevice(this)
+        if (!check.supports(Lens.Back)) {
+            unsupportedView.text = "CamPro cannot protect this device's back camera.\n\n${check.summary()}"
+            unsupportedView.visibility = View.VISIBLE
+            preview.visibility = View.GONE
+            bar.visibility = View.GONE
+            statusView.visibility = View.GONE
+            return
+        }
+
+        val presets = (assets.list(Preset.ASSET_DIR) ?: emptyArray()).filter { it.endsWith(".json") }.map { it.removeSuffix(".json") }.sorted()
+        spinner.adapter = ArrayAdapter(this, android.R.layout.simple_spinner_dropdown_item, presets)
+        spinner.setSelection(maxOf(0, presets.indexOf(Preset.RECOMMENDED.name)))
         spinner.onItemSelectedListener = object : AdapterView.OnItemSelectedListener {
             override fun onItemSelected(parent: AdapterView<*>?, view: View?, position: Int, id: Long) {
-                val f = files[position]
-                camera.post { if (f != paramFile) { paramFile = f; restartCamera() } }
+                val p = Preset.Named(presets[position])
+                if (p != preset) { preset = p; if (camera != null) reopen() }
             }
             override fun onNothingSelected(parent: AdapterView<*>?) {}
         }
-        toggle.setOnCheckedChangeListener { _, on ->
-            if (updatingSwitch) return@setOnCheckedChangeListener
-            camera.post { wantCamPro = on; restartCamera() }
-        }
-        preview.holder.addCallback(object : SurfaceHolder.Callback {
-            override fun surfaceCreated(holder: SurfaceHolder) {}
-            override fun surfaceChanged(holder: SurfaceHolder, format: Int, width: Int, height: Int) {
-                writer?.close()
-                writer = ImageWriter.newInstance(holder.surface, 2)
-            }
-            override fun surfaceDestroyed(holder: SurfaceHolder) {
-                writer?.close()
-                writer = null
-            }
-        })
-    }
-
-    override fun onResume() {
-        super.onResume()
+        show(state)
         when {
-            checkSelfPermission(Manifest.permission.CAMERA) == PackageManager.PERMISSION_GRANTED -> camera.post { openCamera() }
-            // Asked once per activity: no request/recreate loop from onResume.
+            checkSelfPermission(Manifest.permission.CAMERA) == PackageManager.PERMISSION_GRANTED -> reopen()
+            // Asked once per activity: no request/recreate loop.
             !permissionAsked -> { permissionAsked = true; requestPermissions(arrayOf(Manifest.permission.CAMERA), REQUEST_CAMERA) }
-            else -> show(ProtectionState.Stopped("CamPro needs the camera permission (Settings > Apps > CamPro)"))
         }
     }
 
     override fun onRequestPermissionsResult(requestCode: Int, permissions: Array<out String>, grantResults: IntArray) {
         if (requestCode != REQUEST_CAMERA) return
         if (grantResults.firstOrNull() == PackageManager.PERMISSION_GRANTED) {
-            camera.post { openCamera() }
+            reopen()
         } else {
-            show(ProtectionState.Stopped("the camera permission was refused: nothing is captured"))
+            show(ProtectionState.Stopped("the camera permission was refused: nothing is captured (Settings > Apps > CamPro)"))
         }
     }
 
-    override fun onPause() {
-        camera.post { closeCamera() }
-        super.onPause()
-    }
-
-    override fun onDestroy() {
-        cameraThread.quitSafely()
-        super.onDestroy()
-    }
-
-    /** The state on screen: frames only while Protected; the switch shows whether CamPro runs. */
-    private fun show(state: ProtectionState) {
-        preview.visibility = if (state == ProtectionState.Protected) View.VISIBLE else View.INVISIBLE
-        updatingSwitch = true
-        toggle.isChecked = state == ProtectionState.Protected || state == ProtectionState.Verifying
-        updatingSwitch = false
-        statusView.text = "$paramFile: $state"
-    }
-
-    /** A verified frame: onto the screen (ImageWriter takes it and closes it), else closed. */
-    private fun render(image: Image) {
-        val w = writer
-        if (w == null) {
-            image.close()
-            return
-        }
-        try {
-            w.queueInputImage(image)
-        } catch (e: RuntimeException) {
-            image.close()
-            show(ProtectionState.Stopped("display failed: ${e.message}"))
+    /** Opens the camera with the chosen preset, tied to this activity's lifecycle. */
+    private fun reopen() {
+        recording?.stop()
+        camera?.close()
+        camera = CamPro.open(this, this, Lens.Back, preset).also { c ->
+            c.setPreview(preview)
+            c.addStateListener(mainExecutor, ::show)
         }
     }
 
-    private fun openCamera() {
-        // One camera at a time: `campro` is set here, on this thread, before the (asynchronous)
-        // open; `device` only once it opened, so it alone would let the permission grant and
-        // the onResume that follows it open twice.
-        if (device != null || campro != null) return
-        if (!wantCamPro) return runOnUiThread { show(ProtectionState.Stopped("CamPro is off: the camera is closed")) }
-        try {
-            val manager = getSystemService(CameraManager::class.java)
-            val id = manager.cameraIdList.firstOrNull {
-                manager.getCameraCharacteristics(it).get(CameraCharacteristics.LENS_FACING) == CameraCharacteristics.LENS_FACING_BACK
-            } ?: manager.cameraIdList.firstOrNull() ?: return runOnUiThread { show(ProtectionState.Unsupported("no camera")) }
-            val chars = manager.getCameraCharacteristics(id)
-            val support = chars.camproSupport()
-            val maxPoints = (support as? org.campro.DeviceSupport.Result.Supported)?.maxCurvePoints ?: 64
-            val size = chars.camproStreamSize(ImageFormat.PRIVATE)
-                ?: return runOnUiThread { show(ProtectionState.Unsupported("the camera lists no size for a private stream")) }
-            val session = openCamProAsset(assets, "params/$paramFile", maxPoints)
-            val c = CamProCamera2(
-                session, chars, camera, mainExecutor, size.width, size.height,
-                deliver = ::render,
-                onState = ::show,
+    /** The state on screen; photo and video only while Protected (the library refuses otherwise too). */
+    private fun show(s: ProtectionState) {
+        state = s
+        photoButton.isEnabled = s == ProtectionState.Protected
+        recordButton.isEnabled = s == ProtectionState.Protected || recording != null
+        recordButton.text = if (recording != null) "Stop" else "Record"
+        statusView.text = "${preset.name}: $s" + if (lastMessage.isEmpty()) "" else "\n$lastMessage"
+    }
+
+    private fun message(m: String) {
+        lastMessage = m
+        show(state)
+    }
+
+    private fun outputFile(ext: String): File {
+        val dir = getExternalFilesDir(null) ?: filesDir
+        return File(dir, "campro-" + SimpleDateFormat("yyyyMMdd-HHmmss-SSS", Locale.ROOT).format(Date()) + ".$ext")
+    }
+
+    private fun takePhoto() {
+        val c = camera ?: return
+        c.takePicture(outputFile("jpg")) { r ->
+            message(
+                when (r) {
+                    is StillResult.Taken -> "photo saved (${r.jpeg.size / 1024} KiB)"
+                    is StillResult.Failed -> "no photo: ${r.reason}"
+                },
             )
-            campro = c
-            manager.openCamera(id, cameraExecutor, object : CameraDevice.StateCallback() {
-                override fun onOpened(d: CameraDevice) {
-                    // Opened after the app paused or switched presets: not ours any more.
-                    if (campro !== c) return d.close()
-                    device = d
-                    createSession(d, c)
-                }
-                override fun onDisconnected(d: CameraDevice) {
-                    c.onCameraStopped("the camera was disconnected")
-                    d.close()
-                    if (device === d) device = null
-                }
-                override fun onError(d: CameraDevice, error: Int) {
-                    c.onCameraStopped("camera error $error")
-                    d.close()
-                    if (device === d) device = null
-                }
+        }
+    }
+
+    private fun toggleRecording() {
+        val r = recording
+        if (r != null) return r.stop()
+        val c = camera ?: return
+        val file = outputFile("mp4")
+        recording = try {
+            c.startRecording(file, onEnded = { result ->
+                recording = null
+                message(
+                    when (result) {
+                        is RecordingResult.Saved -> "video saved: ${result.summary.frames} frames, ${result.summary.framesFailedCheck} left out by the check"
+                        is RecordingResult.Failed -> "no video: ${result.reason}"
+                    },
+                )
             })
         } catch (e: Exception) {
-            // CameraAccessException, SecurityException, IllegalArgumentException, native errors:
-            // nothing was shown, and nothing will be.
-            closeCamera()
-            runOnUiThread { show(ProtectionState.Stopped("cannot open the camera: ${e.message}")) }
+            message("cannot record: ${e.message}")
+            null
         }
-    }
-
-    private fun createSession(d: CameraDevice, c: CamProCamera2) {
-        try {
-            d.createCaptureSession(
-                SessionConfiguration(SessionConfiguration.SESSION_REGULAR, c.outputs(), cameraExecutor, object : CameraCaptureSession.StateCallback() {
-                    override fun onConfigured(s: CameraCaptureSession) = c.onConfigured(d, s)
-                    override fun onConfigureFailed(s: CameraCaptureSession) = c.onCameraStopped("the capture session could not be configured")
-                    override fun onClosed(s: CameraCaptureSession) = c.onCameraStopped("the capture session closed")
-                }),
-            )
-        } catch (e: Exception) {
-            c.onCameraStopped("cannot create the capture session: ${e.message}")
-        }
-    }
-
-    private fun closeCamera() {
-        campro?.let { it.close(); it.session.close() }
-        campro = null
-        device?.close()
-        device = null
-    }
-
-    private fun restartCamera() {
-        closeCamera()
-        openCamera()
+        show(state)
     }
 
     private companion object {

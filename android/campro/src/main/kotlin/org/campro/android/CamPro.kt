@@ -47,7 +47,20 @@ sealed class Preset {
     internal fun open(context: Context, maxCurvePoints: Int): CamProSession = when (this) {
         is Named -> {
             require(name.matches(Regex("[A-Za-z0-9._-]{1,64}")) && !name.startsWith(".")) { "preset name '$name' is not a bundled preset's name" }
-            openCamProAsset(context.assets, "$ASSET_DIR/$name.json", maxCurvePoints)
+            // Read with a byte cap (the core's limit for a parameter file), parsed natively.
+            // (InputStream.readNBytes is API 33; minSdk is 29.)
+            val bytes = context.assets.open("$ASSET_DIR/$name.json").use { input ->
+                val out = java.io.ByteArrayOutputStream()
+                val buf = ByteArray(64 shl 10)
+                while (true) {
+                    val n = input.read(buf)
+                    if (n < 0) break
+                    out.write(buf, 0, n)
+                    require(out.size() <= MAX_JSON_BYTES) { "preset '$name' is over $MAX_JSON_BYTES bytes" }
+                }
+                out.toByteArray()
+            }
+            CamProSession.fromBytes(bytes, maxCurvePoints)
         }
         is Json -> CamProSession.fromJson(json, maxCurvePoints)
     }
@@ -58,6 +71,9 @@ sealed class Preset {
 
         /** Where the library's assets keep the bundled presets. */
         const val ASSET_DIR = "campro/params"
+
+        /** Largest parameter file read, bytes (`campro::params::MAX_JSON_BYTES`). */
+        const val MAX_JSON_BYTES = 4 shl 20
     }
 }
 

@@ -42,6 +42,23 @@ rm -rf "$snippets" && mkdir -p "$snippets"
   echo "}"
 } > "$snippets/ConvertSnippets.kt"
 
+# The README's Android block (after its Gradle line), as the body of a function whose
+# parameters are the names it takes from an app: the entry point a newcomer copies compiles.
+{
+  echo "package org.campro.snippets"
+  echo "import android.content.Context"
+  echo "import androidx.lifecycle.LifecycleOwner"
+  echo "import org.campro.ProtectionState"
+  echo "import org.campro.android.*"
+  echo "import java.io.File"
+  echo "import java.util.concurrent.Executor"
+  echo "fun readmeAndroid(context: Context, lifecycleOwner: LifecycleOwner, mainExecutor: Executor, filesDir: File,"
+  echo "    previewView: CamProPreviewView, showNotAvailable: () -> Unit, show: (ProtectionState) -> Unit) {"
+  awk '/^## On Android/{a=1} a&&/^```kotlin/{k=1;next} k&&/^```/{exit} k&&!/^implementation\(/{print}' "$root/README.md"
+  echo "}"
+} > "$snippets/ReadmeSnippet.kt"
+test "$(grep -c . "$snippets/ReadmeSnippet.kt")" -gt 12
+
 # Compile (main: library + app + stubs + snippets; test: the tests) and run the tests.
 mvn -B -q -f "$here/jvm-test/pom.xml" -Dcampro.jni.dir="$(dirname "$lib")" test
 # Surefire's summary for the log (Maven ran quietly).

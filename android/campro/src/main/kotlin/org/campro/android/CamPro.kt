@@ -49,7 +49,12 @@ sealed class Preset {
             require(name.matches(Regex("[A-Za-z0-9._-]{1,64}")) && !name.startsWith(".")) { "preset name '$name' is not a bundled preset's name" }
             // Read with a byte cap (the core's limit for a parameter file), parsed natively.
             // (InputStream.readNBytes is API 33; minSdk is 29.)
-            val bytes = context.assets.open("$ASSET_DIR/$name.json").use { input ->
+            val stream = try {
+                context.assets.open("$ASSET_DIR/$name.json")
+            } catch (e: java.io.FileNotFoundException) {
+                throw IllegalArgumentException("no bundled preset '$name' (assets/$ASSET_DIR/$name.json)")
+            }
+            val bytes = stream.use { input ->
                 val out = java.io.ByteArrayOutputStream()
                 val buf = ByteArray(64 shl 10)
                 while (true) {

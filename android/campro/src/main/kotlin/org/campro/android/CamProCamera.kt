@@ -111,6 +111,9 @@ class CamProCamera internal constructor(
 
     // Camera thread.
     private var wanted = false
+
+    /** Times the camera went away since it last protected; availability reopens it only below [REOPEN_LIMIT]. */
+    private var lostInARow = 0
     private var device: CameraDevice? = null
 
     /** The running Camera2 glue (camera thread writes; the frame thread reads the gate's count). */
@@ -131,17 +134,22 @@ class CamProCamera internal constructor(
     private var closed = false
 
     private val lifecycleObserver = object : DefaultLifecycleObserver {
-        override fun onStart(owner: LifecycleOwner) = onCamera { wanted = true; openCamera() }
+        override fun onStart(owner: LifecycleOwner) = onCamera { wanted = true; lostInARow = 0; openCamera() }
         override fun onStop(owner: LifecycleOwner) = onCamera { wanted = false; closeCamera("paused: the app is not in the foreground") }
         override fun onDestroy(owner: LifecycleOwner) = close()
     }
 
     private val availability = object : CameraManager.AvailabilityCallback() {
         override fun onCameraAvailable(id: String) {
-            if (id == cameraId || cameraId == null) openCamera()
+            if (id == cameraId || cameraId == null) reopen()
         }
 
-        override fun onCameraAccessPrioritiesChanged() = openCamera()
+        override fun onCameraAccessPrioritiesChanged() = reopen()
+
+        /** A camera that keeps failing is not reopened for ever: the owner's next start tries again. */
+        private fun reopen() {
+            if (lostInARow < REOPEN_LIMIT) openCamera()
+        }
     }
 
     init {
@@ -367,7 +375,12 @@ class CamProCamera internal constructor(
     /** The camera went away (taken, disconnected, failed): closed until it is available again. */
     private fun lost(c: CamProCamera2, d: CameraDevice, reason: String) {
         c.onCameraStopped(reason)
-        if (campro === c) closeCamera(reason) else d.close()
+        if (campro !== c) return d.close()
+        lostInARow++
+        closeCamera(
+            if (lostInARow < REOPEN_LIMIT) reason
+            else "$reason ($lostInARow times without protecting in between: not reopened until the app starts again)",
+        )
     }
 
     /** Closes the camera, stops a recording and fails waiting stills with [reason]; the state becomes Stopped. */
@@ -402,6 +415,7 @@ class CamProCamera internal constructor(
     // Any thread
 
     private fun publish(s: ProtectionState) {
+        if (s == ProtectionState.Protected) cameraHandler.post { lostInARow = 0 }
         if (mutableState.value == s && s !is ProtectionState.Stopped) return
         mutableState.value = s
         for ((executor, listener) in listeners) {
@@ -430,6 +444,11 @@ class CamProCamera internal constructor(
             Surface.ROTATION_270 -> 90
             else -> 0
         }
+    }
+
+    private companion object {
+        /** Losses in a row after which the camera is left closed until the owner starts again. */
+        const val REOPEN_LIMIT = 3
     }
 
     // ------------------------------------------------------------------------------------

@@ -123,12 +123,33 @@ class CamProCameraTest {
         settle(c)
         assertNotNull("reopened when the camera came back", c.glue)
 
+        // A camera that keeps going away without protecting in between is left closed after 3
+        // (the disconnect above was the first).
+        repeat(2) { k ->
+            shadowOf(manager).triggerDisconnect()
+            settle(c)
+            assertNull(c.glue)
+            shadowOf(manager).removeCamera("0")
+            shadowOf(manager).addCamera("0", chars())
+            settle(c)
+            assertEquals("loss ${k + 2}", k == 0, c.glue != null)
+        }
+        val given = c.state.value
+        assertTrue("$given", given is ProtectionState.Stopped && given.reason.endsWith("not reopened until the app starts again)"))
+        owner.moveTo(Lifecycle.State.CREATED)
+        owner.moveTo(Lifecycle.State.STARTED)
+        settle(c)
+        assertNotNull("the owner's next start tries again", c.glue)
+
         // Destroyed: closed for good.
         owner.moveTo(Lifecycle.State.DESTROYED)
         settle(c)
         assertNull(c.glue)
         assertEquals(ProtectionState.Stopped("closed by the app"), c.state.value)
-        assertEquals(listOf("Stopped", "Verifying", "Protected", "Stopped", "Verifying", "Stopped", "Verifying", "Stopped"), seen.map { it.javaClass.simpleName }.distinctConsecutive())
+        assertEquals(
+            listOf("Stopped", "Verifying", "Protected", "Stopped", "Verifying", "Stopped", "Verifying", "Stopped", "Verifying", "Stopped", "Verifying", "Stopped"),
+            seen.map { it.javaClass.simpleName }.distinctConsecutive(),
+        )
     }
 
     private fun <T> List<T>.distinctConsecutive(): List<T> = filterIndexed { i, x -> i == 0 || this[i - 1] != x }

@@ -20,18 +20,6 @@ pub const MAX_SIDE: u32 = 16_384;
 /// Largest still, pixels: 64 MP, so the RGB copy stays under 200 MB.
 pub const MAX_PIXELS: u64 = 64 << 20;
 
-/// EXIF `Orientation` (tag 0x0112) values: how a viewer must turn the stored pixels.
-pub mod orientation {
-    /// As stored.
-    pub const NORMAL: u16 = 1;
-    /// Turned 180 degrees.
-    pub const ROTATE_180: u16 = 3;
-    /// Turned 90 degrees clockwise to view.
-    pub const ROTATE_90: u16 = 6;
-    /// Turned 270 degrees clockwise (90 counter-clockwise) to view.
-    pub const ROTATE_270: u16 = 8;
-}
-
 /// TIFF and EXIF constants of the one-tag block [`exif_orientation`] writes.
 mod tiff {
     /// Little-endian byte order mark, "II".
@@ -148,7 +136,8 @@ pub fn exif_orientation(value: u16) -> Vec<u8> {
 }
 
 /// Encodes interleaved 8-bit RGB as a baseline JPEG at `quality` (1..=100) whose only
-/// metadata is EXIF `Orientation` = `exif_orientation` (1..=8).
+/// metadata is EXIF `Orientation` = `exif_orientation_value` (1..=8: 1 as stored, 6 turned
+/// 90 degrees clockwise to view, 3 turned 180, 8 turned 270).
 pub fn jpeg(
     rgb: &[u8],
     width: u32,
@@ -331,7 +320,8 @@ mod tests {
                 ]);
             }
         }
-        let bytes = jpeg(&rgb, w, h, orientation::ROTATE_90, 100).unwrap();
+        // EXIF 6: turned 90 degrees clockwise to view (Kotlin's Orientation.exifOrientation(90)).
+        let bytes = jpeg(&rgb, w, h, 6, 100).unwrap();
         let exif = exif::Reader::new().read_from_container(&mut std::io::Cursor::new(&bytes)).unwrap();
         assert_eq!(exif.get_field(exif::Tag::Orientation, exif::In::PRIMARY).unwrap().value.get_uint(0), Some(6));
         assert!(exif.fields().all(|f| f.tag == exif::Tag::Orientation), "only the orientation is written");

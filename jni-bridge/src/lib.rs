@@ -586,9 +586,8 @@ pub extern "system" fn Java_org_campro_CamProNative_encodeJpegYuv<'local>(
             uv_row_stride: stride("uvRowStride", uv_row_stride)?,
             uv_pixel_stride: stride("uvPixelStride", uv_pixel_stride)?,
         };
-        let rgb = still::yuv420_to_rgb(&frame)?;
         let (o, q) = exif_and_quality(exif_orientation, quality)?;
-        let jpeg = still::jpeg(&rgb, frame.width, frame.height, o, q)?;
+        let jpeg = still::jpeg_from_yuv420(&frame, o, q)?;
         Ok(env.byte_array_from_slice(&jpeg)?)
     })
     .resolve::<ThrowJava>()
@@ -610,7 +609,7 @@ pub extern "system" fn Java_org_campro_CamProNative_encodeJpegRgb<'local>(
     env.with_env(|env| -> Result<JByteArray<'local>> {
         let px = read_bytes(env, "rgb", &rgb)?;
         let (o, q) = exif_and_quality(exif_orientation, quality)?;
-        let jpeg = still::jpeg(&px, side("width", width)?, side("height", height)?, o, q)?;
+        let jpeg = still::jpeg_from_rgb(&px, side("width", width)?, side("height", height)?, o, q)?;
         Ok(env.byte_array_from_slice(&jpeg)?)
     })
     .resolve::<ThrowJava>()

@@ -35,6 +35,7 @@ pub mod params;
 pub mod pipeline;
 pub mod provenance;
 pub mod rational;
+pub mod record;
 pub mod targets;
 pub mod tone_curve;
 

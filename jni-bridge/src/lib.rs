@@ -615,6 +615,112 @@ pub extern "system" fn Java_org_campro_CamProNative_encodeJpegRgb<'local>(
     .resolve::<ThrowJava>()
 }
 
+/// A string argument, non-null, at most `max` bytes.
+fn read_string(env: &Env, name: &str, s: &JString, max: usize) -> Result<String> {
+    non_null(name, s)?;
+    let text = s.try_to_string(env)?;
+    if text.len() > max {
+        return Err(BridgeError::Argument(format!("{name}: {} bytes; the limit is {max}", text.len())));
+    }
+    Ok(text)
+}
+
+/// `org.campro.CamProNative.record(presetJson: ByteArray, given, presetSha256, cameraId,
+/// transform: IntArray(18), curvePoints, gains: FloatArray(4), conversionBoundLsb,
+/// worstDeviationLsb, maxDeviationLsb, jpegQuality, metadata, outputName, outputSha256,
+/// outputBytes): String`: the record (`NAME.campro.json`, [`campro::record`]) of a phone's
+/// protected output: the preset (its name and training round read from `presetJson`, its
+/// SHA-256 as the app hashed those bytes), the values sent, and the output's hash; checked by
+/// the rules `campro check --record` reads it with. The bound is the conversion's (the last
+/// update's report) plus the largest reported deviation the guard accepts. `jpegQuality` 0:
+/// not a JPEG. Takes no handle: a still's record is written after its camera may have closed.
+#[unsafe(no_mangle)]
+#[allow(clippy::too_many_arguments)]
+pub extern "system" fn Java_org_campro_CamProNative_record<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    preset_json: JByteArray<'local>,
+    given: JString<'local>,
+    preset_sha256: JString<'local>,
+    camera_id: JString<'local>,
+    transform: JIntArray<'local>,
+    curve_points: jint,
+    gains: JFloatArray<'local>,
+    conversion_bound_lsb: jdouble,
+    worst_deviation_lsb: jdouble,
+    max_deviation_lsb: jdouble,
+    jpeg_quality: jint,
+    metadata: JString<'local>,
+    output_name: JString<'local>,
+    output_sha256: JString<'local>,
+    output_bytes: jlong,
+) -> JString<'local> {
+    env.with_env(|env| -> Result<JString<'local>> {
+        use campro::record::{DeviceRecord, FileRecord, PresetRecord, Record};
+        let bytes = read_bytes(env, "presetJson", &preset_json)?;
+        if bytes.len() > campro::params::MAX_JSON_BYTES {
+            return Err(BridgeError::Argument(format!(
+                "presetJson: {} bytes; the limit is {}",
+                bytes.len(),
+                campro::params::MAX_JSON_BYTES
+            )));
+        }
+        let text =
+            std::str::from_utf8(&bytes).map_err(|e| BridgeError::Argument(format!("presetJson: not UTF-8: {e}")))?;
+        let params = Params::from_json(text).map_err(|e| BridgeError::Argument(format!("presetJson: {e}")))?;
+        let t: [i32; 18] = read_ints(env, "transform", &transform)?;
+        let g = read_floats(env, "gains", &gains, 4)?;
+        let non_negative = |name: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(v)
+            } else {
+                Err(BridgeError::Argument(format!("{name}: must be finite and >= 0, got {v}")))
+            }
+        };
+        let count = |name: &str, v: i64| {
+            u64::try_from(v).map_err(|_| BridgeError::Argument(format!("{name}: must be >= 0, got {v}")))
+        };
+        let r = Record {
+            campro_record: campro::record::RECORD_VERSION,
+            campro_version: env!("CARGO_PKG_VERSION").to_string(),
+            preset: PresetRecord {
+                name: params.name.clone(),
+                given: read_string(env, "given", &given, 4096)?,
+                sha256: read_string(env, "presetSha256", &preset_sha256, 64)?,
+                best_round: params.provenance_fields().ok().and_then(|f| f.best_round),
+            },
+            path: campro::record::PATH_CAMERA2.to_string(),
+            bit_depth: 8,
+            bound_lsb: non_negative("conversionBoundLsb", conversion_bound_lsb)?
+                + non_negative("maxDeviationLsb", max_deviation_lsb)?,
+            enhancer_sha256: None,
+            jpeg_quality: match jpeg_quality {
+                0 => None,
+                q => Some(u8::try_from(q).ok().filter(|q| (1..=100).contains(q)).ok_or_else(|| {
+                    BridgeError::Argument(format!("jpegQuality: must be 0 (not a JPEG) or 1..=100, got {q}"))
+                })?),
+            },
+            metadata: read_string(env, "metadata", &metadata, 64)?,
+            input: None,
+            output: FileRecord {
+                name: read_string(env, "outputName", &output_name, 4096)?,
+                sha256: read_string(env, "outputSha256", &output_sha256, 64)?,
+                bytes: count("outputBytes", output_bytes)?,
+            },
+            device: Some(DeviceRecord {
+                camera_id: read_string(env, "cameraId", &camera_id, 256)?,
+                transform: t.to_vec(),
+                gains: g,
+                curve_points: count("curvePoints", i64::from(curve_points))? as u32,
+                worst_reported_deviation_lsb: non_negative("worstDeviationLsb", worst_deviation_lsb)?,
+            }),
+        };
+        r.check().map_err(|e| BridgeError::Argument(e.to_string()))?;
+        Ok(env.new_string(r.to_json())?)
+    })
+    .resolve::<ThrowJava>()
+}
+
 /// The pixels of `raw` (linear sensor RGB, 3 floats a pixel) as 8-bit codes, through
 /// `f`: what a simulated camera's frame holds. `out` has one byte a float.
 #[cfg(feature = "test-exports")]

@@ -180,7 +180,13 @@ pub fn exif_orientation(value: u16) -> Vec<u8> {
 
 /// Encodes interleaved 8-bit RGB as a baseline JPEG (4:4:4 from quality 90, 4:2:0 below)
 /// whose only metadata is EXIF `Orientation` = `exif_orientation_value` (1..=8).
-pub fn jpeg_from_rgb(rgb: &[u8], width: u32, height: u32, exif_orientation_value: u16, quality: u8) -> Result<Vec<u8>, BridgeError> {
+pub fn jpeg_from_rgb(
+    rgb: &[u8],
+    width: u32,
+    height: u32,
+    exif_orientation_value: u16,
+    quality: u8,
+) -> Result<Vec<u8>, BridgeError> {
     check_size(width, height)?;
     let need = 3 * width as usize * height as usize;
     if rgb.len() != need {
@@ -231,7 +237,16 @@ mod tests {
     fn a_yuv_still_round_trips_with_its_orientation() {
         let (w, h) = (64usize, 48usize);
         let (y, u, v) = blocks(w, h);
-        let f = Yuv420 { width: 64, height: 48, y: &y, y_row_stride: w, u: &u, v: &v, uv_row_stride: w / 2, uv_pixel_stride: 1 };
+        let f = Yuv420 {
+            width: 64,
+            height: 48,
+            y: &y,
+            y_row_stride: w,
+            u: &u,
+            v: &v,
+            uv_row_stride: w / 2,
+            uv_pixel_stride: 1,
+        };
         // EXIF 6: turned 90 degrees clockwise to view (Kotlin's Orientation.exifOrientation(90)).
         let bytes = jpeg_from_yuv420(&f, 6, 100).unwrap();
         let exif = exif::Reader::new().read_from_container(&mut std::io::Cursor::new(&bytes)).unwrap();
@@ -256,7 +271,21 @@ mod tests {
         let (w, h) = (16usize, 10usize);
         let (y, u, v) = blocks(w, h);
         let (cw, ch) = (w / 2, h / 2);
-        let packed = jpeg_from_yuv420(&Yuv420 { width: 16, height: 10, y: &y, y_row_stride: w, u: &u, v: &v, uv_row_stride: cw, uv_pixel_stride: 1 }, 1, 90).unwrap();
+        let packed = jpeg_from_yuv420(
+            &Yuv420 {
+                width: 16,
+                height: 10,
+                y: &y,
+                y_row_stride: w,
+                u: &u,
+                v: &v,
+                uv_row_stride: cw,
+                uv_pixel_stride: 1,
+            },
+            1,
+            90,
+        )
+        .unwrap();
         let mut ypad = vec![0u8; 24 * h];
         for r in 0..h {
             ypad[24 * r..24 * r + w].copy_from_slice(&y[w * r..w * r + w]);
@@ -268,7 +297,21 @@ mod tests {
                 vu[24 * r + 2 * c + 1] = u[cw * r + c];
             }
         }
-        let nv21 = jpeg_from_yuv420(&Yuv420 { width: 16, height: 10, y: &ypad, y_row_stride: 24, u: &vu[1..], v: &vu, uv_row_stride: 24, uv_pixel_stride: 2 }, 1, 90).unwrap();
+        let nv21 = jpeg_from_yuv420(
+            &Yuv420 {
+                width: 16,
+                height: 10,
+                y: &ypad,
+                y_row_stride: 24,
+                u: &vu[1..],
+                v: &vu,
+                uv_row_stride: 24,
+                uv_pixel_stride: 2,
+            },
+            1,
+            90,
+        )
+        .unwrap();
         assert_eq!(packed, nv21);
     }
 
@@ -276,15 +319,58 @@ mod tests {
     fn short_planes_and_bad_strides_are_refused_by_name() {
         let y = [0u8; 16];
         let c = [0u8; 4];
-        let e = jpeg_from_yuv420(&Yuv420 { width: 4, height: 4, y: &y[..15], y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride: 1 }, 1, 90).unwrap_err();
+        let e = jpeg_from_yuv420(
+            &Yuv420 {
+                width: 4,
+                height: 4,
+                y: &y[..15],
+                y_row_stride: 4,
+                u: &c,
+                v: &c,
+                uv_row_stride: 2,
+                uv_pixel_stride: 1,
+            },
+            1,
+            90,
+        )
+        .unwrap_err();
         assert!(e.to_string().starts_with("y: holds 15 bytes"), "{e}");
-        let e = jpeg_from_yuv420(&Yuv420 { width: 4, height: 4, y: &y, y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride: 2 }, 1, 90).unwrap_err();
+        let e = jpeg_from_yuv420(
+            &Yuv420 { width: 4, height: 4, y: &y, y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride: 2 },
+            1,
+            90,
+        )
+        .unwrap_err();
         assert!(e.to_string().starts_with("u: row stride 2 and pixel stride 2"), "{e}");
-        let e = jpeg_from_yuv420(&Yuv420 { width: 0, height: 4, y: &y, y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride: 1 }, 1, 90).unwrap_err();
+        let e = jpeg_from_yuv420(
+            &Yuv420 { width: 0, height: 4, y: &y, y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride: 1 },
+            1,
+            90,
+        )
+        .unwrap_err();
         assert!(e.to_string().starts_with("width x height"), "{e}");
-        let e = jpeg_from_yuv420(&Yuv420 { width: MAX_SIDE + 1, height: 4, y: &y, y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride: 1 }, 1, 90).unwrap_err();
+        let e = jpeg_from_yuv420(
+            &Yuv420 {
+                width: MAX_SIDE + 1,
+                height: 4,
+                y: &y,
+                y_row_stride: 4,
+                u: &c,
+                v: &c,
+                uv_row_stride: 2,
+                uv_pixel_stride: 1,
+            },
+            1,
+            90,
+        )
+        .unwrap_err();
         assert!(e.to_string().starts_with("width x height"), "{e}");
-        let e = jpeg_from_yuv420(&Yuv420 { width: 4, height: 4, y: &y, y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride: 1 }, 9, 90).unwrap_err();
+        let e = jpeg_from_yuv420(
+            &Yuv420 { width: 4, height: 4, y: &y, y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride: 1 },
+            9,
+            90,
+        )
+        .unwrap_err();
         assert!(e.to_string().starts_with("orientation:"), "{e}");
     }
 
@@ -311,7 +397,11 @@ mod tests {
             for xx in 0..w {
                 let blk = (yy / 8) * (w / 8) + xx / 8;
                 let k = 3 * (yy * w + xx) as usize;
-                rgb[k..k + 3].copy_from_slice(&[(blk * 37 % 256) as u8, (blk * 91 % 256) as u8, (blk * 53 % 256) as u8]);
+                rgb[k..k + 3].copy_from_slice(&[
+                    (blk * 37 % 256) as u8,
+                    (blk * 91 % 256) as u8,
+                    (blk * 53 % 256) as u8,
+                ]);
             }
         }
         let back = decode(&jpeg_from_rgb(&rgb, w, h, 1, 100).unwrap());

@@ -407,16 +407,28 @@ fn verify_record(a: &CheckArgs, record: &Path) -> Result<i32> {
         r.bit_depth,
         r.bound_lsb
     );
+    let what = match &r.device {
+        Some(d) => format!(
+            "{what}; camera {} sent its values ({} curve points; reported within {:.3} LSB of them)",
+            escape(&d.camera_id),
+            d.curve_points,
+            d.worst_reported_deviation_lsb
+        ),
+        None => what,
+    };
     if h == r.output.sha256 {
         say!("{}: the output its record names: {what}", crate::shown(file));
         return Ok(0);
     }
-    if h != r.input.sha256 {
+    if r.input.as_ref().is_none_or(|i| i.sha256 != h) {
+        let raw = match &r.input {
+            Some(i) => format!("nor the input's ({})", escape(&i.name)),
+            None => "and the record names no raw input (a phone's capture: the raw never left the camera)".into(),
+        };
         say!(
-            "{}: NOT what its record names: its SHA-256 is neither the output's ({}) nor the input's ({})",
+            "{}: NOT what its record names: its SHA-256 is not the output's ({}) {raw}",
             crate::shown(file),
-            escape(&r.output.name),
-            escape(&r.input.name)
+            escape(&r.output.name)
         );
         return Ok(LINKABLE_EXIT);
     }

@@ -2,65 +2,11 @@
 //! preset (name and SHA-256), which campro, which path and its stated error bound, and the
 //! SHA-256 of the input and the output; and its verification (`campro check --record`).
 
-use anyhow::{anyhow, bail, Context, Result};
-use serde::{Deserialize, Serialize};
+use anyhow::{anyhow, Context, Result};
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 
-/// The record format's version.
-pub const RECORD_VERSION: u32 = 1;
-
-/// A record file's largest size: it is a few hundred bytes.
-const MAX_RECORD_BYTES: u64 = 64 << 10;
-
-/// What a record says of the preset.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct PresetRecord {
-    /// The parameter set's own name.
-    pub name: String,
-    /// What was given on the command line (a bundled preset's name, or a file).
-    pub given: String,
-    /// SHA-256 of the parameter file's bytes (a bundled preset: its JSON as built in).
-    pub sha256: String,
-    /// The training round kept, where the set was trained.
-    pub best_round: Option<u64>,
-}
-
-/// A file a record names.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct FileRecord {
-    /// Its file name (no folder: the record lies beside the output).
-    pub name: String,
-    pub sha256: String,
-    pub bytes: u64,
-}
-
-/// One protected output's record.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Record {
-    pub campro_record: u32,
-    pub campro_version: String,
-    pub preset: PresetRecord,
-    /// `camera` (the desktop pipeline: the exact 8-bit tables or the 16-bit reference
-    /// path), or `camera+enhancer` (then the preset's enhancer on the camera's 8-bit output).
-    pub path: String,
-    /// Output bits per channel.
-    pub bit_depth: u8,
-    /// The camera path's stated bound against the f64 reference: rounding to the output
-    /// code only, 8-bit or 16-bit LSB of `bit_depth` (docs/accuracy-and-speed.md). The
-    /// enhancer, a network, has none: `enhancer_sha256` names it.
-    pub bound_lsb: f64,
-    pub enhancer_sha256: Option<String>,
-    /// JPEG quality (1..=100) where the output is a JPEG.
-    pub jpeg_quality: Option<u8>,
-    /// What the output kept of the input's metadata (`--metadata`).
-    pub metadata: String,
-    pub input: FileRecord,
-    pub output: FileRecord,
-}
+pub use campro::record::{FileRecord, PresetRecord, Record, MAX_RECORD_BYTES};
 
 /// A digest as lowercase hex.
 fn hex(digest: &[u8]) -> String {
@@ -153,39 +99,32 @@ impl RunRecord {
             })
         };
         let r = Record {
-            campro_record: RECORD_VERSION,
+            campro_record: campro::record::RECORD_VERSION,
             campro_version: env!("CARGO_PKG_VERSION").to_string(),
             preset: self.preset.clone(),
-            path: if self.enhancer_sha256.is_some() { "camera+enhancer" } else { "camera" }.to_string(),
+            path: if self.enhancer_sha256.is_some() {
+                campro::record::PATH_CAMERA_ENHANCER
+            } else {
+                campro::record::PATH_CAMERA
+            }
+            .to_string(),
             bit_depth: self.bit_depth,
             bound_lsb: 0.5,
             enhancer_sha256: self.enhancer_sha256.clone(),
             jpeg_quality,
             metadata: self.metadata.clone(),
-            input: file(input)?,
+            input: Some(file(input)?),
             output: file(output)?,
+            device: None,
         };
-        crate::write_atomic(&path_of(output), (serde_json::to_string_pretty(&r)? + "\n").as_bytes(), force)
+        crate::write_atomic(&path_of(output), r.to_json().as_bytes(), force)
     }
 }
 
 /// Reads a record (a regular file of at most 64 KB, every field checked).
 pub fn read(path: &Path) -> Result<Record> {
     let text = campro::file::read_text_capped(path, MAX_RECORD_BYTES, "a campro record")?;
-    let de = &mut serde_json::Deserializer::from_str(&text);
-    let r: Record = serde_path_to_error::deserialize(de)
-        .map_err(|e| anyhow!("{}: {}: {}", crate::shown(path), e.path(), e.inner()))?;
-    if r.campro_record != RECORD_VERSION {
-        bail!("{}: campro_record: must be {RECORD_VERSION}, got {}", crate::shown(path), r.campro_record);
-    }
-    for (field, h) in
-        [("preset.sha256", &r.preset.sha256), ("input.sha256", &r.input.sha256), ("output.sha256", &r.output.sha256)]
-    {
-        if h.len() != 64 || !h.bytes().all(|b| b.is_ascii_hexdigit()) {
-            bail!("{}: {field}: must be 64 hex digits", crate::shown(path));
-        }
-    }
-    Ok(r)
+    Record::from_json(&text).map_err(|e| anyhow!("{}: {e}", crate::shown(path)))
 }
 
 #[cfg(test)]

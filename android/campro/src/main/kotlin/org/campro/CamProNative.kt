@@ -86,4 +86,15 @@ object CamProNative {
 
     /** Interleaved 8-bit RGB as a JPEG whose only metadata is EXIF [exifOrientation] (1..8). */
     @JvmStatic external fun encodeJpegRgb(width: Int, height: Int, rgb: ByteArray?, exifOrientation: Int, quality: Int): ByteArray
+
+    /**
+     * The record (`NAME.campro.json`) of a phone's protected output: see [RecordContext];
+     * [jpegQuality] 0 when the output is not a JPEG.
+     */
+    @JvmStatic external fun record(
+        presetJson: ByteArray?, given: String?, presetSha256: String?, cameraId: String?,
+        transform: IntArray?, curvePoints: Int, gains: FloatArray?,
+        conversionBoundLsb: Double, worstDeviationLsb: Double, maxDeviationLsb: Double,
+        jpegQuality: Int, metadata: String?, outputName: String?, outputSha256: String?, outputBytes: Long,
+    ): String
 }

@@ -145,3 +145,55 @@ class ProtectedRecording<T>(
         return s
     }
 }
+
+/**
+ * What a protected output's record (`NAME.campro.json`, `campro::record`) says of the camera
+ * that made it, captured while the camera runs (its native state may be gone when the file
+ * is finished): the preset's bytes and SHA-256, the values sent, the bounds. [json] builds
+ * the record natively, by the same rules `campro check --record` reads it with.
+ */
+class RecordContext(
+    private val presetJson: ByteArray,
+    /** What named the preset (a bundled preset's name, or "app JSON"). */
+    val given: String,
+    val cameraId: String,
+    private val transform: IntArray,
+    private val curvePoints: Int,
+    private val gains: FloatArray,
+    /** The last update's stated bound, 8-bit LSB. */
+    private val conversionBoundLsb: Double,
+    private val worstDeviationLsb: Double,
+    private val maxDeviationLsb: Double,
+) {
+    /** The record of [output] ([jpegQuality] 0: not a JPEG; [metadata]: what it carries). */
+    fun json(output: java.io.File, jpegQuality: Int, metadata: String): String = CamProNative.record(
+        presetJson, given, Records.sha256(presetJson), cameraId, transform, curvePoints, gains,
+        conversionBoundLsb, worstDeviationLsb, maxDeviationLsb, jpegQuality, metadata,
+        output.name, Records.sha256(output), output.length(),
+    )
+}
+
+/** Where records lie and the hashes they hold. */
+object Records {
+    /** The record of [output]: its name with `.campro.json` appended, beside it. */
+    fun pathOf(output: java.io.File) = java.io.File(output.path + ".campro.json")
+
+    /** SHA-256 of [bytes], lowercase hex. */
+    fun sha256(bytes: ByteArray): String = hex(java.security.MessageDigest.getInstance("SHA-256").digest(bytes))
+
+    /** SHA-256 of a file's bytes, streamed, lowercase hex. */
+    fun sha256(file: java.io.File): String {
+        val md = java.security.MessageDigest.getInstance("SHA-256")
+        file.inputStream().use { input ->
+            val buf = ByteArray(1 shl 16)
+            while (true) {
+                val n = input.read(buf)
+                if (n < 0) break
+                md.update(buf, 0, n)
+            }
+        }
+        return hex(md.digest())
+    }
+
+    private fun hex(d: ByteArray) = d.joinToString("") { "%02x".format(it.toInt() and 255) }
+}

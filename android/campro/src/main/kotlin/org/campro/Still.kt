@@ -4,8 +4,11 @@ import java.util.concurrent.Executor
 
 /** How a still ended: its JPEG, or why there is none. */
 sealed class StillResult {
-    /** The JPEG of the verified frame taken at sensor time [timestampNs] (its only metadata: the orientation). */
-    class Taken(val jpeg: ByteArray, val timestampNs: Long) : StillResult()
+    /**
+     * The JPEG of the verified frame taken at sensor time [timestampNs] (its only metadata: the
+     * orientation), and the record written beside the file where there is one.
+     */
+    class Taken(val jpeg: ByteArray, val timestampNs: Long, val record: java.io.File? = null) : StillResult()
 
     /** No still: [reason] says why (the camera stopped, encoding failed, the app cancelled). */
     data class Failed(val reason: String) : StillResult()
@@ -25,21 +28,23 @@ sealed class StillResult {
 class StillCapture<T, S>(
     /** Copies a borrowed frame (called on the frame thread; must not keep the frame). */
     private val snapshot: (T) -> S,
-    /** The snapshot's sensor timestamp, nanoseconds. */
-    private val timestampNs: (S) -> Long,
     private val background: Executor,
 ) {
-    /** One waiting request: its encoder (orientation and quality are the request's) and its callback. */
-    class Request<S> internal constructor(internal val encode: (S) -> ByteArray, internal val callback: (StillResult) -> Unit)
+    /** One waiting request: what makes its still from the snapshot (encoding, writing: the request's) and its callback. */
+    class Request<S> internal constructor(internal val make: (S) -> StillResult, internal val callback: (StillResult) -> Unit)
 
     private val pending = ArrayList<Request<S>>()
 
     /** Requests waiting for a frame. */
     val waiting: Int @Synchronized get() = pending.size
 
-    /** Asks for a still, JPEG-encoded by [encode]; [callback] runs on the background executor, exactly once. */
+    /**
+     * Asks for a still, made from the next verified frame's snapshot by [make] (on the
+     * background executor: encoding, writing); [callback] runs there too, exactly once, with
+     * what [make] returned or why there is none (an exception from [make] is a failure).
+     */
     @Synchronized
-    fun request(encode: (S) -> ByteArray, callback: (StillResult) -> Unit): Request<S> = Request(encode, callback).also { pending += it }
+    fun request(make: (S) -> StillResult, callback: (StillResult) -> Unit): Request<S> = Request(make, callback).also { pending += it }
 
     /** One verified frame, borrowed: taken by every waiting request (one snapshot). */
     fun onFrame(frame: T) {
@@ -54,9 +59,9 @@ class StillCapture<T, S>(
         }
         run(takers) { r ->
             try {
-                StillResult.Taken(r.encode(snap), timestampNs(snap))
-            } catch (e: RuntimeException) {
-                StillResult.Failed("JPEG encoding failed: ${e.message}")
+                r.make(snap)
+            } catch (e: Exception) {
+                StillResult.Failed("the still failed: ${e.message}")
             }
         }
     }

@@ -82,20 +82,20 @@ class CaptureLogicTest {
     fun stillsTakeOnlyFramesAfterTheirRequestAndEndOnce() {
         val direct = java.util.concurrent.Executor { it.run() }
         val snapshots = ArrayList<Int>()
-        val stills = StillCapture<Int, Int>({ snapshots += it; it }, { it.toLong() }, direct)
+        val stills = StillCapture<Int, Int>({ snapshots += it; it }, direct)
         stills.onFrame(1) // nobody asked: not even copied
         assertEquals(emptyList<Int>(), snapshots)
         val results = ArrayList<StillResult>()
-        val a = stills.request({ f -> byteArrayOf(f.toByte()) }) { results += it }
-        stills.request({ throw IllegalStateException("boom") }) { results += it }
+        val a = stills.request({ f -> StillResult.Taken(byteArrayOf(f.toByte()), f.toLong()) }) { results += it }
+        stills.request({ throw java.io.IOException("disk full") }) { results += it }
         stills.onFrame(2)
         assertEquals("one copy for both requests", listOf(2), snapshots)
         assertEquals(2L, (results[0] as StillResult.Taken).timestampNs)
-        assertEquals("JPEG encoding failed: boom", (results[1] as StillResult.Failed).reason)
+        assertEquals("the still failed: disk full", (results[1] as StillResult.Failed).reason)
         assertTrue("a finished request cannot be cancelled", !stills.cancel(a, "late"))
-        val c = stills.request({ byteArrayOf() }) { results += it }
+        val c = stills.request({ StillResult.Failed("never made") }) { results += it }
         assertTrue(stills.cancel(c, "timed out"))
-        stills.request({ byteArrayOf() }) { results += it }
+        stills.request({ StillResult.Failed("never made") }) { results += it }
         stills.fail("the camera closed")
         stills.onFrame(3)
         assertEquals(listOf("timed out", "the camera closed"), results.drop(2).map { (it as StillResult.Failed).reason })

@@ -44,17 +44,23 @@ sealed class Preset {
     /** A parameter set's JSON (from `campro convert`, a training, or the app's own assets). */
     class Json(val json: String) : Preset()
 
-    internal fun open(context: Context, maxCurvePoints: Int): CamProSession = when (this) {
+    /** What names it in a record: the bundled preset's name, or "app JSON". */
+    internal val given: String get() = when (this) {
+        is Named -> name
+        is Json -> "app JSON"
+    }
+
+    /** The parameter file's bytes (a bundled preset read with a byte cap). */
+    internal fun bytes(context: Context): ByteArray = when (this) {
         is Named -> {
             require(name.matches(Regex("[A-Za-z0-9._-]{1,64}")) && !name.startsWith(".")) { "preset name '$name' is not a bundled preset's name" }
-            // Read with a byte cap (the core's limit for a parameter file), parsed natively.
-            // (InputStream.readNBytes is API 33; minSdk is 29.)
             val stream = try {
                 context.assets.open("$ASSET_DIR/$name.json")
             } catch (e: java.io.FileNotFoundException) {
                 throw IllegalArgumentException("no bundled preset '$name' (assets/$ASSET_DIR/$name.json)")
             }
-            val bytes = stream.use { input ->
+            // Read with the core's limit for a parameter file (InputStream.readNBytes is API 33; minSdk is 29).
+            stream.use { input ->
                 val out = java.io.ByteArrayOutputStream()
                 val buf = ByteArray(64 shl 10)
                 while (true) {
@@ -65,9 +71,8 @@ sealed class Preset {
                 }
                 out.toByteArray()
             }
-            CamProSession.fromBytes(bytes, maxCurvePoints)
         }
-        is Json -> CamProSession.fromJson(json, maxCurvePoints)
+        is Json -> json.toByteArray(Charsets.UTF_8)
     }
 
     companion object {

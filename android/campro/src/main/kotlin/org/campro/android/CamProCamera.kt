@@ -22,6 +22,9 @@ import kotlinx.coroutines.flow.MutableStateFlow
 import kotlinx.coroutines.flow.StateFlow
 import kotlinx.coroutines.flow.asStateFlow
 import org.campro.CamProNative
+import org.campro.CamProSession
+import org.campro.RecordContext
+import org.campro.Records
 import org.campro.DeviceSupport
 import org.campro.FrameRouter
 import org.campro.Orientation
@@ -42,7 +45,8 @@ import java.util.concurrent.RejectedExecutionException
 
 /** How a recording ended: the file and what it holds, or why there is none. */
 sealed class RecordingResult {
-    class Saved(val file: File, val summary: RecordingSummary) : RecordingResult()
+    /** The MP4, what it holds, and its record beside it (`NAME.campro.json`). */
+    class Saved(val file: File, val summary: RecordingSummary, val record: File) : RecordingResult()
     data class Failed(val reason: String) : RecordingResult()
 }
 
@@ -55,6 +59,7 @@ class ActiveRecording internal constructor(
     /** The file being written (it appears there only once finished). */
     val output: File,
     internal val recording: ProtectedRecording<Image>,
+    internal val overwrite: Boolean,
     internal val onEnded: (RecordingResult) -> Unit,
     private val stopper: (ActiveRecording, String) -> Unit,
 ) {
@@ -107,7 +112,11 @@ class CamProCamera internal constructor(
     /** Verified frames, in order: stills, the recording, the preview. */
     private val router = FrameRouter<Image> { it.close() }
 
-    private val stills = StillCapture<Image, ImageSnapshot>(ImageSnapshot::of, { it.timestampNs }, stillExecutor)
+    private val stills = StillCapture<Image, Pair<ImageSnapshot, RecordContext?>>({ image -> ImageSnapshot.of(image) to recordContext() }, stillExecutor)
+
+    /** The preset's bytes for records, set when the camera opens (camera thread). */
+    @Volatile
+    private var presetBytes: ByteArray? = null
 
     // Camera thread.
     private var wanted = false
@@ -199,10 +208,12 @@ class CamProCamera internal constructor(
         val c = campro ?: throw IllegalStateException("the camera is not open (state: ${mutableState.value})")
         val s = stream ?: throw IllegalStateException("the camera is not open")
         check(active == null) { "a recording is under way" }
+        val recordFile = Records.pathOf(output)
+        if (recordFile.exists() && !recordingOptions.overwrite) throw IOException("$recordFile exists: pass RecordingOptions(overwrite = true) to replace it")
         val rotation = Orientation.stillRotation(s.sensorOrientation, deviceOrientation ?: deviceOrientationFromDisplay(), s.front)
         val encoder = MediaCodecEncoder(output, s.width, s.height, rotation, recordingOptions)
         val rec = ProtectedRecording(encoder, Image::getTimestamp) { c.pipeline.gate.dropped }
-        val a = ActiveRecording(output, rec, onEnded, ::stopRecording)
+        val a = ActiveRecording(output, rec, recordingOptions.overwrite, onEnded, ::stopRecording)
         active = a
         router.recording = rec
         return a
@@ -214,13 +225,30 @@ class CamProCamera internal constructor(
 
     /** Ends [a] on the frame thread (after the frames already queued), then reports on the main thread; once. */
     private fun stopRecording(a: ActiveRecording, reason: String) {
+        val ctx = recordContext() // now, while the camera's values are there
         val task = Runnable {
             if (!a.recording.isActive) return@Runnable
             if (router.recording === a.recording) router.recording = null
             if (active === a) active = null
             val result = try {
                 val summary = a.recording.stop(reason)
-                if (summary.frames == 0L) RecordingResult.Failed("no verified frame was recorded ($reason)") else RecordingResult.Saved(a.output, summary)
+                when {
+                    summary.frames == 0L -> RecordingResult.Failed("no verified frame was recorded ($reason)")
+                    ctx == null -> {
+                        a.output.delete() // a protected output always has its record
+                        RecordingResult.Failed("the camera closed before the recording's values could be recorded")
+                    }
+                    else -> {
+                        val recordFile = Records.pathOf(a.output)
+                        try {
+                            writeAtomically(recordFile, ctx.json(a.output, 0, RECORD_METADATA_VIDEO).toByteArray(), a.overwrite)
+                        } catch (e: Exception) {
+                            a.output.delete()
+                            throw IOException("its record could not be written: ${e.message}", e)
+                        }
+                        RecordingResult.Saved(a.output, summary, recordFile)
+                    }
+                }
             } catch (e: IOException) {
                 RecordingResult.Failed(e.message ?: "the recording failed")
             }
@@ -243,9 +271,11 @@ class CamProCamera internal constructor(
      */
     fun takePicture(output: File, overwrite: Boolean = false, deviceOrientation: Int? = null, callback: (StillResult) -> Unit) {
         val s = stream
+        val recordFile = Records.pathOf(output)
         val refused = when {
             s == null -> "the camera is not open (state: ${mutableState.value})"
             output.exists() && !overwrite -> "$output exists: pass overwrite = true to replace it"
+            recordFile.exists() && !overwrite -> "$recordFile exists: pass overwrite = true to replace it"
             else -> null
         }
         if (refused != null || s == null) {
@@ -254,27 +284,29 @@ class CamProCamera internal constructor(
         }
         val exif = Orientation.exifOrientation(Orientation.stillRotation(s.sensorOrientation, deviceOrientation ?: deviceOrientationFromDisplay(), s.front))
         val quality = options.jpegQuality
-        val request = stills.request({ snap -> snap.jpeg(exif, quality) }) { r ->
-            val result = if (r is StillResult.Taken) writeAtomically(output, r.jpeg, overwrite)?.let { StillResult.Failed(it) } ?: r else r
-            main.post { callback(result) }
+        val request = stills.request({ (snap, ctx) -> saveStill(snap, ctx, output, recordFile, exif, quality, overwrite) }) { r ->
+            main.post { callback(r) }
         }
         main.postDelayed({
             stills.cancel(request, "no verified frame within ${options.stillTimeoutMs} ms (state: ${mutableState.value})")
         }, options.stillTimeoutMs)
     }
 
-    /** Writes [bytes] to [output] through a temporary file beside it; returns why it failed, or null. */
-    private fun writeAtomically(output: File, bytes: ByteArray, overwrite: Boolean): String? {
-        val part = File(output.absoluteFile.parentFile, ".${output.name}.part")
+    /**
+     * Encodes [snap], writes it to [output] and its record to [recordFile] (each through a
+     * temporary file), on the still thread. A record that cannot be made takes the photo
+     * with it: a protected output always has its record.
+     */
+    private fun saveStill(snap: ImageSnapshot, ctx: RecordContext?, output: File, recordFile: File, exif: Int, quality: Int, overwrite: Boolean): StillResult {
+        ctx ?: return StillResult.Failed("the camera closed before the still's values could be recorded")
+        val jpeg = snap.jpeg(exif, quality)
         return try {
-            part.writeBytes(bytes)
-            if (!overwrite && output.exists()) throw IOException("$output appeared meanwhile; it is not replaced")
-            val how = if (overwrite) arrayOf(StandardCopyOption.ATOMIC_MOVE, StandardCopyOption.REPLACE_EXISTING) else arrayOf(StandardCopyOption.ATOMIC_MOVE)
-            Files.move(part.toPath(), output.toPath(), *how)
-            null
-        } catch (e: IOException) {
-            part.delete()
-            "the still could not be written: ${e.message}"
+            writeAtomically(output, jpeg, overwrite)
+            writeAtomically(recordFile, ctx.json(output, quality, RECORD_METADATA_STILL).toByteArray(), overwrite)
+            StillResult.Taken(jpeg, snap.timestampNs, recordFile)
+        } catch (e: Exception) {
+            output.delete()
+            StillResult.Failed("the still could not be written: ${e.message}")
         }
     }
 
@@ -295,6 +327,35 @@ class CamProCamera internal constructor(
             }
         } catch (e: RuntimeException) {
             // The threads are gone already.
+        }
+    }
+
+    /** What a record says of the camera now (`null` when it is not open): any thread. */
+    private fun recordContext(): RecordContext? {
+        val c = campro ?: return null
+        val bytes = presetBytes ?: return null
+        val id = cameraId ?: return null
+        val session = c.session
+        return synchronized(session) {
+            if (session.isClosed) return null
+            RecordContext(
+                bytes, preset.given, id, session.transform.copyOf(), session.curvePoints,
+                c.pipeline.controller.gains.copyOf(), session.boundLsb,
+                c.pipeline.guard.worstDeviationLsb, c.pipeline.guard.maxDeviationLsb,
+            )
+        }
+    }
+
+    /** Writes [text] to [target] through a temporary file beside it (replacing only with [overwrite]). */
+    private fun writeAtomically(target: File, text: ByteArray, overwrite: Boolean) {
+        val part = File(target.absoluteFile.parentFile, ".${target.name}.part")
+        try {
+            part.writeBytes(text)
+            if (!overwrite && target.exists()) throw IOException("$target appeared meanwhile; it is not replaced")
+            val how = if (overwrite) arrayOf(StandardCopyOption.ATOMIC_MOVE, StandardCopyOption.REPLACE_EXISTING) else arrayOf(StandardCopyOption.ATOMIC_MOVE)
+            Files.move(part.toPath(), target.toPath(), *how)
+        } finally {
+            part.delete()
         }
     }
 
@@ -319,7 +380,9 @@ class CamProCamera internal constructor(
             }
             val size = chars.camproStreamSize(ImageFormat.YUV_420_888, options.maxWidth, options.maxHeight)
                 ?: return publish(ProtectionState.Unsupported("the camera lists no YUV_420_888 size"))
-            val session = preset.open(context, (support as DeviceSupport.Result.Supported).maxCurvePoints)
+            val bytes = preset.bytes(context)
+            val session = CamProSession.fromBytes(bytes, (support as DeviceSupport.Result.Supported).maxCurvePoints)
+            presetBytes = bytes
             val c = try {
                 CamProCamera2(
                     session, chars, cameraHandler, frameExecutor, size.width, size.height,
@@ -385,6 +448,7 @@ class CamProCamera internal constructor(
 
     /** Closes the camera, stops a recording and fails waiting stills with [reason]; the state becomes Stopped. */
     private fun closeCamera(reason: String) {
+        active?.let { stopRecording(it, reason) } // first: its record needs the camera's values
         val c = campro
         campro = null
         stream = null
@@ -393,7 +457,6 @@ class CamProCamera internal constructor(
         device?.close()
         device = null
         stills.fail(reason)
-        active?.let { stopRecording(it, reason) }
         // Queued behind the pipeline's own last state on the frame thread, so this one is final.
         try {
             frameExecutor.execute { publish(ProtectionState.Stopped(reason)) }
@@ -449,6 +512,12 @@ class CamProCamera internal constructor(
     private companion object {
         /** Losses in a row after which the camera is left closed until the owner starts again. */
         const val REOPEN_LIMIT = 3
+
+        /** What a still carries of metadata (the record's `metadata`): its EXIF orientation alone. */
+        const val RECORD_METADATA_STILL = "orientation"
+
+        /** What a recording carries: the orientation hint and CamPro's summary track. */
+        const val RECORD_METADATA_VIDEO = "orientation+summary"
     }
 
     // ------------------------------------------------------------------------------------

@@ -243,6 +243,18 @@ class CamProCameraTest {
         }
         assertTrue("still off by $worst", worst <= 3)
 
+        // Its record lies beside it, and the CLI (the Rust reader of the same format) verifies it.
+        val record = taken.record!!
+        assertEquals(File(dir, "still.jpg.campro.json"), record)
+        val json = record.readText()
+        assertTrue(json, json.contains("\"path\": \"camera2\"") && json.contains("\"input\": null") && json.contains("\"camera_id\": \"0\""))
+        val (code, said) = cli("check", "--record", record.path, out.path)
+        assertEquals(said, 0, code)
+        assertTrue(said, said.contains("the output its record names") && said.contains("camera 0 sent its values"))
+        val changed = File(dir, "changed.jpg").also { f -> f.writeBytes(out.readBytes().also { it[it.size / 2] = (it[it.size / 2] + 1).toByte() }) }
+        val (code2, said2) = cli("check", "--record", record.path, changed.path)
+        assertTrue(said2, code2 != 0 && said2.contains("NOT what its record names") && said2.contains("names no raw input"))
+
         // A second still into the same file is refused without overwrite; the first is left alone.
         c.takePicture(out) { stills += it }
         settle(c)
@@ -256,6 +268,14 @@ class CamProCameraTest {
         assertEquals("paused: the app is not in the foreground", (stills.last() as StillResult.Failed).reason)
         assertFalse(File(dir, "late.jpg").exists())
         assertEquals(View.VISIBLE, view.cover.visibility)
+    }
+
+    /** Runs the campro CLI; returns its exit code and what it printed. */
+    private fun cli(vararg args: String): Pair<Int, String> {
+        val bin = System.getProperty("campro.cli") ?: error("campro.cli is not set: run android/check-on-jvm.sh")
+        val p = ProcessBuilder(bin, *args).redirectErrorStream(true).start()
+        val text = p.inputStream.readBytes().decodeToString()
+        return p.waitFor() to text
     }
 
     private fun le16(b: ByteArray, at: Int) = (b[at].toInt() and 255) or ((b[at + 1].toInt() and 255) shl 8)

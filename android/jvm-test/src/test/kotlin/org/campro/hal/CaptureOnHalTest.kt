@@ -114,7 +114,6 @@ class CaptureOnHalTest {
             var stillFrame: SimFrame? = null
             val stillCapture = StillCapture<SimFrame, Pair<SimFrame, ByteArray>>(
                 snapshot = { f -> stillFrame = f; f to f.pixels.copyOf() },
-                timestampNs = { it.first.timestampNs },
                 background = direct,
             )
             router.stills = stillCapture
@@ -127,7 +126,7 @@ class CaptureOnHalTest {
             router.recording = recording
             p.start(Fixtures.supported())
             val droppedBefore = p.gate.dropped
-            hal.run(120, p) { i -> if (i == 100) stillCapture.request({ (_, px) -> CamProNative.encodeJpegRgb(side, side, px, Orientation.exifOrientation(90), 100) }) { stills += it } }
+            hal.run(120, p) { i -> if (i == 100) stillCapture.request({ (f, px) -> StillResult.Taken(CamProNative.encodeJpegRgb(side, side, px, Orientation.exifOrientation(90), 100), f.timestampNs) }) { stills += it } }
             assertEquals(ProtectionState.Protected, p.state)
             val summary = recording.stop()
 

@@ -99,18 +99,26 @@ class MediaCodecEncoder(
         }
 
         override fun onOutputFormatChanged(c: MediaCodec, format: MediaFormat) {
-            synchronized(lock) {
-                if (muxing) return fail("the encoder changed its output format mid-stream")
-                videoTrack = muxer.addTrack(format)
-                metadataTrack = muxer.addTrack(MediaFormat().apply { setString(MediaFormat.KEY_MIME, RecordingSummary.METADATA_MIME) })
-                muxer.start()
-                muxing = true
+            // A callback must never throw on this thread (an uncaught exception ends the app):
+            // every failure is recorded and ends the recording instead.
+            try {
+                synchronized(lock) {
+                    if (released) return
+                    if (muxing) return fail("the encoder changed its output format mid-stream")
+                    videoTrack = muxer.addTrack(format)
+                    metadataTrack = muxer.addTrack(MediaFormat().apply { setString(MediaFormat.KEY_MIME, RecordingSummary.METADATA_MIME) })
+                    muxer.start()
+                    muxing = true
+                }
+            } catch (e: RuntimeException) {
+                fail("the muxer could not start: ${e.message}")
             }
         }
 
         override fun onOutputBufferAvailable(c: MediaCodec, index: Int, info: MediaCodec.BufferInfo) {
             try {
                 synchronized(lock) {
+                    if (released) return
                     val config = info.flags and MediaCodec.BUFFER_FLAG_CODEC_CONFIG != 0
                     if (!config && info.size > 0 && muxing) muxer.writeSampleData(videoTrack, c.getOutputBuffer(index)!!, info)
                 }
@@ -185,11 +193,14 @@ class MediaCodecEncoder(
         part.delete()
     }
 
+    /** Set under [lock]: callbacks that come after the release do nothing. */
     private var released = false
 
     private fun release() {
-        if (released) return
-        released = true
+        synchronized(lock) {
+            if (released) return
+            released = true
+        }
         runCatching { codec.stop() }
         runCatching { codec.release() }
         runCatching { muxer.release() }

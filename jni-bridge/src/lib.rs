@@ -595,7 +595,7 @@ pub extern "system" fn Java_org_campro_CamProNative_encodeJpegYuv<'local>(
 
 /// `org.campro.CamProNative.encodeJpegRgb(width, height, rgb: ByteArray, exifOrientation,
 /// quality): ByteArray`: interleaved 8-bit RGB as a JPEG whose only metadata is its EXIF
-/// orientation ([`still::jpeg`]).
+/// orientation ([`still::jpeg_from_rgb`]).
 #[unsafe(no_mangle)]
 pub extern "system" fn Java_org_campro_CamProNative_encodeJpegRgb<'local>(
     mut env: EnvUnowned<'local>,

@@ -319,59 +319,21 @@ mod tests {
     fn short_planes_and_bad_strides_are_refused_by_name() {
         let y = [0u8; 16];
         let c = [0u8; 4];
-        let e = jpeg_from_yuv420(
-            &Yuv420 {
-                width: 4,
-                height: 4,
-                y: &y[..15],
-                y_row_stride: 4,
-                u: &c,
-                v: &c,
-                uv_row_stride: 2,
-                uv_pixel_stride: 1,
-            },
-            1,
-            90,
-        )
-        .unwrap_err();
-        assert!(e.to_string().starts_with("y: holds 15 bytes"), "{e}");
-        let e = jpeg_from_yuv420(
-            &Yuv420 { width: 4, height: 4, y: &y, y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride: 2 },
-            1,
-            90,
-        )
-        .unwrap_err();
-        assert!(e.to_string().starts_with("u: row stride 2 and pixel stride 2"), "{e}");
-        let e = jpeg_from_yuv420(
-            &Yuv420 { width: 0, height: 4, y: &y, y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride: 1 },
-            1,
-            90,
-        )
-        .unwrap_err();
-        assert!(e.to_string().starts_with("width x height"), "{e}");
-        let e = jpeg_from_yuv420(
-            &Yuv420 {
-                width: MAX_SIDE + 1,
-                height: 4,
-                y: &y,
-                y_row_stride: 4,
-                u: &c,
-                v: &c,
-                uv_row_stride: 2,
-                uv_pixel_stride: 1,
-            },
-            1,
-            90,
-        )
-        .unwrap_err();
-        assert!(e.to_string().starts_with("width x height"), "{e}");
-        let e = jpeg_from_yuv420(
-            &Yuv420 { width: 4, height: 4, y: &y, y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride: 1 },
-            9,
-            90,
-        )
-        .unwrap_err();
-        assert!(e.to_string().starts_with("orientation:"), "{e}");
+        // A 4 x 4 frame with these changes, refused: the message.
+        let refused = |y: &[u8], width: u32, uv_pixel_stride: usize, orientation: u16| {
+            let f = Yuv420 { width, height: 4, y, y_row_stride: 4, u: &c, v: &c, uv_row_stride: 2, uv_pixel_stride };
+            jpeg_from_yuv420(&f, orientation, 90).unwrap_err().to_string()
+        };
+        let cases = [
+            (refused(&y[..15], 4, 1, 1), "y: holds 15 bytes"),
+            (refused(&y, 4, 2, 1), "u: row stride 2 and pixel stride 2"),
+            (refused(&y, 0, 1, 1), "width x height"),
+            (refused(&y, MAX_SIDE + 1, 1, 1), "width x height"),
+            (refused(&y, 4, 1, 9), "orientation:"),
+        ];
+        for (said, want) in cases {
+            assert!(said.starts_with(want), "{said}");
+        }
     }
 
     /// The EXIF block read by a second implementation (kamadak-exif): Orientation and

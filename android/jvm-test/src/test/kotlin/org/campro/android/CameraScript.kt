@@ -95,22 +95,40 @@ object CameraScript {
     }
 
     /** A YUV 4:2:0 frame of flat 8 x 8 blocks (I420 planes), closed through [closed]. */
-    class FakeImage(val w: Int, val h: Int, private val ts: Long, val closed: MutableList<Long>) : Image() {
-        val y = ByteArray(w * h) { k -> (40 + 13 * ((k % w) / 8 + 3 * ((k / w) / 8))).toByte() }
-        val u = ByteArray(w * h / 4) { k -> (90 + 11 * ((k % (w / 2)) / 4)).toByte() }
-        val v = ByteArray(w * h / 4) { k -> (170 - 9 * ((k / (w / 2)) / 4)).toByte() }
-        fun plane(b: ByteArray, stride: Int) = object : Plane() {
-            override fun getRowStride() = stride
-            override fun getPixelStride() = 1
-            override fun getBuffer(): ByteBuffer = ByteBuffer.wrap(b)
-        }
+    /**
+     * A `YUV_420_888` image over [planes] (buffer, row stride, pixel stride each), as a camera
+     * or a codec hands them out; [onClose] runs on close.
+     */
+    open class YuvImage(
+        private val w: Int,
+        private val h: Int,
+        private val ts: Long,
+        private val planes: () -> List<Triple<ByteBuffer, Int, Int>>,
+        private val onClose: () -> Unit = {},
+    ) : Image() {
         override fun getFormat() = ImageFormat.YUV_420_888
         override fun getWidth() = w
         override fun getHeight() = h
         override fun getTimestamp() = ts
         override fun getTransform() = 0
         override fun getScalingMode() = 0
-        override fun getPlanes(): Array<Plane> = arrayOf(plane(y, w), plane(u, w / 2), plane(v, w / 2))
-        override fun close() { closed += ts }
+        override fun getPlanes(): Array<Plane> = planes().map { (b, row, px) ->
+            object : Plane() {
+                override fun getRowStride() = row
+                override fun getPixelStride() = px
+                override fun getBuffer(): ByteBuffer = b.duplicate()
+            }
+        }.toTypedArray()
+        override fun close() = onClose()
+    }
+
+    /** A YUV 4:2:0 frame of flat 8 x 8 blocks (I420 planes), its timestamp added to [closed] on close. */
+    class FakeImage(w: Int, h: Int, ts: Long, closed: MutableList<Long>) :
+        YuvImage(w, h, ts, { emptyList() }, { closed += ts }) {
+        val y = ByteArray(w * h) { k -> (40 + 13 * ((k % w) / 8 + 3 * ((k / w) / 8))).toByte() }
+        val u = ByteArray(w * h / 4) { k -> (90 + 11 * ((k % (w / 2)) / 4)).toByte() }
+        val v = ByteArray(w * h / 4) { k -> (170 - 9 * ((k / (w / 2)) / 4)).toByte() }
+        private val planeList = listOf(Triple(ByteBuffer.wrap(y), w, 1), Triple(ByteBuffer.wrap(u), w / 2, 1), Triple(ByteBuffer.wrap(v), w / 2, 1))
+        override fun getPlanes(): Array<Plane> = YuvImage(width, height, timestamp, { planeList }).planes
     }
 }

@@ -46,52 +46,20 @@ class MediaCodecEncoderTest {
         }
     }
 
-    private class PlanarImage(buf: ByteBuffer, private val w: Int, private val h: Int) : Image() {
-        private fun slice(b: ByteBuffer, from: Int, to: Int): ByteBuffer = b.duplicate().also { it.limit(to).position(from) }.slice()
-        private val planes = arrayOf(
-            plane(slice(buf, 0, w * h), w),
-            plane(slice(buf, w * h, w * h * 5 / 4), w / 2),
-            plane(slice(buf, w * h * 5 / 4, w * h * 3 / 2), w / 2),
-        )
-        private fun plane(b: ByteBuffer, stride: Int) = object : Plane() {
-            override fun getRowStride() = stride
-            override fun getPixelStride() = 1
-            override fun getBuffer() = b
-        }
-        override fun getFormat() = ImageFormat.YUV_420_888
-        override fun getWidth() = w
-        override fun getHeight() = h
-        override fun getTimestamp() = 0L
-        override fun getTransform() = 0
-        override fun getScalingMode() = 0
-        override fun getPlanes(): Array<Plane> = arrayOf(*planes)
-        override fun close() {}
-    }
+    /** I420 planes over [buf] (a codec's input buffer). */
+    private class PlanarImage(buf: ByteBuffer, w: Int, h: Int) : CameraScript.YuvImage(w, h, 0, {
+        fun slice(from: Int, to: Int): ByteBuffer = buf.duplicate().also { it.limit(to).position(from) }.slice()
+        listOf(Triple(slice(0, w * h), w, 1), Triple(slice(w * h, w * h * 5 / 4), w / 2, 1), Triple(slice(w * h * 5 / 4, w * h * 3 / 2), w / 2, 1))
+    })
 
     /** A camera frame as NV21 (V and U interleaved, pixel stride 2) with rows padded to [stride]. */
-    private class Nv21Frame(val y: ByteArray, val u: ByteArray, val v: ByteArray, private val w: Int, private val h: Int, private val stride: Int) : Image() {
-        private val yBuf = ByteBuffer.allocate(stride * h).also { b -> for (r in 0 until h) for (c in 0 until w) b.put(r * stride + c, y[r * w + c]) }
-        private val vu = ByteBuffer.allocate(stride * h / 2).also { b ->
+    private class Nv21Frame(val y: ByteArray, val u: ByteArray, val v: ByteArray, w: Int, h: Int, stride: Int) : CameraScript.YuvImage(w, h, 0, {
+        val yBuf = ByteBuffer.allocate(stride * h).also { b -> for (r in 0 until h) for (c in 0 until w) b.put(r * stride + c, y[r * w + c]) }
+        val vu = ByteBuffer.allocate(stride * h / 2).also { b ->
             for (r in 0 until h / 2) for (c in 0 until w / 2) { b.put(r * stride + 2 * c, v[r * w / 2 + c]); b.put(r * stride + 2 * c + 1, u[r * w / 2 + c]) }
         }
-        private fun plane(b: ByteBuffer, px: Int) = object : Plane() {
-            override fun getRowStride() = stride
-            override fun getPixelStride() = px
-            override fun getBuffer() = b
-        }
-        override fun getFormat() = ImageFormat.YUV_420_888
-        override fun getWidth() = w
-        override fun getHeight() = h
-        override fun getTimestamp() = 0L
-        override fun getTransform() = 0
-        override fun getScalingMode() = 0
-        override fun getPlanes(): Array<Plane> = arrayOf(
-            plane(yBuf, 1),
-            plane(vu.duplicate().also { it.position(1) }.slice(), 2),
-            plane(vu.duplicate(), 2),
-        )
-        override fun close() {}
-    }
+        listOf(Triple(yBuf, stride, 1), Triple(vu.duplicate().also { it.position(1) }.slice(), stride, 2), Triple(vu, stride, 2))
+    })
 
     private val dir: File = Files.createTempDirectory("campro-encoder").toFile()
 

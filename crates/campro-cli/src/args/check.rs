@@ -13,10 +13,11 @@ pub struct CheckArgs {
     /// person's photos (re-identified among everyone's); loose photos are each their own.
     #[arg(required_unless_present_any = ["persons", "record"])]
     pub photos: Vec<PathBuf>,
-    /// Verify a file against the record `simulate --record` wrote beside it: `campro check
-    /// --record OUT.jpg.campro.json FILE` (FILE the output: its hash; FILE the raw input:
-    /// the camera run again and its output's hash compared). Exit status 3 if it is not
-    /// what the record says.
+    /// Verify a file against the record `simulate --record` (or the Android library, for a
+    /// phone's photo or video) wrote beside it: `campro check --record OUT.jpg.campro.json
+    /// FILE` (FILE the output: its hash; FILE the raw input of a desktop record: the camera
+    /// run again and its output's hash compared). Exit status 3 if it is not what the
+    /// record says.
     #[arg(long, value_name = "RECORD", conflicts_with_all = ["persons", "output", "fail_above"])]
     pub record: Option<PathBuf>,
     /// One person's photos, NAME=DIR (repeatable).

@@ -36,8 +36,6 @@ import org.campro.StillResult
 import org.campro.Yuv
 import java.io.File
 import java.io.IOException
-import java.nio.file.Files
-import java.nio.file.StandardCopyOption
 import java.util.concurrent.CopyOnWriteArrayList
 import java.util.concurrent.Executor
 import java.util.concurrent.Executors
@@ -343,19 +341,6 @@ class CamProCamera internal constructor(
                 c.pipeline.controller.gains.copyOf(), session.boundLsb,
                 c.pipeline.guard.worstDeviationLsb, c.pipeline.guard.maxDeviationLsb,
             )
-        }
-    }
-
-    /** Writes [text] to [target] through a temporary file beside it (replacing only with [overwrite]). */
-    private fun writeAtomically(target: File, text: ByteArray, overwrite: Boolean) {
-        val part = File(target.absoluteFile.parentFile, ".${target.name}.part")
-        try {
-            part.writeBytes(text)
-            if (!overwrite && target.exists()) throw IOException("$target appeared meanwhile; it is not replaced")
-            val how = if (overwrite) arrayOf(StandardCopyOption.ATOMIC_MOVE, StandardCopyOption.REPLACE_EXISTING) else arrayOf(StandardCopyOption.ATOMIC_MOVE)
-            Files.move(part.toPath(), target.toPath(), *how)
-        } finally {
-            part.delete()
         }
     }
 

@@ -155,9 +155,6 @@ class CamProPreviewView @JvmOverloads constructor(
         texture.setTransform(Matrix().apply { setValues(Orientation.fitTransform(bufferWidth, bufferHeight, width, height, rotation, frontFacing)) })
     }
 
-    /** The matrix the texture shows the stream with (tests read it). */
-    internal fun textureTransform(): FloatArray = FloatArray(9).also { texture.getTransform(null).getValues(it) }
-
     private fun displayRotationDegrees(): Int = when (display?.rotation ?: Surface.ROTATION_0) {
         Surface.ROTATION_90 -> 90
         Surface.ROTATION_180 -> 180

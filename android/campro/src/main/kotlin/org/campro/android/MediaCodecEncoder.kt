@@ -13,8 +13,6 @@ import org.campro.Yuv
 import java.io.File
 import java.io.IOException
 import java.nio.ByteBuffer
-import java.nio.file.Files
-import java.nio.file.StandardCopyOption
 import java.util.concurrent.CountDownLatch
 import java.util.concurrent.LinkedBlockingQueue
 import java.util.concurrent.TimeUnit
@@ -57,7 +55,7 @@ class MediaCodecEncoder(
     orientationHint: Int,
     private val options: RecordingOptions = RecordingOptions(),
 ) : VideoEncoder<Image> {
-    private val part = File(output.absoluteFile.parentFile, ".${output.name}.part")
+    private val part = partOf(output)
     private val thread = HandlerThread("campro-encoder").apply { start() }
     private val codec: MediaCodec
     private val muxer: MediaMuxer
@@ -177,10 +175,7 @@ class MediaCodecEncoder(
                 muxing = false
             }
             release()
-            // ATOMIC_MOVE replaces on POSIX: a file that appeared since the start is not clobbered.
-            if (!options.overwrite && output.exists()) throw IOException("$output appeared while recording; the recording is not moved onto it")
-            val how = if (options.overwrite) arrayOf(StandardCopyOption.ATOMIC_MOVE, StandardCopyOption.REPLACE_EXISTING) else arrayOf(StandardCopyOption.ATOMIC_MOVE)
-            Files.move(part.toPath(), output.toPath(), *how)
+            moveIntoPlace(part, output, options.overwrite)
         } catch (e: Exception) {
             release()
             part.delete()

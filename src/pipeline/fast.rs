@@ -325,6 +325,24 @@ impl<'a> Exact8<'a> {
         self.decide(rgb, e, t)
     }
 
+    /// The code of a split cell `e` for an f32 curve input `t` clear of its boundary's error
+    /// bound (below `lo` or from `hi` on); `None` when `t` is within it or the cell is
+    /// ambiguous (then [`Exact8::decide`] needs f64).
+    #[inline(always)]
+    fn split_code(&self, e: u16, t: f32) -> Option<u8> {
+        if e & SPLIT == 0 {
+            return None;
+        }
+        let s = &self.splits[(e & !SPLIT) as usize];
+        if t < s.lo {
+            Some(s.below)
+        } else if t >= s.hi {
+            Some(s.above)
+        } else {
+            None
+        }
+    }
+
     /// A pixel whose table entries `e` (for curve inputs `t`) hold a split or an ambiguous
     /// cell: a split cell decides by its boundary, and where the f32 input is within the
     /// bound of it, by the reference's own f64 input against the boundary; an ambiguous
@@ -339,18 +357,14 @@ impl<'a> Exact8<'a> {
         for k in 0..3 {
             out[k] = match e[k] {
                 code if code < AMBIGUOUS => code as u8,
-                split => {
+                split => self.split_code(split, t[k]).unwrap_or_else(|| {
                     let s = &self.splits[(split & !SPLIT) as usize];
-                    if t[k] < s.lo {
-                        s.below
-                    } else if t[k] >= s.hi {
-                        s.above
-                    } else if exact.get_or_insert_with(|| self.curve_inputs(rgb))[k] < s.at {
+                    if exact.get_or_insert_with(|| self.curve_inputs(rgb))[k] < s.at {
                         s.below
                     } else {
                         s.above
                     }
-                }
+                }),
             };
         }
         (out, exact.is_some())
@@ -389,12 +403,22 @@ impl<'a> Exact8<'a> {
             let d: &mut [u8; BLOCK] = d.try_into().expect("a whole block");
             let mut n = 0;
             for p in 0..LANES {
-                let (e, _) = self.lookup([s[3 * p], s[3 * p + 1], s[3 * p + 2]]);
-                d[3 * p] = e[0] as u8;
-                d[3 * p + 1] = e[1] as u8;
-                d[3 * p + 2] = e[2] as u8;
+                let (e, t) = self.lookup([s[3 * p], s[3 * p + 1], s[3 * p + 2]]);
+                let mut more = false;
+                for k in 0..3 {
+                    d[3 * p + k] = if e[k] < AMBIGUOUS {
+                        e[k] as u8
+                    } else {
+                        // A split cell whose f32 input is clear of its boundary is decided
+                        // here, as `decide` would; only the rest is queued.
+                        self.split_code(e[k], t[k]).unwrap_or_else(|| {
+                            more = true;
+                            0
+                        })
+                    };
+                }
                 queue[n] = p as u8;
-                n += ((e[0] | e[1] | e[2]) >= AMBIGUOUS) as usize;
+                n += more as usize;
             }
             for &p in &queue[..n] {
                 fell += self.redo(s, d, 3 * p as usize) as usize;

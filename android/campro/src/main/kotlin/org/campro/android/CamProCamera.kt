@@ -126,6 +126,9 @@ class CamProCamera internal constructor(
     /** The running Camera2 glue (camera thread writes; the frame thread reads the gate's count). */
     @Volatile
     private var campro: CamProCamera2? = null
+
+    /** The camera opened last (camera thread writes; records read it on other threads). */
+    @Volatile
     private var cameraId: String? = null
 
     /** The open stream: size, sensor orientation, facing (written on the camera thread). */
@@ -165,11 +168,17 @@ class CamProCamera internal constructor(
         owner.lifecycle.addObserver(lifecycleObserver)
     }
 
-    /** Adds [listener], called on [executor] with the current state now and every change after. */
+    /**
+     * Adds [listener], called on [executor] with the current state now and every change after,
+     * in order (the current state is queued under the same lock as every change, so a change
+     * racing with this call never reaches the listener before the state it replaced).
+     */
     fun addStateListener(executor: Executor, listener: (ProtectionState) -> Unit) {
-        listeners += executor to listener
-        val now = mutableState.value
-        executor.execute { listener(now) }
+        synchronized(listeners) {
+            listeners += executor to listener
+            val now = mutableState.value
+            executor.execute { listener(now) }
+        }
     }
 
     fun removeStateListener(listener: (ProtectionState) -> Unit) {
@@ -310,8 +319,10 @@ class CamProCamera internal constructor(
 
     /** Stops everything and releases the camera and the threads. Idempotent; any thread. */
     override fun close() {
-        if (closed) return
-        closed = true
+        synchronized(this) {
+            if (closed) return
+            closed = true
+        }
         manager.unregisterAvailabilityCallback(availability)
         onMain { owner.lifecycle.removeObserver(lifecycleObserver) }
         try {
@@ -464,13 +475,15 @@ class CamProCamera internal constructor(
 
     private fun publish(s: ProtectionState) {
         if (s == ProtectionState.Protected) cameraHandler.post { lostInARow = 0 }
-        if (mutableState.value == s && s !is ProtectionState.Stopped) return
-        mutableState.value = s
-        for ((executor, listener) in listeners) {
-            try {
-                executor.execute { listener(s) }
-            } catch (e: RejectedExecutionException) {
-                // The app's executor is shut down: it no longer listens.
+        synchronized(listeners) {
+            if (mutableState.value == s && s !is ProtectionState.Stopped) return
+            mutableState.value = s
+            for ((executor, listener) in listeners) {
+                try {
+                    executor.execute { listener(s) }
+                } catch (e: RejectedExecutionException) {
+                    // The app's executor is shut down: it no longer listens.
+                }
             }
         }
         main.post { preview?.showState(s) }

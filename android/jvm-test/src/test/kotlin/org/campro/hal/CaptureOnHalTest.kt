@@ -152,8 +152,10 @@ class CaptureOnHalTest {
                 worst = maxOf(worst, maxDiff(decoded, f.expected))
             }
             assertTrue("recorded frames off by $worst LSB", worst <= bound)
-            val pts = String(exec("ffprobe", "-v", "error", "-select_streams", "v", "-show_entries", "packet=pts", "-of", "csv=p=0", file.path))
-                .lines().filter { it.isNotBlank() }.map { it.trim().toLong() }.sorted()
+            // Decoded frames come in presentation order: their times must increase as decoded.
+            val pts = String(exec("ffprobe", "-v", "error", "-select_streams", "v", "-show_entries", "frame=pts", "-of", "csv=p=0", file.path))
+                .lines().filter { it.isNotBlank() }.map { it.trim().trimEnd(',').toLong() }
+            assertTrue("presentation times increase: $pts", pts.zipWithNext().all { (a, b) -> b > a })
             val want = recorded.map { (it.timestampNs - recorded[0].timestampNs) / 1000 }
             assertEquals(want.size, pts.size)
             for ((a, b) in want.zip(pts)) assertTrue("pts $b, sensor $a", kotlin.math.abs(a - b) <= 1)

@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# `campro check` on held-out LFW identities, for every bundled preset: the table of
+# trained/README.md ("campro check on held-out identities").
+#
+# The photos: the first N (default 50) of `campro-omega-0.5`'s held-out identities
+# (provenance.data.validation_identities, never trained on) in name order that have at least
+# two LFW photos, their first two photos each (100 photos), one folder a person. Each preset
+# is checked with the defaults (YuNet, faceplugin and mobilefacenet-casia, 1,000 LFW
+# distractors, every view the preset has); per view the table gives the faces, those linkable
+# at FAR 1e-3 and 1e-2 on any model, the median and worst over faces of the highest
+# similarity over models, and the faces whose true person ranks first. The time and peak
+# memory of each run are /usr/bin/time's.
+#
+# Usage: docs/scripts/check-held-out.sh [N]
+# Needs: a release build (cargo build --release -p campro-cli), python3, GNU time, ../shared
+# (or CAMPRO_SHARED) with data/lfw.
+set -euo pipefail
+root="$(cd "$(dirname "$0")/../.." && pwd)"
+campro="$root/target/release/campro"
+n="${1:-50}"
+shared="${CAMPRO_SHARED:-$root/../shared}"
+export CAMPRO_SHARED="$shared"
+work="$(mktemp -d)"
+trap 'rm -rf "$work"' EXIT
+
+python3 - "$root/params/campro-omega-0.5.json" "$shared/data/lfw/images_deepfunneled" "$work/photos" "$n" <<'PY'
+import json, os, shutil, sys
+params, lfw, out, n = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
+ids = json.load(open(params))["provenance"]["data"]["validation_identities"]
+kept = 0
+for name in sorted(ids):
+    d = os.path.join(lfw, name)
+    files = sorted(os.listdir(d))[:2] if os.path.isdir(d) else []
+    if len(files) < 2:
+        continue
+    os.makedirs(os.path.join(out, name))
+    for f in files:
+        shutil.copyfile(os.path.join(d, f), os.path.join(out, name, f))
+    kept += 1
+    if kept == n:
+        break
+print(f"{kept} identities, {2 * kept} photos", file=sys.stderr)
+PY
+
+echo "| preset | view | faces | linkable at 1e-3 | at 1e-2 | median similarity | worst | rank 1 |"
+echo "|---|---|---|---|---|---|---|---|"
+for preset in campro-omega-0.5 campro-omega-0.5-hour campro-omega-0.5-distill campro-omega-1 campro-omega-5 identity srgb-passthrough color-inversion; do
+  /usr/bin/time -f "$preset: %e s, %M KB" -a -o "$work/times" \
+    "$campro" check "$preset" "$work/photos" -o "$work/report-$preset" > "$work/lines-$preset" 2>&1
+  python3 - "$preset" "$work/report-$preset/check.csv" <<'PY'
+import collections, csv, statistics, sys
+preset, path = sys.argv[1], sys.argv[2]
+faces = collections.defaultdict(lambda: collections.defaultdict(list))
+for r in csv.DictReader(open(path)):
+    faces[r["view"]][(r["photo"], r["face"])].append(r)
+for view, by_face in faces.items():
+    worst = [max(float(x["similarity"]) for x in rs) for rs in by_face.values()]
+    l3 = sum(any(x["linkable_far_1e-3"] == "true" for x in rs) for rs in by_face.values())
+    l2 = sum(any(x["linkable_far_1e-2"] == "true" for x in rs) for rs in by_face.values())
+    r1 = sum(any(x["rank"] == "1" for x in rs) for rs in by_face.values())
+    print(f"| {preset} | {view} | {len(by_face)} | {l3} | {l2} | {statistics.median(worst):.2f} | {max(worst):.2f} | {r1} |")
+PY
+done
+echo
+echo "Summary lines:"
+for preset in campro-omega-0.5 campro-omega-0.5-hour campro-omega-0.5-distill campro-omega-1 campro-omega-5 identity srgb-passthrough color-inversion; do
+  echo "- $preset: $(grep -E 'faces linkable|face linkable' "$work/lines-$preset" | tail -1)"
+done
+echo
+cat "$work/times"

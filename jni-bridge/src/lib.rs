@@ -543,17 +543,6 @@ fn side(name: &str, v: jint) -> Result<u32> {
     u32::try_from(v).map_err(|_| BridgeError::Argument(format!("{name}: must be >= 1, got {v}")))
 }
 
-fn exif_and_quality(orientation: jint, quality: jint) -> Result<(u16, u8)> {
-    let o = u16::try_from(orientation).ok().filter(|o| (1..=8).contains(o)).ok_or_else(|| {
-        BridgeError::Argument(format!("exifOrientation: must be an EXIF orientation 1..=8, got {orientation}"))
-    })?;
-    let q = u8::try_from(quality)
-        .ok()
-        .filter(|q| (1..=100).contains(q))
-        .ok_or_else(|| BridgeError::Argument(format!("quality: must be 1..=100, got {quality}")))?;
-    Ok((o, q))
-}
-
 /// `org.campro.CamProNative.encodeJpegYuv(width, height, y: ByteArray, yRowStride, u: ByteArray,
 /// v: ByteArray, uvRowStride, uvPixelStride, exifOrientation, quality): ByteArray`: a verified
 /// `YUV_420_888` frame's planes as a JPEG whose only metadata is its EXIF orientation
@@ -586,7 +575,7 @@ pub extern "system" fn Java_org_campro_CamProNative_encodeJpegYuv<'local>(
             uv_row_stride: stride("uvRowStride", uv_row_stride)?,
             uv_pixel_stride: stride("uvPixelStride", uv_pixel_stride)?,
         };
-        let (o, q) = exif_and_quality(exif_orientation, quality)?;
+        let (o, q) = (still::orientation(exif_orientation.into())?, still::quality(quality.into())?);
         let jpeg = still::jpeg_from_yuv420(&frame, o, q)?;
         Ok(env.byte_array_from_slice(&jpeg)?)
     })
@@ -608,7 +597,7 @@ pub extern "system" fn Java_org_campro_CamProNative_encodeJpegRgb<'local>(
 ) -> JByteArray<'local> {
     env.with_env(|env| -> Result<JByteArray<'local>> {
         let px = read_bytes(env, "rgb", &rgb)?;
-        let (o, q) = exif_and_quality(exif_orientation, quality)?;
+        let (o, q) = (still::orientation(exif_orientation.into())?, still::quality(quality.into())?);
         let jpeg = still::jpeg_from_rgb(&px, side("width", width)?, side("height", height)?, o, q)?;
         Ok(env.byte_array_from_slice(&jpeg)?)
     })
@@ -696,9 +685,7 @@ pub extern "system" fn Java_org_campro_CamProNative_record<'local>(
             enhancer_sha256: None,
             jpeg_quality: match jpeg_quality {
                 0 => None,
-                q => Some(u8::try_from(q).ok().filter(|q| (1..=100).contains(q)).ok_or_else(|| {
-                    BridgeError::Argument(format!("jpegQuality: must be 0 (not a JPEG) or 1..=100, got {q}"))
-                })?),
+                q => Some(still::quality(q.into())?), // 0: not a JPEG
             },
             metadata: read_string(env, "metadata", &metadata, 64)?,
             input: None,

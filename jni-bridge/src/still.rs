@@ -130,15 +130,29 @@ fn check_frame(f: &Yuv420) -> Result<(), BridgeError> {
     check_plane("v", f.v, ch, cw, f.uv_row_stride, f.uv_pixel_stride)
 }
 
-fn encoder(out: &mut Vec<u8>, exif_orientation_value: u16, quality: u8) -> Result<Encoder<&mut Vec<u8>>, BridgeError> {
-    if !(1..=8).contains(&exif_orientation_value) {
-        return Err(BridgeError::Argument(format!(
-            "orientation: must be an EXIF orientation 1..=8, got {exif_orientation_value}"
-        )));
-    }
-    if !(1..=100).contains(&quality) {
-        return Err(BridgeError::Argument(format!("quality: must be 1..=100, got {quality}")));
-    }
+/// An EXIF orientation (1..=8), checked: the one rule for every caller.
+pub fn orientation(v: i64) -> Result<u16, BridgeError> {
+    u16::try_from(v)
+        .ok()
+        .filter(|o| (1..=8).contains(o))
+        .ok_or_else(|| BridgeError::Argument(format!("orientation: must be an EXIF orientation 1..=8, got {v}")))
+}
+
+/// A JPEG quality (1..=100), checked: the one rule for every caller.
+pub fn quality(v: i64) -> Result<u8, BridgeError> {
+    u8::try_from(v)
+        .ok()
+        .filter(|q| (1..=100).contains(q))
+        .ok_or_else(|| BridgeError::Argument(format!("quality: must be 1..=100, got {v}")))
+}
+
+fn encoder(
+    out: &mut Vec<u8>,
+    exif_orientation_value: u16,
+    quality_value: u8,
+) -> Result<Encoder<&mut Vec<u8>>, BridgeError> {
+    let exif_orientation_value = orientation(exif_orientation_value.into())?;
+    let quality = quality(quality_value.into())?;
     let mut enc = Encoder::new(out, quality);
     let mut app1 = EXIF_HEADER.to_vec();
     app1.extend_from_slice(&exif_orientation(exif_orientation_value));

@@ -203,7 +203,7 @@ pub fn enhancer_of(params_path: &Path, p: &Params, args: EnhanceArgs, models: &P
 pub fn face_guard(models: &Path, hide: Hide) -> Result<FaceGuard> {
     let detector = crate::models::load("yunet", models).map_err(|e| {
         anyhow!(
-            "--enhance: the enhanced view hides every face it finds, and its face detector could not be loaded ({e:#}); pass --shared DIR or set CAMPRO_SHARED, or --models DIR: nothing is enhanced without it"
+            "--enhance: the enhanced view hides every face it finds, and its face detector could not be loaded ({e:#}); nothing is enhanced without it"
         )
     })?;
     Ok(FaceGuard::new(campro_eval::face::FaceDetector::new(detector)?, hide))

@@ -501,6 +501,34 @@ fn verify_record(a: &CheckArgs, record: &Path) -> Result<i32> {
     }
 }
 
+/// The bundled face recognition models `check` runs by default.
+const DEFAULT_FACE_MODELS: [&str; 2] = ["faceplugin", "mobilefacenet-casia"];
+
+/// The face models to run: those asked for (each must load), else every default one the
+/// models folder holds, each missing one said in `notes` with how to get it (none at all:
+/// an error naming the command).
+fn face_models_of(asked: &[String], models: &Path, notes: &mut Vec<String>) -> Result<Vec<String>> {
+    if !asked.is_empty() {
+        return Ok(asked.to_vec());
+    }
+    let mut found = Vec::new();
+    for name in DEFAULT_FACE_MODELS {
+        let pin = crate::models::pin(name).expect("a bundled model");
+        if models.join(pin.file).is_file() {
+            found.push(name.to_string());
+        } else {
+            notes.push(format!("checked without {name}: {}", crate::models::how_to_get(pin, models)));
+        }
+    }
+    if found.is_empty() {
+        bail!(
+            "no face recognition model: {}",
+            crate::models::how_to_get(crate::models::pin("faceplugin").expect("bundled"), models)
+        );
+    }
+    Ok(found)
+}
+
 /// `campro check`.
 pub fn run(a: CheckArgs) -> Result<i32> {
     if let Some(record) = &a.record {
@@ -517,15 +545,16 @@ pub fn run(a: CheckArgs) -> Result<i32> {
     let models = a.data.models_dir();
     if !models.is_dir() {
         bail!(
-            "the models folder {}: no such folder; check runs the face models of the shared data folder: pass --shared DIR or set CAMPRO_SHARED (default ../shared), or --models DIR",
+            "the models folder {}: no such folder; `campro models fetch` installs the models a registry has (`campro models list` says where the others come from), or pass --models DIR, --shared DIR or set CAMPRO_SHARED",
             crate::shown(&models)
         );
     }
     let detector = FaceDetector::new(crate::models::load(&a.face_detector, &models)?)?;
-    let embedders: Vec<Embedder> =
-        a.face_models.iter().map(|n| Ok(Embedder::new(crate::models::load(n, &models)?)?)).collect::<Result<_>>()?;
-    let judges: Vec<Judge> = embedders.iter().map(Judge::new).collect::<campro_eval::Result<_>>()?;
     let mut notes = Vec::new();
+    let face_models = face_models_of(&a.face_models, &models, &mut notes)?;
+    let embedders: Vec<Embedder> =
+        face_models.iter().map(|n| Ok(Embedder::new(crate::models::load(n, &models)?)?)).collect::<Result<_>>()?;
+    let judges: Vec<Judge> = embedders.iter().map(Judge::new).collect::<campro_eval::Result<_>>()?;
     let failures = crate::eval::Failures::default();
     let views = views_of(&a, &params, &p, &models, &photos, &mut notes, &failures)?;
     if views.is_empty() {

@@ -287,7 +287,7 @@ pub fn run(a: InspectArgs) -> Result<()> {
     let enhancer = if enhance { Some(crate::capture::enhancer_of(&params, &p, scale, &models)?) } else { None };
     if !models.is_dir() {
         bail!(
-            "{} {}: no such folder; inspect runs the face and person models of the shared data folder: pass --shared DIR or set CAMPRO_SHARED (default ../shared), or --models DIR",
+            "{} {}: no such folder; `campro models fetch` installs the models a registry has (`campro models list` says where the others come from), or pass --models DIR, --shared DIR or set CAMPRO_SHARED",
             if given { "--models" } else { "the models folder" },
             crate::shown(&models)
         );

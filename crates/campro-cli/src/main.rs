@@ -114,6 +114,13 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Train(a) => train::train(&a),
         Cmd::FinetuneDetector(a) => train::finetune_detector(&a),
         Cmd::TrainEnhancer(a) => train::train_enhancer(&a),
+        Cmd::Models(a) => match a.what {
+            args::ModelsCmd::List { data, format } => {
+                models::list(data.models.as_deref(), data.shared.as_deref(), format == Report::Json)
+            }
+            args::ModelsCmd::Fetch { force } => models::fetch(force),
+            args::ModelsCmd::Add { files, force } => models::add(&files, force),
+        },
         Cmd::Presets(a) => presets::list(a.format == Report::Json),
         Cmd::Demo(a) => demo::demo(&a),
     }

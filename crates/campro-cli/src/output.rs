@@ -95,8 +95,6 @@ macro_rules! say {
     ($($t:tt)*) => { $crate::say(format_args!($($t)*)) };
 }
 
-/// Writes `bytes` to `path` whole or not at all ([`campro_eval::atomic::write`]). Refuses
-/// to replace `path` unless `force` (checked once, at the rename).
 /// A progress bar over `n` items on stderr, `label` before it (empty: none), with the
 /// elapsed time and the time left.
 pub(crate) fn count_bar(label: &str, n: u64) -> indicatif::ProgressBar {
@@ -111,6 +109,8 @@ pub(crate) fn count_bar(label: &str, n: u64) -> indicatif::ProgressBar {
     bar
 }
 
+/// Writes `bytes` to `path` whole or not at all ([`campro_eval::atomic::write`]). Refuses
+/// to replace `path` unless `force` (checked once, at the rename).
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()> {
     output_result(path, campro_eval::atomic::write(path, bytes, force))
 }

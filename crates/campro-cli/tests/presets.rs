@@ -198,7 +198,7 @@ fn inspect_says_where_its_models_come_from() {
             .env("CAMPRO_SHARED", dir.path().join("nowhere"))
             .args(["inspect", "campro-omega-0.5", "photo.png", "-o"])
             .arg(&out),
-        "pass --shared DIR or set CAMPRO_SHARED",
+        "`campro models fetch` installs the models a registry has",
     );
 }
 

@@ -35,8 +35,10 @@ pub struct CheckArgs {
     /// Face detector: a bundled name or a manifest file.
     #[arg(long, default_value = "yunet")]
     pub face_detector: String,
-    /// Face recognition models: bundled names or manifest files with task.thresholds (repeatable).
-    #[arg(long = "face-model", default_values_t = ["faceplugin".to_string(), "mobilefacenet-casia".to_string()])]
+    /// Face recognition models: bundled names or manifest files with task.thresholds
+    /// (repeatable; default: every bundled face model the models folder holds, the ones
+    /// missing named in the report).
+    #[arg(long = "face-model")]
     pub face_models: Vec<String>,
     /// LFW identities added to the re-identification gallery (0: only your photos); needs
     /// LFW (--lfw, or SHARED/data/lfw).

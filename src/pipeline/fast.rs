@@ -90,7 +90,7 @@ impl Elision {
 /// `Exact8` of the process) run on both over 16,384 pixels of a fixed scene (best of three,
 /// about a millisecond in all), once per process. Either is bit-identical, so the choice
 /// changes speed only.
-fn gathers_pay(tables: &Exact8) -> bool {
+fn avx2_pays(tables: &Exact8) -> bool {
     static PAYS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     *PAYS.get_or_init(|| {
         let src: Vec<u8> = (0..3 * 16384u32).map(|i| (i.wrapping_mul(2654435761) >> 24) as u8).collect();
@@ -132,8 +132,8 @@ pub struct Exact8<'a> {
 /// Pixels of one [`Exact8::run`] redone by the f64 reference.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Fallbacks {
-    /// Flagged by the AVX-512 engine (a value within its error bound of a rounding
-    /// boundary).
+    /// Flagged by the AVX-512 engine or the AVX2 one on its tables (a value within its
+    /// error bound of a rounding boundary).
     pub flagged: usize,
     /// Outside whole blocks (or without the engine): ambiguous in the scalar tables.
     pub ambiguous: usize,
@@ -146,7 +146,9 @@ pub enum Engine {
     /// The tables, 16 pixels a block with their fallbacks queued after it (any CPU, any
     /// curve; the fast path on ARM, where LLVM lowers its four-lane sums to NEON).
     Scalar,
-    /// The tables, eight pixels a step by gathers (x86-64 with AVX2; any curve).
+    /// Eight pixels a step (x86-64 with AVX2 and FMA): the AVX-512 engine's arithmetic on
+    /// its tables (uniform curve of <= 32 knots: the degamma by scalar loads, every other
+    /// lookup a register permute), else the scalar tables by gathers (any curve).
     Avx2,
     /// 64 pixels per step with AVX-512 (x86-64; uniform curve of <= 32 knots).
     Avx512,
@@ -236,7 +238,7 @@ impl<'a> Exact8<'a> {
         e.engine = match asked {
             Some(a) => a,
             None if e.runs(Engine::Avx512) => Engine::Avx512,
-            None if e.runs(Engine::Avx2) && gathers_pay(&e) => Engine::Avx2,
+            None if e.runs(Engine::Avx2) && avx2_pays(&e) => Engine::Avx2,
             None => Engine::Scalar,
         };
         e
@@ -246,7 +248,7 @@ impl<'a> Exact8<'a> {
     pub fn runs(&self, engine: Engine) -> bool {
         match engine {
             #[cfg(target_arch = "x86_64")]
-            Engine::Avx512 => self.simd.is_some(),
+            Engine::Avx512 => self.simd.is_some() && avx512::supported(),
             other => other.runs_here(),
         }
     }
@@ -446,9 +448,16 @@ impl<'a> Exact8<'a> {
             (src, dst) = (&src[whole..], &mut dst[whole..]);
         }
         #[cfg(target_arch = "x86_64")]
-        if self.engine != Engine::Scalar && avx2::available() {
-            // SAFETY: AVX2 is detected.
-            let (redone, whole) = unsafe { avx2::run(self, src, dst) };
+        if self.engine == Engine::Avx2 && avx2::available() {
+            // SAFETY: AVX2 and FMA are detected.
+            let (redone, whole) = match &self.simd {
+                Some(k) => {
+                    let (flagged, whole) = unsafe { avx2::run_lines(k, self, src, dst) };
+                    fell.flagged += flagged;
+                    (0, whole)
+                }
+                None => unsafe { avx2::run(self, src, dst) },
+            };
             fell.ambiguous += redone;
             (src, dst) = (&src[whole..], &mut dst[whole..]);
         }

@@ -112,24 +112,29 @@ fn position_error(params: &Params, row: usize) -> f64 {
     u * (2.0001 * s + (h + m[0]) + (h + m[0] + m[1]) + h) * 1.01 + 1e-12 * (1.0 + s)
 }
 
-/// Tables of one parameter set. Only built where [`supported`] holds.
+/// Tables of one parameter set. Only built where [`supported`] or the AVX2 engine's
+/// features hold; the AVX2 engine ([`super::avx2::run_lines`]) runs the same arithmetic on
+/// the same tables (the degamma, `m`, `half`, the lines and the thresholds), eight lanes a
+/// step.
 #[derive(Debug, Clone)]
 pub(super) struct Kernel {
     /// `planes[b][x]`: byte b (little-endian) of the f32 degamma of code x.
     planes: [[u8; 256]; 4],
+    /// The f32 degamma of each code (the planes' values), for the AVX2 engine's gathers.
+    pub(super) degamma: [f32; 256],
     /// `CCM · (k - 1)`, row-major, f32.
-    m: [f32; 9],
+    pub(super) m: [f32; 9],
     /// `h` ([`half`]): the curve input is `x' = x - h` (x in segment units), clamped to
     /// [-h, h].
-    half: f32,
+    pub(super) half: f32,
     /// Per table slot `n mod 32` (n = x' rounded to nearest, ties to even), the line
     /// `w = intercept + x' · slope` in output LSB, scaled by 2^16 and shifted by
     /// `0.5 + E_c` for output channel c (see [`slots`]).
-    intercept: [[f32; 32]; 3],
-    slope: [f32; 32],
+    pub(super) intercept: [[f32; 32]; 3],
+    pub(super) slope: [f32; 32],
     /// A lane of channel c whose low 16 bits are below `threshold[c]` is within `E_c` of
     /// a rounding boundary: `ceil(2^17 · E_c + 0.5)` (`E_c` at least [`MIN_E`]).
-    threshold: [i32; 3],
+    pub(super) threshold: [i32; 3],
     /// Byte permutes: deinterleave (plane c: first from bytes 0..128, then 128..192)
     /// and interleave (output register r: first R and G, then B).
     split: [[[u8; 64]; 2]; 3],
@@ -316,12 +321,12 @@ fn slots(y: &[f64], codes: [Option<u16>; 2]) -> Option<(f64, [f64; 32], [f64; 32
 }
 
 impl Kernel {
-    /// `None` where the CPU lacks the features, the curve is not uniform or has more
+    /// `None` where the CPU runs neither engine, the curve is not uniform or has more
     /// than 32 knots, or the bound is too wide to be worth it (E >= 0.25 LSB).
     pub(super) fn new(params: &Params, degamma: &[f64]) -> Option<Self> {
         let c = &params.tone_curve;
         let k = c.len();
-        if !supported() || !c.is_uniform() || k > 32 || degamma.len() != 256 {
+        if !(supported() || super::avx2::available()) || !c.is_uniform() || k > 32 || degamma.len() != 256 {
             return None;
         }
         let e = error_lsb(params);
@@ -329,7 +334,9 @@ impl Kernel {
             return None;
         }
         let mut planes = [[0u8; 256]; 4];
+        let mut degamma32 = [0f32; 256];
         for (x, d) in degamma.iter().enumerate() {
+            degamma32[x] = *d as f32;
             for (b, byte) in (*d as f32).to_le_bytes().into_iter().enumerate() {
                 planes[b][x] = byte;
             }
@@ -375,7 +382,18 @@ impl Kernel {
             }
         }
         let reference = Reference::new(params, degamma);
-        Some(Self { planes, m, half: half as f32, intercept, slope, threshold, split, merge, reference })
+        Some(Self {
+            planes,
+            degamma: degamma32,
+            m,
+            half: half as f32,
+            intercept,
+            slope,
+            threshold,
+            split,
+            merge,
+            reference,
+        })
     }
 
     /// Runs whole blocks: `src.len() == dst.len()`, a multiple of [`BLOCK_BYTES`]. Each
@@ -383,8 +401,8 @@ impl Kernel {
     /// were flagged.
     pub(super) fn run(&self, src: &[u8], dst: &mut [u8]) -> usize {
         assert!(src.len() == dst.len() && src.len().is_multiple_of(BLOCK_BYTES));
-        // SAFETY: a Kernel exists only where `supported()` held, so the CPU has every
-        // feature `blocks` is compiled for.
+        assert!(supported(), "the AVX-512 engine on a CPU without it");
+        // SAFETY: `supported()` holds, so the CPU has every feature `blocks` is compiled for.
         unsafe { self.blocks(src, dst) }
     }
 

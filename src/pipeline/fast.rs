@@ -222,7 +222,7 @@ impl<'a> Exact8<'a> {
         let cells: Box<[u16; CELLS]> = cells.into_boxed_slice().try_into().expect("FINE + 1 cells and a pad");
         let mut e = Self {
             #[cfg(target_arch = "x86_64")]
-            simd: avx512::Kernel::new(params, &d),
+            simd: (avx512::supported() || avx2::available()).then(|| avx512::Kernel::new(params, &d)).flatten(),
             reference,
             terms,
             cells,

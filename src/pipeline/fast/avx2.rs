@@ -58,9 +58,9 @@ const QUEUE: usize = 256;
 /// Decides each flagged pixel (its byte offset in `src`) as the scalar engine decides it:
 /// its tables, then the f64 reference where they need it.
 #[inline(never)]
-fn decide_queued(e: &Exact8, src: &[u8], dst: &mut [u8], queue: &[u32]) {
+fn decide_queued(e: &Exact8, src: &[u8], dst: &mut [u8], queue: &[usize]) {
     for &p in queue {
-        e.redo(src, dst, p as usize);
+        e.redo(src, dst, p);
     }
 }
 
@@ -83,7 +83,7 @@ pub(super) unsafe fn run_lines(k: &Kernel, e: &Exact8, src: &[u8], dst: &mut [u8
     let pack = _mm256_broadcastsi128_si256(_mm_loadu_si128(PACK.as_ptr() as *const __m128i));
     let degamma = k.degamma.as_ptr();
     let mut flagged = 0;
-    let mut queue = [0u32; QUEUE];
+    let mut queue = [0usize; QUEUE];
     let mut queued = 0;
     for at in (0..whole).step_by(STEP_BYTES) {
         let s = &src[at..at + STEP_BYTES];
@@ -117,11 +117,11 @@ pub(super) unsafe fn run_lines(k: &Kernel, e: &Exact8, src: &[u8], dst: &mut [u8
         let high = _mm256_extracti128_si256::<1>(out);
         _mm_storel_epi64(d.as_mut_ptr().add(12) as *mut __m128i, high);
         (d.as_mut_ptr().add(20) as *mut i32).write_unaligned(_mm_extract_epi32::<2>(high));
-        // Flagged pixels are queued, without a branch per pixel, and decided after a
-        // stretch of steps (a call in the loop would make it keep its tables on the stack).
+        // Flagged pixels are queued and decided after a stretch of steps (a call in the
+        // loop would make it keep its tables on the stack).
         let mut f = _mm256_movemask_ps(_mm256_castsi256_ps(near)) as u32;
         while f != 0 {
-            queue[queued] = (at + 3 * f.trailing_zeros() as usize) as u32;
+            queue[queued] = at + 3 * f.trailing_zeros() as usize;
             queued += 1;
             f &= f - 1;
         }

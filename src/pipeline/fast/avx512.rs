@@ -113,7 +113,7 @@ fn position_error(params: &Params, row: usize) -> f64 {
 }
 
 /// Tables of one parameter set. Only built where [`supported`] or the AVX2 engine's
-/// features hold; the AVX2 engine ([`super::avx2::run_lines`]) runs the same arithmetic on
+/// features hold (see `Exact8::new`); the AVX2 engine ([`super::avx2::run_lines`]) runs the same arithmetic on
 /// the same tables (the degamma, `m`, `half`, the lines and the thresholds), eight lanes a
 /// step.
 #[derive(Debug, Clone)]
@@ -321,12 +321,13 @@ fn slots(y: &[f64], codes: [Option<u16>; 2]) -> Option<(f64, [f64; 32], [f64; 32
 }
 
 impl Kernel {
-    /// `None` where the CPU runs neither engine, the curve is not uniform or has more
-    /// than 32 knots, or the bound is too wide to be worth it (E >= 0.25 LSB).
+    /// `None` where the curve is not uniform or has more than 32 knots, or the bound is too
+    /// wide to be worth it (E >= 0.25 LSB). (The caller builds it only where an engine that
+    /// runs it runs.)
     pub(super) fn new(params: &Params, degamma: &[f64]) -> Option<Self> {
         let c = &params.tone_curve;
         let k = c.len();
-        if !(supported() || super::avx2::available()) || !c.is_uniform() || k > 32 || degamma.len() != 256 {
+        if !c.is_uniform() || k > 32 || degamma.len() != 256 {
             return None;
         }
         let e = error_lsb(params);

@@ -99,7 +99,7 @@ pub fn train(a: &TrainArgs) -> Result<()> {
         checkpoints: files.checkpoints.clone(),
         resume: files.resume.clone(),
         init,
-        ctx: campro_nn::Context::cpu(),
+        ctx: campro_nn::Context::cpu().on(device_of(&a.device)?),
     };
     let pb = training_bar("train", "round", cfg.budget.rounds);
     let out = campro_train::train::run(&cfg, opts, |r| {
@@ -414,7 +414,7 @@ pub fn bench_train(a: &BenchTrainArgs) -> Result<()> {
     };
     let shared = crate::args::shared_dir(a.shared.as_deref());
     let models = shared.join("models");
-    let ctx = campro_nn::Context::cpu().with_threads(threads);
+    let ctx = campro_nn::Context::cpu().with_threads(threads).on(device_of(&a.device)?);
     let times = ctx.install(|| campro_train::bench::run(&ctx, &models, &cfg, &steps, a.timing.runs as usize))?;
     let torch = match &a.anchor {
         Some(py) => Some(run_anchor(py, &shared, threads)?),
@@ -575,4 +575,9 @@ pub fn bench_enhancer(a: &BenchEnhancerArgs) -> Result<()> {
         crate::args::Report::Text => crate::say!("{}", t.markdown().trim_end()),
     }
     Ok(())
+}
+
+/// A `--device` value's device, or one line saying why not.
+fn device_of(name: &str) -> Result<campro_nn::Device> {
+    campro_nn::context::device(name).map_err(|e| anyhow::anyhow!("--device {e}"))
 }

@@ -41,6 +41,43 @@ impl Context {
     }
 }
 
+/// The device a `--device` value names: `cpu`, `cuda` (GPU 0) or `cuda:N`. A GPU on a
+/// build without CUDA, or none at that index, is an error naming why (the build command
+/// is in docs/gpu.md).
+pub fn device(name: &str) -> Result<Device, String> {
+    let ordinal = match name {
+        "cpu" => return Ok(Device::Cpu),
+        "cuda" => 0,
+        _ => match name.strip_prefix("cuda:").map(str::parse::<usize>) {
+            Some(Ok(n)) if n < 64 => n,
+            _ => return Err(format!("{}: not a device (cpu, cuda or cuda:N, N < 64)", name.escape_debug())),
+        },
+    };
+    if !cfg!(feature = "cuda") {
+        return Err(format!("{name}: this build has no CUDA (build with --features cuda: docs/gpu.md)"));
+    }
+    Device::new_cuda(ordinal)
+        .map_err(|e| format!("{name}: no CUDA device ({})", e.to_string().lines().next().unwrap_or("")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn device_names() {
+        assert!(matches!(device("cpu"), Ok(Device::Cpu)));
+        for bad in ["gpu", "cuda:", "cuda:x", "cuda:64", "CPU", ""] {
+            assert!(device(bad).unwrap_err().contains("not a device"), "{bad}");
+        }
+        // Without the feature a GPU is refused with the way to build one; with it, this
+        // machine's answer (a GPU or why not) is what candle says.
+        if !cfg!(feature = "cuda") {
+            assert!(device("cuda:1").unwrap_err().contains("--features cuda"));
+        }
+    }
+}
+
 impl Default for Context {
     /// The CPU with every core.
     fn default() -> Self {

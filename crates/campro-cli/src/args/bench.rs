@@ -78,6 +78,9 @@ impl Timing {
 pub struct BenchTrainArgs {
     #[command(flatten)]
     pub timing: Timing,
+    /// Where the steps run: cpu, cuda or cuda:N (a build with --features cuda: docs/gpu.md).
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
     /// The configuration whose face batch, person batch and size the players' steps use
     /// (default: the paper's).
     #[arg(long)]

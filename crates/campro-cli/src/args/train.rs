@@ -35,6 +35,10 @@ pub struct TrainArgs {
     /// them, degamma camera.gamma) instead of the identity.
     #[arg(long, conflicts_with = "resume")]
     pub init: Option<PathBuf>,
+    /// Where the run computes: cpu, cuda or cuda:N (a build with --features cuda:
+    /// docs/gpu.md). A checkpoint resumes on any device.
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
     #[command(flatten)]
     pub files: RunFiles,
 }

@@ -5,12 +5,12 @@
 # subset of LFW's identities with >= 5 photos, a subset of the COCO person images with
 # their annotations) and a short training configuration. docs/gpu.md says how to run it.
 #
-# Usage: docs/scripts/gpu-pack.sh [LFW_IDENTITIES [COCO_IMAGES]]   (defaults 80 and 200)
+# Usage: docs/scripts/gpu-pack.sh [LFW_IDENTITIES [COCO_IMAGES]]   (defaults 60 and 150)
 # Needs: Python 3 with venv and pip (nvcc comes from PyPI), $CAMPRO_SHARED or ../shared.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-ids=${1:-80}
-coco=${2:-200}
+ids=${1:-60}
+coco=${2:-150}
 shared=${CAMPRO_SHARED:-../shared}
 venv=target/cuda/venv
 # nvcc, the CUDA runtime headers and the C runtime headers, pinned (CUDA 13, the lent
@@ -23,6 +23,11 @@ cuda=$(echo "$venv"/lib/python3*/site-packages/nvidia/cu13)
 export CUDA_ROOT="$PWD/$cuda" CUDA_PATH="$PWD/$cuda" PATH="$PWD/$cuda/bin:$PATH"
 # H100 and H200 are compute capability 9.0; there is no GPU here to ask.
 export CUDA_COMPUTE_CAP=${CUDA_COMPUTE_CAP:-90}
+# candle's kernels link the CUDA runtime: its static library (the wheel has no libcudart.so),
+# found through the C compiler's LIBRARY_PATH so that no RUSTFLAGS change rebuilds the rest.
+mkdir -p target/cuda/link
+ln -sf "$PWD/$cuda/lib/libcudart_static.a" target/cuda/link/libcudart.a
+export LIBRARY_PATH="$PWD/target/cuda/link${LIBRARY_PATH:+:$LIBRARY_PATH}"
 cargo build --release --locked -p campro-cli --features cuda --target-dir target/cuda
 ops=$(cargo test --release --locked -p campro-nn --features cuda --test ops --no-run --target-dir target/cuda \
   --message-format=json 2>/dev/null | python3 -c '
@@ -33,10 +38,17 @@ for line in sys.stdin:
         print(m["executable"])')
 pack=gpu-pack
 rm -rf "$pack.part" && mkdir -p "$pack.part/bin" "$pack.part/shared/models" "$pack.part/shared/data"
-install -m 755 target/cuda/release/campro "$pack.part/bin/campro"
-install -m 755 "$ops" "$pack.part/bin/ops"
-strip "$pack.part/bin/campro" "$pack.part/bin/ops"
-cp "$shared"/models/{yunet_s_640_640.onnx,faceplugin_fr_feature.onnx,mobilefacenet_casia.onnx,mobilefacenet_casia_068.ckpt,yolox_nano.onnx,README.md} "$pack.part/shared/models/"
+# Stripped and xz-compressed (76 MB of campro, most of it candle's CUDA kernels as PTX,
+# become about 16 MB); run.sh unpacks them.
+for b in campro ops; do
+  src=target/cuda/release/campro
+  [ "$b" = ops ] && src=$ops
+  strip -o "$pack.part/bin/$b" "$src"
+  xz -T2 -6 "$pack.part/bin/$b"
+done
+# What training and its bench read: YuNet (face alignment), the attacker's checkpoint,
+# YOLOX-Nano (the utility player).
+cp "$shared"/models/{yunet_s_640_640.onnx,mobilefacenet_casia_068.ckpt,yolox_nano.onnx,README.md} "$pack.part/shared/models/"
 python3 - "$shared" "$pack.part/shared" "$ids" "$coco" <<'PY'
 import json, os, shutil, sys
 src, dst, ids, coco = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])

@@ -14,6 +14,11 @@ mkdir -p "$out"
 export CAMPRO_SHARED="$pack/shared"
 dry=${1:-}
 say() { echo "== $(date +%T) $*" | tee -a "$out/steps.log"; }
+# The binaries travel xz-compressed.
+bin=$(mktemp -d)
+for b in campro ops; do
+  xz -dc "$pack/bin/$b.xz" > "$bin/$b" && chmod +x "$bin/$b" || { say "cannot unpack $b (xz missing?)"; exit 1; }
+done
 
 say device
 if [ "$dry" != --dry ]; then
@@ -21,23 +26,23 @@ if [ "$dry" != --dry ]; then
     say "no GPU: stopping"; exit 1; }
 fi
 say "op tests (CPU always; CUDA where a GPU is present)"
-"$pack/bin/ops" --test-threads 1 > "$out/ops.txt" 2>&1
+"$bin/ops" --test-threads 1 > "$out/ops.txt" 2>&1
 echo "ops exit $?" | tee -a "$out/steps.log"
 grep -E "test result|skipped" "$out/ops.txt" | sort | uniq -c | tee -a "$out/steps.log"
 say "training steps on the CPU"
-"$pack/bin/campro" bench train --shared "$pack/shared" --runs 3 --format json > "$out/bench-cpu.json" 2> "$out/bench-cpu.err"
+"$bin/campro" bench train --shared "$pack/shared" --runs 3 --format json > "$out/bench-cpu.json" 2> "$out/bench-cpu.err"
 echo "bench cpu exit $?" | tee -a "$out/steps.log"
 if [ "$dry" = --dry ]; then
   say "dry run: stopping before the GPU is needed"
   exit 0
 fi
 say "training steps on CUDA"
-"$pack/bin/campro" bench train --shared "$pack/shared" --runs 3 --device cuda --format json > "$out/bench-cuda.json" 2> "$out/bench-cuda.err"
+"$bin/campro" bench train --shared "$pack/shared" --runs 3 --device cuda --format json > "$out/bench-cuda.json" 2> "$out/bench-cuda.err"
 echo "bench cuda exit $?" | tee -a "$out/steps.log"
 say "training on CUDA"
 resume=()
 [ -d "$pack/checkpoints" ] && resume=(--resume "$pack/checkpoints")
-"$pack/bin/campro" train "$pack/train.toml" --device cuda -o "$out/gpu-pack.json" --log "$out/train.csv" \
+"$bin/campro" train "$pack/train.toml" --device cuda -o "$out/gpu-pack.json" --log "$out/train.csv" \
   --checkpoints "$out/checkpoints" "${resume[@]}" > "$out/train.txt" 2>&1
 echo "train exit $?" | tee -a "$out/steps.log"
 say done

@@ -56,8 +56,19 @@ pub fn device(name: &str) -> Result<Device, String> {
     if !cfg!(feature = "cuda") {
         return Err(format!("{name}: this build has no CUDA (build with --features cuda: docs/gpu.md)"));
     }
+    #[cfg(feature = "cuda")]
+    driver_present().map_err(|e| format!("{name}: no CUDA driver ({e})"))?;
     Device::new_cuda(ordinal)
         .map_err(|e| format!("{name}: no CUDA device ({})", e.to_string().lines().next().unwrap_or("")))
+}
+
+/// Whether the CUDA driver library opens (cudarc loads it at run time and panics where it
+/// cannot; a machine without a GPU has none).
+#[cfg(feature = "cuda")]
+fn driver_present() -> Result<(), String> {
+    // SAFETY: opening the driver runs only its initialisers, which the CUDA runtime runs
+    // anyway; the handle is dropped at once.
+    unsafe { libloading::Library::new("libcuda.so.1") }.map(drop).map_err(|e| format!("libcuda.so.1: {e}"))
 }
 
 #[cfg(test)]

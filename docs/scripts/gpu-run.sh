@@ -26,7 +26,7 @@ if [ "$dry" != --dry ]; then
     say "no GPU: stopping"; exit 1; }
 fi
 say "op tests (CPU always; CUDA where a GPU is present)"
-"$bin/ops" --test-threads 1 > "$out/ops.txt" 2>&1
+"$bin/ops" --test-threads 1 --nocapture > "$out/ops.txt" 2>&1
 echo "ops exit $?" | tee -a "$out/steps.log"
 grep -E "test result|skipped" "$out/ops.txt" | sort | uniq -c | tee -a "$out/steps.log"
 say "training steps on the CPU"

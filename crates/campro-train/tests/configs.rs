@@ -28,7 +28,9 @@ fn the_gpu_pack_reads_only_what_it_packs() {
     let c = Config::load(&configs().join("gpu-pack.toml")).unwrap();
     let script = std::fs::read_to_string(campro_testkit::workspace_root().join("docs/scripts/gpu-pack.sh")).unwrap();
     for (key, path) in c.inputs() {
-        let rel = path.strip_prefix("gpu-pack/shared").unwrap_or_else(|_| panic!("{key}: {} is outside the pack", path.display()));
+        let rel = path
+            .strip_prefix("gpu-pack/shared")
+            .unwrap_or_else(|_| panic!("{key}: {} is outside the pack", path.display()));
         // A model file is one the script copies; a folder one it makes.
         let name = rel.file_name().unwrap().to_string_lossy();
         assert!(script.contains(&*name), "{key}: the pack script does not copy {name}");

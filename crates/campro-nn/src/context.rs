@@ -71,6 +71,13 @@ fn driver_present() -> Result<(), String> {
     unsafe { libloading::Library::new("libcuda.so.1") }.map(drop).map_err(|e| format!("libcuda.so.1: {e}"))
 }
 
+impl Default for Context {
+    /// The CPU with every core.
+    fn default() -> Self {
+        Context::cpu()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -86,12 +93,5 @@ mod tests {
         if !cfg!(feature = "cuda") {
             assert!(device("cuda:1").unwrap_err().contains("--features cuda"));
         }
-    }
-}
-
-impl Default for Context {
-    /// The CPU with every core.
-    fn default() -> Self {
-        Context::cpu()
     }
 }

@@ -122,7 +122,26 @@ fn shipped_configs_parse() {
         omegas.push(c.protector.omega);
     }
     omegas.sort_by(f64::total_cmp);
-    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
+    // (gpu-pack.toml is omega-0.5.toml on the GPU pack's data.)
+    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
+}
+
+/// The GPU pack's configuration reads only what `docs/scripts/gpu-pack.sh` packs (every
+/// input under `gpu-pack/shared/`, each a file or folder the script copies or makes), so a
+/// lent GPU machine needs nothing else, and it fits a device session.
+#[test]
+fn the_gpu_pack_reads_only_what_it_packs() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let c = Config::load(&dir.join("gpu-pack.toml")).unwrap();
+    let script = std::fs::read_to_string(campro_testkit::workspace_root().join("docs/scripts/gpu-pack.sh")).unwrap();
+    for (key, path) in c.inputs() {
+        let rel = path
+            .strip_prefix("gpu-pack/shared")
+            .unwrap_or_else(|_| panic!("{key}: {} is outside the pack", path.display()));
+        let name = rel.file_name().unwrap().to_string_lossy();
+        assert!(script.contains(&*name), "{key}: the pack script does not copy {name}");
+    }
+    assert!(c.budget.seconds <= 300.0, "a device session is minutes long");
 }
 
 /// The step's cost by hand, from the coefficients' definitions (docs: campro_train::cost):

@@ -48,9 +48,9 @@ unsafe fn pick(t: &[__m256; 4], n: __m256i) -> __m256 {
     _mm256_blendv_ps(lo, hi, bit4)
 }
 
-/// [`run_lines`]'s byte shuffle: the low three bytes of each 32-bit lane (R, G, B of one
-/// pixel), packed into the first 12 bytes of each 128-bit half.
-const PACK: [i8; 16] = [0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1];
+/// [`run_lines`]'s byte shuffle: from the packs' order in each 128-bit half (R0..R3,
+/// G0..G3, B0..B3) to four RGB pixels in its first 12 bytes.
+const PACK: [i8; 16] = [0, 4, 8, 1, 5, 9, 2, 6, 10, 3, 7, 11, -1, -1, -1, -1];
 
 /// Flagged pixels held before [`run_lines`] decides them.
 const QUEUE: usize = 256;
@@ -79,7 +79,6 @@ pub(super) unsafe fn run_lines(k: &Kernel, e: &Exact8, src: &[u8], dst: &mut [u8
     let (start, top) = (_mm256_set1_ps(-k.half), _mm256_set1_ps(k.half));
     let threshold = k.threshold.map(|t| _mm256_set1_epi32(t));
     let low16 = _mm256_set1_epi32(0xFFFF);
-    let (zero, max_code) = (_mm256_setzero_si256(), _mm256_set1_epi32(255));
     let pack = _mm256_broadcastsi128_si256(_mm_loadu_si128(PACK.as_ptr() as *const __m128i));
     let degamma = k.degamma.as_ptr();
     let mut flagged = 0;
@@ -97,7 +96,7 @@ pub(super) unsafe fn run_lines(k: &Kernel, e: &Exact8, src: &[u8], dst: &mut [u8
             _mm256_setr_ps(g(0), g(1), g(2), g(3), g(4), g(5), g(6), g(7))
         });
         let mut near = _mm256_setzero_si256();
-        let mut packed = _mm256_setzero_si256();
+        let mut code = [_mm256_setzero_si256(); 3];
         for c in 0..3 {
             let x = _mm256_fmadd_ps(m[3 * c], lin[0], start);
             let x = _mm256_fmadd_ps(m[3 * c + 1], lin[1], x);
@@ -107,11 +106,14 @@ pub(super) unsafe fn run_lines(k: &Kernel, e: &Exact8, src: &[u8], dst: &mut [u8
             let n = _mm256_cvtps_epi32(x);
             let t = _mm256_cvtps_epi32(_mm256_fmadd_ps(x, pick(&slope, n), pick(&intercept[c], n)));
             near = _mm256_or_si256(near, _mm256_cmpgt_epi32(threshold[c], _mm256_and_si256(t, low16)));
-            // The code: the high 16 bits, saturated to a byte as the AVX-512 engine's packs do.
-            let code = _mm256_min_epi32(_mm256_max_epi32(_mm256_srai_epi32::<16>(t), zero), max_code);
-            packed = _mm256_or_si256(packed, _mm256_sll_epi32(code, _mm_cvtsi32_si128(8 * c as i32)));
+            // The code: the high 16 bits (saturated to a byte by the packs below, as the
+            // AVX-512 engine's packs do).
+            code[c] = _mm256_srai_epi32::<16>(t);
         }
-        let out = _mm256_shuffle_epi8(packed, pack);
+        // Per 128-bit half: R0..R3 G0..G3 B0..B3 (B again), then interleaved.
+        let words = _mm256_packs_epi32(code[0], code[1]);
+        let blue = _mm256_packs_epi32(code[2], code[2]);
+        let out = _mm256_shuffle_epi8(_mm256_packus_epi16(words, blue), pack);
         // Pixels 0..3 (12 bytes, then 4 spare bytes that the next store overwrites), 4..7.
         _mm_storeu_si128(d.as_mut_ptr() as *mut __m128i, _mm256_castsi256_si128(out));
         let high = _mm256_extracti128_si256::<1>(out);

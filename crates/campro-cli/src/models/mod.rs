@@ -116,13 +116,14 @@ pub fn data_dir() -> Option<PathBuf> {
 }
 
 /// The models folder a command uses: `--models`, else the shared data folder's `models`
-/// when `--shared` or `$CAMPRO_SHARED` names one, else the user's data folder when it
-/// exists, else `../shared/models` (a checkout beside the project's data).
-pub fn folder(models: Option<&Path>, shared: Option<&Path>) -> PathBuf {
+/// when one is named (`--shared` or `$CAMPRO_SHARED`, resolved by the caller), else the
+/// user's data folder when it exists, else `../shared/models` (a checkout beside the
+/// project's data).
+pub fn folder(models: Option<&Path>, named_shared: Option<&Path>) -> PathBuf {
     if let Some(m) = models {
         return m.to_path_buf();
     }
-    if let Some(s) = crate::args::named_shared_dir(shared) {
+    if let Some(s) = named_shared {
         return s.join("models");
     }
     match data_dir() {

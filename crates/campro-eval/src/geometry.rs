@@ -34,10 +34,24 @@ fn to_u8(v: f64) -> u8 {
     v.round().clamp(0.0, 255.0) as u8
 }
 
+/// [`to_u8`] without a library call or the saturating cast's fix-ups (so loops of it
+/// vectorise): `v` held to [-1, 256] (NaN to -1), where both give the clamped byte; then the
+/// integer part by truncation and the exact remainder (`v - trunc(v)` is exact for any
+/// finite f64) decide the half away from zero. The same byte as [`to_u8`] for every `v`.
+#[inline(always)]
+fn to_u8_fast(v: f64) -> u8 {
+    let v = v.max(-1.0).min(256.0);
+    // SAFETY: v is finite and in [-1, 256], so its truncation is an i32.
+    let t = unsafe { v.to_int_unchecked::<i32>() };
+    let r = t + i32::from(v - f64::from(t) >= 0.5);
+    r.clamp(0, 255) as u8
+}
+
 /// Resizes with bilinear interpolation and half-pixel centres (as OpenCV's INTER_LINEAR;
 /// edge pixels are replicated). The same f64 arithmetic as [`sample_bilinear`] at each
-/// pixel's source point, so the same bytes, with the columns' and rows' source points and
-/// weights computed once.
+/// pixel's source point, so the same bytes (a test compares them), computed separably:
+/// each source row's horizontal interpolation (`a + (b - a) fx`) once, kept while output
+/// rows use it, then the vertical one per output byte (loops the compiler vectorises).
 pub fn resize_bilinear(img: &RgbImage, width: u32, height: u32) -> RgbImage {
     let (iw, ih) = (img.width() as usize, img.height() as usize);
     if iw == 0 || ih == 0 {
@@ -56,18 +70,43 @@ pub fn resize_bilinear(img: &RgbImage, width: u32, height: u32) -> RgbImage {
             .collect()
     };
     let (xs, ys) = (taps(width, iw), taps(height, ih));
-    let (raw, stride) = (img.as_raw(), iw * 3);
-    let mut out = vec![0u8; width as usize * height as usize * 3];
-    for (row, &(y0, y1, fy)) in out.chunks_exact_mut(width as usize * 3).zip(&ys) {
-        let (r0, r1) = (&raw[y0 * stride..][..stride], &raw[y1 * stride..][..stride]);
-        for (px, &(x0, x1, fx)) in row.chunks_exact_mut(3).zip(&xs) {
-            for k in 0..3 {
-                let (a, b) = (r0[x0 * 3 + k] as f64, r0[x1 * 3 + k] as f64);
-                let (c, d) = (r1[x0 * 3 + k] as f64, r1[x1 * 3 + k] as f64);
-                let top = a + (b - a) * fx;
-                let bot = c + (d - c) * fx;
-                px[k] = to_u8(top + (bot - top) * fy);
+    let (raw, stride, row_len) = (img.as_raw(), iw * 3, width as usize * 3);
+    // Per output byte: the source bytes of its two columns and the weight.
+    let (mut at0, mut at1, mut wx) = (Vec::with_capacity(row_len), Vec::with_capacity(row_len), Vec::with_capacity(row_len));
+    for &(x0, x1, fx) in &xs {
+        for k in 0..3 {
+            at0.push(x0 * 3 + k);
+            at1.push(x1 * 3 + k);
+            wx.push(fx);
+        }
+    }
+    let across = |y: usize, into: &mut Vec<f64>| {
+        let r = &raw[y * stride..][..stride];
+        into.clear();
+        into.extend(at0.iter().zip(&at1).zip(&wx).map(|((&i0, &i1), &fx)| {
+            let (a, b) = (f64::from(r[i0]), f64::from(r[i1]));
+            a + (b - a) * fx
+        }));
+    };
+    // The horizontal rows of the last source rows used, by source row index.
+    let (mut top, mut bot) = ((usize::MAX, Vec::with_capacity(row_len)), (usize::MAX, Vec::with_capacity(row_len)));
+    let mut out = vec![0u8; row_len * height as usize];
+    for (row, &(y0, y1, fy)) in out.chunks_exact_mut(row_len).zip(&ys) {
+        // Moving down, the last row's bottom is often this one's top.
+        if top.0 != y0 {
+            if bot.0 == y0 {
+                std::mem::swap(&mut top, &mut bot);
+            } else {
+                top.0 = y0;
+                across(y0, &mut top.1);
             }
+        }
+        if bot.0 != y1 {
+            bot.0 = y1;
+            across(y1, &mut bot.1);
+        }
+        for ((o, &t), &b) in row.iter_mut().zip(&top.1).zip(&bot.1) {
+            *o = to_u8_fast(t + (b - t) * fy);
         }
     }
     RgbImage::from_raw(width, height, out).expect("width x height x 3 bytes")
@@ -209,6 +248,20 @@ mod tests {
         // 1 (0.9) first; 0 overlaps it by 1/3 (kept at 0.5); 2 overlaps 0 by 0.9 (dropped).
         assert_eq!(nms(&boxes, &scores, 0.5), vec![1, 0, 3]);
         assert_eq!(nms(&boxes, &scores, 0.3), vec![1, 3]);
+    }
+
+    #[test]
+    fn fast_rounding_is_the_library_rounding() {
+        // Halves (away from zero), the largest f64 below a half (whose `v + 0.5` rounds up
+        // to 1), just below and above the ends, and far outside.
+        let below_half = 0.5 - f64::EPSILON / 4.0;
+        let mut cases = vec![0.0, -0.0, 0.5, 1.5, 2.5, 254.5, 255.0, 255.49, 255.5, below_half, 1.0 + below_half];
+        cases.extend([-0.4, -0.5, -0.6, -1.5, -1e-300, 1e-300, 300.0, -300.0, 2e9, -2e9, 1e300, f64::NAN]);
+        cases.extend([f64::INFINITY, f64::NEG_INFINITY, 255.5 - f64::EPSILON * 64.0, 256.0, 256.5]);
+        cases.extend((0..=2560).map(|i| f64::from(i) / 10.0));
+        for v in cases {
+            assert_eq!(to_u8_fast(v), to_u8(v), "{v:e}");
+        }
     }
 
     #[test]

@@ -193,7 +193,10 @@ mod tests {
             .map(|g| Condition {
                 label: format!("gain {g}"),
                 feed: Feed::Sensor(ccm::IDENTITY),
-                emulator: Box::new(crate::emulate::Isp { matrix: ccm::scale(&p.ccm, g), curve: p.tone_curve.clone() }),
+                emulator: Box::new(crate::emulate::Isp {
+                    matrix: ccm::scale(&p.ccm, g),
+                    curves: p.tone_curves.clone(),
+                }),
                 bound: Some(0.5),
             })
             .collect();

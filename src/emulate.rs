@@ -7,7 +7,7 @@
 
 use crate::ccm::{self, Mat3};
 use crate::pipeline::clip01;
-use crate::tone_curve::ToneCurve;
+use crate::tone_curve::ToneCurves;
 
 /// Something that turns linear sensor RGB into output RGB in [0, 1].
 pub trait Emulator {
@@ -32,38 +32,43 @@ pub struct DeviceModel {
 pub struct Isp {
     /// The matrix the ISP applies to sensor RGB.
     pub matrix: Mat3,
-    /// The curve it applies after clipping to [0, 1].
-    pub curve: ToneCurve,
+    /// The curves it applies after clipping to [0, 1], output channel by channel.
+    pub curves: ToneCurves,
 }
 
 impl Isp {
     /// Guaranteed bound on |this - ideal| where the ideal applies `ideal_matrix`, clip
-    /// and `ideal_curve`, for sensor inputs with |sensor_j| <= `range[j]`:
-    /// `|curve - ideal_curve|_inf + L(curve) · max_i Σ_j |ΔM_ij| · range_j` (clipping is
-    /// 1-Lipschitz, so a row error of δ moves the curve's input by at most δ).
-    pub fn error_bound(&self, ideal_matrix: &Mat3, ideal_curve: &ToneCurve, range: [f64; 3]) -> f64 {
-        error_bound(self.curve.max_abs_diff(ideal_curve), self.curve.max_slope(), &self.matrix, ideal_matrix, range)
+    /// and `ideal_curves`, for sensor inputs with |sensor_j| <= `range[j]`: the largest over
+    /// output channels i of `|curve_i - ideal_curve_i|_inf + L(curve_i) · Σ_j |ΔM_ij| ·
+    /// range_j` (clipping is 1-Lipschitz, so a row error of δ moves channel i's curve input
+    /// by at most δ).
+    pub fn error_bound(&self, ideal_matrix: &Mat3, ideal_curves: &ToneCurves, range: [f64; 3]) -> f64 {
+        let c = |i: usize| (self.curves.channel(i), ideal_curves.channel(i));
+        let e = [0, 1, 2].map(|i| c(i).0.max_abs_diff(c(i).1));
+        error_bound(e, [0, 1, 2].map(|i| c(i).0.max_slope()), &self.matrix, ideal_matrix, range)
     }
 }
 
-/// The bound every matrix-clip-curve deployment states:
-/// `E_curve + L' · max_i Σ_j |sent_ij - ideal_ij| · range_j` for sensor inputs with
-/// |sensor_j| <= `range[j]`, where `E_curve` is the largest difference between the curve
-/// applied and the ideal one and `L'` the applied curve's largest slope. The ISP clips to
-/// [0, 1] before the curve (clipping is 1-Lipschitz), so a row error of δ moves the
-/// curve's input by at most δ and its output by at most `L' · δ`.
-pub fn error_bound(curve_max_abs: f64, lipschitz: f64, sent: &Mat3, ideal: &Mat3, range: [f64; 3]) -> f64 {
-    let worst = sent
-        .iter()
-        .zip(ideal)
-        .map(|(got, want)| (0..3).map(|j| (got[j] - want[j]).abs() * range[j]).sum::<f64>())
-        .fold(0.0, f64::max);
-    curve_max_abs + lipschitz * worst
+/// The bound every matrix-clip-curve deployment states: the largest over output channels
+/// i of `E_i + L_i · Σ_j |sent_ij - ideal_ij| · range_j` for sensor inputs with
+/// |sensor_j| <= `range[j]`, where `E_i` (`curve_max_abs[i]`) is the largest difference
+/// between channel i's applied curve and its ideal one and `L_i` (`lipschitz[i]`) the
+/// applied curve's largest slope. The ISP clips to [0, 1] before the curve (clipping is
+/// 1-Lipschitz), so a row error of δ moves the curve's input by at most δ and its output
+/// by at most `L_i · δ`. A shared curve passes the same value three times.
+pub fn error_bound(curve_max_abs: [f64; 3], lipschitz: [f64; 3], sent: &Mat3, ideal: &Mat3, range: [f64; 3]) -> f64 {
+    (0..3)
+        .map(|i| {
+            let row: f64 = (0..3).map(|j| (sent[i][j] - ideal[i][j]).abs() * range[j]).sum();
+            curve_max_abs[i] + lipschitz[i] * row
+        })
+        .fold(0.0, f64::max)
 }
 
 impl Emulator for Isp {
     #[inline]
     fn sensor_to_output(&self, sensor: [f64; 3]) -> [f64; 3] {
-        clip01(ccm::apply(&self.matrix, sensor)).map(|c| self.curve.eval(c))
+        let t = clip01(ccm::apply(&self.matrix, sensor));
+        [0, 1, 2].map(|c| self.curves.channel(c).eval(t[c]))
     }
 }

@@ -51,7 +51,7 @@ pub mod stress;
 pub use ccm::Mat3;
 pub use error::ValidationError;
 pub use params::Params;
-pub use tone_curve::ToneCurve;
+pub use tone_curve::{ToneCurve, ToneCurves};
 
 /// Any error of this crate's operations: one variant per kind, each naming the field or
 /// file and the rule broken.

@@ -44,7 +44,7 @@ impl Lut3d {
             }
         }
         let s = crate::ccm::norm_inf(&params.ccm);
-        let bound = params.degamma.max(1.0) * params.tone_curve.max_slope() * s * step + 1e-7;
+        let bound = params.degamma.max(1.0) * params.tone_curves.max_slope() * s * step + 1e-7;
         Self { n, data, bound }
     }
 

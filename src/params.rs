@@ -5,16 +5,20 @@
 //!   "name": "identity", "description": "...",
 //!   "ccm": [[1,0,0],[0,1,0],[0,0,1]],
 //!   "tone_curve": { "y": [0.0, ..., 1.0] },          // x optional: evenly spaced
+//!   // or, version 2, a curve per output channel:
+//!   // "tone_curves": { "red": { "y": [...] }, "green": { ... }, "blue": { ... } },
 //!   "degamma": 2.2,                                   // optional, default 2.2
 //!   "ct_calibration": [ { "ct_kelvin": 2856, "ccm": [[...]] }, ... ],  // optional
 //!   "provenance": { ... free-form ... } }
 //! ```
 //! Unknown fields are rejected; every rule broken is reported with its field path:
-//! - `format` is `campro-params` and `version` is 1;
+//! - `format` is `campro-params` and `version` is 1 (one `tone_curve`) or 2 (`tone_curves`,
+//!   one per channel); a set whose three curves are equal is written as version 1, so
+//!   every file written before per-channel curves existed reads and writes unchanged;
 //! - every number is finite;
 //! - `ccm` is 3 rows of 3, entries within ±[`CCM_LIMIT`] (32), row-major, acting on
 //!   column vectors of linear RGB (`out = ccm · in`);
-//! - `tone_curve.y` has 2 to 4096 outputs in [0, 1]; `x`, when given, has as many inputs
+//! - `tone_curve.y` (each of `tone_curves.red`, `.green`, `.blue`) has 2 to 4096 outputs in [0, 1]; `x`, when given, has as many inputs
 //!   strictly increasing from 0 to 1 (evenly spaced otherwise);
 //! - `degamma` is in [0.2, 5] (the desktop pipeline's `clamp(x^γ, 0, 1)`);
 //! - `ct_calibration` CTs are strictly increasing in [1000, 40000] K
@@ -24,13 +28,15 @@
 use crate::ccm::{Mat3, CCM_LIMIT};
 use crate::color_temp::CtCcm;
 use crate::error::{check_matrix, check_range, ValidationError};
-use crate::tone_curve::ToneCurve;
+use crate::tone_curve::{ToneCurve, ToneCurves, CHANNELS};
 use serde::{Deserialize, Serialize};
 
 /// The `format` tag of a parameter file.
 pub const FORMAT: &str = "campro-params";
-/// The only format version this build reads and writes.
+/// The format version of a set with one shared tone curve.
 pub const VERSION: u32 = 1;
+/// The format version of a set with a tone curve per channel (`tone_curves`).
+pub const VERSION_PER_CHANNEL: u32 = 2;
 /// Accepted degamma exponents.
 pub const DEGAMMA_RANGE: (f64, f64) = (0.2, 5.0);
 /// Largest parameter file read (bytes); a real one is a few KiB.
@@ -45,8 +51,9 @@ pub struct Params {
     pub description: String,
     /// The optimised colour correction matrix, `out = ccm · in` on linear RGB.
     pub ccm: Mat3,
-    /// The optimised tone curve applied after the clipped CCM.
-    pub tone_curve: ToneCurve,
+    /// The optimised tone curves applied after the clipped CCM: one shared, or one per
+    /// output channel.
+    pub tone_curves: ToneCurves,
     /// Exponent of the desktop pipeline's degamma `clamp(x^γ, 0, 1)` (paper: 2.2).
     pub degamma: f64,
     /// The target device's calibrated CCMs by colour temperature (ascending), if the
@@ -102,13 +109,38 @@ struct ParamsJson {
     #[serde(default)]
     description: String,
     ccm: Vec<Vec<f64>>,
-    tone_curve: CurveJson,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    tone_curve: Option<CurveJson>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    tone_curves: Option<ChannelCurvesJson>,
     #[serde(default = "default_degamma")]
     degamma: f64,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     ct_calibration: Vec<CtCcmJson>,
     #[serde(default, skip_serializing_if = "serde_json::Map::is_empty")]
     provenance: serde_json::Map<String, serde_json::Value>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ChannelCurvesJson {
+    red: CurveJson,
+    green: CurveJson,
+    blue: CurveJson,
+}
+
+impl CurveJson {
+    fn of(t: &ToneCurve) -> Self {
+        Self { x: (!t.is_uniform()).then(|| t.x().to_vec()), y: t.y().to_vec() }
+    }
+
+    fn curve(self, field: &str) -> Result<ToneCurve, ValidationError> {
+        match self.x {
+            Some(x) => ToneCurve::new(x, self.y),
+            None => ToneCurve::uniform(self.y),
+        }
+        .map_err(|e| e.within(field))
+    }
 }
 
 #[derive(Serialize, Deserialize)]
@@ -147,12 +179,12 @@ fn rows(m: &Mat3) -> Vec<Vec<f64>> {
 
 impl Params {
     /// Builds and validates a parameter set (name/description/provenance empty).
-    pub fn new(ccm: Mat3, tone_curve: ToneCurve, degamma: f64) -> Result<Self, ValidationError> {
+    pub fn new(ccm: Mat3, tone_curves: impl Into<ToneCurves>, degamma: f64) -> Result<Self, ValidationError> {
         let p = Self {
             name: String::new(),
             description: String::new(),
             ccm,
-            tone_curve,
+            tone_curves: tone_curves.into(),
             degamma,
             ct_calibration: Vec::new(),
             provenance: Default::default(),
@@ -202,18 +234,32 @@ impl Params {
                 rule: format!("must be \"{FORMAT}\", got \"{}\"", raw.format),
             });
         }
-        if raw.version != VERSION {
-            return Err(ValidationError::Rule {
-                field: "version".into(),
-                rule: format!("must be {VERSION} (the only version this build reads), got {}", raw.version),
-            });
-        }
+        let rule = |field: &str, rule: String| ValidationError::Rule { field: field.into(), rule };
+        let tone_curves = match (raw.version, raw.tone_curve, raw.tone_curves) {
+            (VERSION, Some(t), None) => ToneCurves::Shared(t.curve("tone_curve")?),
+            (VERSION_PER_CHANNEL, None, Some(t)) => {
+                let [red, green, blue] = CHANNELS.map(|c| format!("tone_curves.{c}"));
+                ToneCurves::per_channel([t.red.curve(&red)?, t.green.curve(&green)?, t.blue.curve(&blue)?])
+            }
+            (VERSION, _, _) => {
+                return Err(rule("tone_curve", "version 1 holds one tone_curve (tone_curves needs version 2)".into()))
+            }
+            (VERSION_PER_CHANNEL, _, _) => {
+                return Err(rule(
+                    "tone_curves",
+                    "version 2 holds tone_curves (red, green, blue), not tone_curve".into(),
+                ))
+            }
+            (v, _, _) => {
+                return Err(rule(
+                    "version",
+                    format!(
+                        "must be {VERSION} (one tone curve) or {VERSION_PER_CHANNEL} (a curve per channel), got {v}"
+                    ),
+                ))
+            }
+        };
         let ccm = matrix_from_rows("ccm", &raw.ccm)?;
-        let tone_curve = match raw.tone_curve.x {
-            Some(x) => ToneCurve::new(x, raw.tone_curve.y),
-            None => ToneCurve::uniform(raw.tone_curve.y),
-        }
-        .map_err(|e| e.within("tone_curve"))?;
         let mut ct_calibration = Vec::with_capacity(raw.ct_calibration.len());
         for (i, c) in raw.ct_calibration.iter().enumerate() {
             ct_calibration.push(CtCcm {
@@ -225,7 +271,7 @@ impl Params {
             name: raw.name,
             description: raw.description,
             ccm,
-            tone_curve,
+            tone_curves,
             degamma: raw.degamma,
             ct_calibration,
             provenance: raw.provenance,
@@ -234,18 +280,29 @@ impl Params {
         Ok(p)
     }
 
-    /// The JSON format, pretty-printed. Evenly spaced knot inputs are left out.
+    /// The JSON format, pretty-printed: version 1 for a shared curve, 2 for a curve per
+    /// channel. Evenly spaced knot inputs are left out.
     pub fn to_json(&self) -> String {
+        let (version, tone_curve, tone_curves) = match &self.tone_curves {
+            ToneCurves::Shared(t) => (VERSION, Some(CurveJson::of(t)), None),
+            ToneCurves::PerChannel(t) => (
+                VERSION_PER_CHANNEL,
+                None,
+                Some(ChannelCurvesJson {
+                    red: CurveJson::of(&t[0]),
+                    green: CurveJson::of(&t[1]),
+                    blue: CurveJson::of(&t[2]),
+                }),
+            ),
+        };
         let raw = ParamsJson {
             format: FORMAT.into(),
-            version: VERSION,
+            version,
             name: self.name.clone(),
             description: self.description.clone(),
             ccm: rows(&self.ccm),
-            tone_curve: CurveJson {
-                x: (!self.tone_curve.is_uniform()).then(|| self.tone_curve.x().to_vec()),
-                y: self.tone_curve.y().to_vec(),
-            },
+            tone_curve,
+            tone_curves,
             degamma: self.degamma,
             ct_calibration: self
                 .ct_calibration

@@ -32,10 +32,11 @@ pub fn clip01(v: [f64; 3]) -> [f64; 3] {
     v.map(|c| if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) })
 }
 
-/// The stages after degamma: `curve(clamp(CCM · lin))`, on linear RGB.
+/// The stages after degamma: `curve_c(clamp(CCM · lin)_c)` per output channel c, on linear RGB.
 #[inline]
 pub fn from_linear(p: &Params, lin: [f64; 3]) -> [f64; 3] {
-    clip01(ccm::apply(&p.ccm, lin)).map(|c| p.tone_curve.eval(c))
+    let t = clip01(ccm::apply(&p.ccm, lin));
+    [0, 1, 2].map(|c| p.tone_curves.channel(c).eval(t[c]))
 }
 
 /// The reference pipeline on one sRGB pixel in [0, 1], in f64.

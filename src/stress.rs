@@ -10,7 +10,7 @@ use crate::params::Params;
 use crate::pipeline::fast::{Exact8, F32Path};
 use crate::pipeline::{from_linear, Depth, Prepared};
 use crate::targets::camera2::{self, Camera2Loop, ConvertError, Options, RationalMode, MATRIX_RANGE};
-use crate::tone_curve::ToneCurve;
+use crate::tone_curve::{ToneCurve, ToneCurves};
 
 /// An invariant a stress case broke.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -134,7 +134,14 @@ pub fn random_case(seed: u64) -> Case {
         _ => RationalMode::Best { max_denominator: 1 << 16 },
     };
     let opts = Options { max_curve_points: r.pick(&[2, 3, 8, 16, 64, 1024]), rational };
-    Case { params, device: device(&mut r), opts, seed }
+    let device = device(&mut r);
+    // A third of the sets have a curve per channel (drawn last: the shared sets stay what
+    // their seeds always gave).
+    if r.next_u64() % 3 == 0 {
+        let red = params.tone_curves.channel(0).clone();
+        params.tone_curves = ToneCurves::per_channel([red, curve(&mut r), curve(&mut r)]);
+    }
+    Case { params, device, opts, seed }
 }
 
 /// What one checked case did.
@@ -177,15 +184,17 @@ pub fn check(case: &Case) -> Result<Outcome, Invariant> {
     if v.color_correction_transform.iter().skip(1).step_by(2).any(|&d| d <= 0) {
         return fail("non-positive denominator".into());
     }
-    let sent = v.curve();
-    if sent.len() > opts.max_curve_points || sent.y().iter().any(|y| !(0.0..=1.0).contains(y)) {
-        return fail(format!("bad curve: {} points, budget {}", sent.len(), opts.max_curve_points));
+    let sent = v.curves();
+    for (c, sent) in sent.each().into_iter().enumerate() {
+        if sent.len() > opts.max_curve_points || sent.y().iter().any(|y| !(0.0..=1.0).contains(y)) {
+            return fail(format!("bad curve {c}: {} points, budget {}", sent.len(), opts.max_curve_points));
+        }
     }
     if !v.report.bound.is_finite() {
         return fail("bound not finite".into());
     }
     // The stated bound holds on the emulated device, for sensor RGB in [0, 1]^3.
-    let dev = camera2::device(v.matrix(), v.curve(), &DeviceModel::default());
+    let dev = camera2::device(v.matrix(), sent, &DeviceModel::default());
     let mut r = Rng(seed ^ 0xA5A5);
     for _ in 0..400 {
         let s = [r.unit(), r.unit(), r.unit()];

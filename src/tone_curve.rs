@@ -275,6 +275,95 @@ impl ToneCurve {
     }
 }
 
+/// Output channels in the order of [`ToneCurves::channel`] and of Camera2's
+/// `TonemapCurve` (`CHANNEL_RED`, `CHANNEL_GREEN`, `CHANNEL_BLUE`).
+pub const CHANNELS: [&str; 3] = ["red", "green", "blue"];
+
+/// The tone curves of a camera: one curve for the three channels (the paper's camera, a
+/// version 1 parameter file) or one per channel (Camera2's `TONEMAP_CURVE` takes three; a
+/// non-linear colour transform at no cost on the phone). Three equal curves are the shared
+/// case: [`ToneCurves::per_channel`] folds them, so a set is written as before.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ToneCurves {
+    /// One curve for red, green and blue.
+    Shared(ToneCurve),
+    /// Red, green, blue; at least two differ.
+    PerChannel(Box<[ToneCurve; 3]>),
+}
+
+impl ToneCurves {
+    /// Three curves (red, green, blue); [`ToneCurves::Shared`] when all are equal.
+    pub fn per_channel(curves: [ToneCurve; 3]) -> Self {
+        if curves[0] == curves[1] && curves[1] == curves[2] {
+            let [r, _, _] = curves;
+            Self::Shared(r)
+        } else {
+            Self::PerChannel(Box::new(curves))
+        }
+    }
+
+    /// The curve of output channel `c` (0 red, 1 green, 2 blue).
+    #[inline]
+    pub fn channel(&self, c: usize) -> &ToneCurve {
+        match self {
+            Self::Shared(t) => t,
+            Self::PerChannel(t) => &t[c],
+        }
+    }
+
+    /// The three curves, red first.
+    pub fn each(&self) -> [&ToneCurve; 3] {
+        [0, 1, 2].map(|c| self.channel(c))
+    }
+
+    /// The one curve of a shared set; `None` when the channels differ.
+    pub fn shared(&self) -> Option<&ToneCurve> {
+        match self {
+            Self::Shared(t) => Some(t),
+            Self::PerChannel(_) => None,
+        }
+    }
+
+    /// Each curve mapped by `f`, staying shared when shared.
+    pub fn map(&self, f: impl Fn(&ToneCurve) -> ToneCurve) -> Self {
+        match self {
+            Self::Shared(t) => Self::Shared(f(t)),
+            Self::PerChannel(t) => Self::per_channel([f(&t[0]), f(&t[1]), f(&t[2])]),
+        }
+    }
+
+    /// The largest knot count of the three.
+    pub fn knots(&self) -> usize {
+        self.each().iter().map(|t| t.len()).max().unwrap_or(0)
+    }
+
+    /// Whether every curve's knots are evenly spaced.
+    pub fn is_uniform(&self) -> bool {
+        self.each().iter().all(|t| t.is_uniform())
+    }
+
+    /// The largest slope of the three ([`ToneCurve::max_slope`]).
+    pub fn max_slope(&self) -> f64 {
+        self.each().iter().map(|t| t.max_slope()).fold(0.0, f64::max)
+    }
+
+    /// Whether every curve is the identity line within `tol`.
+    pub fn is_identity(&self, tol: f64) -> bool {
+        self.each().iter().all(|t| t.is_identity(tol))
+    }
+
+    /// The largest [`ToneCurve::max_abs_diff`] between corresponding curves.
+    pub fn max_abs_diff(&self, other: &Self) -> f64 {
+        (0..3).map(|c| self.channel(c).max_abs_diff(other.channel(c))).fold(0.0, f64::max)
+    }
+}
+
+impl From<ToneCurve> for ToneCurves {
+    fn from(t: ToneCurve) -> Self {
+        Self::Shared(t)
+    }
+}
+
 /// Up to this many knots `simplify` is exactly optimal (O(n^3) time).
 pub const SIMPLIFY_EXACT_MAX: usize = 600;
 

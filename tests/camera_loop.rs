@@ -29,7 +29,7 @@ fn nudge(m: &Mat3, eps: f64) -> Mat3 {
 /// Largest |device - desktop| over a grid of sensor RGB in [0, 1]^3, for a device that
 /// received `values` while its true transform is `device`.
 fn measured(p: &Params, device: &Mat3, values: &Camera2Values) -> f64 {
-    let dev = campro::targets::camera2::device(values.matrix(), values.curve(), &DeviceModel::default());
+    let dev = campro::targets::camera2::device(values.matrix(), values.curves(), &DeviceModel::default());
     let mut worst: f64 = 0.0;
     let n = 24;
     for r in 0..=n {
@@ -82,7 +82,7 @@ fn recomputed_values_equal_the_one_shot_conversion() {
     assert_eq!(s.curve_fits, scales.len() as u64, "{s:?}");
 
     // In-range compositions (scale 1): one fit for any number of scenes.
-    let mild = Params::new(ccm::IDENTITY, p.tone_curve.clone(), 2.2).unwrap();
+    let mild = Params::new(ccm::IDENTITY, p.tone_curves.channel(0).clone(), 2.2).unwrap();
     let mut l = Camera2Loop::new(mild.clone(), Options::default(), 0.0).unwrap();
     for k in 0..10 {
         let dev = nudge(&PHONE, 0.01 * k as f64);
@@ -115,7 +115,7 @@ fn skipped_updates_stay_within_their_stated_bound() {
 #[test]
 fn a_new_curve_budget_recomputes() {
     let mut p = params();
-    p.tone_curve = ToneCurve::from_fn(100, |t| (9.0 * t).sin() * 0.5 + 0.5);
+    p.tone_curves = ToneCurve::from_fn(100, |t| (9.0 * t).sin() * 0.5 + 0.5).into();
     let mut l = Camera2Loop::new(p, Options::default(), DEFAULT_TOLERANCE).unwrap();
     let first = l.update(&PHONE).unwrap().values.report.clone();
     assert!(first.curve_simplified && first.curve_points == 64, "{first:?}");

@@ -4,7 +4,7 @@
 use campro::compare::random_pixels;
 use campro::pipeline::fast::{Engine, Exact8, F32Path};
 use campro::pipeline::{Depth, Prepared};
-use campro::{Params, ToneCurve};
+use campro::{Params, ToneCurve, ToneCurves};
 
 fn all_triples() -> Vec<u8> {
     let mut v = Vec::with_capacity(3 << 24);
@@ -57,6 +57,20 @@ fn sets() -> Vec<Params> {
         let c = ToneCurve::from_fn(k, |t| 0.5 + 0.45 * (11.0 * t + 0.3).sin());
         v.push(Params::new(ccm, c, 2.2).unwrap());
     }
+    // A curve per channel (the version 2 format): 64 knots each (Camera2's guaranteed
+    // budget), different shapes, under the strong matrix (red starts on a rounding tie,
+    // 0.5: every pixel clipped to 0 there is decided in f64); and 32 knots where two channels
+    // share a curve and the third is jagged.
+    let wave = |k: usize, f: f64, phase: f64| ToneCurve::from_fn(k, move |t| 0.5 + 0.48 * (f * t + phase).sin());
+    let three = ToneCurves::per_channel([wave(64, 13.0, 0.0), wave(64, 5.0, 1.0), ToneCurve::from_fn(64, |t| 1.0 - t)]);
+    let mut p = Params::new(strong, three, 2.2).unwrap();
+    p.name = "per-channel-64".into();
+    v.push(p);
+    let jagged = v[8].tone_curves.channel(0).clone();
+    let two = ToneCurves::per_channel([wave(32, 7.0, 0.5), jagged, wave(32, 7.0, 0.5)]);
+    let mut p = Params::new([[0.9, 0.2, -0.1], [0.1, 0.8, 0.1], [-0.2, 0.1, 1.1]], two, 2.2).unwrap();
+    p.name = "per-channel-32".into();
+    v.push(p);
     v
 }
 
@@ -126,7 +140,7 @@ fn block_engine_is_chosen_where_it_applies() {
     // Non-uniform knots, or more than 32: the tables (AVX2 or scalar), never AVX-512. (Found
     // by its knots, not an index: an index into the list went stale when presets were added, and the
     // assertion only bites on an AVX-512 machine.)
-    let steps = s.iter().find(|p| !p.tone_curve.is_uniform()).expect("a set with non-uniform knots");
+    let steps = s.iter().find(|p| !p.tone_curves.channel(0).is_uniform()).expect("a set with non-uniform knots");
     assert!(tables(Exact8::new(steps).engine()));
     assert!(Exact8::new(steps).with_engine(Engine::Avx512).is_none());
     let fine = Params::new(campro::ccm::IDENTITY, ToneCurve::from_fn(33, |t| t * t), 2.2).unwrap();

@@ -28,10 +28,10 @@ fn checkpoints_import_exactly() {
             }
         }
         let kp: Vec<f64> = e["keypoints"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        let got: Vec<f32> = p.tone_curve.y().iter().map(|&v| v as f32).collect();
+        let got: Vec<f32> = p.tone_curves.channel(0).y().iter().map(|&v| v as f32).collect();
         let want: Vec<f32> = kp.iter().map(|&v| v as f32).collect();
         assert_eq!(got, want);
-        assert!(p.tone_curve.is_uniform());
+        assert!(p.tone_curves.channel(0).is_uniform());
         assert_eq!(p.degamma, 2.2);
         assert_eq!(p.provenance["device"], "cpu");
     }
@@ -54,7 +54,7 @@ fn load_all() -> Option<Vec<Fixture>> {
     for e in index["params"].as_array().unwrap() {
         let params = read_checkpoint(&dir.join(e["checkpoint"].as_str().unwrap())).unwrap();
         let ccm32 = params.ccm.map(|r| r.map(|v| v as f32));
-        let kp32 = params.tone_curve.y().iter().map(|&v| v as f32).collect();
+        let kp32 = params.tone_curves.channel(0).y().iter().map(|&v| v as f32).collect();
         let mut images = Vec::new();
         for (image, file) in e["outputs"].as_object().unwrap() {
             let (shape, img) = campro_testkit::npy(&dir.join(format!("image_{image}.npy")));

@@ -38,9 +38,54 @@ fn invalid(edit: impl FnOnce(&mut serde_json::Value)) -> ValidationError {
 fn minimal_file_gets_defaults() {
     let p = parse(&base()).unwrap();
     assert_eq!(p.degamma, 2.2);
-    assert!(p.tone_curve.is_uniform());
-    assert_eq!(p.tone_curve.x(), &[0.0, 0.5, 1.0]);
+    assert!(p.tone_curves.channel(0).is_uniform());
+    assert_eq!(p.tone_curves.channel(0).x(), &[0.0, 0.5, 1.0]);
     assert!(p.ct_calibration.is_empty());
+}
+
+/// A version 2 file: a curve per channel.
+fn per_channel() -> serde_json::Value {
+    let mut v = base();
+    v["version"] = 2.into();
+    v.as_object_mut().unwrap().remove("tone_curve");
+    v["tone_curves"] = serde_json::json!({
+        "red": {"y": [1.0, 0.0]},
+        "green": {"y": [0.0, 0.25, 1.0]},
+        "blue": {"x": [0.0, 0.3, 1.0], "y": [0.0, 0.9, 1.0]}
+    });
+    v
+}
+
+#[test]
+fn a_curve_per_channel_reads_and_writes_as_version_2() {
+    let p = parse(&per_channel()).unwrap();
+    let c = &p.tone_curves;
+    assert!(c.shared().is_none());
+    // Each channel's own curve: red inverts, green bends at 0.5, blue at 0.3.
+    assert_eq!([c.channel(0).eval(0.25), c.channel(1).eval(0.25), c.channel(2).eval(0.15)], [0.75, 0.125, 0.45]);
+    assert_eq!(campro::pipeline::from_linear(&p, [0.25, 0.25, 0.15]), [0.75, 0.125, 0.45]);
+    let text = p.to_json();
+    assert!(text.contains("\"version\": 2") && text.contains("\"tone_curves\"") && !text.contains("\"tone_curve\""));
+    assert_eq!(Params::from_json(&text).unwrap(), p);
+    // Three equal curves are one shared curve, written as version 1.
+    let mut same = per_channel();
+    for c in ["red", "green", "blue"] {
+        same["tone_curves"][c] = serde_json::json!({"y": [0.0, 0.5, 1.0]});
+    }
+    let shared = parse(&same).unwrap();
+    assert_eq!(shared, parse(&base()).unwrap());
+    assert!(shared.to_json().contains("\"version\": 1"));
+    // Rules name the channel; a missing channel and an unknown one are refused.
+    let mut bad = per_channel();
+    bad["tone_curves"]["green"]["y"][1] = 1.5.into();
+    let e = parse(&bad).map(|_| ()).unwrap_err().to_string();
+    assert!(e.contains("tone_curves.green.y[1]"), "{e}");
+    let mut missing = per_channel();
+    missing["tone_curves"].as_object_mut().unwrap().remove("blue");
+    assert!(parse(&missing).map(|_| ()).unwrap_err().to_string().contains("blue"));
+    let mut extra = per_channel();
+    extra["tone_curves"]["alpha"] = serde_json::json!({"y": [0.0, 1.0]});
+    assert!(parse(&extra).map(|_| ()).unwrap_err().to_string().contains("alpha"));
 }
 
 #[test]
@@ -64,13 +109,19 @@ fn bundled_parameter_sets_are_valid_and_match_their_formulas() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("params");
     let inv = Params::from_file(&dir.join("color-inversion.json")).unwrap();
     assert_eq!(inv.ccm, campro::ccm::IDENTITY);
-    for (x, y) in inv.tone_curve.x().iter().zip(inv.tone_curve.y()) {
+    for (x, y) in inv.tone_curves.channel(0).x().iter().zip(inv.tone_curves.channel(0).y()) {
         assert!((y - (1.0 - x.powf(1.0 / 2.2))).abs() < 1e-15);
     }
     let id = Params::from_file(&dir.join("identity.json")).unwrap();
-    assert!(id.tone_curve.is_identity(1e-15) && id.tone_curve.len() == 32);
+    assert!(id.tone_curves.channel(0).is_identity(1e-15) && id.tone_curves.channel(0).len() == 32);
     let pass = Params::from_file(&dir.join("srgb-passthrough.json")).unwrap();
-    assert!(pass.tone_curve.y().iter().zip(pass.tone_curve.x()).all(|(y, x)| (y - x.powf(1.0 / 2.2)).abs() < 1e-15));
+    assert!(pass
+        .tone_curves
+        .channel(0)
+        .y()
+        .iter()
+        .zip(pass.tone_curves.channel(0).x())
+        .all(|(y, x)| (y - x.powf(1.0 / 2.2)).abs() < 1e-15));
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|x| x == "onnx") {
@@ -116,7 +167,14 @@ fn non_finite_numbers_are_rejected() {
 #[test]
 fn format_and_version() {
     assert_eq!(invalid(|v| v["format"] = "other".into()).field(), "format");
-    assert_eq!(invalid(|v| v["version"] = 2.into()).field(), "version");
+    assert_eq!(invalid(|v| v["version"] = 3.into()).field(), "version");
+    assert_eq!(invalid(|v| v["version"] = 0.into()).field(), "version");
+    // Version 2 holds tone_curves, version 1 tone_curve.
+    assert_eq!(invalid(|v| v["version"] = 2.into()).field(), "tone_curves");
+    let mut three = per_channel();
+    three["version"] = 1.into();
+    let e = parse(&three).map(|_| ()).unwrap_err().to_string();
+    assert!(e.ends_with("tone_curve: version 1 holds one tone_curve (tone_curves needs version 2)"), "{e}");
     assert!(err(|v| v.as_object_mut().unwrap().remove("format").map(|_| ()).unwrap()).contains("format"));
 }
 

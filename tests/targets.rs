@@ -37,7 +37,7 @@ fn isp_bound(hw: &ToneCurve, ideal: &ToneCurve, mq: &Mat3, m: &Mat3, device: &Ma
         .chain(ideal.x().iter().copied())
         .map(|t| (hw.eval(t) - ideal.eval(t)).abs())
         .fold(0.0, f64::max);
-    campro::emulate::error_bound(curve_diff, hw.max_slope(), mq, m, range) + 1e-9
+    campro::emulate::error_bound([curve_diff; 3], [hw.max_slope(); 3], mq, m, range) + 1e-9
 }
 
 #[test]
@@ -58,7 +58,7 @@ fn rpi_export_patches_only_ccm_and_gamma_and_parses_back() {
         }
         // Gamma: CamPro knots on 0..65535.
         assert_eq!(tuning.gamma.len(), 32);
-        assert_eq!(tuning.gamma[31], (65535.0, (p.tone_curve.y()[31] * 65535.0).round()));
+        assert_eq!(tuning.gamma[31], (65535.0, (p.tone_curves.channel(0).y()[31] * 65535.0).round()));
         assert_eq!(tuning.gamma[1].0, (65535.0f64 / 31.0).round());
         // Every other algorithm block is untouched.
         let others = |r: &serde_json::Value| {
@@ -153,10 +153,11 @@ fn isp_targets_stay_within_their_stated_bound() {
                     "rpi-vc4" | "rpi-pisp" => {
                         let r = if t.name() == "rpi-vc4" { Rpi::Vc4 } else { Rpi::Pisp };
                         let pts: Vec<(f64, f64)> = p
-                            .tone_curve
+                            .tone_curves
+                            .channel(0)
                             .x()
                             .iter()
-                            .zip(p.tone_curve.y())
+                            .zip(p.tone_curves.channel(0).y())
                             .map(|(x, y)| ((x * 65535.0).round() / 65535.0, (y * 65535.0).round() / 65535.0))
                             .collect();
                         r.hardware_curve(
@@ -164,10 +165,10 @@ fn isp_targets_stay_within_their_stated_bound() {
                                 .unwrap(),
                         )
                     }
-                    "rkaiq-isp20" => Rkaiq::Isp20.hardware_curve(&p.tone_curve),
-                    _ => Rkaiq::Isp3x.hardware_curve(&p.tone_curve),
+                    "rkaiq-isp20" => Rkaiq::Isp20.hardware_curve(&p.tone_curves.channel(0)),
+                    _ => Rkaiq::Isp3x.hardware_curve(&p.tone_curves.channel(0)),
                 };
-                let bound = isp_bound(&hw, &p.tone_curve, &fmt.apply(&m), &m, &device);
+                let bound = isp_bound(&hw, &p.tone_curves.channel(0), &fmt.apply(&m), &m, &device);
                 let s = deployment_vs_desktop(&p, &c.feed, c.emulator.as_ref(), &px).unwrap();
                 assert!(s.max_abs <= bound, "{} {} {}: {} > bound {}", t.name(), p.name, c.label, s.max_abs, bound);
             }
@@ -198,7 +199,7 @@ fn rkaiq_grids_and_export() {
         let grid = t.grid();
         for (_, y) in &ours.curves {
             for (x, v) in grid.iter().zip(y) {
-                assert_eq!(*v, (p.tone_curve.eval(x / 4095.0) * 4095.0).round());
+                assert_eq!(*v, (p.tone_curves.channel(0).eval(x / 4095.0) * 4095.0).round());
             }
         }
         for ((name, _, m), (bname, _, bm)) in ours.matrices.iter().zip(&theirs.matrices) {

@@ -50,12 +50,15 @@ pub mod report {
     pub const CURVE_LIPSCHITZ: usize = 4;
     /// Range scale folded into the curve (>= 1).
     pub const SCALE: usize = 5;
-    /// (Pin, Pout) points written per channel.
+    /// The most (Pin, Pout) points written for a channel.
     pub const CURVE_POINTS: usize = 6;
     /// 1.0 when knots were dropped to fit the device's point budget.
     pub const CURVE_SIMPLIFIED: usize = 7;
+    /// (Pin, Pout) points written for red; green and blue follow (a set with one curve
+    /// writes the same curve three times).
+    pub const CURVE_POINTS_RED: usize = 8;
     /// Array length.
-    pub const LEN: usize = 8;
+    pub const LEN: usize = 11;
 }
 
 /// Layout of the `DoubleArray` the readback comparison fills.
@@ -227,13 +230,26 @@ fn read_ints<const N: usize>(env: &Env, name: &str, a: &JIntArray) -> Result<[i3
 }
 
 fn read_floats(env: &Env, name: &str, a: &JFloatArray, count: jint) -> Result<Vec<f32>> {
+    read_floats_at(env, name, a, 0, count)
+}
+
+/// `count` floats of `a` from `offset` (both checked against its length).
+fn read_floats_at(env: &Env, name: &str, a: &JFloatArray, offset: jint, count: jint) -> Result<Vec<f32>> {
     non_null(name, a)?;
     let len = a.len(env)?;
-    let n = usize::try_from(count).ok().filter(|&n| n <= len).ok_or_else(|| {
-        BridgeError::Argument(format!("{name}: count {count} is negative or exceeds the array's {len} elements"))
-    })?;
-    let mut out = vec![0f32; n];
-    a.get_region(env, 0, &mut out)?;
+    let range = usize::try_from(offset)
+        .ok()
+        .zip(usize::try_from(count).ok())
+        .and_then(|(o, n)| Some(o..o.checked_add(n)?))
+        .filter(|r| r.end <= len)
+        .ok_or_else(|| {
+            BridgeError::Argument(format!(
+                "{name}: offset {offset} and count {count} are negative or exceed the array's {len} elements"
+            ))
+        })?;
+    let mut out = vec![0f32; range.len()];
+    // start < len, a Java array's length (an i32).
+    a.get_region(env, range.start as jint, &mut out)?;
     Ok(out)
 }
 
@@ -274,16 +290,22 @@ struct Outputs<'a, 'local> {
 impl Outputs<'_, '_> {
     fn check(&self, env: &Env, max_points: usize) -> Result<()> {
         check_len(env, "outTransform", self.transform, 18, true)?;
-        check_len(env, "outCurve", self.curve, 2 * max_points, false)?;
+        check_len(env, "outCurve", self.curve, 3 * 2 * max_points, false)?;
         check_len(env, "outReport", self.report, report::LEN, false)
     }
 
-    fn write(&self, env: &Env, u: &Update<'_>) -> Result<jboolean> {
+    /// Writes the values; channel c's curve at `c · 2 · max_points` of `outCurve`.
+    fn write(&self, env: &Env, u: &Update<'_>, max_points: usize) -> Result<jboolean> {
         let v = u.values;
         let r = &v.report;
         self.transform.set_region(env, 0, &v.color_correction_transform)?;
-        self.curve.set_region(env, 0, &v.tonemap_curve.red)?;
+        let t = &v.tonemap_curve;
         let mut rep = [0f64; report::LEN];
+        for (c, pairs) in [&t.red, &t.green, &t.blue].into_iter().enumerate() {
+            // Within outCurve's checked length, a Java array's (an i32).
+            self.curve.set_region(env, (c * 2 * max_points) as jint, pairs)?;
+            rep[report::CURVE_POINTS_RED + c] = (pairs.len() / 2) as f64;
+        }
         rep[report::RECOMPUTED] = u.recomputed as u8 as f64;
         rep[report::BOUND] = u.bound;
         rep[report::MATRIX_MAX_ABS] = r.matrix_max_abs;
@@ -304,9 +326,10 @@ fn update(
     step: impl FnOnce(&mut Camera2Loop) -> std::result::Result<Update<'_>, ConvertError>,
 ) -> Result<jboolean> {
     with_loop(handle, |l| {
-        out.check(env, l.options().max_curve_points)?;
+        let max_points = l.options().max_curve_points;
+        out.check(env, max_points)?;
         let u = step(l)?;
-        out.write(env, &u)
+        out.write(env, &u, max_points)
     })
 }
 
@@ -445,7 +468,9 @@ pub extern "system" fn Java_org_campro_CamProNative_setDngCalibration<'local>(
 }
 
 /// `updateFromTransform(handle, deviceTransform: IntArray(18), outTransform: IntArray(18),
-/// outCurve: FloatArray(>= 2 * maxCurvePoints), outReport: DoubleArray(>= REPORT_LEN)): Boolean`:
+/// outCurve: FloatArray(>= 3 * 2 * maxCurvePoints), outReport: DoubleArray(>= REPORT_LEN)): Boolean`:
+/// (`outCurve` holds red, green and blue, each from `c * 2 * maxCurvePoints`, with
+/// `REPORT_CURVE_POINTS_RED + c` points)
 /// one frame, from the `COLOR_CORRECTION_TRANSFORM` of an auto-mode `CaptureResult`.
 /// Returns whether the values changed (the request must be rebuilt); the arrays always
 /// hold the values to send.
@@ -488,10 +513,12 @@ pub extern "system" fn Java_org_campro_CamProNative_updateFromColorTemperature<'
     .resolve::<ThrowJava>()
 }
 
-/// `readback(requestedTransform: IntArray(18), requestedCurve: FloatArray, requestedCount: Int,
-/// reportedTransform: IntArray(18), reportedCurve: FloatArray, reportedCount: Int, out: DoubleArray(>= 3))`:
-/// how far a `CaptureResult`'s transform and curve are from the request (counts are
-/// floats used, i.e. 2 x points).
+/// `readback(requestedTransform: IntArray(18), requestedCurve: FloatArray, requestedOffset: Int,
+/// requestedCount: Int, reportedTransform: IntArray(18), reportedCurve: FloatArray, reportedCount: Int,
+/// channel: Int, out: DoubleArray(>= 3))`: how far a `CaptureResult`'s transform and the curve
+/// of one channel (0 red, 1 green, 2 blue) are from the request, and the bound on that
+/// channel's output (counts are floats used, i.e. 2 x points; the requested curve starts at
+/// `requestedOffset`, as a session's packed curves do).
 #[unsafe(no_mangle)]
 #[allow(clippy::too_many_arguments)]
 pub extern "system" fn Java_org_campro_CamProNative_readback<'local>(
@@ -499,19 +526,22 @@ pub extern "system" fn Java_org_campro_CamProNative_readback<'local>(
     _class: JClass<'local>,
     requested_transform: JIntArray<'local>,
     requested_curve: JFloatArray<'local>,
+    requested_offset: jint,
     requested_count: jint,
     reported_transform: JIntArray<'local>,
     reported_curve: JFloatArray<'local>,
     reported_count: jint,
+    channel: jint,
     out: JDoubleArray<'local>,
 ) {
     env.with_env(|env| -> Result<()> {
         let rt: [i32; 18] = read_ints(env, "requestedTransform", &requested_transform)?;
         let gt: [i32; 18] = read_ints(env, "reportedTransform", &reported_transform)?;
-        let rc = read_floats(env, "requestedCurve", &requested_curve, requested_count)?;
+        let rc = read_floats_at(env, "requestedCurve", &requested_curve, requested_offset, requested_count)?;
         let gc = read_floats(env, "reportedCurve", &reported_curve, reported_count)?;
         check_len(env, "out", &out, readback::LEN, false)?;
-        let r = camera2::readback(&rt, &rc, &gt, &gc).map_err(arg)?;
+        let channel = usize::try_from(channel).unwrap_or(usize::MAX);
+        let r = camera2::readback_channel(channel, &rt, &rc, &gt, &gc).map_err(arg)?;
         let mut vals = [0f64; readback::LEN];
         vals[readback::MATRIX_MAX_ABS] = r.matrix_max_abs;
         vals[readback::CURVE_MAX_ABS] = r.curve_max_abs;
@@ -739,9 +769,10 @@ fn rgb_gains(env: &Env, gains: &JFloatArray) -> Result<[f64; 3]> {
     Ok([g[0] as f64, (g[1] as f64 + g[2] as f64) / 2.0, g[3] as f64])
 }
 
-/// `org.campro.hal.HalNative.emulate(transform: IntArray(18), curve: FloatArray, curveCount: Int,
-/// gains: FloatArray(4), raw: FloatArray(3n), out: ByteArray(3n))`: what a Camera2 device
-/// applying this transform, curve (on all three channels) and these gains makes of linear
+/// `org.campro.hal.HalNative.emulate(transform: IntArray(18), curve: FloatArray, stride: Int,
+/// counts: IntArray(3), gains: FloatArray(4), raw: FloatArray(3n), out: ByteArray(3n))`: what a
+/// Camera2 device applying this transform, these curves (channel c's `counts[c]` floats from
+/// `c * stride` of `curve`) and these gains makes of linear
 /// sensor RGB, through the core's emulator ([`campro::emulate::Isp`]): gains, matrix, clip,
 /// curve, 8-bit rounding. Test builds only: the JVM suite's simulated camera renders its
 /// frames with it.
@@ -753,7 +784,8 @@ pub extern "system" fn Java_org_campro_hal_HalNative_emulate<'local>(
     _class: JClass<'local>,
     transform: JIntArray<'local>,
     curve: JFloatArray<'local>,
-    curve_count: jint,
+    stride: jint,
+    counts: JIntArray<'local>,
     gains: JFloatArray<'local>,
     raw: JFloatArray<'local>,
     out: JByteArray<'local>,
@@ -762,10 +794,18 @@ pub extern "system" fn Java_org_campro_hal_HalNative_emulate<'local>(
         use campro::emulate::Emulator;
         let t: [i32; 18] = read_ints(env, "transform", &transform)?;
         let matrix = camera2::matrix_from_rationals(&t).map_err(|e| arg(e.within("transform")))?;
-        let pairs = read_floats(env, "curve", &curve, curve_count)?;
-        let curve = camera2::curve_from_pairs(&pairs).map_err(|e| arg(e.within("curve")))?;
+        let counts: [i32; 3] = read_ints(env, "counts", &counts)?;
+        let mut curves = Vec::with_capacity(3);
+        for (c, &count) in counts.iter().enumerate() {
+            let offset = (c as jint)
+                .checked_mul(stride)
+                .ok_or_else(|| BridgeError::Argument(format!("stride: {stride} is too large")))?;
+            let pairs = read_floats_at(env, "curve", &curve, offset, count)?;
+            curves.push(camera2::curve_from_pairs(&pairs).map_err(|e| arg(e.within("curve")))?);
+        }
+        let [r, g_curve, b]: [campro::ToneCurve; 3] = curves.try_into().expect("three channels");
         let g = rgb_gains(env, &gains)?;
-        let isp = campro::emulate::Isp { matrix, curve };
+        let isp = campro::emulate::Isp { matrix, curves: campro::ToneCurves::per_channel([r, g_curve, b]) };
         render(env, &raw, &out, |p| isp.sensor_to_output([p[0] * g[0], p[1] * g[1], p[2] * g[2]]))
     })
     .resolve::<ThrowJava>()

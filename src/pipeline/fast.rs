@@ -29,7 +29,8 @@ mod avx512;
 use super::{degamma, Depth, Prepared};
 use crate::ccm;
 use crate::params::Params;
-use crate::tone_curve::ToneCurve;
+use crate::tone_curve::{ToneCurve, ToneCurves};
+use std::sync::Arc;
 
 /// Cells of [`Exact8`]'s output table over [0, 1] (2^16; the last cell holds t = 1).
 const FINE: usize = 1 << 16;
@@ -82,7 +83,7 @@ pub struct Elision {
 impl Elision {
     /// What `p` lets the pipeline skip.
     pub fn of(p: &Params) -> Self {
-        Self { matrix: p.ccm == ccm::IDENTITY, curve: p.tone_curve.is_identity(0.0) }
+        Self { matrix: p.ccm == ccm::IDENTITY, curve: p.tone_curves.is_identity(0.0) }
     }
 }
 
@@ -116,12 +117,15 @@ pub struct Exact8<'a> {
     /// `terms[256 * j + x] = (CCM[0][j], CCM[1][j], CCM[2][j], 0) · degamma(x / 255)`.
     /// Fixed-size, so that an index `256 * j + u8` needs no bounds check.
     terms: Box<[[f32; 4]; 3 * 256]>,
-    /// FINE + 1 cells: the output code, [`AMBIGUOUS`], or [`SPLIT`] | an index into `splits`;
-    /// then a padding entry ([`CELLS`]). Fixed-size, so that an index clamped to `FINE`
-    /// needs no bounds check.
-    cells: Box<[u16; CELLS]>,
+    /// Per output channel, FINE + 1 cells: the output code, [`AMBIGUOUS`], or [`SPLIT`] |
+    /// an index into `splits`; then a padding entry ([`CELLS`]). Fixed-size, so that an
+    /// index clamped to `FINE` needs no bounds check; one table shared by the three
+    /// channels when the curve is.
+    cells: [Arc<[u16; CELLS]>; 3],
     splits: Vec<Split>,
     ambiguous: usize,
+    /// Distinct cell tables: 1 (a shared curve) or 3.
+    tables: usize,
     elision: Elision,
     #[cfg(target_arch = "x86_64")]
     simd: Option<avx512::Kernel>,
@@ -216,10 +220,23 @@ impl<'a> Exact8<'a> {
         // the reference's own f64 rounding.
         let row = crate::ccm::norm_inf(m);
         let delta = 3.0 * row * f32::EPSILON as f64 / 2.0 * 1.0000001 + 1e-12;
-        let (cells, splits, ambiguous) = cell_table(&params.tone_curve, delta);
-        let mut cells = cells;
-        cells.push(0);
-        let cells: Box<[u16; CELLS]> = cells.into_boxed_slice().try_into().expect("FINE + 1 cells and a pad");
+        let mut splits = Vec::new();
+        let mut ambiguous = 0;
+        let mut table = |curve: &ToneCurve| {
+            let (mut cells, a) = cell_table(curve, delta, &mut splits);
+            ambiguous += a;
+            cells.push(0);
+            let cells: Box<[u16; CELLS]> = cells.into_boxed_slice().try_into().expect("FINE + 1 cells and a pad");
+            Arc::<[u16; CELLS]>::from(cells)
+        };
+        let cells = match &params.tone_curves {
+            ToneCurves::Shared(t) => {
+                let one = table(t);
+                [one.clone(), one.clone(), one]
+            }
+            ToneCurves::PerChannel(t) => [table(&t[0]), table(&t[1]), table(&t[2])],
+        };
+        let tables = if params.tone_curves.shared().is_some() { 1 } else { 3 };
         let mut e = Self {
             #[cfg(target_arch = "x86_64")]
             simd: (avx512::supported() || avx2::available()).then(|| avx512::Kernel::new(params, &d)).flatten(),
@@ -228,6 +245,7 @@ impl<'a> Exact8<'a> {
             cells,
             splits,
             ambiguous,
+            tables,
             elision: Elision::of(params),
             engine: Engine::Scalar,
         };
@@ -271,16 +289,17 @@ impl<'a> Exact8<'a> {
         self.engine
     }
 
-    /// Fraction of the output table's cells whose pixels all take the reference path
-    /// (a cell with more than one rounding boundary, or a knot, inside).
+    /// Fraction of the output tables' cells whose pixels all take the reference path
+    /// (a cell with more than one rounding boundary, or a knot, inside), over the distinct
+    /// tables (one for a shared curve, three for a curve per channel).
     pub fn fallback_fraction(&self) -> f64 {
-        self.ambiguous as f64 / (FINE + 1) as f64
+        self.ambiguous as f64 / (self.tables * (FINE + 1)) as f64
     }
 
-    /// Fraction of the output table's cells that hold one rounding boundary: only their
+    /// Fraction of the output tables' cells that hold one rounding boundary: only their
     /// pixels within the error bound of it take the reference.
     pub fn split_fraction(&self) -> f64 {
-        self.splits.len() as f64 / (FINE + 1) as f64
+        self.splits.len() as f64 / (self.tables * (FINE + 1)) as f64
     }
 
     /// Stages this parameter set lets the path skip.
@@ -312,14 +331,14 @@ impl<'a> Exact8<'a> {
             let x = if x < 0.0 { 0.0 } else { x };
             t[k] = if x > 1.0 { 1.0 } else { x };
         }
-        let cell = |t: f32| {
+        let cell = |c: usize| {
             // SAFETY: t is in [0, 1] (clamped above), so t · FINE is exact (a power of two)
             // and in [0, 65536], finite and within i32 (a signed conversion is one
             // instruction; an unsigned one is five on x86-64).
-            let i = unsafe { (t * FINE as f32).to_int_unchecked::<i32>() } as usize;
-            self.cells[i.min(FINE)]
+            let i = unsafe { (t[c] * FINE as f32).to_int_unchecked::<i32>() } as usize;
+            self.cells[c][i.min(FINE)]
         };
-        ([cell(t[0]), cell(t[1]), cell(t[2])], t)
+        ([cell(0), cell(1), cell(2)], t)
     }
 
     /// One pixel, and whether it took the reference path.
@@ -503,7 +522,16 @@ impl<'a> Exact8<'a> {
 pub struct F32Path {
     degamma: Vec<f32>,
     m: [[f32; 3]; 3],
-    /// Segment starts, values and slopes of the curve.
+    /// Each output channel's curve.
+    curves: [Segments; 3],
+    elision: Elision,
+    bound: f64,
+}
+
+/// One curve's segments in f32.
+#[derive(Debug, Clone)]
+struct Segments {
+    /// Segment starts, values and slopes.
     x0: Vec<f32>,
     y0: Vec<f32>,
     slope: Vec<f32>,
@@ -511,19 +539,12 @@ pub struct F32Path {
     first: Vec<u32>,
     /// Segments per unit when the knots are evenly spaced (index = floor(t · n)).
     uniform: Option<f32>,
-    elision: Elision,
-    bound: f64,
 }
 
 const GRID: usize = 1024;
 
-impl F32Path {
-    /// The f32 path for `params` on inputs of depth `input` (tables built here).
-    pub fn new(params: &Params, input: Depth) -> Self {
-        let max = input.max();
-        let degamma = (0..=max).map(|c| degamma(c as f64 / max as f64, params.degamma) as f32).collect();
-        let m = params.ccm.map(|r| r.map(|v| v as f32));
-        let c = &params.tone_curve;
+impl Segments {
+    fn new(c: &ToneCurve) -> Self {
         let (xs, ys) = (c.x(), c.y());
         let segs = xs.len() - 1;
         let slope: Vec<f64> = (0..segs).map(|i| (ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i])).collect();
@@ -533,34 +554,17 @@ impl F32Path {
                 (xs.partition_point(|&v| v <= t).saturating_sub(1).min(segs - 1)) as u32
             })
             .collect();
-        // Error in output units: the matrix input t carries at most 5u·S (degamma table,
-        // products, two sums; S the largest absolute row sum), amplified by the slope L;
-        // the segment evaluation y0 + s·(t - x0) adds u·(1 + 3L); knot positions rounded to
-        // f32 move segment ends by u, costing u·L. u = 2^-24.
-        let u = f32::EPSILON as f64 / 2.0;
-        let s = crate::ccm::norm_inf(&params.ccm);
-        let l = c.max_slope();
-        let bound = (5.0 * u * s * l + u * (1.0 + 4.0 * l)) * 1.01;
         Self {
-            degamma,
-            m,
             x0: xs[..segs].iter().map(|&v| v as f32).collect(),
             y0: ys[..segs].iter().map(|&v| v as f32).collect(),
             slope: slope.iter().map(|&v| v as f32).collect(),
             first,
             uniform: c.is_uniform().then_some(segs as f32),
-            elision: Elision::of(params),
-            bound,
         }
     }
 
-    /// Bound on |this path - reference| before output rounding, output units.
-    pub fn error_bound(&self) -> f64 {
-        self.bound
-    }
-
     #[inline(always)]
-    fn curve(&self, t: f32) -> f32 {
+    fn eval(&self, t: f32) -> f32 {
         let last = self.x0.len() - 1;
         let s = if let Some(n) = self.uniform {
             ((t * n) as i32 as usize).min(last)
@@ -572,6 +576,30 @@ impl F32Path {
             s
         };
         self.y0[s] + self.slope[s] * (t - self.x0[s])
+    }
+}
+
+impl F32Path {
+    /// The f32 path for `params` on inputs of depth `input` (tables built here).
+    pub fn new(params: &Params, input: Depth) -> Self {
+        let max = input.max();
+        let degamma = (0..=max).map(|c| degamma(c as f64 / max as f64, params.degamma) as f32).collect();
+        let m = params.ccm.map(|r| r.map(|v| v as f32));
+        // Error in output units: the matrix input t carries at most 5u·S (degamma table,
+        // products, two sums; S the largest absolute row sum), amplified by the slope L
+        // (the steepest of the channels' curves); the segment evaluation y0 + s·(t - x0)
+        // adds u·(1 + 3L); knot positions rounded to f32 move segment ends by u, costing u·L.
+        // u = 2^-24.
+        let u = f32::EPSILON as f64 / 2.0;
+        let s = crate::ccm::norm_inf(&params.ccm);
+        let l = params.tone_curves.max_slope();
+        let bound = (5.0 * u * s * l + u * (1.0 + 4.0 * l)) * 1.01;
+        Self { degamma, m, curves: params.tone_curves.each().map(Segments::new), elision: Elision::of(params), bound }
+    }
+
+    /// Bound on |this path - reference| before output rounding, output units.
+    pub fn error_bound(&self) -> f64 {
+        self.bound
     }
 
     /// One pixel of integer codes (clamped to the input depth) to output in [0, 1].
@@ -589,7 +617,7 @@ impl F32Path {
         if self.elision.curve {
             lin
         } else {
-            lin.map(|t| self.curve(t))
+            [0, 1, 2].map(|c| self.curves[c].eval(lin[c]))
         }
     }
 
@@ -609,12 +637,11 @@ impl F32Path {
 
 /// For each cell `[k, k+1) / FINE` widened by `delta`: the rounded 8-bit curve output if
 /// it is the same over the whole interval; else a [`Split`] when the interval holds exactly
-/// one rounding boundary and no knot; else [`AMBIGUOUS`]. Returns the table, the splits
-/// and the number of ambiguous cells.
-fn cell_table(curve: &ToneCurve, delta: f64) -> (Vec<u16>, Vec<Split>, usize) {
+/// one rounding boundary and no knot (appended to `splits`, shared by the channels'
+/// tables); else [`AMBIGUOUS`]. Returns the table and the number of ambiguous cells.
+fn cell_table(curve: &ToneCurve, delta: f64, splits: &mut Vec<Split>) -> (Vec<u16>, usize) {
     let n = FINE as f64;
     let mut cells = Vec::with_capacity(FINE + 1);
-    let mut splits = Vec::new();
     let mut ambiguous = 0;
     let mut knot = 0; // first knot index with x > lo
     for k in 0..=FINE {
@@ -634,7 +661,7 @@ fn cell_table(curve: &ToneCurve, delta: f64) -> (Vec<u16>, Vec<Split>, usize) {
             },
         }
     }
-    (cells, splits, ambiguous)
+    (cells, ambiguous)
 }
 
 /// The reference's 8-bit code for a curve input `t` in [0, 1], as [`Prepared::run`] rounds it.

@@ -14,7 +14,8 @@
 //! linear, which commutes with the composition).
 
 use super::target::{
-    resample_on_grid, Condition, CurveFormat, Feed, Format, MatrixBy, MatrixFormat, StageOrder, Target, TargetError,
+    resample_on_grid, shared_curve, Condition, CurveFormat, Feed, Format, MatrixBy, MatrixFormat, StageOrder, Target,
+    TargetError,
 };
 use crate::ccm::{self, Mat3};
 use crate::emulate::Isp;
@@ -221,7 +222,8 @@ impl Target for Rkaiq {
             let slot = root.pointer_mut(p).expect("found by the parser");
             *slot = write_numbers(slot, &c.iter().flatten().copied().collect::<Vec<_>>(), 6);
         }
-        let y: Vec<f64> = self.hardware_curve(&params.tone_curve).y().iter().map(|v| (v * FULL).round()).collect();
+        let y: Vec<f64> =
+            self.hardware_curve(shared_curve(self.name(), params)?).y().iter().map(|v| (v * FULL).round()).collect();
         for (p, _) in &iq.curves {
             let slot = root.pointer_mut(p).expect("found by the parser");
             *slot = write_numbers(slot, &y, 0);
@@ -258,7 +260,7 @@ impl Target for Rkaiq {
                 bound: None,
                 label: name.clone(),
                 feed: Feed::Sensor(*device),
-                emulator: Box::new(Isp { matrix: MATRIX.apply(m), curve: curve.clone() }),
+                emulator: Box::new(Isp { matrix: MATRIX.apply(m), curves: curve.clone().into() }),
             })
             .collect())
     }

@@ -20,7 +20,8 @@
 //! with the composition, so the check runs at each calibrated CT.
 
 use super::target::{
-    curve_from_points, Condition, CurveFormat, Feed, Format, MatrixBy, MatrixFormat, StageOrder, Target, TargetError,
+    curve_from_points, shared_curve, Condition, CurveFormat, Feed, Format, MatrixBy, MatrixFormat, StageOrder, Target,
+    TargetError,
 };
 use crate::ccm::{self, Mat3};
 use crate::emulate::Isp;
@@ -288,7 +289,7 @@ impl Rpi {
             composed.push(serde_json::json!({ "ct": ct, "ccm": c }));
         }
         block(&mut root, "rpi.ccm", self.file())?["ccms"] = Value::Array(composed);
-        let c = &params.tone_curve;
+        let c = shared_curve(self.name(), params)?;
         let mut points: Vec<Value> = Vec::with_capacity(2 * c.len());
         let mut last_x = -1.0;
         for (&x, &y) in c.x().iter().zip(c.y()) {
@@ -345,7 +346,7 @@ impl Rpi {
                 bound: None,
                 label: format!("ct {ct}"),
                 feed: Feed::Sensor(*device),
-                emulator: Box::new(Isp { matrix: fmt.apply(m), curve: curve.clone() }),
+                emulator: Box::new(Isp { matrix: fmt.apply(m), curves: curve.clone().into() }),
             })
             .collect())
     }

@@ -191,3 +191,13 @@ pub(crate) fn resample_on_grid(given: &ToneCurve, grid: &[f64], y_step: f64) -> 
     let y = grid.iter().map(|&x| ((given.eval(x) / y_step).round() * y_step).clamp(0.0, 1.0)).collect();
     ToneCurve::new(grid.to_vec(), y).expect("grid is strictly increasing and values are clamped")
 }
+
+/// The one tone curve of `params` for a stack whose ISP has a single gamma curve for the
+/// three channels; a set with a curve per channel is refused (Camera2 and 3D LUTs hold
+/// it).
+pub fn shared_curve<'a>(target: &'static str, params: &'a Params) -> Result<&'a ToneCurve, TargetError> {
+    params.tone_curves.shared().ok_or_else(|| TargetError::Unsupported {
+        target,
+        why: "its ISP has one gamma curve for the three channels and this set has a curve per channel (the camera2 and cube targets hold it)".into(),
+    })
+}

@@ -330,7 +330,7 @@ pub fn run(params: &Params, quick: bool) -> Vec<Row> {
     }
     // Curve budgets on a fine (256-knot) version of the curve.
     let mut fine = params.clone();
-    fine.tone_curve = params.tone_curve.resample_uniform(256);
+    fine.tone_curves = params.tone_curves.map(|c| c.resample_uniform(256));
     for pts in [8usize, 16, 32, 64, 256] {
         let o = Options { max_curve_points: pts, ..Options::default() };
         let t = per_call(batch / 10 + 1, runs, || {
@@ -347,7 +347,8 @@ pub fn run(params: &Params, quick: bool) -> Vec<Row> {
         });
     }
     for tol_lsb in [0.1, 0.5, 1.0] {
-        let (c, e) = fine.tone_curve.simplify_within(tol_lsb / 255.0);
+        // The red channel's (all of a shared curve's).
+        let (c, e) = fine.tone_curves.channel(0).simplify_within(tol_lsb / 255.0);
         rows.push(Row {
             group: "skip",
             name: format!("fewest curve points within {tol_lsb} LSB"),

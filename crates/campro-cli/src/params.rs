@@ -41,16 +41,18 @@ pub fn validate(a: &ValidateArgs) -> Result<()> {
                 "{}",
                 serde_json::json!({
                     "file": path.display().to_string(), "ok": true, "name": v.name, "description": v.description,
-                    "knots": v.tone_curve.len(), "evenlySpaced": v.tone_curve.is_uniform(), "degamma": v.degamma,
+                    "knots": v.tone_curves.knots(), "perChannel": v.tone_curves.shared().is_none(),
+                    "evenlySpaced": v.tone_curves.is_uniform(), "degamma": v.degamma,
                     "ccmMin": lo, "ccmMax": hi, "ctCalibrations": v.ct_calibration.len(),
                 })
             ),
             Report::Text => say!(
-                "{}: ok ({}: {} knots{}, degamma {}, CCM range [{lo:.3}, {hi:.3}], {} CT calibrations)",
+                "{}: ok ({}: {} knots{}{}, degamma {}, CCM range [{lo:.3}, {hi:.3}], {} CT calibrations)",
                 path.display(),
                 if v.name.is_empty() { "unnamed".to_string() } else { escape(&v.name) },
-                v.tone_curve.len(),
-                if v.tone_curve.is_uniform() { " evenly spaced" } else { "" },
+                v.tone_curves.knots(),
+                if v.tone_curves.is_uniform() { " evenly spaced" } else { "" },
+                if v.tone_curves.shared().is_none() { ", a curve per channel" } else { "" },
                 v.degamma,
                 v.ct_calibration.len()
             ),
@@ -65,6 +67,6 @@ pub fn import_pt(a: &ImportPtArgs) -> Result<()> {
     let p = campro::import_pt::read_checkpoint(&a.checkpoint)
         .map_err(|e| anyhow!("{}: {e}", crate::shown(&a.checkpoint)))?;
     write_atomic(&a.output, p.to_json().as_bytes(), a.force)?;
-    eprintln!("wrote {} ({} knots)", crate::shown(&a.output), p.tone_curve.len());
+    eprintln!("wrote {} ({} knots)", crate::shown(&a.output), p.tone_curves.knots());
     Ok(())
 }

@@ -226,9 +226,9 @@ pub fn finetune_detector(a: &FinetuneDetectorArgs) -> Result<()> {
         force,
     )?;
     let mut params = load_params(params_path)?;
-    let campro_train::train::Initial { ccm, curve, gamma, .. } =
+    let campro_train::train::Initial { ccm, curves, gamma, .. } =
         campro_train::train::Initial::from_params(&params, &params_path.display().to_string())?;
-    let imaging = campro_train::finetune::Imaging::Camera { ccm, curve, gamma };
+    let imaging = campro_train::finetune::Imaging::Camera { ccm, curves, gamma };
     let opts = campro_train::finetune::FinetuneOptions {
         steps,
         seconds,

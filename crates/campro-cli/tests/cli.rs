@@ -223,7 +223,7 @@ fn import_pt_reads_fixture_and_refuses_hostile_files() {
         z.finish().unwrap();
         let pc = campro::import_pt::read_checkpoint(&cuda).unwrap();
         assert_eq!(pc.provenance["device"], "cuda:0");
-        assert_eq!((pc.ccm, pc.tone_curve.clone()), (p.ccm, p.tone_curve.clone()));
+        assert_eq!((pc.ccm, pc.tone_curves.channel(0).clone()), (p.ccm, p.tone_curves.channel(0).clone()));
     }
 
     // A pickle calling os.system must be refused by name, never run.

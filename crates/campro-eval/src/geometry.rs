@@ -72,7 +72,8 @@ pub fn resize_bilinear(img: &RgbImage, width: u32, height: u32) -> RgbImage {
     let (xs, ys) = (taps(width, iw), taps(height, ih));
     let (raw, stride, row_len) = (img.as_raw(), iw * 3, width as usize * 3);
     // Per output byte: the source bytes of its two columns and the weight.
-    let (mut at0, mut at1, mut wx) = (Vec::with_capacity(row_len), Vec::with_capacity(row_len), Vec::with_capacity(row_len));
+    let (mut at0, mut at1, mut wx) =
+        (Vec::with_capacity(row_len), Vec::with_capacity(row_len), Vec::with_capacity(row_len));
     for &(x0, x1, fx) in &xs {
         for k in 0..3 {
             at0.push(x0 * 3 + k);

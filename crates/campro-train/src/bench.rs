@@ -76,7 +76,7 @@ pub fn run(
         None
     };
     let det = if needs_yolox { Some(Yolox::load(&models.join("yolox_nano.onnx"), &dev)?) } else { None };
-    let cam = Camera::identity(cfg.camera.knots, cfg.camera.gamma, &dev)?;
+    let cam = Camera::identity(cfg.camera.knots, cfg.camera.per_channel, cfg.camera.gamma, &dev)?;
     let fb = cfg.data.batch;
     for &step in steps {
         let ms = 1e3

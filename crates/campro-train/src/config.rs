@@ -35,6 +35,9 @@ pub struct Config {
 pub struct CameraConfig {
     /// Tone-curve knots k (paper: 32).
     pub knots: usize,
+    /// A curve per output channel (Camera2's `TONEMAP_CURVE` takes three) instead of one
+    /// for the three (the paper's camera).
+    pub per_channel: bool,
     /// Degamma exponent (2.2).
     pub gamma: f64,
     /// Adam learning rate for the CCM and curve (paper: 1e-3).
@@ -194,7 +197,7 @@ impl Default for ValidationConfig {
 
 impl Default for CameraConfig {
     fn default() -> Self {
-        Self { knots: 32, gamma: 2.2, lr: 1e-3 }
+        Self { knots: 32, per_channel: false, gamma: 2.2, lr: 1e-3 }
     }
 }
 impl Default for AttackerConfig {

@@ -25,8 +25,8 @@ pub enum Imaging {
     /// Unprocessed sRGB (the images as stored).
     Raw,
     /// campro's desktop pipeline with these values: CCM, curve outputs at evenly spaced
-    /// knots, degamma exponent.
-    Camera { ccm: [[f64; 3]; 3], curve: Vec<f64>, gamma: f64 },
+    /// knots (one row, or three: red, green, blue), degamma exponent.
+    Camera { ccm: [[f64; 3]; 3], curves: Vec<Vec<f64>>, gamma: f64 },
 }
 
 /// How long to fine-tune, and where.
@@ -102,7 +102,7 @@ pub fn run(
     }
     let camera = match imaging {
         Imaging::Raw => None,
-        Imaging::Camera { ccm, curve, gamma } => Some(Camera::from_values(*ccm, curve, *gamma, &dev)?),
+        Imaging::Camera { ccm, curves, gamma } => Some(Camera::from_values(*ccm, curves, *gamma, &dev)?),
     };
     let det = crate::detection::student(cfg, o.seed, &dev)?;
     let teacher = crate::detection::teacher(cfg, &dev)?;

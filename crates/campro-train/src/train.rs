@@ -40,8 +40,9 @@ pub struct RunOptions {
 pub struct Initial {
     /// CCM rows.
     pub ccm: [[f64; 3]; 3],
-    /// Curve outputs at evenly spaced knots: `camera.knots` of them.
-    pub curve: Vec<f64>,
+    /// Curve outputs at evenly spaced knots, `camera.knots` of them: one row (a shared
+    /// curve) or three (red, green, blue).
+    pub curves: Vec<Vec<f64>>,
     /// Degamma exponent: must be `camera.gamma`.
     pub gamma: f64,
     /// Where it came from, for the provenance (a file name).
@@ -53,8 +54,9 @@ pub struct Initial {
 pub struct Outcome {
     /// Row-major CCM, entries in [−5, 5].
     pub ccm: [[f64; 3]; 3],
-    /// Curve outputs at evenly spaced inputs, in [0, 1].
-    pub curve: Vec<f64>,
+    /// Curve outputs at evenly spaced inputs, in [0, 1]: one row, or three (red, green,
+    /// blue).
+    pub curves: Vec<Vec<f64>>,
     pub gamma: f64,
     /// Config, data, seed, rounds, final losses, time.
     pub provenance: serde_json::Map<String, serde_json::Value>,
@@ -73,17 +75,17 @@ impl Initial {
     /// The camera of a parameter set, to continue from; `origin` names it in the
     /// provenance. The optimiser's curve has evenly spaced knots.
     pub fn from_params(params: &campro::Params, origin: &str) -> Result<Self, TrainError> {
-        if !params.tone_curve.is_uniform() {
+        let c = &params.tone_curves;
+        if !c.is_uniform() || c.each().iter().any(|t| t.len() != c.knots()) {
             return Err(TrainError::Unsupported(format!(
-                "{origin}: tone_curve: the optimiser's camera needs evenly spaced knots"
+                "{origin}: tone_curve: the optimiser's camera needs evenly spaced knots, as many on every channel"
             )));
         }
-        Ok(Self {
-            ccm: params.ccm,
-            curve: params.tone_curve.y().to_vec(),
-            gamma: params.degamma,
-            origin: origin.into(),
-        })
+        let curves = match c.shared() {
+            Some(t) => vec![t.y().to_vec()],
+            None => c.each().iter().map(|t| t.y().to_vec()).collect(),
+        };
+        Ok(Self { ccm: params.ccm, curves, gamma: params.degamma, origin: origin.into() })
     }
 }
 
@@ -93,8 +95,13 @@ impl Outcome {
     /// provenance.
     pub fn params(&self, cfg: &Config, name: &str, config_name: &str) -> Result<campro::Params, TrainError> {
         let invalid = |e: campro::ValidationError| TrainError::Unsupported(format!("the learnt camera: {e}"));
-        let curve = campro::ToneCurve::uniform(self.curve.clone()).map_err(invalid)?;
-        let mut params = campro::Params::new(self.ccm, curve, self.gamma).map_err(invalid)?;
+        let curve = |y: &[f64]| campro::ToneCurve::uniform(y.to_vec()).map_err(invalid);
+        let curves = match self.curves.as_slice() {
+            [one] => campro::ToneCurves::Shared(curve(one)?),
+            [r, g, b] => campro::ToneCurves::per_channel([curve(r)?, curve(g)?, curve(b)?]),
+            rows => return Err(TrainError::Unsupported(format!("the learnt camera: {} curves", rows.len()))),
+        };
+        let mut params = campro::Params::new(self.ccm, curves, self.gamma).map_err(invalid)?;
         params.name = name.into();
         params.description = format!(
             "learnt by campro train from {config_name} ({}{}{})",
@@ -171,13 +178,19 @@ pub(crate) fn draw(order: &mut Vec<usize>, pool: &[usize], n: usize, rng: &mut r
 /// The camera a run starts from: the identity, or `init` (its knots and degamma must be
 /// the configuration's).
 fn start_camera(cfg: &Config, init: Option<&Initial>, dev: &candle_core::Device) -> Result<Camera, TrainError> {
-    let Some(i) = init else { return Ok(Camera::identity(cfg.camera.knots, cfg.camera.gamma, dev)?) };
-    if i.curve.len() != cfg.camera.knots {
+    let per_channel = cfg.camera.per_channel;
+    let Some(i) = init else { return Ok(Camera::identity(cfg.camera.knots, per_channel, cfg.camera.gamma, dev)?) };
+    let knots = i.curves.first().map_or(0, Vec::len);
+    if knots != cfg.camera.knots {
         return Err(TrainError::Unsupported(format!(
-            "--init {}: {} curve knots, but camera.knots is {}",
-            i.origin,
-            i.curve.len(),
-            cfg.camera.knots
+            "--init {}: {knots} curve knots, but camera.knots is {}",
+            i.origin, cfg.camera.knots
+        )));
+    }
+    if i.curves.len() == 3 && !per_channel {
+        return Err(TrainError::Unsupported(format!(
+            "--init {}: a curve per channel, but camera.per_channel is false",
+            i.origin
         )));
     }
     if i.gamma != cfg.camera.gamma {
@@ -186,7 +199,10 @@ fn start_camera(cfg: &Config, init: Option<&Initial>, dev: &candle_core::Device)
             i.origin, i.gamma, cfg.camera.gamma
         )));
     }
-    let c = Camera::from_values(i.ccm, &i.curve, i.gamma, dev)?;
+    // A shared curve continues as three equal ones where the configuration trains one per
+    // channel.
+    let curves = if per_channel && i.curves.len() == 1 { vec![i.curves[0].clone(); 3] } else { i.curves.clone() };
+    let c = Camera::from_values(i.ccm, &curves, i.gamma, dev)?;
     c.project()?;
     Ok(c)
 }
@@ -806,7 +822,7 @@ impl<'a> Game<'a> {
         );
         Ok(Outcome {
             ccm: self.cam.ccm_values()?,
-            curve: self.cam.curve_values()?,
+            curves: self.cam.curve_values()?,
             gamma: self.cfg.camera.gamma,
             provenance,
             log,

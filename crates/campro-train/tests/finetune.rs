@@ -41,7 +41,7 @@ fn fine_tuning_behind_a_camera_fits_its_images_and_stops_on_time() {
     // A strong camera (colour inversion through the curve): the detector must adapt to it.
     let imaging = Imaging::Camera {
         ccm: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        curve: (0..32).map(|i| 1.0 - i as f64 / 31.0).collect(),
+        curves: vec![(0..32).map(|i| 1.0 - i as f64 / 31.0).collect()],
         gamma: 2.2,
     };
     let done = run(

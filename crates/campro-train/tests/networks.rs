@@ -22,10 +22,35 @@ fn camera_matches_the_desktop_pipeline() {
     let params =
         campro::Params::from_file(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../params/color-inversion.json"))
             .unwrap();
-    // A CCM with negative and > 1 entries, so the clip is exercised.
+    let curve: Vec<f64> = params.tone_curves.channel(0).y().to_vec();
+    matches_the_desktop_pipeline(&params, &[curve]);
+}
+
+#[test]
+fn camera_with_a_curve_per_channel_matches_the_desktop_pipeline() {
+    // Three different 32-knot curves: inverted, a sine, a square root.
+    let k = 32;
+    let rows: Vec<Vec<f64>> = [
+        Box::new(|t: f64| 1.0 - t) as Box<dyn Fn(f64) -> f64>,
+        Box::new(|t: f64| (7.0 * t).sin() * 0.5 + 0.5),
+        Box::new(|t: f64| t.sqrt()),
+    ]
+    .iter()
+    .map(|f| (0..k).map(|i| f(i as f64 / (k - 1) as f64)).collect())
+    .collect();
+    let curve = |y: &Vec<f64>| campro::ToneCurve::uniform(y.clone()).unwrap();
+    let curves = campro::ToneCurves::per_channel([curve(&rows[0]), curve(&rows[1]), curve(&rows[2])]);
+    assert!(curves.shared().is_none());
+    let params = campro::Params::new(campro::ccm::IDENTITY, curves, 2.2).unwrap();
+    matches_the_desktop_pipeline(&params, &rows);
+}
+
+/// The camera with `params`' curves (`rows`: one, or three) and a CCM with negative and
+/// > 1 entries, so the clip is exercised, against the f64 pipeline.
+fn matches_the_desktop_pipeline(params: &campro::Params, rows: &[Vec<f64>]) {
     let ccm = [[1.4, -0.3, -0.1], [-0.2, 1.3, -0.1], [0.05, -0.5, 1.45]];
-    let curve: Vec<f64> = params.tone_curve.y().to_vec();
-    let cam = Camera::from_values(ccm, &curve, 2.2, &Device::Cpu).unwrap();
+    let cam = Camera::from_values(ccm, rows, 2.2, &Device::Cpu).unwrap();
+    assert_eq!(cam.per_channel(), rows.len() == 3);
     let mut p = params.clone();
     p.ccm = ccm;
     let x = ((rng_tensor(&[1, 3, 40, 50], 7) + 1.0).unwrap() * 0.5).unwrap();
@@ -49,7 +74,7 @@ fn camera_gradients_by_hand() {
     // One pixel, identity CCM, k = 5 knots: linear value 0.3 sits in segment 1 (0.25..0.5)
     // at fraction 0.2, so d out / d curve = (0, 0.8, 0.2, 0, 0) and d out / d y = 4·(c2 − c1).
     let dev = Device::Cpu;
-    let curve = [0.0, 0.1, 0.9, 0.95, 1.0];
+    let curve = vec![vec![0.0, 0.1, 0.9, 0.95, 1.0]];
     let cam = Camera::from_values([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], &curve, 2.2, &dev).unwrap();
     let lin = Tensor::new(&[0.3f32, 0.3, 0.3], &dev).unwrap().reshape((1, 3, 1, 1)).unwrap();
     let out = cam.forward_linear(&lin).unwrap();
@@ -75,11 +100,40 @@ fn camera_gradients_by_hand() {
     let gm: Vec<Vec<f32>> = g.get(cam2.ccm.as_tensor()).unwrap().to_vec2().unwrap();
     assert_eq!(gm[0], vec![0.0; 3]);
     // project() clamps into the ranges.
-    let cam3 = Camera::from_values([[9.0, -7.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], &[-0.5, 0.5, 1.5], 2.2, &dev)
-        .unwrap();
+    let cam3 =
+        Camera::from_values([[9.0, -7.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], &[vec![-0.5, 0.5, 1.5]], 2.2, &dev)
+            .unwrap();
     cam3.project().unwrap();
     assert_eq!(cam3.ccm_values().unwrap()[0], [5.0, -5.0, 0.0]);
-    assert_eq!(cam3.curve_values().unwrap(), vec![0.0, 0.5, 1.0]);
+    assert_eq!(cam3.curve_values().unwrap(), vec![vec![0.0, 0.5, 1.0]]);
+}
+
+#[test]
+fn a_curve_per_channel_takes_only_its_channels_gradient() {
+    // Three 5-knot curves, identity CCM; linear (0.3, 0.6, 0.9): red in segment 1 at
+    // fraction 0.2, green in segment 2 at 0.4, blue in segment 3 at 0.6. A loss of
+    // red + 2 green reaches only red's knots 1, 2 and green's knots 2, 3 (twice); blue's
+    // row gets nothing.
+    let dev = Device::Cpu;
+    let rows = vec![vec![0.0, 0.1, 0.9, 0.95, 1.0], vec![1.0, 0.8, 0.5, 0.2, 0.0], vec![0.0, 0.25, 0.5, 0.75, 1.0]];
+    let cam = Camera::from_values(campro::ccm::IDENTITY, &rows, 2.2, &dev).unwrap();
+    let lin = Tensor::new(&[0.3f32, 0.6, 0.9], &dev).unwrap().reshape((1, 3, 1, 1)).unwrap();
+    let out = cam.forward_linear(&lin).unwrap();
+    let r: Vec<f32> = out.flatten_all().unwrap().to_vec1().unwrap();
+    let want = [0.8 * 0.1 + 0.2 * 0.9, 0.6 * 0.5 + 0.4 * 0.2, 0.4 * 0.75 + 0.6 * 1.0];
+    for c in 0..3 {
+        assert!((r[c] as f64 - want[c]).abs() < 1e-6, "{r:?}");
+    }
+    let weights = Tensor::new(&[1f32, 2.0, 0.0], &dev).unwrap().reshape((1, 3, 1, 1)).unwrap();
+    let g = out.mul(&weights).unwrap().sum_all().unwrap().backward().unwrap();
+    let gc: Vec<Vec<f32>> = g.get(cam.curve.as_tensor()).unwrap().to_vec2().unwrap();
+    let expect = [[0.0, 0.8, 0.2, 0.0, 0.0], [0.0, 0.0, 1.2, 0.8, 0.0], [0.0; 5]];
+    for c in 0..3 {
+        for i in 0..5 {
+            assert!((gc[c][i] as f64 - expect[c][i]).abs() < 1e-6, "{gc:?}");
+        }
+    }
+    assert!(Camera::from_values(campro::ccm::IDENTITY, &rows[..2], 2.2, &dev).is_err());
 }
 
 #[test]

@@ -80,8 +80,11 @@ fn protector_defeats_a_frozen_attacker_on_a_tiny_set() {
     assert!(last < 0.5 * first, "L_ns {first} -> {last}");
     let (before, after) = (rows[0].check_accuracy.unwrap(), rows[10].check_accuracy.unwrap());
     assert!(after < before, "attacker check accuracy {before} -> {after}");
-    assert!(out.ccm.iter().flatten().all(|v| v.abs() <= 5.0) && out.curve.iter().all(|v| (0.0..=1.0).contains(v)));
-    assert_eq!(out.curve.len(), 32);
+    assert!(
+        out.ccm.iter().flatten().all(|v| v.abs() <= 5.0)
+            && out.curves.iter().flatten().all(|v| (0.0..=1.0).contains(v))
+    );
+    assert_eq!((out.curves.len(), out.curves[0].len()), (1, 32));
     assert_eq!(out.provenance["config"]["seed"], 1);
     // The face set was cached: a second build reads it back identically.
     let sel = campro_train::faces::Selection {
@@ -263,17 +266,32 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     // one round, it ends there) and the provenance names it; a set of other knots is refused.
     let ccm = [[0.5, -1.0, 0.25], [2.0, 1.0, -0.5], [0.0, 0.125, 1.5]];
     let curve: Vec<f64> = (0..32).map(|i| ((i * 7) % 32) as f64 / 31.0).collect();
-    let init = |curve: Vec<f64>| campro_train::train::RunOptions {
-        init: Some(campro_train::train::Initial { ccm, curve, gamma: 2.2, origin: "start.json".into() }),
+    let init = |curves: Vec<Vec<f64>>| campro_train::train::RunOptions {
+        init: Some(campro_train::train::Initial { ccm, curves, gamma: 2.2, origin: "start.json".into() }),
         ..Default::default()
     };
     c.camera.lr = 1e-12;
-    let out = campro_train::train::run(&c, &init(curve.clone()), |_| {}).unwrap();
+    let out = campro_train::train::run(&c, &init(vec![curve.clone()]), |_| {}).unwrap();
     assert!(out.ccm.iter().flatten().zip(ccm.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-6), "{:?}", out.ccm);
-    assert!(out.curve.iter().zip(&curve).all(|(a, b)| (a - b).abs() < 1e-6), "{:?}", out.curve);
+    assert!(out.curves[0].iter().zip(&curve).all(|(a, b)| (a - b).abs() < 1e-6), "{:?}", out.curves);
     assert_eq!(out.provenance["init"], "start.json");
-    let err = campro_train::train::run(&c, &init(vec![0.0, 1.0]), |_| {}).err().unwrap().to_string();
+    let err = campro_train::train::run(&c, &init(vec![vec![0.0, 1.0]]), |_| {}).err().unwrap().to_string();
     assert!(err.contains("2 curve knots") && err.contains("camera.knots is 32"), "{err}");
+    // A curve per channel: a shared start continues as three equal curves, which learn
+    // apart; three curves do not start a shared camera.
+    c.camera.per_channel = true;
+    c.camera.lr = 1e-2;
+    let out = campro_train::train::run(&c, &init(vec![curve.clone()]), |_| {}).unwrap();
+    assert_eq!(out.curves.len(), 3);
+    assert!(out.curves.iter().all(|row| row.len() == 32 && row.iter().all(|v| (0.0..=1.0).contains(v))));
+    assert!(out.curves[0] != out.curves[1] || out.curves[1] != out.curves[2], "the channels' curves moved apart");
+    let p = out.params(&c, "per-channel", "tiny.toml").unwrap();
+    assert!(p.tone_curves.shared().is_none());
+    let back = campro::Params::from_json(&p.to_json()).unwrap();
+    assert_eq!(back.tone_curves, p.tone_curves);
+    c.camera.per_channel = false;
+    let err = campro_train::train::run(&c, &init(out.curves.clone()), |_| {}).err().unwrap().to_string();
+    assert!(err.contains("camera.per_channel is false"), "{err}");
 }
 
 #[test]
@@ -353,8 +371,8 @@ fn the_run_keeps_its_best_validated_camera_and_stops_when_none_is_better() {
     let written: Vec<f64> = out.ccm.iter().flatten().copied().collect();
     let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6);
     assert!(close(&written, &flat("best.camera.ccm")), "{written:?}");
-    assert!(close(&out.curve, &flat("best.camera.curve")));
-    assert!(!close(&written, &flat("camera.ccm")) || !close(&out.curve, &flat("camera.curve")));
+    assert!(close(&out.curves.concat(), &flat("best.camera.curve")));
+    assert!(!close(&written, &flat("camera.ccm")) || !close(&out.curves.concat(), &flat("camera.curve")));
     // A resumed run reads the best camera back and keeps it unless a later one is better.
     c.validation.patience = 0;
     c.budget.rounds = last + 2;

@@ -160,7 +160,7 @@ const fn spread(base: i8, offset: i8) -> [i8; 16] {
 pub(super) unsafe fn run(e: &Exact8, src: &[u8], dst: &mut [u8]) -> (usize, usize) {
     let whole = src.len().min(dst.len()) / STEP_BYTES * STEP_BYTES;
     let terms = e.terms.as_ptr() as *const f32;
-    let cells = e.cells.as_ptr() as *const i32;
+    let cells = e.cells.each_ref().map(|t| t.as_ptr() as *const i32);
     // The low half's four pixels come from bytes 0..16 (pixels 0..3 at 0, 3, 6, 9), the
     // high half's from bytes 8..24 (pixels 4..7 at 12 - 8 = 4, 7, 10, 13).
     let lo = |c: i8| _mm_loadu_si128(spread(0, c).as_ptr() as *const __m128i);
@@ -192,7 +192,7 @@ pub(super) unsafe fn run(e: &Exact8, src: &[u8], dst: &mut [u8]) -> (usize, usiz
             let cell = _mm256_min_epi32(_mm256_cvttps_epi32(_mm256_mul_ps(t, fine)), last);
             // Cells are u16: a 32-bit gather at byte 2 · cell, its low half kept (the
             // table has a padding cell past FINE for the last one's high half).
-            *out = _mm256_and_si256(_mm256_i32gather_epi32::<2>(cells, cell), low16);
+            *out = _mm256_and_si256(_mm256_i32gather_epi32::<2>(cells[c], cell), low16);
         }
         let any = _mm256_or_si256(_mm256_or_si256(code[0], code[1]), code[2]);
         let flags = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(any, code_max))) as u32;

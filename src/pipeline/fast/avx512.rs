@@ -45,6 +45,7 @@
 //! LSB, which the flag threshold includes.
 
 use crate::params::Params;
+use crate::tone_curve::ToneCurve;
 use std::arch::x86_64::*;
 
 /// Pixels per step.
@@ -85,15 +86,14 @@ fn half(k: usize) -> f64 {
 
 /// Error bound of the engine's value before rounding, in output LSB, for each output
 /// channel (see the module doc).
-fn error_lsb(params: &Params) -> [f64; 3] {
+fn error_lsb(params: &Params, c: &ToneCurve) -> [f64; 3] {
     let u = f32::EPSILON as f64 / 2.0;
-    let c = &params.tone_curve;
     let l = c.max_slope();
     let h = half(c.len());
     let d = 255.0 * c.y().windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
     // The curve amplifies the position error by L; the intercept (|b| <= 256 + h·D), the
     // slope (times |x'| <= h) and the final FMA (|w| <= 256.5) round once each.
-    [0, 1, 2].map(|row| 255.0 * l * position_error(params, row) + u * (513.0 + 2.0 * h * d) * 1.01)
+    [0, 1, 2].map(|row| 255.0 * l * position_error(params, c, row) + u * (513.0 + 2.0 * h * d) * 1.01)
 }
 
 /// The matrix output's error for one output channel (row c), in curve-input units. The
@@ -103,12 +103,12 @@ fn error_lsb(params: &Params) -> [f64; 3] {
 /// `h + |M_c0| + |M_c1|` (units of `k - 1`), the last a sum that matters only where it is
 /// not clamped, so bounded by h; each rounding errs at most u of its result. Plus the f64
 /// reference's own rounding.
-fn position_error(params: &Params, row: usize) -> f64 {
+fn position_error(params: &Params, c: &ToneCurve, row: usize) -> f64 {
     let u = f32::EPSILON as f64 / 2.0;
     let m = params.ccm[row].map(f64::abs);
     let s = m[0] + m[1] + m[2];
-    let top = (params.tone_curve.len() - 1) as f64;
-    let h = half(params.tone_curve.len()) / top;
+    let top = (c.len() - 1) as f64;
+    let h = half(c.len()) / top;
     u * (2.0001 * s + (h + m[0]) + (h + m[0] + m[1]) + h) * 1.01 + 1e-12 * (1.0 + s)
 }
 
@@ -164,8 +164,7 @@ struct Reference {
 }
 
 impl Reference {
-    fn new(params: &Params, degamma: &[f64]) -> Self {
-        let c = &params.tone_curve;
+    fn new(params: &Params, c: &ToneCurve, degamma: &[f64]) -> Self {
         let (x, y) = (c.x(), c.y());
         let k = c.len();
         let mut t = Self {
@@ -321,16 +320,17 @@ fn slots(y: &[f64], codes: [Option<u16>; 2]) -> Option<(f64, [f64; 32], [f64; 32
 }
 
 impl Kernel {
-    /// `None` where the curve is not uniform or has more than 32 knots, or the bound is too
+    /// `None` where the channels have their own curves (the scalar tables run those), the
+    /// curve is not uniform or has more than 32 knots, or the bound is too
     /// wide to be worth it (E >= 0.25 LSB). (The caller builds it only where an engine that
     /// runs it runs.)
     pub(super) fn new(params: &Params, degamma: &[f64]) -> Option<Self> {
-        let c = &params.tone_curve;
+        let c = params.tone_curves.shared()?;
         let k = c.len();
         if !c.is_uniform() || k > 32 || degamma.len() != 256 {
             return None;
         }
-        let e = error_lsb(params);
+        let e = error_lsb(params, c);
         if e.iter().any(|&e| e >= 0.25) {
             return None;
         }
@@ -342,7 +342,7 @@ impl Kernel {
                 planes[b][x] = byte;
             }
         }
-        let pos = (0..3).map(|row| position_error(params, row)).fold(0.0, f64::max);
+        let pos = (0..3).map(|row| position_error(params, c, row)).fold(0.0, f64::max);
         let mut hint = 0;
         let low_code = super::constant_code(c, 0.0, pos.min(1.0), &mut hint);
         let mut hint = 0;
@@ -382,7 +382,7 @@ impl Kernel {
                 out[1][j] = if plane == 2 { 64 + pos } else { j as u8 };
             }
         }
-        let reference = Reference::new(params, degamma);
+        let reference = Reference::new(params, c, degamma);
         Some(Self {
             planes,
             degamma: degamma32,

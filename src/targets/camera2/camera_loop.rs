@@ -141,7 +141,7 @@ impl Camera2Loop {
         let (_, v) = self.current.as_ref()?;
         let ideal = ccm::scale(&ccm::mul(&self.params.ccm, device), 1.0 / v.scale);
         let sent = v.matrix();
-        Some(error_bound(v.report.curve_max_abs, v.report.curve_lipschitz, &sent, &ideal, [1.0; 3]))
+        Some(error_bound(v.report.channel_max_abs, v.report.channel_lipschitz, &sent, &ideal, [1.0; 3]))
     }
 
     /// One frame's update from the device transform (sensor RGB -> linear sRGB).

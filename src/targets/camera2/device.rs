@@ -10,20 +10,20 @@ use crate::targets::target::{
     Condition, CurveFormat, Feed, Format, MatrixBy, MatrixFormat, StageOrder, Target, TargetError,
 };
 
-/// The ISP a Camera2 device runs with the request's matrix and curve, as `model` says
+/// The ISP a Camera2 device runs with the request's matrix and curves, as `model` says
 /// its HAL treats them: matrix entries rounded to `matrix_frac_bits` fractional bits,
-/// the curve resampled to a `lut_size`-entry LUT.
-pub fn device(matrix: Mat3, curve: crate::ToneCurve, model: &DeviceModel) -> Isp {
+/// each channel's curve resampled to a `lut_size`-entry LUT.
+pub fn device(matrix: Mat3, curves: crate::ToneCurves, model: &DeviceModel) -> Isp {
     let mut matrix = matrix;
     if let Some(bits) = model.matrix_frac_bits {
         let q = (2.0f64).powi(bits.min(52) as i32);
         matrix = matrix.map(|r| r.map(|v| (v * q).round() / q));
     }
-    let curve = match model.lut_size {
-        Some(n) => curve.resample_uniform(n.max(2)),
-        None => curve,
+    let curves = match model.lut_size {
+        Some(n) => curves.map(|c| c.resample_uniform(n.max(2))),
+        None => curves,
     };
-    Isp { matrix, curve }
+    Isp { matrix, curves }
 }
 
 /// A Camera2 device: its own colour transform (sensor RGB to linear sRGB), the
@@ -81,14 +81,14 @@ impl Target for Camera2 {
     }
 
     fn emulate(&self, params: &Params, exported: &[u8], _base: Option<&str>) -> Result<Vec<Condition>, TargetError> {
-        let (matrix, curve, scale) = values_from_json(exported)?;
-        let isp = device(matrix, curve, &self.model);
+        let (matrix, curves, scale) = values_from_json(exported)?;
+        let isp = device(matrix, curves, &self.model);
         // The ideal the device should reach: CCM · M_dev / s, then the folded curve, for
         // the sensor RGB that sRGB test pixels in [0, 1]^3 synthesise through M_dev^-1.
         let bound = ccm::inverse(&self.device).map(|inv| {
             let range = inv.map(|row| row.iter().map(|v| v.abs()).sum::<f64>());
             let ideal = ccm::scale(&ccm::mul(&params.ccm, &self.device), 1.0 / scale);
-            isp.error_bound(&ideal, &params.tone_curve.fold_scale(scale), range)
+            isp.error_bound(&ideal, &params.tone_curves.map(|c| c.fold_scale(scale)), range)
         });
         Ok(vec![Condition { label: "camera2".into(), feed: Feed::Sensor(self.device), emulator: Box::new(isp), bound }])
     }

@@ -24,7 +24,7 @@ mod wire;
 
 pub use camera_loop::{Camera2Loop, LoopStats, Update, DEFAULT_TOLERANCE};
 pub use device::{device, Camera2};
-pub use readback::{readback, Readback};
+pub use readback::{readback, readback_channel, Readback};
 pub use wire::{device_transform_from_capture_result, gain, gains_from_capture_result, values_from_json, MAX_GAIN};
 
 use crate::ccm::{self, Mat3};
@@ -32,7 +32,7 @@ use crate::emulate::error_bound;
 use crate::error::{check_matrix, ValidationError};
 use crate::params::Params;
 use crate::rational::{self, Rational, RationalError};
-use crate::tone_curve::ToneCurve;
+use crate::tone_curve::{ToneCurve, ToneCurves};
 
 /// Camera2 guarantees matrix entries in this range are not clipped.
 pub const MATRIX_RANGE: (f64, f64) = (-1.5, 3.0);
@@ -80,7 +80,7 @@ impl Default for Options {
 pub struct TonemapCurve {
     /// Red channel pairs.
     pub red: Vec<f32>,
-    /// Green channel pairs (campro sends the same curve on all three).
+    /// Green channel pairs (the same as red and blue for a set with one shared curve).
     pub green: Vec<f32>,
     /// Blue channel pairs.
     pub blue: Vec<f32>,
@@ -91,14 +91,19 @@ pub struct TonemapCurve {
 pub struct ErrorReport {
     /// Largest |rational - wanted| over the nine (scaled) matrix entries.
     pub matrix_max_abs: f64,
-    /// Exact max |sent curve - folded curve| over [0, 1] (simplification and f32 rounding).
+    /// Exact max |sent curve - folded curve| over [0, 1] (simplification and f32 rounding),
+    /// the largest of the channels'.
     pub curve_max_abs: f64,
-    /// Points per channel in the sent curve.
+    /// The most points of any channel's sent curve.
     pub curve_points: usize,
-    /// Whether the curve had to lose knots to fit `max_curve_points`.
+    /// Whether a curve had to lose knots to fit `max_curve_points`.
     pub curve_simplified: bool,
-    /// Largest slope of the sent curve (how much matrix error grows).
+    /// Largest slope of the sent curves (how much matrix error grows).
     pub curve_lipschitz: f64,
+    /// [`ErrorReport::curve_max_abs`] of each channel (red, green, blue).
+    pub channel_max_abs: [f64; 3],
+    /// [`ErrorReport::curve_lipschitz`] of each channel.
+    pub channel_lipschitz: [f64; 3],
     /// Guaranteed bound on |device - desktop| for sensor RGB in [0, 1]^3.
     pub bound: f64,
 }
@@ -132,9 +137,12 @@ impl Camera2Values {
         matrix_from_rationals(&self.color_correction_transform).expect("denominators are positive")
     }
 
-    /// The curve the device receives (the red channel; all three are equal), as f64.
-    pub fn curve(&self) -> ToneCurve {
-        curve_from_pairs(&self.tonemap_curve.red).expect("sent curves are valid")
+    /// The curves the device receives, as f64.
+    pub fn curves(&self) -> ToneCurves {
+        let t = &self.tonemap_curve;
+        ToneCurves::per_channel(
+            [&t.red, &t.green, &t.blue].map(|p| curve_from_pairs(p).expect("sent curves are valid")),
+        )
     }
 }
 
@@ -178,16 +186,21 @@ pub fn matrix_from_rationals(v: &[i32; 18]) -> Result<Mat3, ValidationError> {
 
 /// A curve from a flat (Pin, Pout) array as `TonemapCurve` holds it.
 pub fn curve_from_pairs(pairs: &[f32]) -> Result<ToneCurve, ValidationError> {
+    curve_from_pairs_named(pairs, "tonemapCurve")
+}
+
+/// [`curve_from_pairs`] with errors naming `field` (`tonemapCurve.green`).
+pub fn curve_from_pairs_named(pairs: &[f32], field: &str) -> Result<ToneCurve, ValidationError> {
     if !pairs.len().is_multiple_of(2) {
         return Err(ValidationError::WrongLength {
-            field: "tonemapCurve".into(),
+            field: field.into(),
             expected: "an even number (Pin, Pout pairs)".into(),
             got: pairs.len(),
         });
     }
     let x = pairs.iter().step_by(2).map(|&v| v as f64).collect();
     let y = pairs.iter().skip(1).step_by(2).map(|&v| v as f64).collect();
-    ToneCurve::new(x, y).map_err(|e| e.within("tonemapCurve"))
+    ToneCurve::new(x, y).map_err(|e| e.within(field))
 }
 
 /// The smallest `s >= 1` that brings every entry of `m` into [`MATRIX_RANGE`].
@@ -246,10 +259,18 @@ pub fn check_options(opts: &Options) -> Result<(), ValidationError> {
 /// scale and the point budget, so a camera loop keeps it while the device matrix moves.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CurvePart {
-    /// Range scale folded into the curve.
+    /// Range scale folded into the curves.
     pub scale: f64,
-    /// The point budget it was fitted to.
+    /// The point budget they were fitted to.
     pub max_points: usize,
+    /// Each channel's sent curve (red, green, blue; one fit shared by the three when the
+    /// parameters' curve is).
+    pub channels: [SentCurve; 3],
+}
+
+/// One channel's curve as sent, and what sending it costs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SentCurve {
     /// Flat f32 (Pin, Pout) pairs as sent.
     pub pairs: Vec<f32>,
     /// Exact max |sent - folded| over [0, 1].
@@ -260,15 +281,25 @@ pub struct CurvePart {
     pub lipschitz: f64,
 }
 
-/// Folds `scale` into the parameters' curve, fits it to `max_points` (optimal knot
-/// subset when it has more) and rounds it to f32 pairs, measuring what that costs.
+/// Folds `scale` into each of the parameters' curves, fits it to `max_points` (optimal
+/// knot subset when it has more) and rounds it to f32 pairs, measuring what that costs.
 pub fn curve_part(params: &Params, scale: f64, max_points: usize) -> CurvePart {
-    let folded = params.tone_curve.fold_scale(scale);
-    let (fitted, simplified) =
-        if folded.len() > max_points { (folded.simplify(max_points).0, true) } else { (folded.clone(), false) };
-    let pairs = to_f32_pairs(&fitted);
-    let sent = curve_from_pairs(&pairs).expect("rounded pairs stay valid");
-    CurvePart { scale, max_points, max_abs: folded.max_abs_diff(&sent), simplified, lipschitz: sent.max_slope(), pairs }
+    let fit = |c: &ToneCurve| {
+        let folded = c.fold_scale(scale);
+        let (fitted, simplified) =
+            if folded.len() > max_points { (folded.simplify(max_points).0, true) } else { (folded.clone(), false) };
+        let pairs = to_f32_pairs(&fitted);
+        let sent = curve_from_pairs(&pairs).expect("rounded pairs stay valid");
+        SentCurve { max_abs: folded.max_abs_diff(&sent), simplified, lipschitz: sent.max_slope(), pairs }
+    };
+    let channels = match &params.tone_curves {
+        ToneCurves::Shared(c) => {
+            let one = fit(c);
+            [one.clone(), one.clone(), one]
+        }
+        ToneCurves::PerChannel(c) => [fit(&c[0]), fit(&c[1]), fit(&c[2])],
+    };
+    CurvePart { scale, max_points, channels }
 }
 
 /// [`convert`] reusing `cache` when its scale and point budget still apply (and
@@ -308,19 +339,24 @@ pub(crate) fn convert_with(
         Some(c) if c.scale == scale && c.max_points == opts.max_curve_points => c,
         _ => cache.insert(curve_part(params, scale, opts.max_curve_points)),
     };
+    let [red, green, blue] = &curve.channels;
+    let max_abs = curve.channels.each_ref().map(|c| c.max_abs);
+    let lipschitz = curve.channels.each_ref().map(|c| c.lipschitz);
     Ok(Camera2Values {
         color_correction_transform: cst,
-        tonemap_curve: TonemapCurve { red: curve.pairs.clone(), green: curve.pairs.clone(), blue: curve.pairs.clone() },
+        tonemap_curve: TonemapCurve { red: red.pairs.clone(), green: green.pairs.clone(), blue: blue.pairs.clone() },
         scale,
         composed,
         report: ErrorReport {
             matrix_max_abs: matrix_err,
-            curve_max_abs: curve.max_abs,
-            curve_points: curve.pairs.len() / 2,
-            curve_simplified: curve.simplified,
-            curve_lipschitz: curve.lipschitz,
+            curve_max_abs: max_abs.into_iter().fold(0.0, f64::max),
+            curve_points: curve.channels.iter().map(|c| c.pairs.len() / 2).max().unwrap_or(0),
+            curve_simplified: curve.channels.iter().any(|c| c.simplified),
+            curve_lipschitz: lipschitz.into_iter().fold(0.0, f64::max),
+            channel_max_abs: max_abs,
+            channel_lipschitz: lipschitz,
             // The device applying exactly what it received, over sensor RGB in [0, 1]^3.
-            bound: error_bound(curve.max_abs, curve.lipschitz, &sent, &wanted, [1.0; 3]),
+            bound: error_bound(max_abs, lipschitz, &sent, &wanted, [1.0; 3]),
         },
     })
 }
@@ -405,7 +441,7 @@ mod tests {
         let v = convert(&p, &ccm::IDENTITY, &Options { max_curve_points: 16, ..Options::default() }).unwrap();
         assert_eq!(v.report.curve_points, 16);
         assert!(v.report.curve_simplified);
-        let exact = p.tone_curve.max_abs_diff(&v.curve());
+        let exact = p.tone_curves.max_abs_diff(&v.curves());
         assert!((exact - v.report.curve_max_abs).abs() < 1e-12 && exact > 0.0);
     }
 

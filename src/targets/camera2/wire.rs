@@ -43,7 +43,19 @@ impl Camera2Values {
     pub fn to_kotlin(&self, gains: Option<[f32; 4]>) -> String {
         let ints = self.color_correction_transform.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(", ");
         let floats = |v: &[f32]| v.iter().map(|f| format!("{f:?}f")).collect::<Vec<_>>().join(", ");
-        let c = floats(&self.tonemap_curve.red);
+        let t = &self.tonemap_curve;
+        let curves = if t.red == t.green && t.green == t.blue {
+            format!("val campro = floatArrayOf({})\n", floats(&t.red))
+        } else {
+            format!(
+                "val red = floatArrayOf({})\nval green = floatArrayOf({})\nval blue = floatArrayOf({})\n",
+                floats(&t.red),
+                floats(&t.green),
+                floats(&t.blue)
+            )
+        };
+        let curve_args =
+            if t.red == t.green && t.green == t.blue { "campro, campro, campro" } else { "red, green, blue" };
         let gains = match gains {
             Some(g) => format!(
                 "// The device's white balance (R, G_even, G_odd, B), metered with the device transform.\n\
@@ -58,13 +70,13 @@ impl Camera2Values {
         format!(
             "// CamPro via Camera2 (scale {scale}, bound {bound:.3} LSB). COLOR_CORRECTION_MODE is\n\
              // only honoured with CONTROL_AWB_MODE_OFF, which also needs COLOR_CORRECTION_GAINS.\n\
-             val campro = floatArrayOf({c})\n\
+             {curves}\
              builder.set(CaptureRequest.CONTROL_AWB_MODE, CaptureRequest.CONTROL_AWB_MODE_OFF)\n\
              {gains}\
              builder.set(CaptureRequest.COLOR_CORRECTION_MODE, CaptureRequest.COLOR_CORRECTION_MODE_TRANSFORM_MATRIX)\n\
              builder.set(CaptureRequest.COLOR_CORRECTION_TRANSFORM, ColorSpaceTransform(intArrayOf({ints})))\n\
              builder.set(CaptureRequest.TONEMAP_MODE, CaptureRequest.TONEMAP_MODE_CONTRAST_CURVE)\n\
-             builder.set(CaptureRequest.TONEMAP_CURVE, TonemapCurve(campro, campro, campro))\n",
+             builder.set(CaptureRequest.TONEMAP_CURVE, TonemapCurve({curve_args}))\n",
             scale = self.scale,
             bound = self.report.bound_lsb(),
         )
@@ -155,9 +167,9 @@ pub fn gain(x: Option<f64>) -> Option<f32> {
 }
 
 /// Reads back what [`Camera2Values::to_json`] wrote: the matrix the device receives (from
-/// `colorCorrectionTransform`), its curve (`tonemapCurve.red`) and the range scale folded
-/// into the curve. Trailing content after the object is refused.
-pub fn values_from_json(bytes: &[u8]) -> Result<(Mat3, crate::ToneCurve, f64), ValidationError> {
+/// `colorCorrectionTransform`), its curves (`tonemapCurve.red`, `.green`, `.blue`) and the
+/// range scale folded into the curves. Trailing content after the object is refused.
+pub fn values_from_json(bytes: &[u8]) -> Result<(Mat3, crate::ToneCurves, f64), ValidationError> {
     let rule = |field: &str, rule: String| ValidationError::Rule { field: field.into(), rule };
     let v: serde_json::Value =
         serde_json::from_slice(bytes).map_err(|e| rule("<camera2 values>", format!("not JSON: {e}")))?;
@@ -173,16 +185,18 @@ pub fn values_from_json(bytes: &[u8]) -> Result<(Mat3, crate::ToneCurve, f64), V
             .and_then(|x| i32::try_from(x).ok())
             .ok_or_else(|| rule(&format!("colorCorrectionTransform[{i}]"), "must be a 32-bit integer".into()))?;
     }
-    let red = v
-        .pointer("/tonemapCurve/red")
-        .and_then(|a| a.as_array())
-        .ok_or_else(|| rule("tonemapCurve.red", "must be an array of numbers".into()))?;
-    let pairs = red
-        .iter()
-        .map(|x| x.as_f64().map(|f| f as f32))
-        .collect::<Option<Vec<f32>>>()
-        .ok_or_else(|| rule("tonemapCurve.red", "must be an array of numbers".into()))?;
+    let curve = |channel: &str| {
+        let field = format!("tonemapCurve.{channel}");
+        let pairs = v
+            .pointer(&format!("/tonemapCurve/{channel}"))
+            .and_then(|a| a.as_array())
+            .and_then(|a| a.iter().map(|x| x.as_f64().map(|f| f as f32)).collect::<Option<Vec<f32>>>())
+            .ok_or_else(|| rule(&field, "must be an array of numbers".into()))?;
+        super::curve_from_pairs_named(&pairs, &field)
+    };
+    let [red, green, blue] = crate::tone_curve::CHANNELS.map(curve);
+    let curves = crate::ToneCurves::per_channel([red?, green?, blue?]);
     let scale = v.get("scale").and_then(|s| s.as_f64()).filter(|s| s.is_finite() && *s >= 1.0);
     let scale = scale.ok_or_else(|| rule("scale", "must be a finite number >= 1".into()))?;
-    Ok((matrix_from_rationals(&ints)?, super::curve_from_pairs(&pairs)?, scale))
+    Ok((matrix_from_rationals(&ints)?, curves, scale))
 }

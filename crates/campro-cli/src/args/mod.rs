@@ -148,10 +148,7 @@ impl DataArgs {
     /// The models folder ([`crate::models::folder`]): --models, else SHARED/models when a
     /// shared folder is named, else the user's data folder, else ../shared/models.
     pub fn models_dir(&self) -> PathBuf {
-        crate::models::folder(
-            self.models.as_deref(),
-            named_shared_dir(self.shared.as_deref()).as_deref(),
-        )
+        crate::models::folder(self.models.as_deref(), named_shared_dir(self.shared.as_deref()).as_deref())
     }
 }
 

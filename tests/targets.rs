@@ -215,6 +215,32 @@ fn rkaiq_grids_and_export() {
 }
 
 #[test]
+fn single_curve_stacks_refuse_a_curve_per_channel_and_luts_hold_it() {
+    let mut p = strong();
+    let c = p.tone_curves.channel(0).clone();
+    p.tone_curves = campro::ToneCurves::per_channel([c.clone(), ToneCurve::from_fn(32, |t| 1.0 - t), c]);
+    if let Some(base) = fixture("rpi_pisp_imx219.json") {
+        let e = Rpi::Pisp.export(&p, Some(&base)).unwrap_err().to_string();
+        assert!(e.contains("one gamma curve") && e.contains("a curve per channel"), "{e}");
+    }
+    if let Some(base) = fixture("rkaiq_isp3x_imx415_ccm_gamma_excerpt.json") {
+        let e = Rkaiq::Isp3x.export(&p, Some(&base)).unwrap_err().to_string();
+        assert!(e.contains("a curve per channel"), "{e}");
+    }
+    // A 3D LUT is any colour map: within the baked LUT's Lipschitz bound (the steepest
+    // channel's slope), plus the file's 6 decimals and 8-bit rounding.
+    let t = CubeFile { kind: Kind::Cube, size: 33 };
+    let text = t.export(&p, None).unwrap();
+    let conds = t.emulate(&p, &text, None).unwrap();
+    let bound = Lut3d::bake(&p, 33).error_bound() * 255.0;
+    let px = random_pixels(5000, 4);
+    for c in &conds {
+        let s = deployment_vs_desktop(&p, &c.feed, c.emulator.as_ref(), &px).unwrap();
+        assert!(s.max_lsb() <= bound + 0.51, "{}: {} > {bound} + 0.51", c.label, s.max_lsb());
+    }
+}
+
+#[test]
 fn cube_and_hald_parse_back_and_errors_shrink_with_size() {
     let p = strong();
     let px = random_pixels(20_000, 8);

@@ -86,6 +86,46 @@ fn convert_json_has_camera2_keys() {
 }
 
 #[test]
+fn convert_sends_a_curve_per_channel() {
+    // A version 2 set: red inverted, green a ramp to 0.5, blue the identity (2 knots each).
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("three.json");
+    std::fs::write(
+        &path,
+        r#"{"format":"campro-params","version":2,"ccm":[[1,0,0],[0,1,0],[0,0,1]],
+            "tone_curves":{"red":{"y":[1,0]},"green":{"y":[0,0.5]},"blue":{"y":[0,1]}}}"#,
+    )
+    .unwrap();
+    let out = campro().args(["convert", "--target", "camera2"]).arg(&path).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let curve = |ch: &str| -> Vec<f64> {
+        v["tonemapCurve"][ch].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
+    };
+    assert_eq!(curve("red"), vec![0.0, 1.0, 1.0, 0.0]);
+    assert_eq!(curve("green"), vec![0.0, 0.0, 1.0, 0.5]);
+    assert_eq!(curve("blue"), vec![0.0, 0.0, 1.0, 1.0]);
+    let kt = campro().args(["convert", "--format", "kotlin"]).arg(&path).output().unwrap();
+    let kt = String::from_utf8(kt.stdout).unwrap();
+    assert!(
+        kt.contains("val green = floatArrayOf(0.0f, 0.0f, 1.0f, 0.5f)")
+            && kt.contains("TonemapCurve(red, green, blue)"),
+        "{kt}"
+    );
+    // A stack with one gamma curve refuses it by name; the 3D LUT holds it.
+    if let Some(base) = campro_testkit::shared("fixtures/targets/rpi_pisp_imx219.json") {
+        fails_with(
+            campro().args(["convert"]).arg(&path).args(["--target", "rpi-pisp", "--base"]).arg(base),
+            "a curve per channel",
+        );
+    }
+    let lut = campro().args(["convert"]).arg(&path).args(["--target", "cube", "--cube-size", "2"]).output().unwrap();
+    assert!(lut.status.success(), "{}", String::from_utf8_lossy(&lut.stderr));
+    // The LUT's (1, 0, 0) node: red through the inverted curve, green and blue at 0.
+    assert!(String::from_utf8(lut.stdout).unwrap().lines().any(|l| l == "0.000000 0.000000 0.000000"));
+}
+
+#[test]
 fn convert_capture_result_and_bad_device_input() {
     let dir = tempfile::tempdir().unwrap();
     let cr = dir.path().join("cr.json");

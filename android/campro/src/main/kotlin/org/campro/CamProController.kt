@@ -80,12 +80,20 @@ class CamProController(
      * A protected frame's result: compares what it reports with what was sent and
      * returns the bound on the output deviation this causes (output units).
      */
-    fun onProtectedResult(reportedTransform: IntArray, reportedCurve: FloatArray, reportedCount: Int = reportedCurve.size): Double {
+    fun onProtectedResult(reportedTransform: IntArray, reportedCurves: List<FloatArray>): Double {
+        require(reportedCurves.size == 3) { "reportedCurves must hold red, green and blue, got ${reportedCurves.size}" }
+        var worst = 0.0
         synchronized(session) {
-            CamProNative.readback(session.transform, session.curve, 2 * session.curvePoints, reportedTransform, reportedCurve, reportedCount, readbackOut)
+            for ((c, curve) in reportedCurves.withIndex()) {
+                CamProNative.readback(
+                    session.transform, session.curve, session.curveOffset(c), 2 * session.curvePoints(c),
+                    reportedTransform, curve, curve.size, c, readbackOut,
+                )
+                worst = max(worst, readbackOut[CamProNative.READBACK_BOUND])
+            }
         }
-        worstReadbackBound = max(worstReadbackBound, readbackOut[CamProNative.READBACK_BOUND])
-        return readbackOut[CamProNative.READBACK_BOUND]
+        worstReadbackBound = max(worstReadbackBound, worst)
+        return worst
     }
 
     /** One line for the app's status bar. */

@@ -17,9 +17,12 @@ object CamProNative {
     const val REPORT_CURVE_MAX_ABS = 3
     const val REPORT_CURVE_LIPSCHITZ = 4
     const val REPORT_SCALE = 5
+    /** The most (Pin, Pout) points of a channel. */
     const val REPORT_CURVE_POINTS = 6
     const val REPORT_CURVE_SIMPLIFIED = 7
-    const val REPORT_LEN = 8
+    /** Points of the red channel's curve; green and blue follow. */
+    const val REPORT_CURVE_POINTS_RED = 8
+    const val REPORT_LEN = 11
 
     /** Index of the readback comparison slots. */
     const val READBACK_MATRIX_MAX_ABS = 0
@@ -67,10 +70,15 @@ object CamProNative {
     @JvmStatic external fun setDngCalibration(handle: Long, illuminant1: Int, forwardMatrix1: IntArray?, illuminant2: Int, forwardMatrix2: IntArray?)
     @JvmStatic external fun updateFromTransform(handle: Long, deviceTransform: IntArray?, outTransform: IntArray?, outCurve: FloatArray?, outReport: DoubleArray?): Boolean
     @JvmStatic external fun updateFromColorTemperature(handle: Long, kelvin: Double, outTransform: IntArray?, outCurve: FloatArray?, outReport: DoubleArray?): Boolean
+    /**
+     * One channel (0 red, 1 green, 2 blue) of a result against the request: the requested
+     * curve is [requestedCount] floats of [requestedCurve] from [requestedOffset] (a session's
+     * packed curves), the reported one the first [reportedCount] floats of [reportedCurve].
+     */
     @JvmStatic external fun readback(
-        requestedTransform: IntArray?, requestedCurve: FloatArray?, requestedCount: Int,
+        requestedTransform: IntArray?, requestedCurve: FloatArray?, requestedOffset: Int, requestedCount: Int,
         reportedTransform: IntArray?, reportedCurve: FloatArray?, reportedCount: Int,
-        out: DoubleArray?,
+        channel: Int, out: DoubleArray?,
     )
 
     /**

@@ -32,7 +32,7 @@ interface CameraRequests {
      * [meteringRun] auto-mode metering frames (a run: AWB converges only after its first)
      * is an auto-mode metering frame (needs per-frame control: `SYNC_MAX_LATENCY_PER_FRAME_CONTROL`).
      */
-    fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int)
+    fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int)
 
     /**
      * Repeat probe frames ([PixelProbe]) with these values (AWB off, TRANSFORM_MATRIX,
@@ -363,7 +363,7 @@ class CamProPipeline<T>(
         val gains = controller.gains.copyOf()
         guard.requestChanged(gains, meteredPhysicalId)
         gate.clear()
-        camera.protect(session.transform.copyOf(), session.curveForRequest(), gains, perFrameControl, controller.meteringInterval, controller.meteringRun)
+        camera.protect(session.transform.copyOf(), session.curvesForRequest(), gains, perFrameControl, controller.meteringInterval, controller.meteringRun)
     }
 
     /** Runs [body]; any exception stops the loop closed with its message. */

@@ -17,8 +17,12 @@ class CamProSession private constructor(
     /** `COLOR_CORRECTION_TRANSFORM` to send: nine (numerator, denominator) pairs, row-major. */
     val transform = IntArray(18)
 
-    /** `TONEMAP_CURVE` to send, the same for red, green and blue: [curvePoints] (Pin, Pout) pairs. */
-    var curve = FloatArray(2 * maxCurvePoints)
+    /**
+     * `TONEMAP_CURVE` to send, packed: channel c (0 red, 1 green, 2 blue) from [curveOffset]
+     * with [curvePoints] `(c)` (Pin, Pout) pairs. A parameter set with one curve has the same
+     * three; a version 2 set has its own per channel.
+     */
+    var curve = FloatArray(3 * 2 * maxCurvePoints)
         private set
 
     /** What the last update achieved; slots are `CamProNative.REPORT_*`. */
@@ -28,8 +32,14 @@ class CamProSession private constructor(
     var maxCurvePoints = maxCurvePoints
         private set
 
-    /** (Pin, Pout) points per channel in [curve]. */
+    /** The most (Pin, Pout) points of any channel in [curve]. */
     val curvePoints: Int get() = report[CamProNative.REPORT_CURVE_POINTS].toInt()
+
+    /** (Pin, Pout) points of [channel] (0 red, 1 green, 2 blue) in [curve]. */
+    fun curvePoints(channel: Int): Int = report[CamProNative.REPORT_CURVE_POINTS_RED + channel].toInt()
+
+    /** Where [channel]'s pairs start in [curve]. */
+    fun curveOffset(channel: Int): Int = 2 * maxCurvePoints * channel
 
     /** Guaranteed bound on |device - desktop pipeline| for the last update, output units (1 = full scale). */
     val bound: Double get() = report[CamProNative.REPORT_BOUND]
@@ -54,7 +64,7 @@ class CamProSession private constructor(
     fun setMaxCurvePoints(n: Int) {
         CamProNative.setMaxCurvePoints(live(), n)
         if (n != maxCurvePoints) {
-            curve = FloatArray(2 * n)
+            curve = FloatArray(3 * 2 * n)
             maxCurvePoints = n
         }
     }
@@ -64,9 +74,10 @@ class CamProSession private constructor(
     fun setDngCalibration(illuminant1: Int, forwardMatrix1: IntArray, illuminant2: Int, forwardMatrix2: IntArray) =
         CamProNative.setDngCalibration(live(), illuminant1, forwardMatrix1, illuminant2, forwardMatrix2)
 
-    /** The curve with exactly [curvePoints] pairs, as `TonemapCurve`'s constructor wants it (allocates; call when an update returned `true`). */
+    /** The red, green and blue curves with exactly their pairs, as `TonemapCurve`'s constructor wants them (allocates; call when an update returned `true`). */
     @Synchronized
-    fun curveForRequest(): FloatArray = curve.copyOf(2 * curvePoints)
+    fun curvesForRequest(): Array<FloatArray> =
+        Array(3) { c -> curve.copyOfRange(curveOffset(c), curveOffset(c) + 2 * curvePoints(c)) }
 
     /** Frees the native state; further calls throw [IllegalStateException]. Idempotent. */
     @Synchronized

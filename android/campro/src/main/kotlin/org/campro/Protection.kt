@@ -237,7 +237,10 @@ class ProtectionGuard(
         for ((c, curve) in curves.withIndex()) {
             val bound = try {
                 synchronized(session) {
-                    CamProNative.readback(session.transform, session.curve, 2 * session.curvePoints, transform, curve, curve.size, out)
+                    CamProNative.readback(
+                        session.transform, session.curve, session.curveOffset(c), 2 * session.curvePoints(c),
+                        transform, curve, curve.size, c, out,
+                    )
                 }
                 out[CamProNative.READBACK_BOUND] * 255.0
             } catch (e: IllegalArgumentException) {

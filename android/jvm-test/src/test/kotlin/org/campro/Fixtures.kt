@@ -45,15 +45,15 @@ object Fixtures {
     class FakeCamera : CameraRequests {
         val calls = mutableListOf<String>()
         var lastTransform: IntArray? = null
-        var lastCurve: FloatArray? = null
+        var lastCurves: Array<FloatArray>? = null
         var lastGains: FloatArray? = null
         var failWith: Exception? = null
 
         override fun meter() { failWith?.let { throw it }; calls += "meter" }
-        override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
+        override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
             failWith?.let { throw it }
             calls += if (interleaveMetering) "protect+meter$meteringRun/$meteringInterval" else "protect"
-            lastTransform = transform; lastCurve = curve; lastGains = gains
+            lastTransform = transform; lastCurves = curves; lastGains = gains
         }
         override fun halt() { calls += "halt" }
 
@@ -72,8 +72,7 @@ object Fixtures {
 
         /** What a device honouring the last request reports. */
         fun honoured(): CaptureReport {
-            val c = lastCurve!!
-            return CaptureReport(0, 0, 0, lastTransform!!.copyOf(), listOf(c, c.copyOf(), c.copyOf()), lastGains!!.copyOf())
+            return CaptureReport(0, 0, 0, lastTransform!!.copyOf(), lastCurves!!.map { it.copyOf() }, lastGains!!.copyOf())
         }
     }
 

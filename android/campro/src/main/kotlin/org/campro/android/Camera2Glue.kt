@@ -97,13 +97,16 @@ fun CaptureResult.meteringReport(): MeteringReport = MeteringReport(
 
 /**
  * CamPro's values as request settings: AWB off (Camera2 ignores TRANSFORM_MATRIX otherwise),
- * the [gains] measured in auto mode, the [transform] (18 ints) and the [curve] (flat
- * (Pin, Pout) pairs, at least two) on all three channels. One list serves a
+ * the [gains] measured in auto mode, the [transform] (18 ints) and the [curves] (red, green,
+ * blue: flat (Pin, Pout) pairs, at least two each). One list serves a
  * `CaptureRequest.Builder` ([applyCamPro]) and CameraX's `CaptureRequestOptions`.
  */
-fun camproSettings(transform: IntArray, curve: FloatArray, gains: FloatArray): List<Pair<CaptureRequest.Key<*>, Any>> {
+fun camproSettings(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray): List<Pair<CaptureRequest.Key<*>, Any>> {
     require(transform.size == 18) { "transform must have 18 ints, got ${transform.size}" }
-    require(curve.size >= 4 && curve.size % 2 == 0) { "curve must hold at least two (Pin, Pout) pairs, got ${curve.size} floats" }
+    require(curves.size == 3) { "curves must hold red, green and blue, got ${curves.size}" }
+    for ((c, curve) in curves.withIndex()) {
+        require(curve.size >= 4 && curve.size % 2 == 0) { "curves[$c] must hold at least two (Pin, Pout) pairs, got ${curve.size} floats" }
+    }
     require(gains.size == 4) { "gains must have 4 elements (R, G_even, G_odd, B), got ${gains.size}" }
     return listOf(
         CaptureRequest.CONTROL_AWB_MODE to CaptureRequest.CONTROL_AWB_MODE_OFF,
@@ -111,7 +114,7 @@ fun camproSettings(transform: IntArray, curve: FloatArray, gains: FloatArray): L
         CaptureRequest.COLOR_CORRECTION_GAINS to RggbChannelVector(gains[0], gains[1], gains[2], gains[3]),
         CaptureRequest.COLOR_CORRECTION_TRANSFORM to ColorSpaceTransform(transform),
         CaptureRequest.TONEMAP_MODE to CaptureRequest.TONEMAP_MODE_CONTRAST_CURVE,
-        CaptureRequest.TONEMAP_CURVE to TonemapCurve(curve, curve, curve),
+        CaptureRequest.TONEMAP_CURVE to TonemapCurve(curves[0], curves[1], curves[2]),
         // The HAL's face detector would put face rectangles and landmarks into every result:
         // metadata about the faces the picture hides.
         CaptureRequest.STATISTICS_FACE_DETECT_MODE to CaptureRequest.STATISTICS_FACE_DETECT_MODE_OFF,
@@ -122,8 +125,8 @@ fun camproSettings(transform: IntArray, curve: FloatArray, gains: FloatArray): L
 private fun CaptureRequest.Builder.setAny(key: CaptureRequest.Key<*>, value: Any) = set(key as CaptureRequest.Key<Any>, value)
 
 /** Sets CamPro's values ([camproSettings]) on a request. */
-fun CaptureRequest.Builder.applyCamPro(transform: IntArray, curve: FloatArray, gains: FloatArray) {
-    for ((k, v) in camproSettings(transform, curve, gains)) setAny(k, v)
+fun CaptureRequest.Builder.applyCamPro(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray) {
+    for ((k, v) in camproSettings(transform, curves, gains)) setAny(k, v)
 }
 
 /** A session from a parameter file in the APK's assets, read natively (NDK AAssetManager). */
@@ -192,12 +195,12 @@ class CamProCamera2(
             s.setRepeatingRequest(meteringRequest(), callback, cameraHandler)
         }
 
-        override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
+        override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
             val s = captureSession ?: error("no capture session")
             val d = device ?: error("no camera device")
             val protected = d.createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply {
                 addTarget(frames.surface)
-                applyCamPro(transform, curve, gains)
+                applyCamPro(transform, curves, gains)
                 setTag(PROTECTED)
             }.build()
             if (interleaveMetering) {
@@ -213,7 +216,7 @@ class CamProCamera2(
             val d = device ?: error("no camera device")
             val probe = d.createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply {
                 addTarget(meteringReader.surface) // never the app's stream
-                applyCamPro(transform, curve, gains)
+                applyCamPro(transform, arrayOf(curve, curve, curve), gains)
                 setTag(PROBE)
             }.build()
             s.setRepeatingRequest(probe, callback, cameraHandler)

@@ -71,10 +71,10 @@ class CamProCameraX(
     private val requests = object : CameraRequests {
         override fun meter() = send(listOf(CaptureRequest.CONTROL_AWB_MODE to CaptureRequest.CONTROL_AWB_MODE_AUTO))
 
-        override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) =
-            send(camproSettings(transform, curve, gains))
+        override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) =
+            send(camproSettings(transform, curves, gains))
 
-        override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) = send(camproSettings(transform, curve, gains))
+        override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) = send(camproSettings(transform, arrayOf(curve, curve, curve), gains))
 
         override fun halt() {
             // CameraX owns the repeating request; the gate is closed by the pipeline.

@@ -89,10 +89,10 @@ class Camera2Test {
         CaptureResult.COLOR_CORRECTION_GAINS to RggbChannelVector(2f, 1f, 1f, 1.6f),
     )
 
-    private fun honoured(ts: Long, curve: FloatArray = session.curveForRequest()) = result(
+    private fun honoured(ts: Long, curves: Array<FloatArray> = session.curvesForRequest()) = result(
         CaptureResult.CONTROL_AWB_MODE to 0, CaptureResult.COLOR_CORRECTION_MODE to 0, CaptureResult.TONEMAP_MODE to 0,
         CaptureResult.COLOR_CORRECTION_TRANSFORM to ColorSpaceTransform(session.transform.copyOf()),
-        CaptureResult.TONEMAP_CURVE to TonemapCurve(curve, curve, curve),
+        CaptureResult.TONEMAP_CURVE to TonemapCurve(curves[0], curves[1], curves[2]),
         CaptureResult.COLOR_CORRECTION_GAINS to RggbChannelVector(2f, 1f, 1f, 1.6f),
         CaptureResult.SENSOR_TIMESTAMP to ts,
     )
@@ -146,7 +146,7 @@ class Camera2Test {
         assertEquals(List(3) { CamProCamera2.METERING } + List(27) { CamProCamera2.PROTECTED }, burst)
         cam.onResult(CamProCamera2.PROTECTED, honoured(1))
         assertEquals(ProtectionState.Protected, cam.pipeline.state)
-        cam.onResult(CamProCamera2.PROTECTED, honoured(2, floatArrayOf(0f, 0f, 1f, 1f)))
+        cam.onResult(CamProCamera2.PROTECTED, honoured(2, Array(3) { floatArrayOf(0f, 0f, 1f, 1f) }))
         assertTrue(cam.pipeline.state is ProtectionState.Violated)
         cam.onResult(CamProCamera2.PROTECTED, honoured(3))
         assertEquals(ProtectionState.Protected, cam.pipeline.state)

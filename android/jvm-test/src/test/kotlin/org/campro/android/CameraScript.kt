@@ -69,17 +69,17 @@ object CameraScript {
             )
             for ((i, step) in PixelProbe.Step.values().withIndex()) {
                 val curve = PixelProbe.curve(step)
-                g.onResult(CamProCamera2.PROBE, honoured(g, 100L + i, PixelProbe.transform(step, g.session.transform), curve))
+                g.onResult(CamProCamera2.PROBE, honoured(g, 100L + i, PixelProbe.transform(step, g.session.transform), arrayOf(curve, curve, curve)))
                 g.pipeline.onProbeFrame(100L + i, ByteArray(4800) { Fixtures.probeLevel(curve).toByte() })
             }
         }
         verify(c, ts)
     }
 
-    fun honoured(g: CamProCamera2, ts: Long, transform: IntArray = g.session.transform.copyOf(), curve: FloatArray = g.session.curveForRequest()) = result(
+    fun honoured(g: CamProCamera2, ts: Long, transform: IntArray = g.session.transform.copyOf(), curves: Array<FloatArray> = g.session.curvesForRequest()) = result(
         CaptureResult.CONTROL_AWB_MODE to 0, CaptureResult.COLOR_CORRECTION_MODE to 0, CaptureResult.TONEMAP_MODE to 0,
         CaptureResult.COLOR_CORRECTION_TRANSFORM to ColorSpaceTransform(transform),
-        CaptureResult.TONEMAP_CURVE to TonemapCurve(curve, curve, curve),
+        CaptureResult.TONEMAP_CURVE to TonemapCurve(curves[0], curves[1], curves[2]),
         CaptureResult.COLOR_CORRECTION_GAINS to RggbChannelVector(2f, 1f, 1f, 1.6f),
         CaptureResult.SENSOR_TIMESTAMP to ts,
     )

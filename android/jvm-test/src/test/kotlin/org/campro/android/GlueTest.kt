@@ -113,20 +113,20 @@ class GlueTest {
     @Test
     fun settingsCarryTheSessionsValues() {
         session.updateFromTransform(Fixtures.PHONE)
-        val curve = session.curveForRequest()
-        val s = camproSettings(session.transform, curve, Fixtures.GAINS).toMap()
+        val curves = session.curvesForRequest()
+        val s = camproSettings(session.transform, curves, Fixtures.GAINS).toMap()
         assertEquals(CaptureRequest.CONTROL_AWB_MODE_OFF, s[CaptureRequest.CONTROL_AWB_MODE])
         val t = IntArray(18).also { (s[CaptureRequest.COLOR_CORRECTION_TRANSFORM] as ColorSpaceTransform).copyElements(it, 0) }
         assertTrue(session.transform.contentEquals(t))
         val tc = s[CaptureRequest.TONEMAP_CURVE] as TonemapCurve
         for (ch in 0..2) {
             val got = FloatArray(2 * tc.getPointCount(ch)).also { tc.copyColorCurve(ch, it, 0) }
-            assertTrue(curve.contentEquals(got))
+            assertTrue(curves[ch].contentEquals(got))
         }
         // The HAL's face statistics are off: results carry no face rectangles or landmarks.
         assertEquals(CaptureRequest.STATISTICS_FACE_DETECT_MODE_OFF, s[CaptureRequest.STATISTICS_FACE_DETECT_MODE])
         // An empty curve (no update yet) is refused by name, never sent.
-        val e = runCatching { camproSettings(session.transform, FloatArray(0), Fixtures.GAINS) }.exceptionOrNull()
+        val e = runCatching { camproSettings(session.transform, arrayOf(curves[0], FloatArray(0), curves[2]), Fixtures.GAINS) }.exceptionOrNull()
         assertTrue("$e", e is IllegalArgumentException && e.message!!.contains("curve"))
     }
 

@@ -2,6 +2,7 @@ package org.campro.hal
 
 import org.campro.CamProNative
 import org.campro.CamProPipeline
+import org.campro.CamProSession
 import org.campro.Fixtures
 import org.campro.ProtectionState
 import org.junit.Assert.assertEquals
@@ -37,7 +38,8 @@ class HalScenariosTest {
         val boundLsb: Int get() = kotlin.math.ceil(maxOf(acceptLsb, 0.5)).toInt() + 1
     }
 
-    class Scenario(val hal: Behaviour, val outcome: Outcome, val app: App = App()) {
+    /** [params]: the parameter set's JSON (default: the bundled `campro-omega-0.5`). */
+    class Scenario(val hal: Behaviour, val outcome: Outcome, val app: App = App(), val params: String? = null) {
         val name: String get() = hal.name
     }
 
@@ -74,6 +76,8 @@ class HalScenariosTest {
         Scenario(Behaviour("the app holds every frame from 30 to 60 (the stream runs out of buffers)"), Outcome.Protects, App(holdFrom = 30, holdUntil = 60)),
         Scenario(Behaviour("paused at frame 30, resumed at 45"), Outcome.Protects, App(pauseAt = 30, resumeAt = 45)),
         Scenario(Behaviour("paused at frame 30, resumed at 45, settings 2 frames late", latency = 2), Outcome.Protects, App(pauseAt = 30, resumeAt = 45)),
+        Scenario(Behaviour("honest, a parameter set with a curve per channel"), Outcome.Protects, params = PER_CHANNEL),
+        Scenario(Behaviour("a curve per channel, each resampled to 17 points", curvePoints = 17), Outcome.Refuses, params = PER_CHANNEL),
     )
 
     /** A scene of 256 linear sensor colours: a grid over the gamut, greys and skin-like tones. */
@@ -99,8 +103,9 @@ class HalScenariosTest {
         val b = sc.hal
         val app = sc.app
         Fixtures.load()
-        val session = Fixtures.session()
-        val reference = SimulatedHal.reference(Fixtures.params())
+        val json = sc.params ?: Fixtures.params()
+        val session = CamProSession.fromJson(json, 64)
+        val reference = SimulatedHal.reference(json)
         try {
             val queue = 6 + b.resultDelay
             val hal = SimulatedHal(b, if (b.flatScene) flat else scene, listOf(Fixtures.PHONE, tele, relit), Fixtures.GAINS, reference, bufferPool = queue)
@@ -183,8 +188,34 @@ class HalScenariosTest {
         assertTrue(rows.size >= 25)
     }
 
+    @Test
+    fun aSetWithACurvePerChannelSendsThreeCurves() {
+        Fixtures.load()
+        CamProSession.fromJson(PER_CHANNEL, 64).use { s ->
+            s.updateFromTransform(Fixtures.PHONE)
+            val (r, g, b) = s.curvesForRequest()
+            // Red falls, green waves, blue rises: three different curves, each within the budget.
+            assertTrue(r[1] > r[r.size - 1] && b[1] < b[b.size - 1])
+            assertTrue(!r.contentEquals(g) && !g.contentEquals(b))
+            assertTrue(listOf(r, g, b).all { it.size / 2 in 2..64 })
+            assertEquals(s.curvePoints, listOf(r, g, b).maxOf { it.size / 2 })
+        }
+    }
+
     companion object {
         const val FRAMES = 90
+
+        /** A version 2 parameter set: a strong matrix and 64 knots per channel (falling, waving, rising). */
+        val PER_CHANNEL: String by lazy {
+            fun curve(f: (Double) -> Double) =
+                (0 until 64).joinToString(",", "{\"y\":[", "]}") { String.format(java.util.Locale.ROOT, "%.6f", f(it / 63.0)) }
+            val red = curve { 1 - it }
+            val green = curve { 0.5 + 0.45 * kotlin.math.sin(9 * it) }
+            val blue = curve { kotlin.math.sqrt(it) }
+            """{"format":"campro-params","version":2,"name":"per-channel-test",""" +
+                """"ccm":[[0.83,-0.27,-0.22],[-0.01,1.13,0.04],[0.2,-0.5,1.1]],""" +
+                """"tone_curves":{"red":$red,"green":$green,"blue":$blue}}"""
+        }
 
         /** Behaviours the library does not hold yet (docs/android.md, "What the simulated camera shows"). */
         val KNOWN_GAPS: Set<String> = emptySet()

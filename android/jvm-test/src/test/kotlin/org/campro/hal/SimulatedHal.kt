@@ -11,8 +11,11 @@ import org.campro.MeteringReport
  * with its `test-exports` feature; never in an app's library).
  */
 object HalNative {
-    /** What a device applying [transform], [curve] (all channels) and [gains] makes of linear sensor RGB [raw]: 8-bit codes. */
-    @JvmStatic external fun emulate(transform: IntArray, curve: FloatArray, curveCount: Int, gains: FloatArray, raw: FloatArray, out: ByteArray)
+    /**
+     * What a device applying [transform], the curves in [curve] (channel c's `counts[c]`
+     * floats from `c * stride`) and [gains] makes of linear sensor RGB [raw]: 8-bit codes.
+     */
+    @JvmStatic external fun emulate(transform: IntArray, curve: FloatArray, stride: Int, counts: IntArray, gains: FloatArray, raw: FloatArray, out: ByteArray)
 
     /** What the desktop pipeline of [handle]'s parameters makes of the scene the device renders with [deviceTransform] and [gains]. */
     @JvmStatic external fun desktop(handle: Long, deviceTransform: IntArray, gains: FloatArray, raw: FloatArray, out: ByteArray)
@@ -121,7 +124,7 @@ class SimulatedHal(
     private sealed class Req {
         object Auto : Req()
         /** CamPro-style settings: a protected request, or a probe ([probe]) when [probe] is set. */
-        class Protect(val transform: IntArray, val curve: FloatArray, val gains: FloatArray, val probe: Boolean = false) : Req()
+        class Protect(val transform: IntArray, val curves: List<FloatArray>, val gains: FloatArray, val probe: Boolean = false) : Req()
     }
 
     private var repeating: List<Req> = emptyList()
@@ -134,13 +137,13 @@ class SimulatedHal(
 
     override fun meter() { setRepeating(listOf(Req.Auto)) }
 
-    override fun protect(transform: IntArray, curve: FloatArray, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
-        val p = Req.Protect(transform.copyOf(), curve.copyOf(), gains.copyOf())
+    override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
+        val p = Req.Protect(transform.copyOf(), curves.map { it.copyOf() }, gains.copyOf())
         setRepeating(if (interleaveMetering) List<Req>(meteringRun) { Req.Auto } + List(meteringInterval - meteringRun) { p } else listOf(p))
     }
 
     override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) {
-        setRepeating(listOf(Req.Protect(transform.copyOf(), curve.copyOf(), gains.copyOf(), probe = true)))
+        setRepeating(listOf(Req.Protect(transform.copyOf(), List(3) { curve.copyOf() }, gains.copyOf(), probe = true)))
     }
 
     override fun halt() { setRepeating(emptyList()) }
@@ -172,8 +175,13 @@ class SimulatedHal(
         }
     }
 
-    private fun render(transform: IntArray, curve: FloatArray, gains: FloatArray): ByteArray =
-        ByteArray(scene.size).also { HalNative.emulate(transform, curve, curve.size, gains, scene, it) }
+    private fun render(transform: IntArray, curves: List<FloatArray>, gains: FloatArray): ByteArray {
+        val stride = curves.maxOf { it.size }
+        val packed = FloatArray(3 * stride)
+        for ((c, curve) in curves.withIndex()) curve.copyInto(packed, c * stride)
+        val counts = IntArray(3) { curves[it].size }
+        return ByteArray(scene.size).also { HalNative.emulate(transform, packed, stride, counts, gains, scene, it) }
+    }
 
     /** Runs [frames] frames into [p]; returns the frames that reached the app (through [delivered]). */
     fun run(frames: Int, p: CamProPipeline<SimFrame>, onFrame: (Int) -> Unit = {}) {
@@ -208,7 +216,7 @@ class SimulatedHal(
                         autoRun <= 1 + b.awbSettleFrames -> 1 // SEARCHING
                         else -> CamProPipeline.AWB_STATE_CONVERGED
                     }
-                    val pixels = render(device, defaultCurve, autoGains)
+                    val pixels = render(device, List(3) { defaultCurve }, autoGains)
                     if (tagged is Req.Protect) {
                         // A protected (or probe) request whose frame still carries auto settings: its result says so.
                         val report = CaptureReport(1, 1, 2, device.copyOf(), List(3) { defaultCurve.copyOf() }, autoGains.copyOf(), physicalId)
@@ -226,14 +234,14 @@ class SimulatedHal(
                         else -> applied.transform
                     }
                     val c = when {
-                        b.echo -> defaultCurve
-                        b.curvePoints > 0 -> resample(applied.curve, b.curvePoints)
-                        else -> applied.curve
+                        b.echo -> List(3) { defaultCurve }
+                        b.curvePoints > 0 -> applied.curves.map { resample(it, b.curvePoints) }
+                        else -> applied.curves
                     }
                     val pixels = render(t, c, applied.gains)
-                    val reportedCurve = if (b.echo) applied.curve else c
+                    val reportedCurves = if (b.echo) applied.curves else c
                     val reportedTransform = if (b.echo || b.ignoreTransform) applied.transform else t
-                    val report = CaptureReport(0, 0, 0, reportedTransform.copyOf(), List(3) { reportedCurve.copyOf() }, applied.gains.copyOf(), physicalId)
+                    val report = CaptureReport(0, 0, 0, reportedTransform.copyOf(), reportedCurves.map { it.copyOf() }, applied.gains.copyOf(), physicalId)
                     if (tagged is Req.Protect) {
                         deliver(p, tagged, i, ts, report, pixels, expected, before)
                     } else {

@@ -117,13 +117,14 @@ fn shipped_configs_parse() {
         if name.starts_with("finetune") {
             continue; // read for its seed and [detector] only
         }
-        // Only the validated run stops on validation.
+        // Only the validated run stops on validation; the name says a curve per channel.
         assert_eq!(c.validation.every > 0, name.ends_with("validated"), "{name}");
+        assert_eq!(c.camera.per_channel, name.contains("per-channel"), "{name}");
         omegas.push(c.protector.omega);
     }
     omegas.sort_by(f64::total_cmp);
     // (gpu-pack.toml is omega-0.5.toml on the GPU pack's data.)
-    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
+    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
 }
 
 /// The GPU pack's configuration reads only what `docs/scripts/gpu-pack.sh` packs (every

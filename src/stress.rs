@@ -137,7 +137,7 @@ pub fn random_case(seed: u64) -> Case {
     let device = device(&mut r);
     // A third of the sets have a curve per channel (drawn last: the shared sets stay what
     // their seeds always gave).
-    if r.next_u64() % 3 == 0 {
+    if r.next_u64().is_multiple_of(3) {
         let red = params.tone_curves.channel(0).clone();
         params.tone_curves = ToneCurves::per_channel([red, curve(&mut r), curve(&mut r)]);
     }

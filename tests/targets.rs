@@ -165,10 +165,10 @@ fn isp_targets_stay_within_their_stated_bound() {
                                 .unwrap(),
                         )
                     }
-                    "rkaiq-isp20" => Rkaiq::Isp20.hardware_curve(&p.tone_curves.channel(0)),
-                    _ => Rkaiq::Isp3x.hardware_curve(&p.tone_curves.channel(0)),
+                    "rkaiq-isp20" => Rkaiq::Isp20.hardware_curve(p.tone_curves.channel(0)),
+                    _ => Rkaiq::Isp3x.hardware_curve(p.tone_curves.channel(0)),
                 };
-                let bound = isp_bound(&hw, &p.tone_curves.channel(0), &fmt.apply(&m), &m, &device);
+                let bound = isp_bound(&hw, p.tone_curves.channel(0), &fmt.apply(&m), &m, &device);
                 let s = deployment_vs_desktop(&p, &c.feed, c.emulator.as_ref(), &px).unwrap();
                 assert!(s.max_abs <= bound, "{} {} {}: {} > bound {}", t.name(), p.name, c.label, s.max_abs, bound);
             }

@@ -40,6 +40,7 @@ fn to_u8(v: f64) -> u8 {
 /// finite f64) decide the half away from zero. The same byte as [`to_u8`] for every `v`.
 #[inline(always)]
 fn to_u8_fast(v: f64) -> u8 {
+    #[allow(clippy::manual_clamp)] // f64::clamp keeps a NaN; max turns it into -1
     let v = v.max(-1.0).min(256.0);
     // SAFETY: v is finite and in [-1, 256], so its truncation is an i32.
     let t = unsafe { v.to_int_unchecked::<i32>() };

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 /// `campro validate`.
 #[derive(Args)]
 pub struct ValidateArgs {
-    /// Parameter files (JSON, format campro-params v1).
+    /// Parameter files (JSON, format campro-params v1, or v2 with a tone curve per channel).
     #[arg(required = true)]
     pub params: Vec<PathBuf>,
     /// Text (one line per file) or one JSON object per file, one a line.

@@ -181,12 +181,12 @@ fn start_camera(cfg: &Config, init: Option<&Initial>, dev: &candle_core::Device)
     let per_channel = cfg.camera.per_channel;
     let Some(i) = init else { return Ok(Camera::identity(cfg.camera.knots, per_channel, cfg.camera.gamma, dev)?) };
     let knots = i.curves.first().map_or(0, Vec::len);
-    if knots != cfg.camera.knots {
+    let Some(refined) = refine_knots(&i.curves, cfg.camera.knots) else {
         return Err(TrainError::Unsupported(format!(
-            "--init {}: {knots} curve knots, but camera.knots is {}",
+            "--init {}: {knots} curve knots, but camera.knots is {} (a set continues on its own knots or on a grid that holds them: (k - 1)·m + 1)",
             i.origin, cfg.camera.knots
         )));
-    }
+    };
     if i.curves.len() == 3 && !per_channel {
         return Err(TrainError::Unsupported(format!(
             "--init {}: a curve per channel, but camera.per_channel is false",
@@ -201,10 +201,36 @@ fn start_camera(cfg: &Config, init: Option<&Initial>, dev: &candle_core::Device)
     }
     // A shared curve continues as three equal ones where the configuration trains one per
     // channel.
-    let curves = if per_channel && i.curves.len() == 1 { vec![i.curves[0].clone(); 3] } else { i.curves.clone() };
+    let curves = if per_channel && refined.len() == 1 { vec![refined[0].clone(); 3] } else { refined };
     let c = Camera::from_values(i.ccm, &curves, i.gamma, dev)?;
     c.project()?;
     Ok(c)
+}
+
+/// Evenly spaced curves of k knots on a grid of `knots` = (k - 1)·m + 1 knots that holds
+/// every old one (each segment cut into m by linear interpolation): the same functions,
+/// so a set continues exactly on a finer grid (32 knots on 63: the finest that, with the
+/// point a range scale folds in, fits Camera2's 64). `None` for any other count.
+pub fn refine_knots(curves: &[Vec<f64>], knots: usize) -> Option<Vec<Vec<f64>>> {
+    let k = curves.first()?.len();
+    if k < 2 || knots < k || !(knots - 1).is_multiple_of(k - 1) {
+        return None;
+    }
+    let m = (knots - 1) / (k - 1);
+    let refine = |y: &Vec<f64>| -> Vec<f64> {
+        (0..knots)
+            .map(|j| {
+                let (i, r) = (j / m, j % m);
+                if r == 0 {
+                    y[i]
+                } else {
+                    let a = r as f64 / m as f64;
+                    y[i] + a * (y[i + 1] - y[i])
+                }
+            })
+            .collect()
+    };
+    Some(curves.iter().map(refine).collect())
 }
 
 /// The utility player (the person images and the detector the camera must keep working),

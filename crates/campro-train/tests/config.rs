@@ -120,11 +120,12 @@ fn shipped_configs_parse() {
         // Only the validated run stops on validation; the name says a curve per channel.
         assert_eq!(c.validation.every > 0, name.ends_with("validated"), "{name}");
         assert_eq!(c.camera.per_channel, name.contains("per-channel"), "{name}");
+        assert_eq!(c.camera.knots, if name.contains("-63-") { 63 } else { 32 }, "{name}");
         omegas.push(c.protector.omega);
     }
     omegas.sort_by(f64::total_cmp);
     // (gpu-pack.toml is omega-0.5.toml on the GPU pack's data.)
-    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
+    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 5.0]);
 }
 
 /// The GPU pack's configuration reads only what `docs/scripts/gpu-pack.sh` packs (every

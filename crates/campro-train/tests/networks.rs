@@ -109,6 +109,26 @@ fn camera_gradients_by_hand() {
 }
 
 #[test]
+fn a_set_continues_exactly_on_a_grid_that_holds_its_knots() {
+    use campro_train::train::refine_knots;
+    // By hand: 3 knots on 5.
+    assert_eq!(refine_knots(&[vec![0.0, 1.0, 0.0]], 5), Some(vec![vec![0.0, 0.5, 1.0, 0.5, 0.0]]));
+    // 32 knots on 63 (and on themselves): the same function at any input; other counts refused.
+    let y: Vec<f64> = (0..32).map(|i| ((i * 7) % 32) as f64 / 31.0).collect();
+    let old = campro::ToneCurve::uniform(y.clone()).unwrap();
+    for knots in [32, 63, 94] {
+        let fine = refine_knots(&[y.clone(), y.clone(), y.clone()], knots).unwrap();
+        assert_eq!(fine.len(), 3);
+        let new = campro::ToneCurve::uniform(fine[1].clone()).unwrap();
+        assert_eq!(new.len(), knots);
+        assert!(new.max_abs_diff(&old) < 1e-15, "{knots}: {}", new.max_abs_diff(&old));
+    }
+    for knots in [2, 31, 64, 65] {
+        assert_eq!(refine_knots(&[y.clone()], knots), None, "{knots}");
+    }
+}
+
+#[test]
 fn a_curve_per_channel_takes_only_its_channels_gradient() {
     // Three 5-knot curves, identity CCM; linear (0.3, 0.6, 0.9): red in segment 1 at
     // fraction 0.2, green in segment 2 at 0.4, blue in segment 3 at 0.6. A loss of

@@ -275,8 +275,8 @@ fn the_utility_player_fits_its_images_beside_the_privacy_player() {
     assert!(out.ccm.iter().flatten().zip(ccm.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-6), "{:?}", out.ccm);
     assert!(out.curves[0].iter().zip(&curve).all(|(a, b)| (a - b).abs() < 1e-6), "{:?}", out.curves);
     assert_eq!(out.provenance["init"], "start.json");
-    let err = campro_train::train::run(&c, &init(vec![vec![0.0, 1.0]]), |_| {}).err().unwrap().to_string();
-    assert!(err.contains("2 curve knots") && err.contains("camera.knots is 32"), "{err}");
+    let err = campro_train::train::run(&c, &init(vec![vec![0.0, 1.0, 0.5]]), |_| {}).err().unwrap().to_string();
+    assert!(err.contains("3 curve knots") && err.contains("camera.knots is 32"), "{err}");
     // A curve per channel: a shared start continues as three equal curves, which learn
     // apart; three curves do not start a shared camera.
     c.camera.per_channel = true;

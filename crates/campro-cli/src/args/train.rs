@@ -31,8 +31,9 @@ pub struct TrainArgs {
     /// The learnt parameter set (JSON, as `convert`, `simulate` and `eval` read it).
     #[arg(short, long, default_value = "campro-trained.json")]
     pub output: PathBuf,
-    /// Start the camera from this parameter set (evenly spaced knots, camera.knots of
-    /// them, degamma camera.gamma) instead of the identity.
+    /// Start the camera from this parameter set (evenly spaced knots: camera.knots of
+    /// them, or k where camera.knots = (k - 1)·m + 1, the same curve on a finer grid;
+    /// degamma camera.gamma) instead of the identity.
     #[arg(long, conflicts_with = "resume")]
     pub init: Option<PathBuf>,
     /// Where the run computes: cpu, cuda or cuda:N (a build with --features cuda:

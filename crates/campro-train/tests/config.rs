@@ -125,7 +125,10 @@ fn shipped_configs_parse() {
     }
     omegas.sort_by(f64::total_cmp);
     // (gpu-pack.toml is omega-0.5.toml on the GPU pack's data.)
-    assert_eq!(omegas, [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 5.0]);
+    assert_eq!(
+        omegas,
+        [0.0, 0.2, 0.2, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 5.0]
+    );
 }
 
 /// The GPU pack's configuration reads only what `docs/scripts/gpu-pack.sh` packs (every

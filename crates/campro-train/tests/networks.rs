@@ -124,7 +124,7 @@ fn a_set_continues_exactly_on_a_grid_that_holds_its_knots() {
         assert!(new.max_abs_diff(&old) < 1e-15, "{knots}: {}", new.max_abs_diff(&old));
     }
     for knots in [2, 31, 64, 65] {
-        assert_eq!(refine_knots(&[y.clone()], knots), None, "{knots}");
+        assert_eq!(refine_knots(std::slice::from_ref(&y), knots), None, "{knots}");
     }
 }
 

@@ -51,7 +51,7 @@ class Case(val name: String) {
     var dng: Triple<Int, IntArray, Pair<Int, IntArray>>? = null
     var ct = 0.0
     var transform = IntArray(18)
-    var curve = FloatArray(0)
+    val curves = Array(3) { FloatArray(0) }
     var report = DoubleArray(0)
 }
 
@@ -69,7 +69,7 @@ fun readCases(path: String): List<Case> {
             "device" -> c!!.device = ints(1, 18)
             "dng" -> { c!!.dng = Triple(t[1].toInt(), ints(2, 18), Pair(t[20].toInt(), ints(21, 18))); c.ct = t[39].toDouble() }
             "transform" -> c!!.transform = ints(1, 18)
-            "curve" -> c!!.curve = FloatArray(t.size - 1) { java.lang.Float.intBitsToFloat(t[1 + it].toInt()) }
+            "curve" -> c!!.curves[t[1].toInt()] = FloatArray(t.size - 2) { java.lang.Float.intBitsToFloat(t[2 + it].toInt()) }
             "report" -> c!!.report = DoubleArray(t.size - 1) { java.lang.Double.longBitsToDouble(t[1 + it].toLong()) }
             else -> error("bad cases line: $line")
         }
@@ -93,9 +93,11 @@ fun valuesEqualTheCore(cases: List<Case>) {
             CamProSession.fromBytes(File(c.params).readBytes(), c.maxPoints, c.maxDen, 0.0).use { s ->
                 expect(update(s, c)) { "first update must recompute" }
                 expect(s.transform.contentEquals(c.transform)) { "transform ${s.transform.toList()} != ${c.transform.toList()}" }
-                val sent = s.curveForRequest()
-                expect(sent.size == c.curve.size) { "curve size ${sent.size} != ${c.curve.size}" }
-                for (i in sent.indices) expect(sent[i].toRawBits() == c.curve[i].toRawBits()) { "curve[$i] ${sent[i]} != ${c.curve[i]}" }
+                for ((ch, sent) in s.curvesForRequest().withIndex()) {
+                    val want = c.curves[ch]
+                    expect(sent.size == want.size) { "curve $ch size ${sent.size} != ${want.size}" }
+                    for (i in sent.indices) expect(sent[i].toRawBits() == want[i].toRawBits()) { "curve $ch [$i] ${sent[i]} != ${want[i]}" }
+                }
                 for (k in 1 until CamProNative.REPORT_LEN) {
                     expect(s.report[k].toRawBits() == c.report[k].toRawBits()) { "report[$k] ${s.report[k]} != ${c.report[k]}" }
                 }
@@ -125,13 +127,13 @@ fun badInput(paramsJson: String) {
         throws<IllegalArgumentException>("maxDenominator") { CamProSession.fromJson(paramsJson, maxDenominator = -5) }
     }
     CamProSession.fromJson(paramsJson).use { s ->
-        val t = IntArray(18); val c = FloatArray(128); val r = DoubleArray(8)
+        val t = IntArray(18); val c = FloatArray(3 * 128); val r = DoubleArray(CamProNative.REPORT_LEN)
         val h = handleOf(s)
         check("wrong array sizes and nulls name the array") {
             throws<IllegalArgumentException>("deviceTransform: must have 18 elements, got 9") { s.updateFromTransform(IntArray(9)) }
             throws<IllegalArgumentException>("outTransform: must have exactly 18 elements, got 17") { CamProNative.updateFromTransform(h, ID, IntArray(17), c, r) }
-            throws<IllegalArgumentException>("outCurve: must have at least 128 elements, got 10") { CamProNative.updateFromTransform(h, ID, t, FloatArray(10), r) }
-            throws<IllegalArgumentException>("outReport: must have at least 8 elements, got 2") { CamProNative.updateFromTransform(h, ID, t, c, DoubleArray(2)) }
+            throws<IllegalArgumentException>("outCurve: must have at least 384 elements, got 10") { CamProNative.updateFromTransform(h, ID, t, FloatArray(10), r) }
+            throws<IllegalArgumentException>("outReport: must have at least 11 elements, got 2") { CamProNative.updateFromTransform(h, ID, t, c, DoubleArray(2)) }
             throws<IllegalArgumentException>("deviceTransform: must not be null") { CamProNative.updateFromTransform(h, null, t, c, r) }
             throws<IllegalArgumentException>("outCurve: must not be null") { CamProNative.updateFromTransform(h, ID, t, null, r) }
         }
@@ -184,11 +186,12 @@ fun readbackAndController(paramsJson: String) {
         CamProSession.fromJson(paramsJson).use { s ->
             s.updateFromTransform(PHONE)
             val ctl = CamProController(s)
-            expect(ctl.onProtectedResult(s.transform, s.curveForRequest()) == 0.0) { "exact readback" }
+            expect(ctl.onProtectedResult(s.transform, s.curvesForRequest().toList()) == 0.0) { "exact readback" }
             val off = s.transform.copyOf().also { it[0] = it[0] + 1 }
-            val b = ctl.onProtectedResult(off, s.curveForRequest())
+            val b = ctl.onProtectedResult(off, s.curvesForRequest().toList())
             expect(b > 0.0 && ctl.worstReadbackBound == b) { "deviation $b" }
-            throws<IllegalArgumentException>("reportedCurve: count 99") { ctl.onProtectedResult(s.transform, FloatArray(4), 99) }
+            throws<IllegalArgumentException>("reportedCurves") { ctl.onProtectedResult(s.transform, listOf(FloatArray(4))) }
+            throws<IllegalArgumentException>("reported.tonemapCurve.red") { ctl.onProtectedResult(s.transform, List(3) { FloatArray(3) }) }
         }
     }
     check("controller: rebuild on first result, on a moved transform or moved gains, not otherwise") {
@@ -223,7 +226,7 @@ fun readbackAndController(paramsJson: String) {
             s.updateFromTransform(PHONE)
             s.setMaxCurvePoints(8)
             expect(s.updateFromTransform(PHONE)) { "recompute after a budget change" }
-            expect(s.curvePoints <= 8 && s.curve.size == 16) { "points ${s.curvePoints}" }
+            expect(s.curvePoints <= 8 && s.curve.size == 3 * 16) { "points ${s.curvePoints}" }
             throws<IllegalArgumentException>("maxCurvePoints") { s.setMaxCurvePoints(1) }
         }
     }
@@ -308,8 +311,7 @@ fun soak(paramsJson: String, updates: Int) {
 
 /** A result that honours the request: modes as asked, the sent transform and curve on all channels. */
 fun honoured(s: CamProSession): CaptureReport {
-    val c = s.curveForRequest()
-    return CaptureReport(0, 0, 0, s.transform.copyOf(), listOf(c, c.copyOf(), c.copyOf()))
+    return CaptureReport(0, 0, 0, s.transform.copyOf(), s.curvesForRequest().toList())
 }
 
 fun CaptureReport.with(
@@ -331,7 +333,7 @@ fun failClosed(paramsJson: String) {
             expect(g.onProtectedResult(honoured(s)) == ProtectionState.Protected && g.framesAllowed) { "${g.state}" }
             // A device that reports the curve with more points (here 2n - 1: every sent point and
             // each segment's midpoint) applies the same curve: still Protected.
-            val c = s.curveForRequest()
+            val c = s.curvesForRequest()[0]
             val dense = FloatArray(2 * (2 * (c.size / 2) - 1))
             var k = 0
             for (i in 0 until c.size / 2) {
@@ -352,8 +354,8 @@ fun failClosed(paramsJson: String) {
             val line = floatArrayOf(0f, 0f, 1f, 1f)
             expect(violated(g.onProtectedResult(ok.with(curves = listOf(line, line, line))), "curve differs")) { "${g.state}" }
             // One channel only ignored is enough.
-            val c = s.curveForRequest()
-            expect(violated(g.onProtectedResult(ok.with(curves = listOf(c, c, line))), "channel B")) { "${g.state}" }
+            val (r, gr, _) = s.curvesForRequest()
+            expect(violated(g.onProtectedResult(ok.with(curves = listOf(r, gr, line))), "channel B")) { "${g.state}" }
             expect(violated(g.onProtectedResult(ok.with(awbMode = 1)), "auto white balance is on")) { "${g.state}" }
             expect(violated(g.onProtectedResult(ok.with(colorCorrectionMode = 1)), "instead of TRANSFORM_MATRIX")) { "${g.state}" }
             expect(violated(g.onProtectedResult(ok.with(tonemapMode = 2)), "instead of CONTRAST_CURVE")) { "${g.state}" }

@@ -74,11 +74,17 @@ fn write_case(out: &mut String, name: &str, params: &Path, opts: &Options, input
         v.scale,
         r.curve_points as f64,
         r.curve_simplified as u8 as f64,
+        (v.tonemap_curve.red.len() / 2) as f64,
+        (v.tonemap_curve.green.len() / 2) as f64,
+        (v.tonemap_curve.blue.len() / 2) as f64,
     ];
     writeln!(out, "case {name}\nparams {}\nopts {} {den}\n{input}", params.display(), opts.max_curve_points).unwrap();
     writeln!(out, "transform {}", ints(&v.color_correction_transform)).unwrap();
-    let curve: Vec<i32> = v.tonemap_curve.red.iter().map(|f| f.to_bits() as i32).collect();
-    writeln!(out, "curve {}", ints(&curve)).unwrap();
+    let t = &v.tonemap_curve;
+    for (c, pairs) in [&t.red, &t.green, &t.blue].into_iter().enumerate() {
+        let bits: Vec<i32> = pairs.iter().map(|f| f.to_bits() as i32).collect();
+        writeln!(out, "curve {c} {}", ints(&bits)).unwrap();
+    }
     let rep: Vec<String> = report.iter().map(|d| (d.to_bits() as i64).to_string()).collect();
     writeln!(out, "report {}", rep.join(" ")).unwrap();
 }
@@ -108,6 +114,17 @@ fn parameter_files(root: &Path, tmp: &Path) -> Vec<(String, PathBuf)> {
             files.push((name, json));
         }
     }
+    // A version 2 set: a curve per channel (red inverted, green a wave, blue a root).
+    let mut three = Params::from_file(&root.join("params/campro-omega-0.5.json")).unwrap();
+    let (f, g, h) = (|t: f64| 1.0 - t, |t: f64| 0.5 + 0.45 * (9.0 * t).sin(), |t: f64| t.sqrt());
+    three.tone_curves = campro::ToneCurves::per_channel([
+        campro::ToneCurve::from_fn(32, f),
+        campro::ToneCurve::from_fn(32, g),
+        campro::ToneCurve::from_fn(32, h),
+    ]);
+    let json = tmp.join("per-channel.json");
+    std::fs::write(&json, three.to_json()).unwrap();
+    files.push(("per-channel".into(), json));
     files
 }
 

@@ -44,18 +44,18 @@ impl Camera2Values {
         let ints = self.color_correction_transform.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(", ");
         let floats = |v: &[f32]| v.iter().map(|f| format!("{f:?}f")).collect::<Vec<_>>().join(", ");
         let t = &self.tonemap_curve;
-        let curves = if t.red == t.green && t.green == t.blue {
-            format!("val campro = floatArrayOf({})\n", floats(&t.red))
+        // One array for a shared curve, as before; three for a curve per channel.
+        let (curves, curve_args) = if t.red == t.green && t.green == t.blue {
+            (format!("val campro = floatArrayOf({})\n", floats(&t.red)), "campro, campro, campro")
         } else {
-            format!(
+            let arrays = format!(
                 "val red = floatArrayOf({})\nval green = floatArrayOf({})\nval blue = floatArrayOf({})\n",
                 floats(&t.red),
                 floats(&t.green),
                 floats(&t.blue)
-            )
+            );
+            (arrays, "red, green, blue")
         };
-        let curve_args =
-            if t.red == t.green && t.green == t.blue { "campro, campro, campro" } else { "red, green, blue" };
         let gains = match gains {
             Some(g) => format!(
                 "// The device's white balance (R, G_even, G_odd, B), metered with the device transform.\n\

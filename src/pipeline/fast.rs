@@ -124,8 +124,6 @@ pub struct Exact8<'a> {
     cells: [Arc<[u16; CELLS]>; 3],
     splits: Vec<Split>,
     ambiguous: usize,
-    /// Distinct cell tables: 1 (a shared curve) or 3.
-    tables: usize,
     elision: Elision,
     #[cfg(target_arch = "x86_64")]
     simd: Option<avx512::Kernel>,
@@ -236,7 +234,6 @@ impl<'a> Exact8<'a> {
             }
             ToneCurves::PerChannel(t) => [table(&t[0]), table(&t[1]), table(&t[2])],
         };
-        let tables = if params.tone_curves.shared().is_some() { 1 } else { 3 };
         let mut e = Self {
             #[cfg(target_arch = "x86_64")]
             simd: (avx512::supported() || avx2::available()).then(|| avx512::Kernel::new(params, &d)).flatten(),
@@ -245,7 +242,6 @@ impl<'a> Exact8<'a> {
             cells,
             splits,
             ambiguous,
-            tables,
             elision: Elision::of(params),
             engine: Engine::Scalar,
         };
@@ -293,13 +289,22 @@ impl<'a> Exact8<'a> {
     /// (a cell with more than one rounding boundary, or a knot, inside), over the distinct
     /// tables (one for a shared curve, three for a curve per channel).
     pub fn fallback_fraction(&self) -> f64 {
-        self.ambiguous as f64 / (self.tables * (FINE + 1)) as f64
+        self.ambiguous as f64 / (self.tables() * (FINE + 1)) as f64
+    }
+
+    /// Distinct cell tables: 1 (a shared curve) or 3.
+    fn tables(&self) -> usize {
+        if self.reference.params().tone_curves.shared().is_some() {
+            1
+        } else {
+            3
+        }
     }
 
     /// Fraction of the output tables' cells that hold one rounding boundary: only their
     /// pixels within the error bound of it take the reference.
     pub fn split_fraction(&self) -> f64 {
-        self.splits.len() as f64 / (self.tables * (FINE + 1)) as f64
+        self.splits.len() as f64 / (self.tables() * (FINE + 1)) as f64
     }
 
     /// Stages this parameter set lets the path skip.

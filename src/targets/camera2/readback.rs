@@ -30,19 +30,13 @@ pub fn readback(
     reported_cst: &[i32; 18],
     reported_curves: [&[f32]; 3],
 ) -> Result<Readback, ValidationError> {
-    let mut worst: Option<Readback> = None;
-    for c in 0..3 {
+    let mut worst = readback_channel(0, requested_cst, requested_curves[0], reported_cst, reported_curves[0])?;
+    for c in 1..3 {
         let r = readback_channel(c, requested_cst, requested_curves[c], reported_cst, reported_curves[c])?;
-        worst = Some(match worst {
-            None => r,
-            Some(w) => Readback {
-                matrix_max_abs: w.matrix_max_abs,
-                curve_max_abs: w.curve_max_abs.max(r.curve_max_abs),
-                bound: w.bound.max(r.bound),
-            },
-        });
+        worst.curve_max_abs = worst.curve_max_abs.max(r.curve_max_abs);
+        worst.bound = worst.bound.max(r.bound);
     }
-    Ok(worst.expect("three channels"))
+    Ok(worst)
 }
 
 /// [`readback`] of one output channel `channel` (0 red, 1 green, 2 blue): its requested
@@ -67,17 +61,13 @@ pub fn readback_channel(
     let want_c = curve_from_pairs_named(requested_curve, &field).map_err(requested)?;
     let got_c = curve_from_pairs_named(reported_curve, &field).map_err(reported)?;
     let curve_max_abs = got_c.max_abs_diff(&want_c);
-    // Only row `channel` of the matrix reaches this channel's curve.
-    let mut rows = [[0.0; 3]; 3];
-    rows[channel] = [0, 1, 2].map(|j| got[channel][j] - want[channel][j]);
-    let mut e = [0.0; 3];
-    let mut l = [0.0; 3];
-    e[channel] = curve_max_abs;
-    l[channel] = got_c.max_slope();
+    // Only this channel's curve is compared: the other channels' terms are 0.
+    let (mut e, mut l) = ([0.0; 3], [0.0; 3]);
+    (e[channel], l[channel]) = (curve_max_abs, got_c.max_slope());
     Ok(Readback {
         matrix_max_abs: ccm::max_abs_diff(&got, &want),
         curve_max_abs,
-        bound: error_bound(e, l, &rows, &[[0.0; 3]; 3], [1.0; 3]),
+        bound: error_bound(e, l, &got, &want, [1.0; 3]),
     })
 }
 

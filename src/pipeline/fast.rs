@@ -65,6 +65,44 @@ struct Split {
     above: u8,
 }
 
+/// `a + b + c` lane by lane, summed in that order and clamped to [0, 1], as four lanes of
+/// one register: SSE on x86-64 (`maxps`/`minps`), elsewhere `f32::max`/`min`, which
+/// AArch64 lowers to single `fmaxnm`/`fminnm` (NEON on four lanes). Written out for x86-64
+/// because LLVM scalarised the portable form there and turned its clamps into a branch a
+/// lane (9.3 against 14 ms a 1080p frame). No NaN can occur (the terms are finite); -0.0
+/// may become +0.0 or stay, which indexes the same cell and compares equal.
+#[inline(always)]
+fn clamped_sum(a: &[f32; 4], b: &[f32; 4], c: &[f32; 4]) -> [f32; 4] {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: SSE is part of the x86-64 baseline; the loads and the store are of 4 f32s.
+    unsafe {
+        use std::arch::x86_64::*;
+        let x = _mm_add_ps(_mm_add_ps(_mm_loadu_ps(a.as_ptr()), _mm_loadu_ps(b.as_ptr())), _mm_loadu_ps(c.as_ptr()));
+        let x = _mm_min_ps(_mm_max_ps(x, _mm_setzero_ps()), _mm_set1_ps(1.0));
+        let mut t = [0f32; 4];
+        _mm_storeu_ps(t.as_mut_ptr(), x);
+        t
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        clamped_sum_portable(a, b, c)
+    }
+}
+
+/// [`clamped_sum`] in portable Rust (the path of every CPU but x86-64; tested against the
+/// SSE one here).
+#[inline(always)]
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+// max then min (AArch64's fmaxnm and fminnm), not `clamp`'s compares and selects.
+#[allow(clippy::manual_clamp)]
+fn clamped_sum_portable(a: &[f32; 4], b: &[f32; 4], c: &[f32; 4]) -> [f32; 4] {
+    let mut t = [0f32; 4];
+    for k in 0..4 {
+        t[k] = (a[k] + b[k] + c[k]).max(0.0).min(1.0);
+    }
+    t
+}
+
 /// Round-half-up to an output code, as [`Prepared::run`] does.
 #[inline]
 fn quantize(v: f64, max: f64) -> u16 {
@@ -327,15 +365,7 @@ impl<'a> Exact8<'a> {
     fn lookup(&self, rgb: [u8; 3]) -> ([u16; 3], [f32; 4]) {
         let terms = &*self.terms;
         let (a, b, c) = (&terms[rgb[0] as usize], &terms[256 + rgb[1] as usize], &terms[512 + rgb[2] as usize]);
-        let mut t = [0f32; 4];
-        for k in 0..4 {
-            // Compares, not f32::max/min: no NaN can occur (the terms are finite), and these
-            // lower to plain maxps/minps without the NaN fix-ups. (-0.0 may stay -0.0: it
-            // indexes cell 0 and compares equal to 0.0, as +0.0 does.)
-            let x = a[k] + b[k] + c[k];
-            let x = if x < 0.0 { 0.0 } else { x };
-            t[k] = if x > 1.0 { 1.0 } else { x };
-        }
+        let t = clamped_sum(a, b, c);
         let cell = |c: usize| {
             // SAFETY: t is in [0, 1] (clamped above), so t · FINE is exact (a power of two)
             // and in [0, 65536], finite and within i32 (a signed conversion is one
@@ -752,4 +782,28 @@ fn constant_code(curve: &ToneCurve, lo: f64, hi: f64, knot: &mut usize) -> Optio
     }
     let (qa, qb) = (quantize(ymin, 255.0), quantize(ymax, 255.0));
     (qa == qb).then_some(qa)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The x86-64 form of the clamped sum equals the portable one (what every other CPU
+    /// runs) on sums below, at and above both ends, signed zeros and tiny values; values
+    /// compare equal (a -0.0 may come out as either zero: the same cell).
+    #[test]
+    fn clamped_sum_is_the_portable_one() {
+        let values = [-3.5f32, -1.0, -1e-30, -0.0, 0.0, 1e-30, 0.25, 0.5 - f32::EPSILON, 1.0, 1.0 + f32::EPSILON, 2.75];
+        for &x in &values {
+            for &y in &values {
+                let (a, b, c) = ([x, y, x, 0.0], [y, 0.5, -0.5, 0.0], [0.125, x, y, 0.0]);
+                let (fast, portable) = (clamped_sum(&a, &b, &c), clamped_sum_portable(&a, &b, &c));
+                for k in 0..4 {
+                    let want = (a[k] + b[k] + c[k]).clamp(0.0, 1.0);
+                    assert_eq!(fast[k], want, "lane {k} of {a:?} + {b:?} + {c:?}");
+                    assert_eq!(portable[k], want, "lane {k} of {a:?} + {b:?} + {c:?}");
+                }
+            }
+        }
+    }
 }

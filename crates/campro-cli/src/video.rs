@@ -26,6 +26,29 @@ use std::sync::mpsc;
 
 /// Frames in flight between the decoder, the camera and the encoder (at least).
 const IN_FLIGHT: usize = 4;
+
+/// Frames in flight around a camera stage that takes `batch` at once.
+fn in_flight(batch: usize) -> usize {
+    IN_FLIGHT.max(batch + 2)
+}
+
+/// What a video holds from the process's budget, bytes, with `batch` frames of
+/// `frame_bytes` enhanced at once: the frames in flight (the pool, the outputs, 16-bit
+/// scratch), the decoder's pump, and each enhanced frame's own `work` (the network and the
+/// face guard's pyramid: `Capture::work`). Saturating.
+fn held_bytes(frame_bytes: u64, work: u64, sixteen: bool, batch: usize) -> u64 {
+    frame_bytes
+        .saturating_mul((in_flight(batch) + batch) as u64 + if sixteen { 2 } else { 0 })
+        .saturating_add((PUMP_CHUNKS * PUMP_CHUNK) as u64)
+        .saturating_add(work.saturating_mul(batch as u64))
+}
+
+/// Frames enhanced at once: as many as there are `threads` (at least one) whose memory,
+/// `held(frames)` bytes, fits in `total`; one when none does (the caller's lease then
+/// refuses the video by its size).
+fn frames_at_once(threads: usize, total: u64, held: impl Fn(usize) -> u64) -> usize {
+    (1..=threads.max(1)).rev().find(|&b| held(b) <= total).unwrap_or(1)
+}
 /// The decoder's frames are read off its stdout as they come, whatever else waits, in
 /// chunks of this many bytes, at most [`PUMP_CHUNKS`] of them ahead of the frame loop.
 const PUMP_CHUNK: usize = 1 << 20;
@@ -791,20 +814,26 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
     let stall = source.stall();
     let Decoding { child: mut decode, clock: clock_rx, stderr: dec_err, frames: mut from, pumping, tb, width, height } =
         start_decoding(source, sixteen)?;
-    // Frames the camera stage takes at once, and the frames in flight around it.
-    let batch_max = if job.capture.enhancer.is_some() && !sixteen { rayon::current_num_threads().max(1) } else { 1 };
-    let in_flight = IN_FLIGHT.max(batch_max + 2);
     let bytes_per = if sixteen { 6 } else { 3 };
     let frame_bytes = bytes_per * width as usize * height as usize;
-    // The frames in flight (the pool, the output frame, 16-bit scratch) come from the budget.
-    let held = (frame_bytes as u64)
-        .saturating_mul((in_flight + batch_max) as u64 + if sixteen { 2 } else { 0 })
-        .saturating_add((PUMP_CHUNKS * PUMP_CHUNK) as u64);
+    let work = job.capture.work(width, height);
+    let held = |batch: usize| held_bytes(frame_bytes as u64, work, sixteen, batch);
     let budget = campro_eval::image_file::Budget::global();
+    // The enhancer runs a frame a core where the budget holds that many (720p and 1080p on
+    // two cores; 4K one at a time, its pyramid and planes spread over the cores instead),
+    // the camera alone one frame on every core.
+    let batch_max = if job.capture.enhancer.is_some() && !sixteen {
+        frames_at_once(rayon::current_num_threads(), budget.total(), held)
+    } else {
+        1
+    };
+    let in_flight = in_flight(batch_max);
+    let held = held(batch_max);
     let Some(_lease) = budget.take(held) else {
         bail!(
-            "the video is {width} x {height} pixels; its {} frames in flight need {} MiB, over the {} MiB limit",
+            "the video is {width} x {height} pixels; its {} frames in flight{} need {} MiB, over the {} MiB limit",
             in_flight + batch_max,
+            if work > 0 { " and the enhancer's work" } else { "" },
             held >> 20,
             budget.total() >> 20
         );
@@ -1123,6 +1152,22 @@ fn first_line(stderr: &[u8]) -> String {
 
 #[cfg(test)]
 mod tests {
+
+    /// 4K is enhanced a frame at a time and 1080p two at once on two cores, under the
+    /// 768 MiB budget (hand-derived: a 4K frame 24,883,200 bytes, its work at auto scale
+    /// 170 · 960 · 544 + 30 · 3840 · 2160 = 337,612,800; two at once would hold 891,633,664).
+    #[test]
+    fn frames_enhanced_at_once_fit_the_budget() {
+        let budget = 768u64 << 20;
+        let k4 = |b| super::held_bytes(3840 * 2160 * 3, 170 * 960 * 544 + 30 * 3840 * 2160, false, b);
+        assert_eq!(k4(2), 891_633_664);
+        assert_eq!(super::frames_at_once(2, budget, k4), 1);
+        let hd = |b| super::held_bytes(1920 * 1080 * 3, 170 * 960 * 544 + 30 * 1920 * 1080, false, b);
+        assert_eq!(super::frames_at_once(2, budget, hd), 2);
+        assert_eq!(super::frames_at_once(0, budget, hd), 1);
+        // None fits: one, which the lease then refuses by size.
+        assert_eq!(super::frames_at_once(4, 1 << 20, hd), 1);
+    }
 
     #[test]
     fn network_inputs_by_scheme_and_the_protocols_ffmpeg_lists() {

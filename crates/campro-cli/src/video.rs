@@ -811,8 +811,7 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         warn("--codec rawvideo writes 16-bit frames as rgb48le");
     }
     let started = std::time::Instant::now();
-    let stall = source.stall();
-    let Decoding { child: mut decode, clock: clock_rx, stderr: dec_err, frames: mut from, pumping, tb, width, height } =
+    let Decoding { child: mut decode, clock: clock_rx, stderr: dec_err, frames: from, pumping, tb, width, height } =
         start_decoding(source, sixteen)?;
     let bytes_per = if sixteen { 6 } else { 3 };
     let frame_bytes = bytes_per * width as usize * height as usize;
@@ -838,7 +837,7 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
             budget.total() >> 20
         );
     };
-    let Encoder { child: encode, mut to, stderr: enc_err, tmp, ext } =
+    let Encoder { child: encode, to, stderr: enc_err, tmp, ext } =
         start_encoder(job, source, sink, (width, height), sixteen, raw_out, warn)?;
     let bar = match probe.as_ref().and_then(|p| p.frames) {
         Some(n) => indicatif::ProgressBar::new(job.max_frames.map_or(n, |m| m.min(n))),
@@ -856,147 +855,9 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         Source::File(p) => p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
         other => other.shown(),
     });
-    // Three stages overlap: a reader thread fills frames from the decoder, this thread runs
-    // the camera on every core, a writer thread feeds the encoder. Frames circulate through
-    // a fixed pool of IN_FLIGHT buffers, so memory stays bounded whatever the length.
-    let mut frames = 0u64;
-    let mut busy = std::time::Duration::ZERO;
-    let (mut first_pts, mut last_pts) = (None, None);
-    let (free_tx, free_rx) = mpsc::sync_channel::<Vec<u8>>(in_flight);
-    let (full_tx, full_rx) = mpsc::sync_channel::<Frame>(in_flight);
-    let (done_tx, done_rx) = mpsc::sync_channel::<Frame>(in_flight);
-    for _ in 0..in_flight {
-        free_tx.send(vec![0u8; frame_bytes]).expect("room for the pool");
-    }
-    let header = ivf_header((width, height), sixteen, tb)?;
-    let result = std::thread::scope(|scope| {
-        let reader = scope.spawn(move || -> Result<()> {
-            while let Ok(mut data) = free_rx.recv() {
-                if !read_frame(&mut from, &mut data)? {
-                    return Ok(());
-                }
-                let pts = loop {
-                    match clock_rx.recv() {
-                        Ok(Clock::Pts(p)) => break p,
-                        Ok(Clock::Header { .. }) => {}
-                        Err(_) => bail!("the decoder gave a frame without its timestamp"),
-                    }
-                };
-                if full_tx.send(Frame { data, pts }).is_err() {
-                    return Ok(());
-                }
-            }
-            Ok(())
-        });
-        let writer = scope.spawn(move || -> Result<()> {
-            let stopped = |e: std::io::Error| anyhow!("the encoder stopped: {e}");
-            if !raw_out {
-                to.write_all(&header).map_err(stopped)?;
-            }
-            for f in done_rx {
-                if !raw_out {
-                    to.write_all(&ivf_frame_header(f.data.len(), f.pts)?).map_err(stopped)?;
-                }
-                to.write_all(&f.data).map_err(stopped)?;
-                // After the last frame the reader is gone and takes no buffer back; the
-                // frames still queued must be written all the same.
-                let _ = free_tx.send(f.data);
-            }
-            to.flush().map_err(stopped)?;
-            Ok(())
-        });
-        // The enhancer runs several frames at once, one core each (tract spreads one frame
-        // over cores only partly); the camera alone is one frame on every core.
-        let mut outs: Vec<Vec<u8>> = (0..batch_max).map(|_| vec![0u8; frame_bytes]).collect();
-        let (mut s16, mut d16) =
-            if sixteen { (vec![0u16; frame_bytes / 2], vec![0u16; frame_bytes / 2]) } else { (Vec::new(), Vec::new()) };
-        let mut failure = None;
-        'frames: loop {
-            let first = match stall {
-                Some(limit) => match full_rx.recv_timeout(limit) {
-                    Ok(f) => f,
-                    Err(mpsc::RecvTimeoutError::Timeout) => {
-                        failure = Some(anyhow!(
-                            "{} gave no frame for {} s after frame {frames} (--stall)",
-                            source.shown(),
-                            limit.as_secs()
-                        ));
-                        break;
-                    }
-                    Err(mpsc::RecvTimeoutError::Disconnected) => break,
-                },
-                None => match full_rx.recv() {
-                    Ok(f) => f,
-                    Err(_) => break,
-                },
-            };
-            let mut batch = vec![first];
-            while batch.len() < batch_max {
-                match full_rx.try_recv() {
-                    Ok(f) => batch.push(f),
-                    Err(_) => break,
-                }
-            }
-            if let Some(m) = job.max_frames {
-                batch.truncate(m.saturating_sub(frames) as usize);
-            }
-            if batch.is_empty() {
-                break;
-            }
-            let began = std::time::Instant::now();
-            let ran = if sixteen {
-                let (src, out) = (&batch[0], &mut outs[0]);
-                for (v, b) in s16.iter_mut().zip(src.data.chunks_exact(2)) {
-                    *v = u16::from_le_bytes([b[0], b[1]]);
-                }
-                job.capture.run16(&s16, &mut d16, width).map(|_| {
-                    for (b, v) in out.chunks_exact_mut(2).zip(&d16) {
-                        b.copy_from_slice(&v.to_le_bytes());
-                    }
-                })
-            } else if batch.len() == 1 {
-                // One frame: the enhancer spreads it over the pool's cores as it can.
-                let threads = rayon::current_num_threads();
-                let (src, out) = (&batch[0], &mut outs[0]);
-                job.capture.run_on(&src.data, out, width, height, threads).map(drop)
-            } else {
-                use rayon::prelude::*;
-                batch
-                    .par_iter()
-                    .zip(outs.par_iter_mut())
-                    .try_for_each(|(src, out)| job.capture.run(&src.data, out, width, height).map(drop))
-            };
-            busy += began.elapsed();
-            if let Err(e) = ran {
-                failure = Some(e);
-                break;
-            }
-            for (src, out) in batch.into_iter().zip(outs.iter_mut()) {
-                first_pts.get_or_insert((src.pts, std::time::Instant::now()));
-                last_pts = Some((src.pts, std::time::Instant::now()));
-                // The processed frame goes to the writer; its input buffer becomes the next output.
-                let processed = std::mem::replace(out, src.data);
-                if done_tx.send(Frame { data: processed, pts: src.pts }).is_err() {
-                    break 'frames;
-                }
-                frames += 1;
-                bar.inc(1);
-            }
-        }
-        drop(done_tx);
-        // Unblock a reader waiting for a free buffer if the writer quit early or we stopped,
-        // and one waiting on a silent source: a failed run ends the decoder now.
-        drop(full_rx);
-        if failure.is_some() || job.max_frames.is_some_and(|m| frames >= m) {
-            let _ = decode.kill();
-        }
-        let w = writer.join().unwrap_or_else(|_| Err(anyhow!("the writer thread panicked")));
-        let r = reader.join().unwrap_or_else(|_| Err(anyhow!("the reader thread panicked")));
-        match failure {
-            Some(e) => Err(e),
-            None => r.and(w),
-        }
-    });
+    let frame_loop = FrameLoop { job, source, sixteen, raw_out, size: (width, height), batch: batch_max, in_flight };
+    let (Looped { frames, first_pts, last_pts, busy }, result) =
+        frame_loop.run(&mut decode, from, clock_rx, to, ivf_header((width, height), sixteen, tb)?, &bar);
     bar.finish_and_clear();
     let seconds = started.elapsed().as_secs_f64();
     // A failed or stopped run leaves the decoder blocked on a full pipe: stop it.
@@ -1049,6 +910,192 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         crate::output_result(output, campro_eval::atomic::persist(tmp, output, job.force))?;
     }
     Ok(Outcome { frames, fps, capacity, source_fps, sixteen })
+}
+
+/// The frame loop of [`simulate`]: what it runs and how many frames at once.
+struct FrameLoop<'r, 'a, 'c, 'p> {
+    job: &'r Job<'a, 'c, 'p>,
+    source: &'r Source,
+    sixteen: bool,
+    /// Raw frames to standard output: no IVF headers.
+    raw_out: bool,
+    size: (u32, u32),
+    /// Frames the camera stage takes at once ([`frames_at_once`]).
+    batch: usize,
+    /// Frame buffers circulating ([`in_flight`]).
+    in_flight: usize,
+}
+
+/// What the frame loop did: frames written, the first and last frame's timestamp with
+/// when each was done, and the time the camera stage was busy.
+struct Looped {
+    frames: u64,
+    first_pts: Option<(i64, std::time::Instant)>,
+    last_pts: Option<(i64, std::time::Instant)>,
+    busy: std::time::Duration,
+}
+
+impl FrameLoop<'_, '_, '_, '_> {
+    /// Runs the three overlapping stages: a reader thread fills frames from the decoder
+    /// (`from`, with their timestamps from `clock_rx`), this thread runs the camera (and the
+    /// enhancer) on every core, a writer thread feeds the encoder (`to`, after `header`).
+    /// Frames circulate through a fixed pool of buffers, so memory stays bounded whatever
+    /// the length. A failed run, or one that reached `--frames`, kills the decoder (`decode`
+    /// is reaped by the caller).
+    fn run(
+        self,
+        decode: &mut Reaped,
+        mut from: Pumped,
+        clock_rx: mpsc::Receiver<Clock>,
+        mut to: Box<dyn Write + Send>,
+        header: [u8; 32],
+        bar: &indicatif::ProgressBar,
+    ) -> (Looped, Result<()>) {
+        let FrameLoop { job, source, sixteen, raw_out, size: (width, height), batch: batch_max, in_flight } = self;
+        let frame_bytes = if sixteen { 6 } else { 3 } * width as usize * height as usize;
+        let stall = source.stall();
+        let mut frames = 0u64;
+        let mut busy = std::time::Duration::ZERO;
+        let (mut first_pts, mut last_pts) = (None, None);
+        let (free_tx, free_rx) = mpsc::sync_channel::<Vec<u8>>(in_flight);
+        let (full_tx, full_rx) = mpsc::sync_channel::<Frame>(in_flight);
+        let (done_tx, done_rx) = mpsc::sync_channel::<Frame>(in_flight);
+        for _ in 0..in_flight {
+            free_tx.send(vec![0u8; frame_bytes]).expect("room for the pool");
+        }
+        let result = std::thread::scope(|scope| {
+            let reader = scope.spawn(move || -> Result<()> {
+                while let Ok(mut data) = free_rx.recv() {
+                    if !read_frame(&mut from, &mut data)? {
+                        return Ok(());
+                    }
+                    let pts = loop {
+                        match clock_rx.recv() {
+                            Ok(Clock::Pts(p)) => break p,
+                            Ok(Clock::Header { .. }) => {}
+                            Err(_) => bail!("the decoder gave a frame without its timestamp"),
+                        }
+                    };
+                    if full_tx.send(Frame { data, pts }).is_err() {
+                        return Ok(());
+                    }
+                }
+                Ok(())
+            });
+            let writer = scope.spawn(move || -> Result<()> {
+                let stopped = |e: std::io::Error| anyhow!("the encoder stopped: {e}");
+                if !raw_out {
+                    to.write_all(&header).map_err(stopped)?;
+                }
+                for f in done_rx {
+                    if !raw_out {
+                        to.write_all(&ivf_frame_header(f.data.len(), f.pts)?).map_err(stopped)?;
+                    }
+                    to.write_all(&f.data).map_err(stopped)?;
+                    // After the last frame the reader is gone and takes no buffer back; the
+                    // frames still queued must be written all the same.
+                    let _ = free_tx.send(f.data);
+                }
+                to.flush().map_err(stopped)?;
+                Ok(())
+            });
+            // The enhancer runs several frames at once, one core each (tract spreads one frame
+            // over cores only partly); the camera alone is one frame on every core.
+            let mut outs: Vec<Vec<u8>> = (0..batch_max).map(|_| vec![0u8; frame_bytes]).collect();
+            let (mut s16, mut d16) = if sixteen {
+                (vec![0u16; frame_bytes / 2], vec![0u16; frame_bytes / 2])
+            } else {
+                (Vec::new(), Vec::new())
+            };
+            let mut failure = None;
+            'frames: loop {
+                let first = match stall {
+                    Some(limit) => match full_rx.recv_timeout(limit) {
+                        Ok(f) => f,
+                        Err(mpsc::RecvTimeoutError::Timeout) => {
+                            failure = Some(anyhow!(
+                                "{} gave no frame for {} s after frame {frames} (--stall)",
+                                source.shown(),
+                                limit.as_secs()
+                            ));
+                            break;
+                        }
+                        Err(mpsc::RecvTimeoutError::Disconnected) => break,
+                    },
+                    None => match full_rx.recv() {
+                        Ok(f) => f,
+                        Err(_) => break,
+                    },
+                };
+                let mut batch = vec![first];
+                while batch.len() < batch_max {
+                    match full_rx.try_recv() {
+                        Ok(f) => batch.push(f),
+                        Err(_) => break,
+                    }
+                }
+                if let Some(m) = job.max_frames {
+                    batch.truncate(m.saturating_sub(frames) as usize);
+                }
+                if batch.is_empty() {
+                    break;
+                }
+                let began = std::time::Instant::now();
+                let ran = if sixteen {
+                    let (src, out) = (&batch[0], &mut outs[0]);
+                    for (v, b) in s16.iter_mut().zip(src.data.chunks_exact(2)) {
+                        *v = u16::from_le_bytes([b[0], b[1]]);
+                    }
+                    job.capture.run16(&s16, &mut d16, width).map(|_| {
+                        for (b, v) in out.chunks_exact_mut(2).zip(&d16) {
+                            b.copy_from_slice(&v.to_le_bytes());
+                        }
+                    })
+                } else if batch.len() == 1 {
+                    // One frame: the enhancer spreads it over the pool's cores as it can.
+                    let threads = rayon::current_num_threads();
+                    let (src, out) = (&batch[0], &mut outs[0]);
+                    job.capture.run_on(&src.data, out, width, height, threads).map(drop)
+                } else {
+                    use rayon::prelude::*;
+                    batch
+                        .par_iter()
+                        .zip(outs.par_iter_mut())
+                        .try_for_each(|(src, out)| job.capture.run(&src.data, out, width, height).map(drop))
+                };
+                busy += began.elapsed();
+                if let Err(e) = ran {
+                    failure = Some(e);
+                    break;
+                }
+                for (src, out) in batch.into_iter().zip(outs.iter_mut()) {
+                    first_pts.get_or_insert((src.pts, std::time::Instant::now()));
+                    last_pts = Some((src.pts, std::time::Instant::now()));
+                    // The processed frame goes to the writer; its input buffer becomes the next output.
+                    let processed = std::mem::replace(out, src.data);
+                    if done_tx.send(Frame { data: processed, pts: src.pts }).is_err() {
+                        break 'frames;
+                    }
+                    frames += 1;
+                    bar.inc(1);
+                }
+            }
+            drop(done_tx);
+            // Unblock a reader waiting for a free buffer if the writer quit early or we stopped,
+            // and one waiting on a silent source: a failed run ends the decoder now.
+            drop(full_rx);
+            if failure.is_some() || job.max_frames.is_some_and(|m| frames >= m) {
+                let _ = decode.kill();
+            }
+            let w = writer.join().unwrap_or_else(|_| Err(anyhow!("the writer thread panicked")));
+            let r = reader.join().unwrap_or_else(|_| Err(anyhow!("the reader thread panicked")));
+            match failure {
+                Some(e) => Err(e),
+                None => r.and(w),
+            }
+        });
+        (Looped { frames, first_pts, last_pts, busy }, result)
+    }
 }
 
 /// The rotation (display matrix): ffmpeg sets it only when copying streams, so a rotated

@@ -335,7 +335,7 @@ fn run_reuse_gives_the_same_image() {
         let f = Exact8::new(&p);
         let (mut a, mut b) = (vec![0u8; frame.len()], vec![0u8; frame.len()]);
         f.run(&frame, &mut a);
-        f.run_runs(&frame, &mut b);
+        f.run_reusing_repeats(&frame, &mut b);
         assert_eq!(a, b, "{}", p.name);
     }
 }

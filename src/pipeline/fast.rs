@@ -533,7 +533,7 @@ impl<'a> Exact8<'a> {
 
     /// [`Exact8::run`] that reuses the previous output while the input pixel repeats
     /// (flat regions, clipped highlights): same result, less work on such images.
-    pub fn run_runs(&self, src: &[u8], dst: &mut [u8]) -> usize {
+    pub fn run_reusing_repeats(&self, src: &[u8], dst: &mut [u8]) -> usize {
         assert_eq!(src.len(), dst.len(), "source and destination sample counts differ");
         let mut slow = 0;
         let mut last_in = [0u8; 3];

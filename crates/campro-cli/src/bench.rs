@@ -194,7 +194,7 @@ pub fn run(params: &Params, quick: bool) -> Vec<Row> {
     }
     let scalar = Exact8::new(params).scalar();
     let t = median(runs, || {
-        scalar.run_runs(black_box(&frame), &mut out);
+        scalar.run_reusing_repeats(black_box(&frame), &mut out);
     });
     rows.push(Row {
         group: "skip",

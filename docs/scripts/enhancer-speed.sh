@@ -8,7 +8,8 @@
 # `campro simulate --enhance` (the network at auto scale and the face guard over the
 # enhanced and captured frames: what a person is shown), plus --enhance-scale 1 at 720p; the
 # summary line's "frames a second" is the whole run's (decode, camera, enhancer, guard,
-# H.264 encode), and the peak resident memory is /usr/bin/time's. Quality: the first N
+# H.264 encode), and the peak resident memory is /usr/bin/time's; then 4 frames of 4K for the
+# peak memory there. Quality: the first N
 # held-out COCO images (id a multiple of 5, never trained on; about 416 pixels wide in
 # ../shared) upscaled to 1280 wide (lanczos: the size of a 720p frame, but smoother than a
 # camera's) as the raw images, through the camera and the enhancer at each scale; PSNR and
@@ -50,6 +51,12 @@ for size in 1280x720 1920x1080; do
     printf "| %s, %s | %.1f | %d |\n" "$size" "$label" "$fps" "$(( $(cat "$work/mem") / 1024 ))"
   done
 done
+# 4K: memory (the issue's 1 GB) on a short clip; frames a second from 4 frames only.
+clip="$work/clip-4k.mp4"
+ffmpeg -hide_banner -v error -f lavfi -i "testsrc2=size=3840x2160:rate=30" -frames:v 4 -c:v libx264 "$clip"
+line="$(/usr/bin/time -f "%M" -o "$work/mem" "$campro" simulate "$preset" "$clip" -o "$work/v-4k" --enhance 2>&1 | grep '^simulated')"
+fps="$(sed -E 's/.*\(([0-9.]+) frames a second.*/\1/' <<<"$line")"
+printf "| 3840x2160 (4 frames), campro: camera + enhancer (scale auto) + face guard | %.2f | %d |\n" "$fps" "$(( $(cat "$work/mem") / 1024 ))"
 [ "$n" -gt 0 ] || exit 0
 
 mkdir -p "$work/raw"

@@ -17,6 +17,93 @@
 
 use std::rc::Rc;
 
+/// Every pickle opcode by its name in Python's `pickletools` (protocol 0 text opcodes are
+/// their ASCII letters). Those the reader refuses (extension registry, class instances by
+/// name, out-of-band buffers) are named too, so that each byte the format defines is named
+/// here once.
+pub(crate) mod op {
+    // Protocol 0 and 1.
+    pub const MARK: u8 = b'(';
+    pub const STOP: u8 = b'.';
+    pub const POP: u8 = b'0';
+    pub const POP_MARK: u8 = b'1';
+    pub const DUP: u8 = b'2';
+    pub const FLOAT: u8 = b'F';
+    pub const INT: u8 = b'I';
+    pub const BININT: u8 = b'J';
+    pub const BININT1: u8 = b'K';
+    pub const LONG: u8 = b'L';
+    pub const BININT2: u8 = b'M';
+    pub const NONE: u8 = b'N';
+    pub const PERSID: u8 = b'P';
+    pub const BINPERSID: u8 = b'Q';
+    pub const REDUCE: u8 = b'R';
+    pub const STRING: u8 = b'S';
+    pub const BINSTRING: u8 = b'T';
+    pub const SHORT_BINSTRING: u8 = b'U';
+    pub const UNICODE: u8 = b'V';
+    pub const BINUNICODE: u8 = b'X';
+    pub const APPEND: u8 = b'a';
+    pub const BUILD: u8 = b'b';
+    pub const GLOBAL: u8 = b'c';
+    pub const DICT: u8 = b'd';
+    pub const EMPTY_DICT: u8 = b'}';
+    pub const APPENDS: u8 = b'e';
+    pub const GET: u8 = b'g';
+    pub const BINGET: u8 = b'h';
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub const INST: u8 = b'i';
+    pub const LONG_BINGET: u8 = b'j';
+    pub const LIST: u8 = b'l';
+    pub const EMPTY_LIST: u8 = b']';
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub const OBJ: u8 = b'o';
+    pub const PUT: u8 = b'p';
+    pub const BINPUT: u8 = b'q';
+    pub const LONG_BINPUT: u8 = b'r';
+    pub const SETITEM: u8 = b's';
+    pub const TUPLE: u8 = b't';
+    pub const EMPTY_TUPLE: u8 = b')';
+    pub const SETITEMS: u8 = b'u';
+    pub const BINFLOAT: u8 = b'G';
+    // Protocol 2.
+    pub const PROTO: u8 = 0x80;
+    pub const NEWOBJ: u8 = 0x81;
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub const EXT1: u8 = 0x82;
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub const EXT2: u8 = 0x83;
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub const EXT4: u8 = 0x84;
+    pub const TUPLE1: u8 = 0x85;
+    pub const TUPLE2: u8 = 0x86;
+    pub const TUPLE3: u8 = 0x87;
+    pub const NEWTRUE: u8 = 0x88;
+    pub const NEWFALSE: u8 = 0x89;
+    pub const LONG1: u8 = 0x8a;
+    pub const LONG4: u8 = 0x8b;
+    // Protocol 3.
+    pub const BINBYTES: u8 = b'B';
+    pub const SHORT_BINBYTES: u8 = b'C';
+    // Protocol 4.
+    pub const SHORT_BINUNICODE: u8 = 0x8c;
+    pub const BINUNICODE8: u8 = 0x8d;
+    pub const BINBYTES8: u8 = 0x8e;
+    pub const EMPTY_SET: u8 = 0x8f;
+    pub const ADDITEMS: u8 = 0x90;
+    pub const FROZENSET: u8 = 0x91;
+    pub const NEWOBJ_EX: u8 = 0x92;
+    pub const STACK_GLOBAL: u8 = 0x93;
+    pub const MEMOIZE: u8 = 0x94;
+    pub const FRAME: u8 = 0x95;
+    // Protocol 5.
+    pub const BYTEARRAY8: u8 = 0x96;
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub const NEXT_BUFFER: u8 = 0x97;
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub const READONLY_BUFFER: u8 = 0x98;
+}
+
 /// Resource bounds for one stream.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Limits {
@@ -312,13 +399,19 @@ impl<'a> Vm<'a> {
         std::str::from_utf8(&rest[..end]).or_else(|_| self.bad("a text argument is not UTF-8"))
     }
 
+    /// Refuses one more value on the stack or in the memo past [`Limits::max_live`].
+    fn room_for_one_more(&self) -> Result<(), PickleError> {
+        if self.stack.len() + self.memo.len() >= self.lim.max_live {
+            return Err(self.limit("live values", self.lim.max_live as u64));
+        }
+        Ok(())
+    }
+
     fn push(&mut self, v: Value) -> Result<(), PickleError> {
         if v.depth() > self.lim.max_depth {
             return Err(self.limit("levels of nesting", self.lim.max_depth as u64));
         }
-        if self.stack.len() + self.memo.len() >= self.lim.max_live {
-            return Err(self.limit("live values", self.lim.max_live as u64));
-        }
+        self.room_for_one_more()?;
         self.stack.push(Slot::Val(v));
         Ok(())
     }
@@ -416,66 +509,64 @@ impl<'a> Vm<'a> {
         loop {
             self.at = self.pos;
             self.charge_work(1)?;
-            let op = self.u8()?;
-            match op {
+            let code = self.u8()?;
+            match code {
                 // PROTO n, FRAME n: nothing to build.
-                0x80 => {
+                op::PROTO => {
                     let v = self.u8()?;
                     if v > 5 {
                         return self.bad(format!("protocol {v} is newer than 5"));
                     }
                 }
-                0x95 => {
+                op::FRAME => {
                     self.take(8)?;
                 }
-                b'.' => {
+                op::STOP => {
                     let v = self.pop()?;
                     return Ok(v);
                 }
-                b'(' => {
-                    if self.stack.len() + self.memo.len() >= self.lim.max_live {
-                        return Err(self.limit("live values", self.lim.max_live as u64));
-                    }
+                op::MARK => {
+                    self.room_for_one_more()?;
                     self.stack.push(Slot::Mark)
                 }
-                b'0' => {
+                op::POP => {
                     self.stack.pop().map(|_| ()).map_or_else(|| self.bad("POP on an empty stack"), Ok)?;
                 }
-                b'1' => {
+                op::POP_MARK => {
                     self.pop_mark()?;
                 }
-                b'2' => {
+                op::DUP => {
                     let v = self.top()?.clone();
                     self.push(v)?;
                 }
-                b'N' => self.push(Value::None)?,
-                0x88 => self.push(Value::Bool(true))?,
-                0x89 => self.push(Value::Bool(false))?,
-                b'J' => {
+                op::NONE => self.push(Value::None)?,
+                op::NEWTRUE => self.push(Value::Bool(true))?,
+                op::NEWFALSE => self.push(Value::Bool(false))?,
+                op::BININT => {
                     let v = self.le(4)? as u32 as i32;
                     self.push(Value::Int(v as i64))?
                 }
-                b'K' => {
+                op::BININT1 => {
                     let v = self.u8()?;
                     self.push(Value::Int(v as i64))?
                 }
-                b'M' => {
+                op::BININT2 => {
                     let v = self.le(2)?;
                     self.push(Value::Int(v as i64))?
                 }
-                0x8a => {
+                op::LONG1 => {
                     let n = self.u8()? as usize;
                     let b = self.take(n)?;
                     let v = self.long(b)?;
                     self.push(v)?
                 }
-                0x8b => {
+                op::LONG4 => {
                     let n = self.le(4)? as usize;
                     let b = self.take(n)?;
                     let v = self.long(b)?;
                     self.push(v)?
                 }
-                b'I' | b'L' => {
+                op::INT | op::LONG => {
                     let line = self.line()?.trim_end_matches('L');
                     let v = match line {
                         "00" => Value::Bool(false),
@@ -487,45 +578,50 @@ impl<'a> Vm<'a> {
                     };
                     self.push(v)?
                 }
-                b'G' => {
+                op::BINFLOAT => {
                     let v = f64::from_bits(u64::from_be_bytes(self.take(8)?.try_into().expect("8 bytes")));
                     self.push(Value::Float(v))?
                 }
-                b'F' => {
+                op::FLOAT => {
                     let line = self.line()?;
                     let v = line.parse::<f64>().or_else(|_| self.bad(format!("{line:?} is not a float")))?;
                     self.push(Value::Float(v))?
                 }
-                b'X' | 0x8d | 0x8c => {
-                    let n = match op {
-                        b'X' => self.le(4)?,
-                        0x8d => self.le(8)?,
+                op::BINUNICODE | op::BINUNICODE8 | op::SHORT_BINUNICODE => {
+                    let n = match code {
+                        op::BINUNICODE => self.le(4)?,
+                        op::BINUNICODE8 => self.le(8)?,
                         _ => self.u8()? as u64,
                     };
                     let b = self.take(usize::try_from(n).unwrap_or(usize::MAX))?;
                     let v = self.string(b)?;
                     self.push(v)?
                 }
-                b'V' => {
+                op::UNICODE => {
                     let line = self.line()?;
                     let v = self.string(line.as_bytes())?;
                     self.push(v)?
                 }
-                b'T' | b'U' | b'B' | b'C' | 0x8e | 0x96 => {
-                    let n = match op {
-                        b'T' | b'B' => self.le(4)?,
-                        b'U' | b'C' => self.u8()? as u64,
+                op::BINSTRING
+                | op::SHORT_BINSTRING
+                | op::BINBYTES
+                | op::SHORT_BINBYTES
+                | op::BINBYTES8
+                | op::BYTEARRAY8 => {
+                    let n = match code {
+                        op::BINSTRING | op::BINBYTES => self.le(4)?,
+                        op::SHORT_BINSTRING | op::SHORT_BINBYTES => self.u8()? as u64,
                         _ => self.le(8)?,
                     };
                     let b = self.take(usize::try_from(n).unwrap_or(usize::MAX))?;
                     // Python 2 str (T, U) as text when it is UTF-8, as bytes otherwise.
-                    let v = match (op, std::str::from_utf8(b)) {
-                        (b'T' | b'U', Ok(_)) => self.string(b)?,
+                    let v = match (code, std::str::from_utf8(b)) {
+                        (op::BINSTRING | op::SHORT_BINSTRING, Ok(_)) => self.string(b)?,
                         _ => self.bytes_value(b)?,
                     };
                     self.push(v)?
                 }
-                b'S' => {
+                op::STRING => {
                     let line = self.line()?;
                     let t = line.trim();
                     let inner = t
@@ -536,39 +632,39 @@ impl<'a> Vm<'a> {
                     let v = self.string(inner.as_bytes())?;
                     self.push(v)?
                 }
-                b')' => {
+                op::EMPTY_TUPLE => {
                     let n = self.node(Vec::new())?;
                     self.push(Value::Tuple(n))?
                 }
-                b']' => {
+                op::EMPTY_LIST => {
                     let n = self.node(Vec::new())?;
                     self.push(Value::List(n))?
                 }
-                b'}' => {
+                op::EMPTY_DICT => {
                     let n = self.node(Vec::new())?;
                     self.push(Value::Dict(n))?
                 }
-                0x8f => {
+                op::EMPTY_SET => {
                     let n = self.node(Vec::new())?;
                     self.push(Value::Set(n))?
                 }
-                b't' | b'l' | b'd' | 0x91 => {
+                op::TUPLE | op::LIST | op::DICT | op::FROZENSET => {
                     let items = self.pop_mark()?;
                     self.charge_work(items.len() as u64)?;
-                    if op == b'd' && items.len() % 2 == 1 {
+                    if code == op::DICT && items.len() % 2 == 1 {
                         return self.bad("DICT with an odd number of items");
                     }
                     let n = self.node(items)?;
-                    let v = match op {
-                        b't' => Value::Tuple(n),
-                        b'l' => Value::List(n),
-                        b'd' => Value::Dict(n),
+                    let v = match code {
+                        op::TUPLE => Value::Tuple(n),
+                        op::LIST => Value::List(n),
+                        op::DICT => Value::Dict(n),
                         _ => Value::Set(n),
                     };
                     self.push(v)?
                 }
-                0x85..=0x87 => {
-                    let k = (op - 0x84) as usize;
+                op::TUPLE1 | op::TUPLE2 | op::TUPLE3 => {
+                    let k = (code - op::TUPLE1 + 1) as usize;
                     let mut items = Vec::with_capacity(k);
                     for _ in 0..k {
                         items.push(self.pop()?);
@@ -577,37 +673,37 @@ impl<'a> Vm<'a> {
                     let n = self.node(items)?;
                     self.push(Value::Tuple(n))?
                 }
-                b'a' => {
+                op::APPEND => {
                     let v = self.pop()?;
                     self.extend_top(vec![v], "list")?
                 }
-                b'e' => {
+                op::APPENDS => {
                     let items = self.pop_mark()?;
                     self.extend_top(items, "list")?
                 }
-                b's' => {
+                op::SETITEM => {
                     let v = self.pop()?;
                     let k = self.pop()?;
                     self.extend_top(vec![k, v], "dict")?
                 }
-                b'u' => {
+                op::SETITEMS => {
                     let items = self.pop_mark()?;
                     if items.len() % 2 == 1 {
                         return self.bad("SETITEMS with an odd number of items");
                     }
                     self.extend_top(items, "dict")?
                 }
-                0x90 => {
+                op::ADDITEMS => {
                     let items = self.pop_mark()?;
                     self.extend_top(items, "set")?
                 }
-                b'c' => {
+                op::GLOBAL => {
                     let module = self.line()?;
                     let name = self.line()?;
                     self.charge_bytes((module.len() + name.len()) as u64)?;
                     self.push(Value::Global { module: module.into(), name: name.into() })?
                 }
-                0x93 => {
+                op::STACK_GLOBAL => {
                     let name = self.pop()?;
                     let module = self.pop()?;
                     match (module, name) {
@@ -615,23 +711,23 @@ impl<'a> Vm<'a> {
                         _ => return self.bad("STACK_GLOBAL needs two strings"),
                     }
                 }
-                b'R' | b'b' => {
+                op::REDUCE | op::BUILD => {
                     let arg = self.pop()?;
                     let callable = self.pop()?;
                     // `collections.OrderedDict()` is read as the empty dict it returns, so
                     // that SETITEMS can fill it (how torch pickles a state dict).
                     let empty_args = arg.as_seq().is_some_and(<[Value]>::is_empty);
-                    if op == b'R' && empty_args && callable.is_global("collections", "OrderedDict") {
+                    if code == op::REDUCE && empty_args && callable.is_global("collections", "OrderedDict") {
                         let n = self.node(Vec::new())?;
                         self.push(Value::Dict(n))?;
                         continue;
                     }
                     let n = self.node(vec![callable, arg])?;
-                    self.push(if op == b'R' { Value::Reduce(n) } else { Value::Build(n) })?
+                    self.push(if code == op::REDUCE { Value::Reduce(n) } else { Value::Build(n) })?
                 }
-                0x81 | 0x92 => {
+                op::NEWOBJ | op::NEWOBJ_EX => {
                     // NEWOBJ cls args / NEWOBJ_EX cls args kwargs: a call, like REDUCE.
-                    let kwargs = if op == 0x92 { Some(self.pop()?) } else { None };
+                    let kwargs = if code == op::NEWOBJ_EX { Some(self.pop()?) } else { None };
                     let args = self.pop()?;
                     let cls = self.pop()?;
                     let mut items = vec![cls, args];
@@ -639,40 +735,38 @@ impl<'a> Vm<'a> {
                     let n = self.node(items)?;
                     self.push(Value::Reduce(n))?
                 }
-                b'Q' => {
+                op::BINPERSID => {
                     let pid = self.pop()?;
                     let n = self.node(vec![pid])?;
                     self.push(Value::PersistentId(n))?
                 }
-                b'P' => {
+                op::PERSID => {
                     let line = self.line()?;
                     let s = self.string(line.as_bytes())?;
                     let n = self.node(vec![s])?;
                     self.push(Value::PersistentId(n))?
                 }
-                b'p' | b'q' | b'r' | 0x94 => {
-                    let key = match op {
-                        b'p' => {
+                op::PUT | op::BINPUT | op::LONG_BINPUT | op::MEMOIZE => {
+                    let key = match code {
+                        op::PUT => {
                             let line = self.line()?;
                             line.parse::<u64>().or_else(|_| self.bad(format!("{line:?} is not a memo key")))?
                         }
-                        b'q' => self.u8()? as u64,
-                        b'r' => self.le(4)?,
+                        op::BINPUT => self.u8()? as u64,
+                        op::LONG_BINPUT => self.le(4)?,
                         _ => self.memo.len() as u64,
                     };
                     let v = self.top()?.clone();
-                    if self.stack.len() + self.memo.len() >= self.lim.max_live {
-                        return Err(self.limit("live values", self.lim.max_live as u64));
-                    }
+                    self.room_for_one_more()?;
                     self.memo.insert(key, v);
                 }
-                b'g' | b'h' | b'j' => {
-                    let key = match op {
-                        b'g' => {
+                op::GET | op::BINGET | op::LONG_BINGET => {
+                    let key = match code {
+                        op::GET => {
                             let line = self.line()?;
                             line.parse::<u64>().or_else(|_| self.bad(format!("{line:?} is not a memo key")))?
                         }
-                        b'h' => self.u8()? as u64,
+                        op::BINGET => self.u8()? as u64,
                         _ => self.le(4)?,
                     };
                     let Some(v) = self.memo.get(&key).cloned() else {
@@ -712,6 +806,16 @@ mod tests {
         assert_eq!(l[1].as_str(), Some("é"));
         // dict > list > call > args tuple.
         assert_eq!(v.depth(), 4);
+    }
+
+    /// The opcodes the reader does not build (extension registry, instances by class name,
+    /// out-of-band buffers) are refused by their byte, after a protocol 5 header.
+    #[test]
+    fn unsupported_opcodes_are_refused_by_byte() {
+        for code in [op::EXT1, op::EXT2, op::EXT4, op::INST, op::OBJ, op::NEXT_BUFFER, op::READONLY_BUFFER] {
+            let err = read(&[op::PROTO, 5, code, op::STOP], Limits::default()).unwrap_err().to_string();
+            assert!(err.contains(&format!("opcode 0x{code:02x} is not supported")), "{err}");
+        }
     }
 
     #[test]

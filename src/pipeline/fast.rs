@@ -359,8 +359,8 @@ impl<'a> Exact8<'a> {
     /// The table entries of one pixel and its three curve inputs: a code below
     /// [`AMBIGUOUS`] per channel where the cell decides alone. Written for every CPU: fixed
     /// tables indexed by bytes and by a cell clamped to [`FINE`] need no bounds checks, the
-    /// four-lane sum (the fourth is padding) is one SSE or NEON register ([`clamped_sum`]), and the float-to-cell
-    /// conversion has no saturation fix-ups (its input is in [0, FINE]).
+    /// four-lane sum (the fourth is padding) is one SSE or NEON register ([`clamped_sum`]),
+    /// and the float-to-cell conversion has no saturation fix-ups (its input is in [0, FINE]).
     #[inline(always)]
     fn lookup(&self, rgb: [u8; 3]) -> ([u16; 3], [f32; 4]) {
         let terms = &*self.terms;

@@ -51,7 +51,7 @@ unsafe fn pick(t: &[__m256; 4], n: __m256i) -> __m256 {
 /// Channel `c` of a step's eight pixels `s` through the 256-entry degamma table: scalar
 /// loads inserted. A function called without closures, so that it is inlined into the AVX2
 /// loop: a closure there (`array::from_fn`, `map`) was compiled as a call per channel whose
-/// result went through the stack, doubling the step's time (10.4 against 5.3 ms a frame).
+/// result went through the stack, more than doubling the time (10.5 against 4.5 ms a frame).
 ///
 /// # Safety
 /// `s` holds [`STEP_BYTES`] bytes, `c < 3`, `degamma` points at 256 floats.

@@ -49,6 +49,7 @@ fn held_bytes(frame_bytes: u64, work: u64, sixteen: bool, batch: usize) -> u64 {
 fn frames_at_once(threads: usize, total: u64, held: impl Fn(usize) -> u64) -> usize {
     (1..=threads.max(1)).rev().find(|&b| held(b) <= total).unwrap_or(1)
 }
+
 /// The decoder's frames are read off its stdout as they come, whatever else waits, in
 /// chunks of this many bytes, at most [`PUMP_CHUNKS`] of them ahead of the frame loop.
 const PUMP_CHUNK: usize = 1 << 20;
@@ -855,7 +856,8 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         Source::File(p) => p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
         other => other.shown(),
     });
-    let frame_loop = FrameLoop { job, source, sixteen, raw_out, size: (width, height), batch: batch_max, in_flight };
+    let frame_loop =
+        FrameLoop { job, source, sixteen, raw_out, size: (width, height), frame_bytes, batch: batch_max, in_flight };
     let (Looped { frames, first_pts, last_pts, busy }, result) =
         frame_loop.run(&mut decode, from, clock_rx, to, ivf_header((width, height), sixteen, tb)?, &bar);
     bar.finish_and_clear();
@@ -920,6 +922,8 @@ struct FrameLoop<'r, 'a, 'c, 'p> {
     /// Raw frames to standard output: no IVF headers.
     raw_out: bool,
     size: (u32, u32),
+    /// Bytes of one frame (3 or 6 a pixel).
+    frame_bytes: usize,
     /// Frames the camera stage takes at once ([`frames_at_once`]).
     batch: usize,
     /// Frame buffers circulating ([`in_flight`]).
@@ -951,8 +955,16 @@ impl FrameLoop<'_, '_, '_, '_> {
         header: [u8; 32],
         bar: &indicatif::ProgressBar,
     ) -> (Looped, Result<()>) {
-        let FrameLoop { job, source, sixteen, raw_out, size: (width, height), batch: batch_max, in_flight } = self;
-        let frame_bytes = if sixteen { 6 } else { 3 } * width as usize * height as usize;
+        let FrameLoop {
+            job,
+            source,
+            sixteen,
+            raw_out,
+            size: (width, height),
+            frame_bytes,
+            batch: batch_max,
+            in_flight,
+        } = self;
         let stall = source.stall();
         let mut frames = 0u64;
         let mut busy = std::time::Duration::ZERO;

@@ -28,6 +28,7 @@ fn sets() -> Vec<Params> {
         "campro-omega-0.5-hour",
         "campro-omega-0.5-distill",
         "campro-omega-1",
+        "campro-omega-1-shared-continued",
         "campro-omega-5",
     ]
     .iter()

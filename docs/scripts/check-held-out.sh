@@ -11,7 +11,7 @@
 # similarity over models, and the faces whose true person ranks first. The time and peak
 # memory of each run are /usr/bin/time's.
 #
-# Usage: docs/scripts/check-held-out.sh [N]
+# Usage: [PRESETS="a b …"] docs/scripts/check-held-out.sh [N]   (default: every bundled preset)
 # Needs: a release build (cargo build --release -p campro-cli), python3, GNU time, ../shared
 # (or CAMPRO_SHARED) with data/lfw.
 set -euo pipefail
@@ -20,6 +20,7 @@ campro="$root/target/release/campro"
 n="${1:-50}"
 shared="${CAMPRO_SHARED:-$root/../shared}"
 export CAMPRO_SHARED="$shared"
+presets="${PRESETS:-campro-omega-0.5 campro-omega-0.5-hour campro-omega-0.5-distill campro-omega-1 campro-omega-1-shared-continued campro-omega-5 identity srgb-passthrough color-inversion}"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 
@@ -44,7 +45,7 @@ PY
 
 echo "| preset | view | faces | linkable at 1e-3 | at 1e-2 | median similarity | worst | rank 1 |"
 echo "|---|---|---|---|---|---|---|---|"
-for preset in campro-omega-0.5 campro-omega-0.5-hour campro-omega-0.5-distill campro-omega-1 campro-omega-5 identity srgb-passthrough color-inversion; do
+for preset in $presets; do
   /usr/bin/time -f "$preset: %e s, %M KB" -a -o "$work/times" \
     "$campro" check "$preset" "$work/photos" -o "$work/report-$preset" > "$work/lines-$preset" 2>&1
   python3 - "$preset" "$work/report-$preset/check.csv" <<'PY'
@@ -63,7 +64,7 @@ PY
 done
 echo
 echo "Summary lines:"
-for preset in campro-omega-0.5 campro-omega-0.5-hour campro-omega-0.5-distill campro-omega-1 campro-omega-5 identity srgb-passthrough color-inversion; do
+for preset in $presets; do
   echo "- $preset: $(grep -E 'faces linkable|face linkable' "$work/lines-$preset" | tail -1)"
 done
 echo

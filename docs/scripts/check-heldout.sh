@@ -25,7 +25,7 @@ for name in ids:
     if n == 50:
         break
 PY
-for preset in campro-omega-0.5 campro-omega-0.5-hour campro-omega-0.5-distill campro-omega-1 campro-omega-5 params/identity.json; do
+for preset in campro-omega-0.5 campro-omega-0.5-hour campro-omega-0.5-distill campro-omega-1 campro-omega-1-shared-continued campro-omega-5 params/identity.json; do
   name=$(basename "$preset" .json)
   /usr/bin/time -f "$name: %e s, %M KB" ./target/release/campro check "$preset" "$photos" --format json > "$out/$name.json"
 done

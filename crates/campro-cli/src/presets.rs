@@ -44,6 +44,13 @@ pub const PRESETS: &[Preset] = &[
         pick: "Pick this where hiding faces matters most: the most private camera here, with an enhanced view.",
     },
     Preset { name: "campro-omega-1", json: include_str!("../../../params/campro-omega-1.json"), enhancer: None, detector: Some(include_bytes!("../../../params/campro-omega-1.detector.onnx")), pick: "Detection first: people are found more often, faces are hidden less well. Not for privacy-critical use." },
+    Preset {
+        name: "campro-omega-1-shared-continued",
+        json: include_str!("../../../params/campro-omega-1-shared-continued.json"),
+        detector: Some(include_bytes!("../../../params/campro-omega-1-shared-continued.detector.onnx")),
+        enhancer: None,
+        pick: "Pick this when people must be found and an attacker may learn to undo the camera: faces are recognised more often as captured than with campro-omega-0.5, less often after any attack.",
+    },
     Preset { name: "campro-omega-5", json: include_str!("../../../params/campro-omega-5.json"), enhancer: None, detector: Some(include_bytes!("../../../params/campro-omega-5.detector.onnx")), pick: "For experiments only: faces are recognised often in its pictures." },
     Preset { name: "color-inversion", json: include_str!("../../../params/color-inversion.json"), enhancer: None, detector: None, pick: "No protection: an example transform that is easily undone. For comparisons." },
     Preset { name: "identity", json: include_str!("../../../params/identity.json"), enhancer: None, detector: None, pick: "No protection: the unprotected starting point. For comparisons." },

@@ -85,11 +85,16 @@ fn presets_are_listed_with_their_line_and_unknown_names_list_them() {
     }
     let json = campro().args(["presets", "--format", "json"]).output().unwrap();
     let v: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
-    assert_eq!(v.as_array().unwrap().len(), 8);
+    // One a parameter file of the repository's params/.
+    let files = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../../params"))
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "json"))
+        .count();
+    assert_eq!((v.as_array().unwrap().len(), files), (9, 9));
     assert!(v[0]["description"].as_str().is_some_and(|d| !d.is_empty()));
     // No bundled preset is rated for grey input yet, and each says so.
     assert!(v.as_array().unwrap().iter().all(|p| p["ratedForGrey"] == false), "{v}");
-    assert_eq!(text.matches("Not rated for grey input").count(), 8, "{text}");
+    assert_eq!(text.matches("Not rated for grey input").count(), 9, "{text}");
     // Each says in plain words what to pick it for, the unprotected ones that they protect nothing.
     assert!(text.contains("campro-omega-0.5 (with enhancer)\n    Pick this for everyday use"), "{text}");
     assert_eq!(text.matches("\n    No protection:").count(), 3, "{text}");

@@ -506,7 +506,7 @@ impl<'a> Exact8<'a> {
             // SAFETY: AVX2 and FMA are detected.
             let (redone, whole) = match &self.simd {
                 Some(k) => {
-                    let (flagged, whole) = unsafe { avx2::run_lines(k, self, src, dst) };
+                    let (flagged, whole) = unsafe { avx2::run_lines(k, src, dst) };
                     fell.flagged += flagged;
                     (0, whole)
                 }

@@ -140,7 +140,7 @@ pub(super) struct Kernel {
     split: [[[u8; 64]; 2]; 3],
     merge: [[[u8; 64]; 2]; 3],
     /// The f64 reference for flagged pixels.
-    reference: Reference,
+    pub(super) reference: Reference,
 }
 
 /// The f64 reference pipeline (`Prepared::pixel`, then round half up to a code) on eight
@@ -148,7 +148,7 @@ pub(super) struct Kernel {
 /// same order as the scalar code (no fused multiply-adds), so every lane is bit-identical
 /// to it. (Clamping may turn a -0.0 into +0.0; both reach the same code.)
 #[derive(Debug, Clone)]
-struct Reference {
+pub(super) struct Reference {
     /// Degamma of each code, f64 (the `Prepared` table).
     degamma: [f64; 256],
     /// The CCM, row-major.
@@ -185,6 +185,22 @@ impl Reference {
             (t.x0[i], t.dx[i], t.y0[i], t.dy[i]) = (x[i], x[i + 1] - x[i], y[i], y[i + 1] - y[i]);
         }
         t
+    }
+
+    /// Output channel `c` (0..3) of the pixel `rgb`, rounded: [`Reference::redo`]'s
+    /// operations on one lane in scalar f64 (the AVX2 engine's redo, where 4-lane f64 has no
+    /// 32-entry permute), so bit-identical to it and to the reference.
+    #[inline]
+    pub(super) fn sample(&self, rgb: [u8; 3], c: usize) -> u8 {
+        let v = rgb.map(|x| self.degamma[x as usize]);
+        let m = [self.m[3 * c], self.m[3 * c + 1], self.m[3 * c + 2]];
+        let t = ((m[0] * v[0] + m[1] * v[1]) + m[2] * v[2]).max(0.0).min(1.0);
+        // t · (k - 1) is in [0, 31]: the conversion truncates as `vcvttpd2qq` does.
+        let seg = ((t * self.scale) as i64).min(self.last) as usize % 32;
+        let a = (t - self.x0[seg]) / self.dx[seg];
+        let w = self.y0[seg] + a * self.dy[seg];
+        // `vcvttpd2dq`, then the low byte, as the vector redo stores it.
+        (w * 255.0 + 0.5) as i32 as u8
     }
 
     /// The rounded outputs of the first eight samples of a queue: lane l is output channel

@@ -194,7 +194,7 @@ impl Reference {
     pub(super) fn sample(&self, rgb: [u8; 3], c: usize) -> u8 {
         let v = rgb.map(|x| self.degamma[x as usize]);
         let m = [self.m[3 * c], self.m[3 * c + 1], self.m[3 * c + 2]];
-        let t = ((m[0] * v[0] + m[1] * v[1]) + m[2] * v[2]).max(0.0).min(1.0);
+        let t = ((m[0] * v[0] + m[1] * v[1]) + m[2] * v[2]).clamp(0.0, 1.0);
         // t · (k - 1) is in [0, 31]: the conversion truncates as `vcvttpd2qq` does.
         let seg = ((t * self.scale) as i64).min(self.last) as usize % 32;
         let a = (t - self.x0[seg]) / self.dx[seg];

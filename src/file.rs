@@ -4,7 +4,11 @@
 //! A FIFO, device, socket or directory is refused before a byte is read. On Unix the file
 //! is opened non-blocking (opening a FIFO with no writer would otherwise wait forever)
 //! and its type is checked again on the open handle, so swapping the path for a FIFO
-//! between the check and the open cannot make the read hang.
+//! between the check and the open cannot make the read hang. Writing output files whole or
+//! not at all is [`atomic`] (feature `files`, for the desktop crates).
+
+#[cfg(feature = "files")]
+pub mod atomic;
 
 use std::io::Read;
 use std::path::Path;

@@ -542,7 +542,7 @@ fn run_frontier(points: &Path, output: &Path, force: bool) -> Result<()> {
     let bytes = campro::file::read_capped(points, 1 << 20, "the frontier points")?;
     let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", crate::shown(points)))?;
     let p = campro_eval::frontier::parse(&text).with_context(|| points.display().to_string())?;
-    // The report writers create the folder (campro_eval::atomic).
+    // The report writers create the folder (campro::file::atomic).
     report::write_frontier(&p, output)?;
     eprintln!("frontier: {} points -> {}", p.len(), crate::shown(&output.join("frontier.md")));
     Ok(())

@@ -50,7 +50,7 @@ fn main() {
     // Ctrl-C or SIGTERM during a long write: the unfinished hidden `.campro-*` files go.
     let _ = ctrlc::set_handler(|| {
         video::kill_children();
-        campro_eval::atomic::remove_partial_files();
+        campro::file::atomic::remove_partial_files();
         eprintln!("interrupted");
         std::process::exit(130);
     });

@@ -109,10 +109,10 @@ pub(crate) fn count_bar(label: &str, n: u64) -> indicatif::ProgressBar {
     bar
 }
 
-/// Writes `bytes` to `path` whole or not at all ([`campro_eval::atomic::write`]). Refuses
+/// Writes `bytes` to `path` whole or not at all ([`campro::file::atomic::write`]). Refuses
 /// to replace `path` unless `force` (checked once, at the rename).
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8], force: bool) -> Result<()> {
-    output_result(path, campro_eval::atomic::write(path, bytes, force))
+    output_result(path, campro::file::atomic::write(path, bytes, force))
 }
 
 /// An output write's result, with "exists (use --force ...)" for a refused overwrite.

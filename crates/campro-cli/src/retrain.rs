@@ -134,7 +134,7 @@ pub fn attack(
             net.save_onnx(&file)?;
             let record = Record { set: &cond.name, model: &m.name, config: &cfg, log: &log, identities: &names };
             let json = serde_json::to_vec_pretty(&record)?;
-            campro_eval::atomic::write(&file.with_extension("json"), &json, true)
+            campro::file::atomic::write(&file.with_extension("json"), &json, true)
                 .with_context(|| file.display().to_string())?;
             tuned.push(Embedder::new(campro_eval::model::Model::load(campro_eval::manifest::Manifest {
                 file,

@@ -739,7 +739,7 @@ struct Encoder {
     child: Option<Reaped>,
     to: Box<dyn Write + Send>,
     stderr: std::thread::JoinHandle<Vec<u8>>,
-    tmp: Option<campro_eval::atomic::Temporary>,
+    tmp: Option<campro::file::atomic::Temporary>,
     ext: String,
 }
 
@@ -768,7 +768,7 @@ fn start_encoder(
     };
     let tmp = match sink {
         Sink::File(o) => Some(
-            campro_eval::atomic::temporary_beside(o, &format!(".{ext}")).with_context(|| o.display().to_string())?,
+            campro::file::atomic::temporary_beside(o, &format!(".{ext}")).with_context(|| o.display().to_string())?,
         ),
         _ => None,
     };
@@ -909,7 +909,7 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
             None => tmp,
             Some(r) => rotated(tmp, output, &ext, r, warn)?,
         };
-        crate::output_result(output, campro_eval::atomic::persist(tmp, output, job.force))?;
+        crate::output_result(output, campro::file::atomic::persist(tmp, output, job.force))?;
     }
     Ok(Outcome { frames, fps, capacity, source_fps, sixteen })
 }
@@ -1113,13 +1113,13 @@ impl FrameLoop<'_, '_, '_, '_> {
 /// The rotation (display matrix): ffmpeg sets it only when copying streams, so a rotated
 /// input's output is remuxed once with it (frames themselves are not rotated).
 fn rotated(
-    tmp: campro_eval::atomic::Temporary,
+    tmp: campro::file::atomic::Temporary,
     output: &Path,
     ext: &str,
     r: i64,
     warn: &dyn Fn(&str),
-) -> Result<campro_eval::atomic::Temporary> {
-    let rotated = campro_eval::atomic::temporary_beside(output, &format!(".{ext}"))?;
+) -> Result<campro::file::atomic::Temporary> {
+    let rotated = campro::file::atomic::temporary_beside(output, &format!(".{ext}"))?;
     let out = ffmpeg()?
         .args(["-y", "-i"])
         .arg(file_url(tmp.path())?)

@@ -11,7 +11,6 @@
 //! paper's baselines and a user's own filter are evaluated the same way.
 
 pub mod ap;
-pub mod atomic;
 pub mod baselines;
 pub mod check;
 pub mod data;

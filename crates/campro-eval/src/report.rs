@@ -13,9 +13,9 @@ use crate::utility::UtilityReport;
 use std::fmt::Write as _;
 use std::path::Path;
 
-/// Writes (or replaces) one report file through [`crate::atomic::write`].
+/// Writes (or replaces) one report file through [`campro::file::atomic::write`].
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    crate::atomic::write(path, bytes, true).map_err(EvalError::io(path))
+    campro::file::atomic::write(path, bytes, true).map_err(EvalError::io(path))
 }
 
 fn json(v: &impl serde::Serialize) -> Vec<u8> {

@@ -110,7 +110,7 @@ fn read_model(path: &Path) -> std::result::Result<(pb::ModelProto, String), Grap
 
 /// Writes `model` at `path` (temporary file, then rename).
 fn write_model(path: &Path, model: &pb::ModelProto) -> std::result::Result<(), GraphError> {
-    campro_eval::atomic::write(path, &model.encode_to_vec(), true)
+    campro::file::atomic::write(path, &model.encode_to_vec(), true)
         .map_err(|e| GraphError::Io { path: path.display().to_string(), message: e.to_string() })
 }
 

@@ -20,7 +20,7 @@ fn main() {
     let stem = path.with_extension("");
     for (suffix, svg) in [("losses", losses), ("accuracy", acc)] {
         let out = std::path::PathBuf::from(format!("{}-{suffix}.svg", stem.display()));
-        if let Err(e) = campro_eval::atomic::write(&out, svg.as_bytes(), true) {
+        if let Err(e) = campro::file::atomic::write(&out, svg.as_bytes(), true) {
             eprintln!("{}: {e}", out.display());
             std::process::exit(1);
         }

@@ -33,7 +33,7 @@ const STATE: &str = "state.json";
 
 fn atomic(dir: &Path, name: &str, bytes: &[u8]) -> Result<(), CheckpointError> {
     let io = |e: std::io::Error| CheckpointError::Io { path: dir.join(name), message: e.to_string() };
-    campro_eval::atomic::write(&dir.join(name), bytes, true).map_err(io)
+    campro::file::atomic::write(&dir.join(name), bytes, true).map_err(io)
 }
 
 /// Writes `tensors` and `state` (the optimiser's [`State`], or another run's) into `dir`

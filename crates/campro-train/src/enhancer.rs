@@ -128,7 +128,7 @@ impl EnhancerNet {
     /// Writes [`Self::onnx_bytes`] to `path` (temporary file, then rename; replaces).
     pub fn save_onnx(&self, path: &std::path::Path) -> Result<(), TrainError> {
         let bytes = self.onnx_bytes()?;
-        campro_eval::atomic::write(path, &bytes, true).map_err(|e| {
+        campro::file::atomic::write(path, &bytes, true).map_err(|e| {
             TrainError::Checkpoint(crate::error::CheckpointError::Io { path: path.into(), message: e.to_string() })
         })
     }

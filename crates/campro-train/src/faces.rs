@@ -156,7 +156,7 @@ impl FaceSet {
             }
         }
         let set = Self::build(sel, models)?;
-        campro_eval::atomic::write(&file, &set.encode(sel), true)
+        campro::file::atomic::write(&file, &set.encode(sel), true)
             .map_err(|e| FacesError::Cache { path: file.clone(), message: e.to_string() })?;
         Ok(set)
     }

@@ -290,7 +290,7 @@ fn face_boxes(
             Ok(det.detect(&read_rgb8(p)?)?.iter().take(MAX_BOXES).map(|f| f.bbox).collect())
         })
         .collect::<campro_eval::Result<_>>()?;
-    let _ = campro_eval::atomic::write(&file, &serde_json::to_vec(&boxes).expect("boxes serialise"), true);
+    let _ = campro::file::atomic::write(&file, &serde_json::to_vec(&boxes).expect("boxes serialise"), true);
     Ok(boxes)
 }
 

@@ -108,7 +108,12 @@ class CamProPipeline<T>(
     /** The per-frame gate; verdicts sized for results that lead their images by the pipeline depth (and one more). */
     val gate = FrameGate(guard, maxWaitingFrames = imageQueueDepth - 1, maxPendingVerdicts = pipelineDepth + 1, executor = appExecutor, deliver = deliver, drop = drop)
 
+    // The loop's state below is guarded by this object's lock (`@Synchronized` methods and
+    // `synchronized(this)`); `running` is also read without it, by [onFrame] on the image
+    // thread, so it is volatile: a frame arriving after [stop] sees `false` and is dropped
+    // (the gate would refuse it too: the guard is stopped first).
     private var metering = false
+    @Volatile
     private var running = false
     /** The physical camera of the metering result the current values come from (logical cameras). */
     private var meteredPhysicalId: String? = null

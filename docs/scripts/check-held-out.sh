@@ -11,7 +11,9 @@
 # similarity over models, and the faces whose true person ranks first. The time and peak
 # memory of each run are /usr/bin/time's.
 #
-# Usage: [PRESETS="a b …"] docs/scripts/check-held-out.sh [N]   (default: every bundled preset)
+# Usage: [PRESETS="a b …"] [KEEP=DIR] docs/scripts/check-held-out.sh [N]
+#   PRESETS: the presets to check (default: every bundled one); KEEP: a folder that keeps each
+#   preset's report (`campro check -o`: check.csv, check.json, the HTML page) as DIR/PRESET.
 # Needs: a release build (cargo build --release -p campro-cli), python3, GNU time, ../shared
 # (or CAMPRO_SHARED) with data/lfw.
 set -euo pipefail
@@ -62,6 +64,10 @@ for view, by_face in faces.items():
     print(f"| {preset} | {view} | {len(by_face)} | {l3} | {l2} | {statistics.median(worst):.2f} | {max(worst):.2f} | {r1} |")
 PY
 done
+if [ -n "${KEEP:-}" ]; then
+  mkdir -p "$KEEP"
+  for preset in $presets; do cp -r "$work/report-$preset" "$KEEP/$preset"; done
+fi
 echo
 echo "Summary lines:"
 for preset in $presets; do

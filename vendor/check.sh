@@ -10,7 +10,6 @@ set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
-cargo_home="${CARGO_HOME:-$HOME/.cargo}"
 status=0
 for crate in candle-core@0.9.2 float8@0.6.1; do
   name="${crate%@*}"
@@ -21,7 +20,14 @@ for crate in candle-core@0.9.2 float8@0.6.1; do
     "$name" "$version" > "$pkg/Cargo.toml"
   echo 'fn main() {}' > "$pkg/src/main.rs"
   (cd "$pkg" && cargo fetch -q)
-  release="$(ls -d "$cargo_home"/registry/src/*/"$name-$version" | head -n 1)"
+  # Where cargo unpacked it, whatever the registry's source is called here.
+  manifest="$(cargo metadata -q --format-version 1 --manifest-path "$pkg/Cargo.toml" \
+    | grep -o "\"manifest_path\":\"[^\"]*/$name-$version/Cargo.toml\"" | head -n 1)"
+  release="$(dirname "$(printf '%s' "$manifest" | sed 's/^"manifest_path":"//; s/"$//')")"
+  if [ ! -f "$release/Cargo.toml" ]; then
+    echo "vendor/check.sh: cargo did not unpack $name $version" >&2
+    exit 1
+  fi
   mkdir -p "$work/a/$name"
   cp -r "$release/Cargo.toml" "$release/LICENSE" "$release/README.md" "$release/src" "$work/a/$name/"
   if [ "${1:-}" = "--write" ]; then

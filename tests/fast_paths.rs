@@ -18,29 +18,26 @@ fn all_triples() -> Vec<u8> {
     v
 }
 
-fn sets() -> Vec<Params> {
-    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/params/");
-    let mut v: Vec<Params> = [
-        "identity",
-        "color-inversion",
-        "srgb-passthrough",
-        "campro-omega-0.5",
-        "campro-omega-0.5-hour",
-        "campro-omega-0.5-distill",
-        "campro-omega-1",
-        "campro-omega-1-shared-continued",
-        "campro-omega-5",
-    ]
-    .iter()
-    .map(|n| Params::from_file(std::path::Path::new(&format!("{root}{n}.json"))).unwrap())
-    .collect();
-    // Like the paper's strong checkpoints: entries near ±5, a jagged curve (slopes ~30).
-    let strong = [[1.2101, 0.0430, -4.6679], [-4.3933, 4.1114, -2.2755], [0.2930, -3.3570, 4.9287]];
+/// Like the paper's strong checkpoints: entries near ±5, a jagged curve (slopes ~30).
+fn strong() -> Params {
+    let m = [[1.2101, 0.0430, -4.6679], [-4.3933, 4.1114, -2.2755], [0.2930, -3.3570, 4.9287]];
     let jag = ToneCurve::uniform(
         (0..32).map(|i| if i % 2 == 0 { 0.05 * (i % 7) as f64 } else { 1.0 - 0.03 * i as f64 }).collect(),
     )
     .unwrap();
-    v.push(Params::new(strong, jag, 2.2).unwrap());
+    Params::new(m, jag, 2.2).unwrap()
+}
+
+fn sets() -> Vec<Params> {
+    // Every bundled set (params/*.json), in name order.
+    let mut files: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/params"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "json"))
+        .collect();
+    files.sort();
+    let mut v: Vec<Params> = files.iter().map(|f| Params::from_file(f).unwrap()).collect();
+    v.push(strong());
     // Jumps and plateaus on a non-uniform grid.
     let steps = ToneCurve::new(vec![0.0, 0.2, 0.2001, 0.5, 0.50001, 1.0], vec![0.0, 0.0, 1.0, 1.0, 0.3, 0.9]).unwrap();
     v.push(Params::new([[0.9, 0.2, -0.1], [0.1, 0.8, 0.1], [-0.2, 0.1, 1.1]], steps, 2.2).unwrap());
@@ -64,10 +61,10 @@ fn sets() -> Vec<Params> {
     // share a curve and the third is jagged.
     let wave = |k: usize, f: f64, phase: f64| ToneCurve::from_fn(k, move |t| 0.5 + 0.48 * (f * t + phase).sin());
     let three = ToneCurves::per_channel([wave(64, 13.0, 0.0), wave(64, 5.0, 1.0), ToneCurve::from_fn(64, |t| 1.0 - t)]);
-    let mut p = Params::new(strong, three, 2.2).unwrap();
+    let mut p = Params::new(strong().ccm, three, 2.2).unwrap();
     p.name = "per-channel-64".into();
     v.push(p);
-    let jagged = v[8].tone_curves.channel(0).clone();
+    let jagged = strong().tone_curves.channel(0).clone();
     let two = ToneCurves::per_channel([wave(32, 7.0, 0.5), jagged, wave(32, 7.0, 0.5)]);
     let mut p = Params::new([[0.9, 0.2, -0.1], [0.1, 0.8, 0.1], [-0.2, 0.1, 1.1]], two, 2.2).unwrap();
     p.name = "per-channel-32".into();
@@ -256,7 +253,7 @@ fn shared_end_slot_with_one_ambiguous_end_stays_exact() {
 
 #[test]
 fn block_engine_handles_any_length_and_alignment() {
-    let p = &sets()[8];
+    let p = &strong();
     let reference = Prepared::new(p, Depth::Eight);
     let px: Vec<u8> = random_pixels(1001, 5).into_iter().flatten().collect();
     for f in every_engine(p) {
@@ -274,7 +271,10 @@ fn block_engine_handles_any_length_and_alignment() {
 
 #[test]
 fn exact8_falls_back_rarely_for_gentle_curves() {
-    let p = &sets()[1]; // colour inversion: slope up to ~6 near black
+    // Colour inversion: slope up to ~6 near black.
+    let p =
+        &Params::from_file(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/params/color-inversion.json")))
+            .unwrap();
     let f = Exact8::new(p);
     assert!(f.fallback_fraction() < 0.05, "{}", f.fallback_fraction());
 }

@@ -22,7 +22,7 @@ campro="$root/target/release/campro"
 n="${1:-50}"
 shared="${CAMPRO_SHARED:-$root/../shared}"
 export CAMPRO_SHARED="$shared"
-presets="${PRESETS:-campro-omega-0.5 campro-omega-0.5-hour campro-omega-0.5-distill campro-omega-1 campro-omega-1-shared-continued campro-omega-5 identity srgb-passthrough color-inversion}"
+presets="${PRESETS:-$("$campro" presets --format json | python3 -c 'import json, sys; print(" ".join(p["name"] for p in json.load(sys.stdin)))')}"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 

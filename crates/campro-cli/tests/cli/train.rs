@@ -64,16 +64,7 @@ fn train_writes_params_and_detector_that_eval_reads() {
         .success();
     assert!(std::fs::read_to_string(out.join("utility.md")).unwrap().contains("fine-tuned (p)"));
     // --own-detector: raw with the bundled detector, p with its own, rows in order.
-    campro()
-        .args(["eval", "utility"])
-        .arg(&p)
-        .args(["--own-detector", "--limit", "2", "--force", "--shared"])
-        .arg(&shared)
-        .arg("-o")
-        .arg(&out)
-        .assert()
-        .success();
-    let md = std::fs::read_to_string(out.join("utility.md")).unwrap();
+    let md = own_detector_utility(&p, &shared, &out);
     assert!(md.contains("yolox-nano; p each with its own fine-tuned detector"), "{md}");
     assert!(md.contains("2 images (those held out of detector fine-tuning: COCO id % 5 == 0)"), "{md}");
     let scored: serde_json::Value =
@@ -196,18 +187,7 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
     fails_with(&mut run(), "exists (use --force");
     run().arg("--force").assert().success();
     let out = dir.path().join("ev");
-    campro()
-        .args(["eval", "utility"])
-        .arg(&p)
-        .args(["--own-detector", "--limit", "2", "--force", "--shared"])
-        .arg(&shared)
-        .arg("-o")
-        .arg(&out)
-        .assert()
-        .success();
-    assert!(std::fs::read_to_string(out.join("utility.md"))
-        .unwrap()
-        .contains("inv each with its own fine-tuned detector"));
+    assert!(own_detector_utility(&p, &shared, &out).contains("inv each with its own fine-tuned detector"));
     fails_with(campro().arg("finetune-detector").arg(&p).args(["--steps", "0"]), "0 is not in 1..=10000000");
     fails_with(campro().arg("finetune-detector").arg(&p).args(["--seconds", "NaN"]), "--seconds: must be > 0");
     // A curve with uneven knots cannot drive the optimiser's camera.
@@ -239,4 +219,19 @@ fn finetune_detector_writes_a_detector_for_any_params_and_records_it() {
                 .contains("'--init <INIT>' cannot be used with '--resume <RESUME>'")
     );
     assert!(!trained.exists());
+}
+
+/// `eval utility PARAMS --own-detector` on two held-out images into `out` (replacing what is
+/// there); its `utility.md`.
+fn own_detector_utility(params: &Path, shared: &Path, out: &Path) -> String {
+    campro()
+        .args(["eval", "utility"])
+        .arg(params)
+        .args(["--own-detector", "--limit", "2", "--force", "--shared"])
+        .arg(shared)
+        .arg("-o")
+        .arg(out)
+        .assert()
+        .success();
+    std::fs::read_to_string(out.join("utility.md")).unwrap()
 }

@@ -327,6 +327,14 @@ impl Params {
     pub fn rated_for_grey(&self) -> bool {
         self.provenance_fields().is_ok_and(|p| p.grey_rated)
     }
+
+    /// Whether the set protects faces: its provenance holds a protection rating
+    /// (`"protection": {"worst_top1": T, ...}`) with `T` at most
+    /// [`crate::provenance::PROTECTIVE_TOP1`]. Hand-made sets, sets in training and JSON
+    /// without the rating are not protective: a device does not call them "Protected".
+    pub fn protective(&self) -> bool {
+        self.provenance_fields().is_ok_and(|p| p.protective())
+    }
 }
 
 /// The provenance key of a set's rating for grey input ([`Params::rated_for_grey`]).

@@ -28,6 +28,20 @@ pub const VALIDATION: &str = "validation";
 pub const BEST_ROUND: &str = "best_round";
 /// `provenance.grey`: the set's rating for grey input (`{"rated": true, ...}`).
 pub const GREY: &str = "grey";
+/// `provenance.protection`: the set's measured protection against face recognition
+/// (`{"worst_top1": 0.11, "attacks": "...", "measured": "..."}`), written with the figures
+/// that rate it. A set without it is not called protective anywhere (a privacy camera fails
+/// closed): hand-made sets, sets in training, an app's own JSON.
+pub const PROTECTION: &str = "protection";
+/// `provenance.protection.worst_top1`: the worst face-recognition top-1 accuracy measured
+/// over every attack on the set's output, 0..=1 (1% is chance among 100 identities).
+pub const WORST_TOP1: &str = "worst_top1";
+/// The largest worst-case top-1 at which a set is called protective (15%, inclusive):
+/// every bundled preset below it was measured under the paper's protocol and the adaptive
+/// attacks of its Sec. VII (trained/README.md); `campro-omega-1` (19%) and
+/// `campro-omega-5` (39%) are above it.
+pub const PROTECTIVE_TOP1: f64 = 0.15;
+
 /// A network's or detector's file field (a bare file name beside the parameter file).
 pub const ONNX: &str = "onnx";
 /// A fine-tuned detector's manifest field (a bare file name beside the parameter file).
@@ -44,7 +58,7 @@ pub struct Named {
 }
 
 /// The typed fields of a provenance; everything else stays in `Params::provenance`.
-#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct Provenance {
     /// [`ENHANCER`].
     pub enhancer: Option<Named>,
@@ -58,6 +72,8 @@ pub struct Provenance {
     pub best_round: Option<u64>,
     /// Rated for grey input.
     pub grey_rated: bool,
+    /// [`WORST_TOP1`] of the set's protection rating, when it has one.
+    pub worst_top1: Option<f64>,
 }
 
 /// A provenance field of the wrong shape: the field's path and the rule.
@@ -124,6 +140,11 @@ impl Provenance {
             Some(Value::Bool(b)) => *b,
             Some(_) => return bad("grey.rated", "must be true or false"),
         };
+        let worst_top1 = match object(m, PROTECTION, PROTECTION)?.map(|o| o.get(WORST_TOP1)) {
+            None => None,
+            Some(Some(Value::Number(n))) if n.as_f64().is_some_and(|t| (0.0..=1.0).contains(&t)) => n.as_f64(),
+            Some(_) => return bad("protection.worst_top1", "must be a number in 0..=1"),
+        };
         Ok(Self {
             enhancer: named(m, ENHANCER)?,
             restorer: named(m, RESTORER)?,
@@ -131,7 +152,14 @@ impl Provenance {
             validation_identities,
             best_round,
             grey_rated,
+            worst_top1,
         })
+    }
+
+    /// Whether the set is protective: its rating's worst-case top-1 is at most
+    /// [`PROTECTIVE_TOP1`]. Unrated sets are not.
+    pub fn protective(&self) -> bool {
+        self.worst_top1.is_some_and(|t| t <= PROTECTIVE_TOP1)
     }
 }
 
@@ -182,5 +210,57 @@ mod tests {
             "provenance.validation.best_round: must be a whole number"
         );
         assert_eq!(e(json!({"grey": {"rated": "yes"}})), "provenance.grey.rated: must be true or false");
+        for bad in [json!({}), json!({"worst_top1": "5%"}), json!({"worst_top1": 1.5}), json!({"worst_top1": -0.1})] {
+            assert_eq!(e(json!({ "protection": bad })), "provenance.protection.worst_top1: must be a number in 0..=1");
+        }
+    }
+
+    #[test]
+    fn the_bundled_presets_that_protect_are_the_rated_ones_within_the_threshold() {
+        let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/params"));
+        let mut protective = Vec::new();
+        for e in std::fs::read_dir(dir).unwrap() {
+            let path = e.unwrap().path();
+            if path.extension().is_some_and(|x| x == "json") {
+                let p = crate::Params::from_file(&path).unwrap();
+                let fields = p.provenance_fields().unwrap();
+                // Every learnt set carries its rating; hand-made ones none.
+                assert_eq!(fields.worst_top1.is_some(), p.provenance.contains_key("optimiser"), "{}", path.display());
+                if p.protective() {
+                    protective.push(path.file_stem().unwrap().to_string_lossy().into_owned());
+                }
+            }
+        }
+        protective.sort();
+        assert_eq!(
+            protective,
+            [
+                "campro-omega-0.5",
+                "campro-omega-0.5-distill",
+                "campro-omega-0.5-hour",
+                "campro-omega-1-shared-continued"
+            ]
+        );
+    }
+
+    #[test]
+    fn the_aars_threshold_is_the_cores() {
+        // android/campro/build.gradle.kts picks the presets the AAR ships with the same rule.
+        let gradle =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/android/campro/build.gradle.kts")).unwrap();
+        let line = gradle.lines().find(|l| l.starts_with("val PROTECTIVE_TOP1 = ")).expect("the AAR's threshold");
+        let v: f64 = line.trim_start_matches("val PROTECTIVE_TOP1 = ").trim().parse().unwrap();
+        assert_eq!(v, PROTECTIVE_TOP1);
+    }
+
+    #[test]
+    fn protective_only_with_a_rating_at_most_the_threshold() {
+        let p = |v: Value| read(v).unwrap().protective();
+        assert!(!p(json!({})), "unrated");
+        assert!(!p(json!({"optimiser": "campro-train"})), "trained but unrated");
+        assert!(p(json!({"protection": {"worst_top1": 0.0}})));
+        assert!(p(json!({"protection": {"worst_top1": 0.15}})), "the threshold is inclusive");
+        assert!(!p(json!({"protection": {"worst_top1": 0.1501}})));
+        assert!(!p(json!({"protection": {"worst_top1": 0.39}})));
     }
 }

@@ -22,8 +22,10 @@ android {
         targetCompatibility = JavaVersion.VERSION_17
     }
     sourceSets["main"].jniLibs.srcDir(layout.buildDirectory.dir("rustJniLibs"))
-    // The bundled presets (the repository's params/*.json) as assets/campro/params/NAME.json,
-    // which Preset.Named opens; the detectors (.onnx) stay out of the AAR.
+    // The protective presets (params/*.json with a protection rating, copyPresets below) as
+    // assets/campro/params/NAME.json, which Preset.Named opens; the detectors (.onnx) and the
+    // sets that do not protect (identity, srgb-passthrough, color-inversion: for tests) stay
+    // out of the AAR.
     sourceSets["main"].assets.srcDir(layout.buildDirectory.dir("presetAssets"))
     publishing {
         singleVariant("release") { withSourcesJar() }
@@ -78,12 +80,29 @@ val cargoNdk by tasks.registering(Exec::class) {
     inputs.files(File(repo, "Cargo.toml"), File(repo, "Cargo.lock"), File(repo, "jni-bridge/Cargo.toml"), File(repo, ".cargo/config.toml"))
     outputs.dir(out)
 }
+// campro::provenance::PROTECTIVE_TOP1: a set is protective when its provenance's
+// protection.worst_top1 is at most this (the core's test `the_aars_threshold_is_the_cores`
+// holds the two equal; the JVM tests filter with the core itself).
+val PROTECTIVE_TOP1 = 0.15
+fun protective(f: File): Boolean {
+    val provenance = (groovy.json.JsonSlurper().parse(f) as Map<*, *>)["provenance"] as? Map<*, *>
+    val worst = ((provenance?.get("protection") as? Map<*, *>)?.get("worst_top1") as? Number)?.toDouble()
+    return worst != null && worst >= 0.0 && worst <= PROTECTIVE_TOP1
+}
 val copyPresets by tasks.registering(Copy::class) {
-    from(rootProject.file("../params")) { include("*.json") }
+    from(rootProject.file("../params")) {
+        include("*.json")
+        exclude { !it.isDirectory && !protective(it.file) }
+    }
     into(layout.buildDirectory.dir("presetAssets/campro/params"))
 }
 tasks.named("preBuild") { dependsOn(cargoNdk, copyPresets) }
 
 kotlin {
-    compilerOptions { jvmTarget.set(org.jetbrains.kotlin.gradle.dsl.JvmTarget.JVM_17) }
+    compilerOptions {
+        jvmTarget.set(org.jetbrains.kotlin.gradle.dsl.JvmTarget.JVM_17)
+        // Consumers on Kotlin 2.0 or later can read the library's metadata.
+        apiVersion.set(org.jetbrains.kotlin.gradle.dsl.KotlinVersion.KOTLIN_2_0)
+        languageVersion.set(org.jetbrains.kotlin.gradle.dsl.KotlinVersion.KOTLIN_2_0)
+    }
 }

@@ -427,6 +427,19 @@ pub extern "system" fn Java_org_campro_CamProNative_liveHandles<'local>(
     env.with_env(|_env| -> Result<jint> { Ok(registry().len() as jint) }).resolve::<ThrowJava>()
 }
 
+/// `protective(handle: Long): Boolean`: whether the session's parameter set protects faces
+/// ([`campro::Params::protective`]: a protection rating in its provenance within the
+/// threshold). A device never calls an unprotective set's frames "Protected".
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_protective<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    handle: jlong,
+) -> jboolean {
+    env.with_env(|_env| -> Result<jboolean> { with_loop(handle, |l| Ok(l.params().protective())) })
+        .resolve::<ThrowJava>()
+}
+
 /// `setMaxCurvePoints(handle: Long, n: Int)`: the device's `TONEMAP_MAX_CURVE_POINTS`.
 #[unsafe(no_mangle)]
 pub extern "system" fn Java_org_campro_CamProNative_setMaxCurvePoints<'local>(

@@ -66,7 +66,7 @@ impl GreyPolicy {
             return Ok(false);
         }
         if !self.allow {
-            bail!("{}", grey_message(m.spread));
+            return Err(GreyRefused { spread: m.spread }.into());
         }
         self.allowed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         Ok(true)
@@ -83,6 +83,22 @@ impl GreyPolicy {
         self.check(&sample)
     }
 }
+
+/// The refusal of a grey picture ([`GreyPolicy::check`]), typed so that a caller can tell
+/// it from a failure (the Python API's "refused" rows).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GreyRefused {
+    /// The picture's colour spread, 8-bit codes.
+    pub spread: f64,
+}
+
+impl std::fmt::Display for GreyRefused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&grey_message(self.spread))
+    }
+}
+
+impl std::error::Error for GreyRefused {}
 
 /// Why a grey picture is refused (colour `spread` in 8-bit codes).
 pub fn grey_message(spread: f64) -> String {
@@ -139,6 +155,66 @@ impl<'p> Capture<'_, 'p> {
             dst.copy_from_slice(enhance_on(e, &captured, threads)?.as_raw());
         }
         Ok(grey)
+    }
+}
+
+/// A frame's RGB samples as read: 8 or 16 bits a sample, interleaved, rows top to bottom.
+#[derive(Debug, Clone, Copy)]
+pub enum Frame<'a> {
+    Eight(&'a [u8]),
+    Sixteen(&'a [u16]),
+}
+
+/// What the camera gives for a [`Frame`]: 8-bit or 16-bit samples (codes of the output depth).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Pixels {
+    Eight(Vec<u8>),
+    Sixteen(Vec<u16>),
+}
+
+impl<'p> Capture<'_, 'p> {
+    /// The `w` x `h` frame `src` through the camera, at `depth`, as `simulate` writes a
+    /// photo: 8 bits in and out (or 8 bits in with the enhancer) on the exact path
+    /// (bit-identical to the reference), anything else on the reference path tabulated for
+    /// the input's depth. Also whether the picture was grey and let through
+    /// ([`GreyPolicy::check`]); `warn` hears what the user should know.
+    pub fn picture(&self, src: Frame, w: u32, h: u32, depth: Depth, warn: &dyn Fn(&str)) -> Result<(Pixels, bool)> {
+        let row = 3 * w as usize;
+        let (pixels, grey) = match src {
+            Frame::Eight(s) if self.enhancer.is_some() || depth == Depth::Eight => {
+                let mut dst = vec![0u8; s.len()];
+                let grey = self.run(s, &mut dst, w, h)?;
+                (Pixels::Eight(dst), grey)
+            }
+            // The enhancer reads what an 8-bit camera gives: the caller converts first.
+            Frame::Sixteen(_) if self.enhancer.is_some() => bail!("the enhancer takes 8-bit frames"),
+            Frame::Sixteen(s) => {
+                let grey = self.grey.check16(s)?;
+                let prep = self.prepared16();
+                let mut dst = vec![0u16; s.len()];
+                s.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| prep.run(s, d, depth));
+                (Self::at(dst, depth), grey)
+            }
+            Frame::Eight(s) => {
+                let grey = self.grey.check(s)?;
+                let wide: Vec<u16> = s.iter().map(|&v| u16::from(v)).collect();
+                let mut dst = vec![0u16; wide.len()];
+                wide.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| self.p8.run(s, d, depth));
+                (Self::at(dst, depth), grey)
+            }
+        };
+        if grey {
+            warn(GREY_ALLOWED);
+        }
+        Ok((pixels, grey))
+    }
+
+    /// Reference-path codes of `depth` as [`Pixels`].
+    fn at(codes: Vec<u16>, depth: Depth) -> Pixels {
+        match depth {
+            Depth::Eight => Pixels::Eight(codes.into_iter().map(|v| v as u8).collect()),
+            Depth::Sixteen => Pixels::Sixteen(codes),
+        }
     }
 }
 

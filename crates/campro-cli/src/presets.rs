@@ -101,25 +101,37 @@ pub fn list(json: bool) -> Result<()> {
     let mut rows = Vec::new();
     for p in PRESETS {
         let params = campro::Params::from_json(p.json)?;
-        rows.push((p.name, p.pick, p.enhancer.is_some(), params.rated_for_grey(), params.description));
+        rows.push((
+            p.name,
+            p.pick,
+            p.enhancer.is_some(),
+            params.rated_for_grey(),
+            params.protective(),
+            params.description,
+        ));
     }
     if json {
         let v: Vec<_> = rows
             .iter()
-            .map(|(n, pick, e, g, d)| {
-                serde_json::json!({ "name": n, "pick": pick, "enhancer": e, "ratedForGrey": g, "description": d })
+            .map(|(n, pick, e, g, protective, d)| {
+                serde_json::json!({ "name": n, "pick": pick, "enhancer": e, "ratedForGrey": g, "protective": protective, "description": d })
             })
             .collect();
         crate::say!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        for (n, pick, e, g, d) in rows {
+        for (n, pick, e, g, protective, d) in rows {
             let grey = if g {
                 ""
             } else {
                 "\n    Not rated for grey input: black-and-white pictures are refused (--allow-grey writes them unprotected)."
             };
+            let unprotective = if protective {
+                ""
+            } else {
+                "\n    Not protective: its worst measured face-recognition top-1 is above 15%, or it has no rating (a phone never calls it Protected)."
+            };
             crate::say!(
-                "{n}{}\n    {pick}\n    Measured: {}{grey}",
+                "{n}{}\n    {pick}\n    Measured: {}{grey}{unprotective}",
                 if e { " (with enhancer)" } else { "" },
                 crate::escape(&d)
             );

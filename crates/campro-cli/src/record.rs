@@ -49,6 +49,21 @@ pub fn enhancer_bytes(given: &Path, p: &campro::Params) -> Result<Vec<u8>> {
     Ok(campro::file::read_capped(&path, 1 << 30, "an enhancer")?)
 }
 
+/// The record of the file at `p`: its name, SHA-256 and size.
+pub fn file_record(p: &Path) -> Result<FileRecord> {
+    let (sha256, bytes) = sha256_file(p)?;
+    Ok(FileRecord { name: file_name(p), sha256, bytes })
+}
+
+/// The record of a file's `bytes`, read already, named by `p`'s file name.
+pub fn bytes_record(p: &Path, bytes: &[u8]) -> FileRecord {
+    FileRecord { name: file_name(p), sha256: sha256(bytes), bytes: bytes.len() as u64 }
+}
+
+fn file_name(p: &Path) -> String {
+    p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
+}
+
 /// Where the record of `output` lies: `output` with `.campro.json` appended to its name.
 pub fn path_of(output: &Path) -> PathBuf {
     let mut name = output.file_name().map(|n| n.to_os_string()).unwrap_or_default();
@@ -90,14 +105,11 @@ impl RunRecord {
 
     /// Writes the record of `output` (made from `input`) beside it.
     pub fn write(&self, input: &Path, output: &Path, jpeg_quality: Option<u8>, force: bool) -> Result<()> {
-        let file = |p: &Path| -> Result<FileRecord> {
-            let (sha256, bytes) = sha256_file(p)?;
-            Ok(FileRecord {
-                name: p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
-                sha256,
-                bytes,
-            })
-        };
+        self.write_for(file_record(input)?, output, jpeg_quality, force)
+    }
+
+    /// [`RunRecord::write`] with the input already described.
+    pub fn write_for(&self, input: FileRecord, output: &Path, jpeg_quality: Option<u8>, force: bool) -> Result<()> {
         let r = Record {
             campro_record: campro::record::RECORD_VERSION,
             campro_version: env!("CARGO_PKG_VERSION").to_string(),
@@ -113,8 +125,8 @@ impl RunRecord {
             enhancer_sha256: self.enhancer_sha256.clone(),
             jpeg_quality,
             metadata: self.metadata.clone(),
-            input: Some(file(input)?),
-            output: file(output)?,
+            input: Some(input),
+            output: file_record(output)?,
             device: None,
         };
         crate::write_atomic(&path_of(output), r.to_json().as_bytes(), force)

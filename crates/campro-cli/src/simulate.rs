@@ -10,7 +10,7 @@
 //! other instead of adding up.
 
 use crate::args::{BitDepth, Report, SimulateArgs};
-use crate::capture::Capture;
+use crate::capture::{Capture, Frame, Pixels};
 use crate::output::file_key;
 use crate::video::{self, Encoding, FrameFormat, Sink, Source};
 use crate::write_atomic;
@@ -110,7 +110,7 @@ pub(crate) fn collect_inputs(
 /// Where an input goes: a video keeps its container; an image keeps its format, or takes
 /// `format` when one is asked; a HEIC photo (not written here) becomes a JPEG; a JPEG or
 /// WebP at 16 bits becomes a PNG (neither has a 16-bit form); anything else becomes PNG.
-fn output_for(path: &Path, depth: Depth, format: Option<ImageFormat>) -> PathBuf {
+pub(crate) fn output_for(path: &Path, depth: Depth, format: Option<ImageFormat>) -> PathBuf {
     if video::is_video(path) {
         return path.to_path_buf();
     }
@@ -699,79 +699,83 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
 }
 
 /// What every job shares.
-struct Paths<'a, 'p> {
-    capture: &'a Capture<'a, 'p>,
-    budget: &'a Budget,
-    depth: Depth,
-    force: bool,
-    quality: u8,
-    metadata: crate::metadata::Policy,
+pub(crate) struct Paths<'a, 'p> {
+    pub capture: &'a Capture<'a, 'p>,
+    pub budget: &'a Budget,
+    pub depth: Depth,
+    pub force: bool,
+    pub quality: u8,
+    pub metadata: crate::metadata::Policy,
 }
 
 impl Paths<'_, '_> {
     /// Simulates one image; Ok(true) when it was grey and let through (`--allow-grey`).
     fn one(&self, input: &Path, output: &Path, warn: &dyn Fn(&str)) -> Result<bool> {
-        let (img, _lease, meta) =
-            campro_eval::image_file::read_with_metadata(input, self.budget, &|w, h| self.capture.work(w, h), warn)?;
+        let bytes = campro::file::read_capped(input, campro_eval::image_file::MAX_FILE_BYTES, "an image")?;
+        self.one_of(input, &bytes, output, warn)
+    }
+
+    /// [`Paths::one`] on the input's bytes, already read (`input` names them).
+    pub(crate) fn one_of(&self, input: &Path, bytes: &[u8], output: &Path, warn: &dyn Fn(&str)) -> Result<bool> {
+        let (file, grey) = self.encoded(input, bytes, output, warn)?;
+        write_atomic(output, &file, self.force)?;
+        Ok(grey)
+    }
+
+    /// The file [`Paths::one_of`] writes to `output` (its format from `output`'s ending),
+    /// and whether the input was grey and let through.
+    pub(crate) fn encoded(
+        &self,
+        input: &Path,
+        bytes: &[u8],
+        output: &Path,
+        warn: &dyn Fn(&str),
+    ) -> Result<(Vec<u8>, bool)> {
+        let (img, _lease, meta) = campro_eval::image_file::decode_with_metadata(
+            input,
+            bytes,
+            self.budget,
+            &|w, h| self.capture.work(w, h),
+            warn,
+        )?;
         let kept = crate::metadata::kept(self.metadata, meta.exif.as_deref(), meta.icc, warn);
-        let encode = |format, samples, w, h, quality| encode(format, samples, w, h, quality, &kept);
         let (w, h) = (img.width(), img.height());
         let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
-        let row = 3 * w as usize;
         let format = ImageFormat::of(output).unwrap_or(ImageFormat::Png);
-        if self.capture.enhancer.is_some() || (!sixteen && self.depth == Depth::Eight) {
-            // 8 bits in and out: the exact path (AVX-512 blocks where the CPU has them),
-            // bit-identical to the reference; the enhancer reads what an 8-bit camera gives.
-            if sixteen {
-                warn("--enhance: read as 8 bits (the enhancer takes the camera's 8-bit output)");
-            }
+        let (pixels, grey) = if sixteen && self.capture.enhancer.is_some() {
+            warn("--enhance: read as 8 bits (the enhancer takes the camera's 8-bit output)");
             let src = img.into_rgb8().into_raw();
-            let mut dst = vec![0u8; src.len()];
-            let grey = self.capture.run(&src, &mut dst, w, h)?;
-            if grey {
-                warn(crate::capture::GREY_ALLOWED);
-            }
-            drop(src);
-            write_atomic(output, &encode(format, Samples::Eight(&dst), w, h, self.quality)?, self.force)?;
-            return Ok(grey);
-        }
-        let (src, prep, grey): (Vec<u16>, &Prepared, bool) = if sixteen {
+            self.capture.picture(Frame::Eight(&src), w, h, self.depth, warn)?
+        } else if sixteen {
             let src = img.into_rgb16().into_raw();
-            let grey = self.capture.grey.check16(&src)?;
-            (src, self.capture.prepared16(), grey)
+            self.capture.picture(Frame::Sixteen(&src), w, h, self.depth, warn)?
         } else {
             let src = img.into_rgb8().into_raw();
-            let grey = self.capture.grey.check(&src)?;
-            (src.into_iter().map(u16::from).collect(), self.capture.p8, grey)
+            self.capture.picture(Frame::Eight(&src), w, h, self.depth, warn)?
         };
-        if grey {
-            warn(crate::capture::GREY_ALLOWED);
-        }
-        let mut dst = vec![0u16; src.len()];
-        src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| prep.run(s, d, self.depth));
-        drop(src);
-        let samples = match self.depth {
-            Depth::Sixteen => Samples::Sixteen(&dst),
-            Depth::Eight => {
-                let eight: Vec<u8> = dst.iter().map(|&v| v as u8).collect();
-                write_atomic(output, &encode(format, Samples::Eight(&eight), w, h, self.quality)?, self.force)?;
-                return Ok(grey);
-            }
-        };
-        write_atomic(output, &encode(format, samples, w, h, self.quality)?, self.force)?;
-        Ok(grey)
+        Ok((encode(format, pixels.samples(), w, h, self.quality, &kept)?, grey))
     }
 }
 
 /// RGB samples of 8 or 16 bits.
-enum Samples<'a> {
+pub(crate) enum Samples<'a> {
     Eight(&'a [u8]),
     Sixteen(&'a [u16]),
 }
 
+impl Pixels {
+    /// The samples, borrowed.
+    pub(crate) fn samples(&self) -> Samples<'_> {
+        match self {
+            Pixels::Eight(v) => Samples::Eight(v),
+            Pixels::Sixteen(v) => Samples::Sixteen(v),
+        }
+    }
+}
+
 /// `samples` (a `w` x `h` RGB image) as a file of `format`; JPEG at `quality` (8 bits
 /// only), carrying the `kept` metadata where the format can (TIFF takes no EXIF here).
-fn encode(
+pub(crate) fn encode(
     format: ImageFormat,
     samples: Samples,
     w: u32,

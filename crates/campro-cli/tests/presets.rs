@@ -98,6 +98,14 @@ fn presets_are_listed_with_their_line_and_unknown_names_list_them() {
     // Each says in plain words what to pick it for, the unprotected ones that they protect nothing.
     assert!(text.contains("campro-omega-0.5 (with enhancer)\n    Pick this for everyday use"), "{text}");
     assert_eq!(text.matches("\n    No protection:").count(), 3, "{text}");
+    // Protective: the four rated within the threshold; the other five say they are not.
+    let protective: Vec<&str> =
+        v.as_array().unwrap().iter().filter(|p| p["protective"] == true).map(|p| p["name"].as_str().unwrap()).collect();
+    assert_eq!(
+        protective,
+        ["campro-omega-0.5", "campro-omega-0.5-distill", "campro-omega-0.5-hour", "campro-omega-1-shared-continued"]
+    );
+    assert_eq!(text.matches("\n    Not protective:").count(), 5, "{text}");
     assert!(v.as_array().unwrap().iter().all(|p| p["pick"].as_str().is_some_and(|s| s.len() > 20)), "{v}");
     fails_with(
         campro().args(["validate", "no-such-preset"]),

@@ -162,7 +162,18 @@ pub fn read_with_metadata<'b>(
     warn: &dyn Fn(&str),
 ) -> Result<(image::DynamicImage, Lease<'b>, Metadata)> {
     let bytes = campro::file::read_capped(path, MAX_FILE_BYTES, "an image")?;
-    decoded(path, &bytes, budget, work, warn, true)
+    decode_with_metadata(path, &bytes, budget, work, warn)
+}
+
+/// [`read_with_metadata`] on bytes already read (`path` names them in errors).
+pub fn decode_with_metadata<'b>(
+    path: &Path,
+    bytes: &[u8],
+    budget: &'b Budget,
+    work: Work,
+    warn: &dyn Fn(&str),
+) -> Result<(image::DynamicImage, Lease<'b>, Metadata)> {
+    decoded(path, bytes, budget, work, warn, true)
 }
 
 /// [`read`] on bytes already read (`path` names them in errors).

@@ -19,7 +19,7 @@ pub use eval::{AttackArg, Common, EnrolArg, EvalCmd, LossArg, PrivacyArgs, Retra
 pub use inspect::InspectArgs;
 pub use models::{ModelsArgs, ModelsCmd};
 pub use params::{DemoArgs, ImportPtArgs, ManArgs, PresetsArgs, ValidateArgs};
-pub use simulate::{BitDepth, EnhanceArgs, SimulateArgs};
+pub use simulate::{BitDepth, EnhanceArgs, FacesArg, SimulateArgs};
 pub use train::{FinetuneDetectorArgs, RunFiles, TrainArgs, TrainEnhancerArgs};
 
 use clap::{Parser, Subcommand, ValueEnum};

@@ -66,6 +66,8 @@ object CamProNative {
     @JvmStatic external fun createFromAsset(assetManager: Any?, path: String?, maxCurvePoints: Int, maxDenominator: Int, skipTolerance: Double): Long
     @JvmStatic external fun close(handle: Long)
     @JvmStatic external fun liveHandles(): Int
+    /** Whether the session's parameter set is protective (a protection rating within the threshold, `campro::Params::protective`). */
+    @JvmStatic external fun protective(handle: Long): Boolean
     @JvmStatic external fun setMaxCurvePoints(handle: Long, n: Int)
     @JvmStatic external fun setDngCalibration(handle: Long, illuminant1: Int, forwardMatrix1: IntArray?, illuminant2: Int, forwardMatrix2: IntArray?)
     @JvmStatic external fun updateFromTransform(handle: Long, deviceTransform: IntArray?, outTransform: IntArray?, outCurve: FloatArray?, outReport: DoubleArray?): Boolean

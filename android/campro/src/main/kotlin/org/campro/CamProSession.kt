@@ -49,6 +49,14 @@ class CamProSession private constructor(
 
     val isClosed: Boolean @Synchronized get() = handle == 0L
 
+    /**
+     * Whether the parameter set protects faces: its provenance holds a protection rating
+     * whose worst measured top-1 is within `campro::provenance::PROTECTIVE_TOP1` (15%).
+     * Hand-made sets (`identity`, `srgb-passthrough`, `color-inversion`) and JSON without the
+     * rating are not: a camera with them reads [ProtectionState.Applied], never Protected.
+     */
+    val protective: Boolean @Synchronized get() = CamProNative.protective(live())
+
     /** One frame from the device's own `COLOR_CORRECTION_TRANSFORM` (18 ints, as `ColorSpaceTransform.copyElements` gives). Returns whether the values changed. */
     @Synchronized
     fun updateFromTransform(deviceTransform: IntArray): Boolean =

@@ -15,6 +15,16 @@ sealed class ProtectionState {
         override fun toString() = "Protected"
     }
 
+    /**
+     * The last result read back the values within the bound, as for [Protected], but the
+     * parameter set is not protective ([CamProSession.protective]: no protection rating in
+     * its provenance, e.g. `identity` or an app's own JSON): frames flow and faces are NOT
+     * hidden. Reached only through an explicit opt-in (`CamProOptions.allowUnprotective`).
+     */
+    object Applied : ProtectionState() {
+        override fun toString() = "Applied"
+    }
+
     /** The last protected result shows the device did not apply CamPro: [reason] says how. */
     data class Violated(val reason: String) : ProtectionState()
 
@@ -27,6 +37,9 @@ sealed class ProtectionState {
      */
     data class Stopped(val reason: String) : ProtectionState()
 }
+
+/** Whether the device applies the values as sent: [ProtectionState.Protected] or [ProtectionState.Applied]; frames flow only then. */
+val ProtectionState.applied: Boolean get() = this == ProtectionState.Protected || this == ProtectionState.Applied
 
 /**
  * What one `CaptureResult` reported, as plain values: `null` where the key is absent.
@@ -105,8 +118,11 @@ class ProtectionGuard(
     var state: ProtectionState = ProtectionState.Verifying
         private set
 
-    /** Whether frames may reach the app's consumers now. */
-    val framesAllowed: Boolean get() = state == ProtectionState.Protected
+    /** Whether the session's parameter set protects faces (read once): verified results read [ProtectionState.Protected] only then, [ProtectionState.Applied] otherwise. */
+    val protective: Boolean = session.protective
+
+    /** Whether frames may reach the app's consumers now: the device applies the values as sent (Protected, or Applied for an unprotective set). */
+    val framesAllowed: Boolean get() = state.applied
 
     /** The largest deviation a checked result showed, 8-bit LSB. */
     @Volatile
@@ -160,7 +176,7 @@ class ProtectionGuard(
     @Synchronized
     fun framesUnmatched(reason: String?) {
         unmatched = reason
-        if (reason != null && state == ProtectionState.Protected) state = ProtectionState.Violated(reason)
+        if (reason != null && state.applied) state = ProtectionState.Violated(reason)
     }
 
     /** Whether the last violation was the active physical camera changing (the pipeline meters again). */
@@ -174,7 +190,7 @@ class ProtectionGuard(
         val reason = violation(r) ?: unmatched
         if (reason != null && lastKind == Kind.Deviation) deviatingInARow++ else deviatingInARow = 0
         state = when {
-            reason == null -> ProtectionState.Protected
+            reason == null -> if (protective) ProtectionState.Protected else ProtectionState.Applied
             missingInARow >= missingKeyLimit -> ProtectionState.Unsupported(
                 "$reason in $missingInARow results in a row: this device cannot be verified",
             )
@@ -371,7 +387,7 @@ class FrameGate<T>(
         val state: ProtectionState
         synchronized(this) {
             state = guard.onProtectedResult(report)
-            val ok = state == ProtectionState.Protected && !stopped
+            val ok = state.applied && !stopped
             val frame = waiting.remove(timestampNs)
             if (frame != null) {
                 matched()

@@ -44,6 +44,15 @@ sealed class Preset {
     /** A parameter set's JSON (from `campro convert`, a training, or the app's own assets). */
     class Json(val json: String) : Preset()
 
+    /**
+     * Whether the parameter set protects faces ([org.campro.CamProSession.protective]: a
+     * protection rating in its provenance within the threshold). The bundled presets all
+     * do; a camera with one that does not opens only with [CamProOptions.allowUnprotective]
+     * and then reads [org.campro.ProtectionState.Applied], never Protected.
+     */
+    fun protective(context: Context): Boolean =
+        org.campro.CamProSession.fromBytes(bytes(context)).use { it.protective }
+
     /** What names it in a record: the bundled preset's name, or "app JSON". */
     internal val given: String get() = when (this) {
         is Named -> name
@@ -98,6 +107,13 @@ data class CamProOptions(
     val jpegQuality: Int = 95,
     /** See [org.campro.ProtectionGuard.trustMissingKeys]: accepting it risks unprotected frames. */
     val trustMissingKeys: Boolean = false,
+    /**
+     * Open a preset that does not protect faces ([Preset.protective] false: `identity`, an
+     * app's JSON without a protection rating). Without it such a camera ends
+     * [org.campro.ProtectionState.Unsupported]; with it, it reads
+     * [org.campro.ProtectionState.Applied], never Protected, and faces are NOT hidden.
+     */
+    val allowUnprotective: Boolean = false,
 ) {
     init {
         require(maxWidth > 0 && maxHeight > 0) { "maxWidth and maxHeight must be positive, got $maxWidth x $maxHeight" }

@@ -29,6 +29,7 @@ import org.campro.DeviceSupport
 import org.campro.FrameRouter
 import org.campro.Orientation
 import org.campro.ProtectedRecording
+import org.campro.applied
 import org.campro.ProtectionState
 import org.campro.RecordingSummary
 import org.campro.StillCapture
@@ -102,7 +103,7 @@ class CamProCamera internal constructor(
 
     private val mutableState = MutableStateFlow<ProtectionState>(ProtectionState.Stopped("not started: the lifecycle owner has not started"))
 
-    /** The protection state: frames reach the preview, recordings and stills only while [ProtectionState.Protected]. */
+    /** The protection state: frames reach the preview, recordings and stills only while [ProtectionState.Protected] (or [ProtectionState.Applied] for a preset opened with `allowUnprotective`). */
     val state: StateFlow<ProtectionState> = mutableState.asStateFlow()
 
     private val listeners = CopyOnWriteArrayList<Pair<Executor, (ProtectionState) -> Unit>>()
@@ -378,6 +379,14 @@ class CamProCamera internal constructor(
                 ?: return publish(ProtectionState.Unsupported("the camera lists no YUV_420_888 size"))
             val bytes = preset.bytes(context)
             val session = CamProSession.fromBytes(bytes, (support as DeviceSupport.Result.Supported).maxCurvePoints)
+            if (!session.protective && !options.allowUnprotective) {
+                session.close()
+                return publish(
+                    ProtectionState.Unsupported(
+                        "the preset ${preset.given} does not protect faces (no protection rating in its provenance): open it with CamProOptions(allowUnprotective = true) to apply it anyway; the camera then reads Applied, never Protected",
+                    ),
+                )
+            }
             presetBytes = bytes
             val c = try {
                 CamProCamera2(
@@ -474,7 +483,7 @@ class CamProCamera internal constructor(
     // Any thread
 
     private fun publish(s: ProtectionState) {
-        if (s == ProtectionState.Protected) cameraHandler.post { lostInARow = 0 }
+        if (s.applied) cameraHandler.post { lostInARow = 0 }
         synchronized(listeners) {
             if (mutableState.value == s && s !is ProtectionState.Stopped) return
             mutableState.value = s

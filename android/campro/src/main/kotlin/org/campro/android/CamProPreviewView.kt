@@ -14,6 +14,7 @@ import android.view.View
 import android.widget.FrameLayout
 import org.campro.Orientation
 import org.campro.ProtectionState
+import org.campro.applied
 
 /**
  * The protected camera's preview: shows only frames whose own `CaptureResult` verified
@@ -21,7 +22,7 @@ import org.campro.ProtectionState
  * fitted whole into the view (aspect kept), turned for the display's rotation and mirrored
  * for a front camera.
  *
- * While the state is not [ProtectionState.Protected] an opaque cover hides the picture
+ * While the state is not [ProtectionState.Protected] (or [ProtectionState.Applied], opted in) an opaque cover hides the picture
  * (show the state yourself: `CamProCamera.state`). The surface is never recreated for a
  * state change: the cover is the only thing that moves, so the preview comes back on the
  * first verified frame without a flash or a new buffer queue.
@@ -86,7 +87,7 @@ class CamProPreviewView @JvmOverloads constructor(
     /** The protection state: the picture shows only while Protected (main thread). */
     fun showState(s: ProtectionState) {
         state = s
-        cover.visibility = if (s == ProtectionState.Protected) View.GONE else View.VISIBLE
+        cover.visibility = if (s.applied) View.GONE else View.VISIBLE
     }
 
     /**

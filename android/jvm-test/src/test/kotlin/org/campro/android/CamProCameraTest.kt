@@ -70,6 +70,42 @@ class CamProCameraTest {
         return CamPro.open(app, owner, Lens.Back, Preset.Json(Fixtures.params())).also { cam = it }
     }
 
+    private fun bundled(name: String) =
+        File(System.getProperty("campro.params.dir") ?: error("campro.params.dir is not set"), "$name.json").readText()
+
+    @Test
+    fun aPresetThatDoesNotProtectIsRefusedWithoutOptInAndNeverReadsProtected() {
+        shadowOf(manager).addCamera("0", chars())
+        shadowOf(app).grantPermissions(Manifest.permission.CAMERA)
+        Fixtures.load()
+        for (name in listOf("identity", "srgb-passthrough", "color-inversion", "campro-omega-5")) {
+            assertFalse(name, Preset.Json(bundled(name)).protective(app))
+        }
+        assertTrue(Preset.Json(Fixtures.params()).protective(app))
+
+        // Without the opt-in: refused before the camera opens, final.
+        val refused = Fixtures.TestOwner()
+        val r = CamPro.open(app, refused, Lens.Back, Preset.Json(bundled("identity"))).also { cam = it }
+        refused.moveTo(Lifecycle.State.RESUMED)
+        settle(r)
+        val s = r.state.value
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("does not protect faces") && s.reason.contains("allowUnprotective"))
+        assertNull("nothing opened", r.glue)
+        r.close()
+        settle(r)
+
+        // With it: the device applies it faithfully, and the state says Applied, never Protected.
+        val owner = Fixtures.TestOwner()
+        val c = CamPro.open(app, owner, Lens.Back, Preset.Json(bundled("identity")), CamProOptions(allowUnprotective = true)).also { cam = it }
+        val seen = ArrayList<ProtectionState>()
+        c.addStateListener({ it.run() }) { seen += it }
+        owner.moveTo(Lifecycle.State.RESUMED)
+        settle(c)
+        protect(c, 1000)
+        assertEquals(ProtectionState.Applied, c.state.value)
+        assertFalse("never Protected: $seen", ProtectionState.Protected in seen)
+    }
+
     @Test
     fun checkDeviceListsEveryCameraAndWhy() {
         shadowOf(manager).addCamera("0", chars())

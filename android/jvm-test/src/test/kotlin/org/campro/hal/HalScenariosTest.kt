@@ -17,11 +17,13 @@ import java.io.File
  * output for its scene by more than [App.boundLsb] reaches the app, and the state says the
  * truth: Protected only while frames are delivered; a camera that can protect ends
  * Protected with frames; one that cannot be verified ends Unsupported or Violated with
- * none delivered; a disconnected one ends Stopped.
+ * none delivered; a disconnected one ends Stopped; a parameter set that does not protect
+ * (no protection rating: `identity`, an app's own JSON) ends Applied and never says
+ * Protected, however faithful the camera.
  */
 class HalScenariosTest {
     /** What a scenario must end in, besides "no frame leaked". */
-    enum class Outcome { Protects, Refuses, Stops }
+    enum class Outcome { Protects, Applies, Refuses, Stops }
 
     /** What the app does: its settings and how it treats its frames and its lifecycle. */
     data class App(
@@ -76,7 +78,10 @@ class HalScenariosTest {
         Scenario(Behaviour("the app holds every frame from 30 to 60 (the stream runs out of buffers)"), Outcome.Protects, App(holdFrom = 30, holdUntil = 60)),
         Scenario(Behaviour("paused at frame 30, resumed at 45"), Outcome.Protects, App(pauseAt = 30, resumeAt = 45)),
         Scenario(Behaviour("paused at frame 30, resumed at 45, settings 2 frames late", latency = 2), Outcome.Protects, App(pauseAt = 30, resumeAt = 45)),
-        Scenario(Behaviour("honest, a parameter set with a curve per channel"), Outcome.Protects, params = PER_CHANNEL),
+        Scenario(Behaviour("honest, a parameter set with a curve per channel (unrated)"), Outcome.Applies, params = PER_CHANNEL),
+        Scenario(Behaviour("honest, the identity set (not protective)"), Outcome.Applies, params = bundled("identity")),
+        Scenario(Behaviour("honest, srgb-passthrough (not protective: faces as a normal camera shows them)"), Outcome.Applies, params = bundled("srgb-passthrough")),
+        Scenario(Behaviour("honest, campro-omega-5 (rated, worst top-1 above the threshold)"), Outcome.Applies, params = bundled("campro-omega-5")),
         Scenario(Behaviour("a curve per channel, each resampled to 17 points", curvePoints = 17), Outcome.Refuses, params = PER_CHANNEL),
     )
 
@@ -158,7 +163,8 @@ class HalScenariosTest {
             if (b.lightChangeAt >= 0 && !lastFollows) why += "the values did not follow the light (the last frame delivered is the old light's)"
             when (sc.outcome) {
                 Outcome.Protects -> if (!(state == ProtectionState.Protected && recent)) why += "ends $state with ${delivered} frames (states: ${states.joinToString(" > ") { it.javaClass.simpleName }})"
-                Outcome.Refuses -> if (state == ProtectionState.Protected || (delivered > 0 && leaked > 0)) why += "ends $state"
+                Outcome.Applies -> if (!(state == ProtectionState.Applied && recent) || ProtectionState.Protected in states) why += "ends $state with ${delivered} frames (states: ${states.joinToString(" > ") { it.javaClass.simpleName }})"
+                Outcome.Refuses -> if (state == ProtectionState.Protected || state == ProtectionState.Applied || (delivered > 0 && leaked > 0)) why += "ends $state"
                 Outcome.Stops -> if (state !is ProtectionState.Stopped) why += "ends $state"
             }
             return Row(b.name, FRAMES, delivered, hal.lostFrames, leaked, state, why.isEmpty(), why.joinToString("; "))
@@ -206,6 +212,10 @@ class HalScenariosTest {
         const val FRAMES = 90
 
         /** A version 2 parameter set: a strong matrix and 64 knots per channel (falling, waving, rising). */
+        /** A parameter file of the repository's params/ (the tests read them all; the AAR ships the protective ones). */
+        fun bundled(name: String): String =
+            File(System.getProperty("campro.params.dir") ?: error("campro.params.dir is not set"), "$name.json").readText()
+
         val PER_CHANNEL: String by lazy {
             fun curve(f: (Double) -> Double) =
                 (0 until 64).joinToString(",", "{\"y\":[", "]}") { String.format(java.util.Locale.ROOT, "%.6f", f(it / 63.0)) }

@@ -1,0 +1,5 @@
+"""``python -m campro``: the ``campro`` command."""
+
+from ._cli import main
+
+main()

@@ -34,7 +34,7 @@ import numpy as np
 
 import campro
 
-__all__ = ["Protect", "ProtectFiles", "protect", "main"]
+__all__ = ["Protect", "ProtectFiles", "read_photos", "protect", "main"]
 
 # What `simulate` reads (HEIC through the system's libheif): campro's own decoder reads the
 # bytes, so that the outputs are simulate's, byte for byte.
@@ -188,6 +188,17 @@ class ProtectFiles:
         return {k: _column(v, np.float64 if k == "seconds" else None) for k, v in rows.items()}
 
 
+def read_photos(src: str):
+    """The photo files under ``src`` (a folder or a bucket path) as a Ray dataset of their
+    bytes and paths (``read_binary_files``): campro decodes them itself, so that the
+    outputs are ``simulate``'s. The read tasks reserve no CPU: reading is I/O, and an actor
+    pool that holds every CPU would otherwise leave none to read with."""
+    ray = _ray()
+    return ray.data.read_binary_files(
+        src, include_paths=True, file_extensions=IMAGE_EXTENSIONS, ray_remote_args={"num_cpus": 0}
+    )
+
+
 def protect(
     src: str,
     dst: str,
@@ -203,10 +214,8 @@ def protect(
     :class:`ProtectFiles`'s. Returns the summary: counts of ``done``, ``skipped``,
     ``refused``, ``failed``, ``images_per_second``, ``seconds`` and the failed rows.
     """
-    ray = _ray()
     started = time.perf_counter()
-    ds = ray.data.read_binary_files(src, include_paths=True, file_extensions=IMAGE_EXTENSIONS)
-    ds = ds.map_batches(
+    ds = read_photos(src).map_batches(
         ProtectFiles,
         fn_constructor_args=(preset, src, dst),
         fn_constructor_kwargs=options,

@@ -98,6 +98,12 @@ fn depth(bit_depth: u8) -> PyResult<BitDepth> {
     }
 }
 
+/// Why a picture has no output: its kind ("refused", "error") and the one-line reason.
+type Failure = (&'static str, String);
+
+/// One picture's result in [`Camera::capture_each`]: its output, or why there is none.
+type Row<'py> = (Option<Bound<'py, PyAny>>, Option<Failure>);
+
 /// The camera of one parameter set (see `campro.Camera`).
 #[pyclass(frozen, module = "campro._campro", name = "Camera")]
 struct Camera {
@@ -185,13 +191,13 @@ impl Camera {
         py: Python<'py>,
         images: &Bound<'py, PyList>,
         bit_depth: u8,
-    ) -> PyResult<Vec<(Option<Bound<'py, PyAny>>, Option<(&'static str, String)>)>> {
+    ) -> PyResult<Vec<Row<'py>>> {
         let depth = depth(bit_depth)?;
         let held: Vec<Result<(Samples, u32, u32), String>> =
             images.iter().map(|a| Samples::of(&a, None).map_err(|e| e.to_string())).collect();
         let frames: Vec<Option<(Frame, u32, u32)>> =
             held.iter().map(|r| r.as_ref().ok().map(|(s, w, h)| (s.frame(), *w, *h))).collect();
-        let out: Vec<Option<Result<Pixels, (&'static str, String)>>> = py.detach(|| {
+        let out: Vec<Option<Result<Pixels, Failure>>> = py.detach(|| {
             frames
                 .par_iter()
                 .map(|f| {

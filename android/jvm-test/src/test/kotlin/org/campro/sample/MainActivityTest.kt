@@ -43,20 +43,6 @@ class MainActivityTest {
     }
 
     @Test
-    fun theSampleOffersOnlyTheProtectivePresets() {
-        val act = Robolectric.buildActivity(MainActivity::class.java).setup().get()
-        fun spinners(v: View): List<android.widget.Spinner> = when (v) {
-            is android.widget.Spinner -> listOf(v)
-            is android.view.ViewGroup -> (0 until v.childCount).flatMap { spinners(v.getChildAt(it)) }
-            else -> emptyList()
-        }
-        val spinner = spinners(act.window.decorView).single()
-        val offered = (0 until spinner.adapter.count).map { spinner.adapter.getItem(it).toString() }
-        assertEquals(listOf("campro-omega-0.5", "campro-omega-0.5-distill", "campro-omega-0.5-hour", "campro-omega-1-shared-continued"), offered)
-        assertEquals("the recommended preset is chosen", "campro-omega-0.5", spinner.selectedItem)
-    }
-
-    @Test
     fun refusedPermissionShowsTheStateAndIsNotAskedAgainOnResume() {
         shadowOf(manager).addCamera("0", CameraScript.chars())
         val controller = Robolectric.buildActivity(MainActivity::class.java).setup()

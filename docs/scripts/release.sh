@@ -19,8 +19,8 @@ python3 -m maturin --version >/dev/null 2>&1 || python3 -m pip install -q 'matur
 version=$(sed -n 's/^version = "\(.*\)"/\1/p' crates/campro-py/Cargo.toml | head -n 1)
 triple=$(rustc -vV | sed -n 's/^host: //p')
 start=$(date +%s)
-python3 -m maturin build --locked --release -m crates/campro-py/Cargo.toml --out "$out"
-python3 -m maturin sdist -m crates/campro-py/Cargo.toml --out "$out"
+python3 -m maturin build --locked --release --out "$out"
+python3 -m maturin sdist --out "$out"
 cargo build --locked --release -p campro-cli
 stage=$(mktemp -d)
 trap 'rm -rf "$stage"' EXIT

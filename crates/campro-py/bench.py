@@ -44,14 +44,20 @@ def median_time(f, runs):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=31)
+    ap.add_argument("--runs", type=int, default=101)
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args()
     cam = campro.Camera("campro-omega-0.5")
     img, source = frame()
     cam.capture(img)  # warm: tables, pages, threads
-    rust = statistics.median(cam._native.bench_capture(img, a.runs))
-    python = median_time(lambda: cam.capture(img), a.runs)
+    # Interleaved, so that the machine's drift (these machines are shared) falls on both.
+    rusts, pythons = [], []
+    for _ in range(a.runs):
+        rusts += cam._native.bench_capture(img, 1)
+        t = time.perf_counter()
+        cam.capture(img)
+        pythons.append(time.perf_counter() - t)
+    rust, python = statistics.median(rusts), statistics.median(pythons)
     batch = np.stack([img] * 16)
     cpu0, wall0 = time.process_time(), time.perf_counter()
     one_call = median_time(lambda: cam.capture(batch), max(3, a.runs // 10))

@@ -154,6 +154,16 @@ impl Camera {
         self.with_capture(None, |capture| capture.picture(src, w, h, depth, &|_| {}))
     }
 
+    /// [`Camera::capture`] of an 8-bit frame at 8 bits, written into `dst` (as long as
+    /// `src`): the same exact path, no allocation. A grey picture is refused unless allowed.
+    pub fn capture_into(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32) -> Result<()> {
+        let n = 3 * w as usize * h as usize;
+        if src.len() != n || dst.len() != n || w == 0 || h == 0 {
+            bail!("a {w} x {h} RGB frame holds {n} samples, got {} in and {} out", src.len(), dst.len());
+        }
+        self.with_capture(None, |capture| capture.run(src, dst, w, h)).map(drop)
+    }
+
     /// `f` on the camera's [`Capture`] (with `enhancer`, if any).
     fn with_capture<R>(&self, enhancer: Option<&GuardedEnhancer>, f: impl FnOnce(&Capture<'_, '_>) -> R) -> R {
         self.built

@@ -74,6 +74,10 @@ def test_a_batch_equals_single_calls(cam, coco):
     assert out.shape == batch.shape and out.dtype == np.uint8
     for i, one in enumerate(batch):
         assert np.array_equal(out[i], cam.capture(one))
+    # A strided batch (every other row) and a 16-bit one take the general path: the same.
+    assert np.array_equal(cam.capture(batch[:, ::2]), np.stack([cam.capture(b[::2]) for b in batch]))
+    wide = batch.astype(np.uint16) * 257
+    assert np.array_equal(cam.capture(wide), np.stack([cam.capture(b) for b in wide]))
 
 
 def test_a_list_of_different_sizes_gives_a_list(cam, coco):
@@ -133,6 +137,8 @@ def test_a_grey_picture_is_refused_unless_allowed(coco):
         campro.Camera(PRESET).capture(grey)
     with pytest.raises(campro.Error, match="^image 1: .*grey"):
         campro.Camera(PRESET).capture([campro.read(coco[3]), grey])
+    with pytest.raises(campro.Error, match="^image 1: .*grey"):
+        campro.Camera(PRESET).capture(np.stack([campro.read(coco[3]), grey]))
     out = campro.Camera(PRESET, allow_grey=True).capture(grey)
     assert out.shape == grey.shape
 

@@ -111,6 +111,8 @@ class Camera:
                 if image.shape[0] == 0:
                     raise ValueError("expected at least one image in the batch, got shape (0, ...)")
                 batch = np.ascontiguousarray(image)
+                if batch.dtype == np.uint8 and bit_depth == 8:
+                    return self._native.capture_batch(batch)
                 return np.stack(self._native.capture_list(list(batch), bit_depth))
             (out,) = self._native.capture_list([_contiguous(image)], bit_depth)
             return out

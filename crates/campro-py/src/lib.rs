@@ -194,15 +194,12 @@ impl Camera {
         let frame = 3 * h * w;
         let mut out = vec![0u8; src.len()];
         let failed: Option<String> = py.detach(|| {
-            src.par_chunks(frame)
-                .zip(out.par_chunks_mut(frame))
-                .enumerate()
-                .find_map_first(|(i, (s, d))| {
-                    self.inner
-                        .capture_into(s, d, w as u32, h as u32)
-                        .err()
-                        .map(|e| format!("image {i}: {}", api::error_line(&e)))
-                })
+            src.par_chunks(frame).zip(out.par_chunks_mut(frame)).enumerate().find_map_first(|(i, (s, d))| {
+                self.inner
+                    .capture_into(s, d, w as u32, h as u32)
+                    .err()
+                    .map(|e| format!("image {i}: {}", api::error_line(&e)))
+            })
         });
         if let Some(line) = failed {
             return Err(Error::new_err(line));
@@ -285,18 +282,17 @@ impl Camera {
         array(py, Pixels::Eight(out), w, h)
     }
 
-    /// The photo file's `data` (named `input`) through the camera into `output`, with its
-    /// record when asked: what `simulate` writes. Never raises for the photo itself:
-    /// `("ok", None)`, `("ok-grey", None)` (grey, let through by `allow_grey`),
-    /// `("refused", line)` (grey) or `("error", line)`; the GIL released.
-    #[pyo3(signature = (input, data, output, bit_depth = 8, quality = 92, metadata = "keep-safe", enhance = false, models = None, record = true, force = false))]
+    /// Photo files through the camera, as `simulate` writes them, in parallel (rayon, as
+    /// `simulate` runs its photos), the GIL released: `jobs` are (input name, its bytes,
+    /// output path). Never raises for a photo: one `(status, line)` each, status `"ok"`,
+    /// `"ok-grey"` (grey, let through by `allow_grey`), `"skipped"` (unless `force`, an
+    /// output whose record verifies), `"refused"` (grey) or `"error"`.
+    #[pyo3(signature = (jobs, bit_depth = 8, quality = 92, metadata = "keep-safe", enhance = false, models = None, record = true, force = false))]
     #[allow(clippy::too_many_arguments)]
-    fn protect(
+    fn protect_each(
         &self,
         py: Python<'_>,
-        input: PathBuf,
-        data: &[u8],
-        output: PathBuf,
+        jobs: Vec<(PathBuf, Vec<u8>, PathBuf)>,
         bit_depth: u8,
         quality: i64,
         metadata: &str,
@@ -304,7 +300,7 @@ impl Camera {
         models: Option<PathBuf>,
         record: bool,
         force: bool,
-    ) -> PyResult<(&'static str, Option<String>)> {
+    ) -> PyResult<Vec<(&'static str, Option<String>)>> {
         let job = api::Job {
             depth: depth(bit_depth)?,
             quality: quality_of(quality)?,
@@ -314,18 +310,21 @@ impl Camera {
             record,
             force,
         };
-        Ok(py.detach(|| match self.inner.protect(&input, data, &output, &job) {
-            Ok(false) => ("ok", None),
-            Ok(true) => ("ok-grey", None),
-            Err(e) if api::is_grey_refusal(&e) => ("refused", Some(api::error_line(&e))),
-            Err(e) => ("error", Some(api::error_line(&e))),
+        Ok(py.detach(|| {
+            jobs.par_iter()
+                .map(|(input, data, output)| {
+                    if !force && self.inner.verified(data, output) {
+                        return ("skipped", None);
+                    }
+                    match self.inner.protect(input, data, output, &job) {
+                        Ok(false) => ("ok", None),
+                        Ok(true) => ("ok-grey", None),
+                        Err(e) if api::is_grey_refusal(&e) => ("refused", Some(api::error_line(&e))),
+                        Err(e) => ("error", Some(api::error_line(&e))),
+                    }
+                })
+                .collect()
         }))
-    }
-
-    /// Whether `output` already is the protected output of `data` by this camera (its
-    /// record verifies): what a rerun skips.
-    fn verified(&self, py: Python<'_>, data: &[u8], output: PathBuf) -> bool {
-        py.detach(|| self.inner.verified(data, &output))
     }
 
     /// SHA-256 of the parameter file's bytes, as records name the preset.

@@ -167,7 +167,7 @@ def test_a_job_stopped_halfway_then_rerun_completes_with_nothing_lost(photos, tm
     assert verify_all(dst) == N
 
 
-def test_the_docs_five_line_example_runs_as_written(local_ray, photos, tmp_path, monkeypatch):
+def test_the_docs_five_line_example_runs_as_written(local_ray, photos, tmp_path):
     doc = (pathlib.Path(__file__).resolve().parents[3] / "docs" / "datasets.md").read_text()
     block = re.search(r"```python\n(.*?)```", doc, re.S).group(1)
     assert len(block.strip().splitlines()) <= 6, block
@@ -175,8 +175,7 @@ def test_the_docs_five_line_example_runs_as_written(local_ray, photos, tmp_path,
     for p in sorted((photos / "a").glob("*.jpg"))[:5]:
         shutil.copyfile(p, tmp_path / "photos" / p.name)
     shutil.copyfile(photos / "bad" / "grey.png", tmp_path / "photos" / "grey.png")
-    monkeypatch.chdir(tmp_path)
-    exec(compile(block, "docs/datasets.md", "exec"), {})
+    exec(compile(block.replace("/data/", f"{tmp_path}/"), "docs/datasets.md", "exec"), {})
     written = ray.data.read_parquet(str(tmp_path / "protected")).take_all()
     assert len(written) == 5 and all(r["campro_status"] == "ok" for r in written)
     cam = campro.Camera(PRESET)

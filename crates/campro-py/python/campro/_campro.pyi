@@ -26,11 +26,9 @@ class Camera:
     def enhance(self, captured: np.ndarray, models: Optional[str] = None) -> np.ndarray: ...
     @property
     def preset_sha256(self) -> str: ...
-    def protect(
+    def protect_each(
         self,
-        input: str,
-        data: bytes,
-        output: str,
+        jobs: List[Tuple[str, bytes, str]],
         bit_depth: int = 8,
         quality: int = 92,
         metadata: str = "keep-safe",
@@ -38,8 +36,7 @@ class Camera:
         models: Optional[str] = None,
         record: bool = True,
         force: bool = False,
-    ) -> Tuple[str, Optional[str]]: ...
-    def verified(self, data: bytes, output: str) -> bool: ...
+    ) -> List[Tuple[str, Optional[str]]]: ...
     def camera2_json(self, capture_result: Optional[str] = None) -> str: ...
 
 def presets() -> List[Dict[str, Any]]: ...

@@ -149,39 +149,6 @@ impl Camera {
         self.spec.clone()
     }
 
-    /// Each array of `images` through the camera, in parallel, the GIL released: new
-    /// arrays in the same order. A grey picture raises `Error` naming its index unless the
-    /// camera allows grey.
-    #[pyo3(signature = (images, bit_depth = 8))]
-    fn capture_list<'py>(
-        &self,
-        py: Python<'py>,
-        images: &Bound<'py, PyList>,
-        bit_depth: u8,
-    ) -> PyResult<Vec<Bound<'py, PyAny>>> {
-        let depth = depth(bit_depth)?;
-        let held: Vec<(Samples, u32, u32)> =
-            images.iter().enumerate().map(|(i, a)| Samples::of(&a, Some(i))).collect::<PyResult<_>>()?;
-        let frames: Vec<(Frame, u32, u32)> = held.iter().map(|(s, w, h)| (s.frame(), *w, *h)).collect();
-        let many = frames.len() > 1;
-        let out: Vec<Result<Pixels, String>> = py.detach(|| {
-            frames
-                .par_iter()
-                .enumerate()
-                .map(|(i, (f, w, h))| {
-                    self.inner.capture(*f, *w, *h, depth).map(|(p, _)| p).map_err(|e| {
-                        if many {
-                            format!("image {i}: {}", api::error_line(&e))
-                        } else {
-                            api::error_line(&e)
-                        }
-                    })
-                })
-                .collect()
-        });
-        out.into_iter().zip(&held).map(|(r, (_, w, h))| array(py, r.map_err(Error::new_err)?, *w, *h)).collect()
-    }
-
     /// An N x H x W x 3 uint8 batch (C order) through the camera at 8 bits into one new
     /// array: the pictures in parallel, each written in place, the GIL released. A grey
     /// picture raises `Error` naming its index unless the camera allows grey.
@@ -207,9 +174,10 @@ impl Camera {
         Ok(PyArray1::from_vec(py, out).reshape([n, h, w, 3])?.into_any())
     }
 
-    /// Each array of `images` through the camera, one result a picture and never an
-    /// exception for one: `(array, None)`, or `(None, (kind, message))` with kind
-    /// "refused" (a grey picture) or "error". For data pipelines (`campro.ray`).
+    /// Each array of `images` through the camera, in parallel, the GIL released; one
+    /// result a picture and never an exception for one: `(array, None)`, or `(None, (kind,
+    /// message))` with kind "invalid" (not an H x W x 3 uint8 or uint16 C-order array),
+    /// "refused" (a grey picture) or "error".
     #[pyo3(signature = (images, bit_depth = 8))]
     fn capture_each<'py>(
         &self,
@@ -240,14 +208,14 @@ impl Camera {
             .map(|(r, h)| match (r, h) {
                 (Some(Ok(p)), Ok((_, w, h))) => Ok((Some(array(py, p, *w, *h)?), None)),
                 (Some(Err(e)), _) => Ok((None, Some(e))),
-                (_, Err(line)) => Ok((None, Some(("error", line.clone())))),
+                (_, Err(line)) => Ok((None, Some(("invalid", line.clone())))),
                 (None, Ok(_)) => unreachable!("a held frame is captured"),
             })
             .collect()
     }
 
     /// Seconds each of `runs` captures of `image` takes inside Rust (the same call as
-    /// `capture_list`, without the arrays around it): what `bench.py` measures the Python
+    /// `capture_each`, without the arrays around it): what `bench.py` measures the Python
     /// call's overhead against.
     fn bench_capture(&self, py: Python<'_>, image: &Bound<'_, PyAny>, runs: usize) -> PyResult<Vec<f64>> {
         let (s, w, h) = Samples::of(image, None)?;

@@ -113,12 +113,24 @@ class Camera:
                 batch = np.ascontiguousarray(image)
                 if batch.dtype == np.uint8 and bit_depth == 8:
                     return self._native.capture_batch(batch)
-                return np.stack(self._native.capture_list(list(batch), bit_depth))
-            (out,) = self._native.capture_list([_contiguous(image)], bit_depth)
+                return np.stack(self._capture_all(list(batch), bit_depth))
+            (out,) = self._capture_all([_contiguous(image)], bit_depth)
             return out
         if isinstance(image, (list, tuple)):
-            return self._native.capture_list([_contiguous(a) for a in image], bit_depth)
+            return self._capture_all([_contiguous(a) for a in image], bit_depth)
         raise ValueError(f"expected a numpy array or a list of them, got {type(image).__name__}")
+
+    def _capture_all(self, images: List[Any], bit_depth: int) -> List[np.ndarray]:
+        """Every image captured, or the first failure raised (naming its index in a list)."""
+        if bit_depth not in (8, 16):
+            raise ValueError(f"bit_depth must be 8 or 16, got {bit_depth}")
+        results = self._native.capture_each(images, bit_depth)
+        for i, (_, failure) in enumerate(results):
+            if failure is not None:
+                kind, line = failure
+                where = f"image {i}: " if len(images) > 1 else ""
+                raise (ValueError if kind == "invalid" else Error)(where + line)
+        return [out for out, _ in results]
 
     def enhance(self, captured: np.ndarray, *, models: Optional[PathLike] = None) -> np.ndarray:
         """What the preset's image enhancer shows a person, from a captured uint8 image.

@@ -106,6 +106,7 @@ class Protect:
                     out, err = None, ("error", str(e))
             if out is None:
                 kind, line = err
+                kind = "refused" if kind == "refused" else "error"
                 outs.append(np.zeros((0, 0, 3), np.uint8 if self.bit_depth == 8 else np.uint16))
                 status.append(kind)
                 errors.append(line)

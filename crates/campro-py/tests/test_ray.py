@@ -141,6 +141,10 @@ def test_a_worker_that_dies_mid_batch_is_retried_and_every_output_exists_once(lo
         by_path.setdefault(r["path"], []).append(r["campro_status"])
     assert len(by_path) == N + 4 and all(len(v) == 1 for v in by_path.values())
     assert sum(v == ["ok"] or v == ["skipped"] for v in by_path.values()) == N
+    # Each written row carries its output's record, the file beside it.
+    for r in rows:
+        if r["campro_status"] in ("ok", "skipped"):
+            assert json.loads(r["campro_record"]) == json.loads(pathlib.Path(r["output"] + ".campro.json").read_text())
     assert verify_all(dst) == N
     assert not [p for p in dst.rglob("*") if p.name.startswith(".campro")], "no half-written file is left"
 

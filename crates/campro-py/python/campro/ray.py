@@ -133,7 +133,8 @@ class ProtectFiles:
     output) is skipped, so a retried batch or a rerun job redoes nothing. The photos of a
     batch run in parallel on every core of the node. Returns one row a photo: ``path``,
     ``output``, ``campro_status`` (``ok``, ``skipped``, ``refused``, ``error``),
-    ``campro_error`` and ``seconds`` (the batch's wall time a photo).
+    ``campro_error``, ``campro_record`` (the record's JSON text beside the output, ``""``
+    without one) and ``seconds`` (the batch's wall time a photo).
     """
 
     def __init__(
@@ -180,13 +181,21 @@ class ProtectFiles:
         # The batch's photos in parallel on every core of this node, as `simulate` runs them.
         results = self.camera._native.protect_each(jobs, force=self.force, **self.opts)
         seconds = (time.perf_counter() - started) / max(1, len(jobs))
+        records = [_record_text(o) if st in ("ok", "ok-grey", "skipped") else "" for (st, _), o in zip(results, outs)]
         return {
             "path": _column(paths),
             "output": _column(outs),
             "campro_status": _column(["ok" if s.startswith("ok") else s for s, _ in results]),
             "campro_error": _column([e or "" for _, e in results]),
+            "campro_record": _column(records),
             "seconds": _column([seconds] * len(jobs), np.float64),
         }
+
+
+def _record_text(output: str) -> str:
+    """The record beside ``output`` (``NAME.EXT.campro.json``, at most 64 KiB), as text."""
+    with open(output + ".campro.json", "rb") as f:
+        return f.read(64 << 10).decode("utf-8")
 
 
 def read_photos(src: str, readers: int = 2):

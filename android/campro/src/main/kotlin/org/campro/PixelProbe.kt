@@ -10,9 +10,11 @@ package org.campro
  * 1. [Step.Curve]: CamPro's transform and gains with a **constant** curve at [CURVE_LEVEL].
  *    A device that applies it gives a flat frame whatever the scene (no scene detail, no
  *    noise: everything maps to one code); one that applies its own curve shows the scene.
- * 2. [Step.Matrix]: a **zero** transform with the curve `y = MATRIX_LEVEL + (1 - MATRIX_LEVEL) x`.
- *    A device that applies the transform gives a flat frame at the curve's start; one that
- *    ignores it shows the scene through that curve.
+ * 2. [Step.Matrix]: a **near-zero** transform ([MATRIX_DIAGONAL] on the diagonal: invertible,
+ *    so a HAL that refuses singular matrices and applies the identity instead is not falsely
+ *    refused) with the curve `y = MATRIX_LEVEL + (1 - MATRIX_LEVEL) x`. A device that applies
+ *    the transform gives a flat frame at the curve's start (every linear value times 1/256
+ *    moves the output by at most half an 8-bit code); one that ignores it shows the scene.
  *
  * Both frames must be flat (the [FLAT_WINDOW] codes around the most common luma value hold at
  * least [FLAT_SHARE] of the samples), and the second must be at least [MIN_STEP] luma codes
@@ -22,7 +24,7 @@ package org.campro
  * in limited range, so [MIN_STEP] holds for both.
  *
  * A frame counts only when its own result reports the probe's settings (AWB off, the two
- * modes, the probe's curve; the zero transform for [Step.Matrix]): a device with latency
+ * modes, the probe's curve; the near-zero transform for [Step.Matrix]): a device with latency
  * shows earlier settings for a few frames, and those frames say nothing.
  *
  * What it cannot prove: a HAL that recognises probe requests and treats them differently
@@ -52,13 +54,23 @@ object PixelProbe {
     /** Luma codes [Step.Matrix]'s level must exceed [Step.Curve]'s by. */
     const val MIN_STEP = 30
 
+    /** The diagonal of [Step.Matrix]'s transform, as a Camera2 rational (1/256; the rest zero). */
+    const val MATRIX_DIAGONAL_DENOMINATOR = 256
+
     /** Fewest luma samples a probe frame must carry. */
     const val MIN_SAMPLES = 64
 
-    /** The transform a probe step sends: CamPro's [protectedTransform] for the curve step, zeros for the matrix step. */
+    /** The transform a probe step sends: CamPro's [protectedTransform] for the curve step, the near-zero diagonal for the matrix step. */
     fun transform(step: Step, protectedTransform: IntArray): IntArray = when (step) {
         Step.Curve -> protectedTransform.copyOf()
-        Step.Matrix -> IntArray(18) { if (it % 2 == 0) 0 else 1 }
+        Step.Matrix -> IntArray(18) { i ->
+            val entry = i / 2
+            when {
+                i % 2 == 1 -> if (entry % 4 == 0) MATRIX_DIAGONAL_DENOMINATOR else 1
+                entry % 4 == 0 -> 1 // the diagonal: entries 0, 4 and 8
+                else -> 0
+            }
+        }
     }
 
     /** The curve a probe step sends (flat (Pin, Pout) pairs). */
@@ -84,8 +96,17 @@ object PixelProbe {
             }
         }
         if (step == Step.Matrix) {
+            // Every reported entry is the near-zero transform's (within a HAL's rounding: at
+            // most 1/128 from it, far from the identity and from any auto-mode matrix).
             val t = r.transform ?: return false
-            if (t.size != 18 || (0 until 9).any { t[2 * it] != 0 }) return false
+            if (t.size != 18) return false
+            val want = transform(Step.Matrix, IntArray(18))
+            for (e in 0 until 9) {
+                if (t[2 * e + 1] == 0) return false
+                val got = t[2 * e].toDouble() / t[2 * e + 1]
+                val w = want[2 * e].toDouble() / want[2 * e + 1]
+                if (!(kotlin.math.abs(got - w) <= 1.0 / 128)) return false
+            }
         }
         return true
     }
@@ -121,7 +142,7 @@ object PixelProbe {
         curveLevel == null ->
             "a frame sent with a constant tone curve showed scene detail: the device does not apply the requested TONEMAP_CURVE to its pixels"
         matrixLevel == null ->
-            "a frame sent with a zero COLOR_CORRECTION_TRANSFORM showed scene detail: the device does not apply the requested transform to its pixels"
+            "a frame sent with a near-zero COLOR_CORRECTION_TRANSFORM showed scene detail: the device does not apply the requested transform to its pixels"
         matrixLevel - curveLevel < MIN_STEP ->
             "the probe's curve levels ${CURVE_LEVEL} and ${MATRIX_LEVEL} came out as luma $curveLevel and $matrixLevel: the device's pixels do not follow the requested curve"
         else -> null

@@ -354,6 +354,11 @@ class FrameGate<T>(
                 if (verdict != null) {
                     matched()
                     out += frame to verdict
+                } else if (waiting.containsKey(timestampNs)) {
+                    // Two frames claim one sensor time: neither can be matched to its own
+                    // result, so both are dropped (closed, never leaked, never shown).
+                    out += waiting.remove(timestampNs)!! to false
+                    out += frame to false
                 } else {
                     waiting[timestampNs] = frame
                     while (waiting.size > maxWaitingFrames) {

@@ -270,6 +270,24 @@ class PipelineTest {
     }
 
     @Test
+    fun twoFramesWithOneTimestampAreBothClosedAndNeitherShown() {
+        val p = pipeline()
+        p.start(Fixtures.supported())
+        meter(p, Fixtures.converged())
+        val ok = cam.honoured()
+        val shownHere = mutableListOf<Int>()
+        val closedHere = mutableListOf<Int>()
+        val g = FrameGate<Int>(p.guard, 4, 8, Executor { it.run() }, deliver = { shownHere += it }, drop = { closedHere += it })
+        g.onFrame(7, 70)
+        g.onFrame(7, 71) // a HAL that stamps two frames alike
+        g.onResult(7, ok)
+        g.onFrame(8, 80)
+        g.onResult(8, ok)
+        assertEquals(listOf(80), shownHere)
+        assertEquals(listOf(70, 71), closedHere)
+    }
+
+    @Test
     fun deliveryRunsOnTheAppExecutorOutsideTheGateLock() {
         val appThread = Executors.newSingleThreadExecutor()
         val entered = CountDownLatch(1)
@@ -406,10 +424,18 @@ class PipelineTest {
         val luma = PixelProbe.lumaOfPlane(plane, 4, 4, 10, 2, 2)
         assertTrue(luma.contentToString(), byteArrayOf(0, 4, 20, 24).contentEquals(luma))
         // Resampled probe curves still count (points on the sent line); others do not.
-        val r = CaptureReport(0, 0, 0, IntArray(18) { if (it % 2 == 0) 0 else 1 }, List(3) { floatArrayOf(0f, 0.5f, 0.5f, 0.75f, 1f, 1f) }, null)
+        val nearZero = intArrayOf(1, 256, 0, 1, 0, 1, 0, 1, 1, 256, 0, 1, 0, 1, 0, 1, 1, 256)
+        assertTrue(nearZero.contentEquals(PixelProbe.transform(PixelProbe.Step.Matrix, Fixtures.PHONE)))
+        val r = CaptureReport(0, 0, 0, nearZero, List(3) { floatArrayOf(0f, 0.5f, 0.5f, 0.75f, 1f, 1f) }, null)
         assertTrue(PixelProbe.reportsStep(PixelProbe.Step.Matrix, r))
         assertFalse(PixelProbe.reportsStep(PixelProbe.Step.Curve, r))
         assertFalse(PixelProbe.reportsStep(PixelProbe.Step.Matrix, CaptureReport(0, 0, 0, Fixtures.PHONE, r.curves, null)))
+        // A HAL's Q10 rounding of the near-zero matrix still counts; the identity (what a HAL
+        // that refused the matrix applies) does not.
+        val q10 = intArrayOf(4, 1024, 0, 1, 0, 1, 0, 1, 4, 1024, 0, 1, 0, 1, 0, 1, 4, 1024)
+        assertTrue(PixelProbe.reportsStep(PixelProbe.Step.Matrix, CaptureReport(0, 0, 0, q10, r.curves, null)))
+        val identity = intArrayOf(1, 1, 0, 1, 0, 1, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1)
+        assertFalse(PixelProbe.reportsStep(PixelProbe.Step.Matrix, CaptureReport(0, 0, 0, identity, r.curves, null)))
     }
 
     @Test

@@ -200,7 +200,7 @@ class GlueTest {
                 CaptureResult.COLOR_CORRECTION_GAINS to RggbChannelVector(2f, 1f, 1f, 1.6f),
             ),
         )
-        // The pixel probe: a constant curve, then a zero transform; its frames' luma is read and
+        // The pixel probe: a constant curve, then a near-zero transform; its frames' luma is read and
         // the frames closed unseen; results are routed to it while it runs.
         assertEquals(2, control.sent.size)
         assertTrue(f1.closed)

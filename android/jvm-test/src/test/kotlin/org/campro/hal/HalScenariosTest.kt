@@ -63,6 +63,7 @@ class HalScenariosTest {
         Behaviour("display timestamp base on every stream", imageTimestampOffsetNs = 5_000_000, offsetOnEveryStream = true) to Outcome.Refuses,
         Behaviour("echoing HAL (reports the request, applies its own curve)", echo = true) to Outcome.Refuses,
         Behaviour("echoing HAL (reports the request, applies its own transform)", ignoreTransform = true) to Outcome.Refuses,
+        Behaviour("singular matrices replaced by the identity (the probe's matrix is near zero, not zero)", singularToIdentity = true) to Outcome.Protects,
         Behaviour("honest, lens covered (a flat scene)", flatScene = true) to Outcome.Protects,
         Behaviour("honest, settings 2 frames late, results 3 frames after their images", latency = 2, resultDelay = 3) to Outcome.Protects,
         Behaviour("logical camera switches its physical sensor at frame 40", physicalSwitchAt = 40) to Outcome.Protects,

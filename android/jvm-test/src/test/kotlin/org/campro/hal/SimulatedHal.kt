@@ -55,6 +55,8 @@ data class Behaviour(
     val faultUntil: Int = -1,
     /** Reports the requested transform while applying the sensor's own (auto-mode) one. */
     val ignoreTransform: Boolean = false,
+    /** A singular requested transform is refused: the identity is applied and reported instead (some HALs). */
+    val singularToIdentity: Boolean = false,
     /** The scene is one flat colour (a covered lens, a blank wall). */
     val flatScene: Boolean = false,
     /** The frame from which a logical camera streams from its second physical sensor (-1: never). */
@@ -230,6 +232,7 @@ class SimulatedHal(
                     autoRun = 0
                     val t = when {
                         b.ignoreTransform -> device
+                        b.singularToIdentity && singular(applied.transform) -> IDENTITY
                         b.matrixStep > 0 -> rounded(applied.transform, b.matrixStep)
                         else -> applied.transform
                     }
@@ -255,6 +258,16 @@ class SimulatedHal(
         }
         deliverResults(Int.MAX_VALUE)
     }
+
+    /** Whether the rational transform (18 ints) has determinant 0. */
+    private fun singular(t: IntArray): Boolean {
+        val m = DoubleArray(9) { t[2 * it].toDouble() / t[2 * it + 1] }
+        val det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6])
+        return det == 0.0
+    }
+
+    /** The identity as a Camera2 rational transform. */
+    private val IDENTITY = IntArray(18) { i -> if (i % 2 == 1) 1 else if ((i / 2) % 4 == 0) 1 else 0 }
 
     /** A frame of a protected or probe request, with its result: to the app's stream or (probe) the metering stream's luma. */
     private fun deliver(p: CamProPipeline<SimFrame>, tagged: Req.Protect, i: Int, ts: Long, report: CaptureReport, pixels: ByteArray, expected: ByteArray, before: ByteArray?) {

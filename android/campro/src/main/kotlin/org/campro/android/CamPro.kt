@@ -86,6 +86,7 @@ sealed class Preset {
 
     companion object {
         /** The preset the README recommends. */
+        @JvmField
         val RECOMMENDED = Named("campro-omega-0.5")
 
         /** Where the library's assets keep the bundled presets. */
@@ -97,7 +98,7 @@ sealed class Preset {
 }
 
 /** What [CamPro.open] may change; the defaults suit a phone's preview and 720p video. */
-data class CamProOptions(
+data class CamProOptions @JvmOverloads constructor(
     /** Largest protected stream size; the camera's largest size of the sensor's shape within it is used. */
     val maxWidth: Int = 1280,
     val maxHeight: Int = 720,
@@ -162,6 +163,7 @@ object CamPro {
      * Every camera of the device and whether CamPro can run on it, from its characteristics
      * alone (opens nothing, needs no permission): use it before offering the feature.
      */
+    @JvmStatic
     fun checkDevice(context: Context): DeviceCheck {
         val manager = context.getSystemService(CameraManager::class.java) ?: return DeviceCheck(emptyList(), "no CameraManager")
         return try {
@@ -189,6 +191,8 @@ object CamPro {
      * the camera permission must be granted by then (else the state says so: Stopped).
      * Call on the main thread; [CamProCamera.close] ends it early.
      */
+    @JvmStatic
+    @JvmOverloads
     fun open(
         context: Context,
         owner: LifecycleOwner,

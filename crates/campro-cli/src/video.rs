@@ -361,9 +361,12 @@ pub enum Sink {
     Device(PathBuf),
 }
 
-/// The first video stream, as ffprobe reports it.
+/// The first video stream that is not an attached picture (cover art), as ffprobe reports it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Probe {
+    /// Its index among the file's video streams (`0:v:N`): cover art stored before the
+    /// video is a video stream too, and is never the one protected.
+    pub stream: usize,
     /// Frame width, pixels.
     pub width: u32,
     /// Frame height, pixels.
@@ -414,12 +417,13 @@ pub fn deep_pixel_format(name: &str) -> bool {
     }
 }
 
-/// Reads the first video stream's size, frame count, rotation, depth and transfer.
+/// Reads the first video stream's size, frame count, rotation, depth and transfer, skipping
+/// attached pictures (an MP4's cover art can come before its video).
 pub fn probe(input: &Path) -> Result<Probe> {
     installed("ffprobe")?;
     let out = Command::new("ffprobe")
-        .args(["-hide_banner", "-v", "error", "-select_streams", "v:0", "-of", "json", "-show_entries"])
-        .arg("stream=width,height,nb_frames,pix_fmt,bits_per_raw_sample,color_transfer:stream_side_data=rotation")
+        .args(["-hide_banner", "-v", "error", "-select_streams", "v", "-of", "json", "-show_entries"])
+        .arg("stream=width,height,nb_frames,pix_fmt,bits_per_raw_sample,color_transfer:stream_disposition=attached_pic:stream_side_data=rotation")
         .arg(file_url(input)?)
         .stdin(Stdio::null())
         .output()?;
@@ -427,7 +431,7 @@ pub fn probe(input: &Path) -> Result<Probe> {
         bail!("ffprobe: {}", first_line(&out.stderr));
     }
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).context("ffprobe printed no JSON")?;
-    let s = v.pointer("/streams/0").ok_or_else(|| anyhow!("no video stream"))?;
+    let (stream, s) = protected_stream(&v)?;
     let dim =
         |k: &str| s.get(k).and_then(|x| x.as_u64()).filter(|&d| (1..=MAX_SIDE as u64).contains(&d)).map(|d| d as u32);
     let (width, height) =
@@ -441,7 +445,22 @@ pub fn probe(input: &Path) -> Result<Probe> {
     let bits = text("bits_per_raw_sample").and_then(|b| b.parse::<u32>().ok());
     let deep = bits.is_some_and(|b| b > 8) || text("pix_fmt").is_some_and(|f| deep_pixel_format(&f));
     let transfer = text("color_transfer").filter(|t| t != "unknown");
-    Ok(Probe { width, height, frames, rotation, deep, transfer })
+    Ok(Probe { stream, width, height, frames, rotation, deep, transfer })
+}
+
+/// The video stream `simulate` protects among ffprobe's `streams` (JSON of `-select_streams
+/// v` with `stream_disposition=attached_pic`): the first that is not an attached picture, and
+/// its index among the video streams.
+fn protected_stream(v: &serde_json::Value) -> Result<(usize, &serde_json::Value)> {
+    let streams = v.pointer("/streams").and_then(|s| s.as_array()).map(Vec::as_slice).unwrap_or_default();
+    let cover = |s: &serde_json::Value| s.pointer("/disposition/attached_pic").and_then(|a| a.as_i64()) == Some(1);
+    streams.iter().enumerate().find(|(_, s)| !cover(s)).ok_or_else(|| {
+        if streams.is_empty() {
+            anyhow!("no video stream")
+        } else {
+            anyhow!("no video stream: its {} video stream(s) are attached pictures (cover art)", streams.len())
+        }
+    })
 }
 
 /// What a video run did.
@@ -530,9 +549,9 @@ fn clock(stderr: std::process::ChildStderr, tx: mpsc::Sender<Clock>) -> std::thr
     })
 }
 
-/// The decoder's command: `source` as raw RGB (`rgb24`, or `rgb48le` when `sixteen`) on
-/// stdout and each frame's timestamp as `framecrc` on stderr.
-fn decoder(source: &Source, sixteen: bool) -> Result<Command> {
+/// The decoder's command: `source`'s video stream `stream` (`0:v:N`) as raw RGB (`rgb24`, or
+/// `rgb48le` when `sixteen`) on stdout and each frame's timestamp as `framecrc` on stderr.
+fn decoder(source: &Source, sixteen: bool, stream: usize) -> Result<Command> {
     let mut c = ffmpeg()?;
     match source {
         Source::File(path) => {
@@ -564,9 +583,10 @@ fn decoder(source: &Source, sixteen: bool) -> Result<Command> {
         c.stdin(Stdio::null());
     }
     let pix = if sixteen { "rgb48le" } else { "rgb24" };
-    c.args(["-map", "0:v:0", "-fps_mode", "passthrough", "-flush_packets", "1", "-f", "rawvideo", "-pix_fmt", pix])
+    let map = format!("0:v:{stream}");
+    c.args(["-map", &map, "-fps_mode", "passthrough", "-flush_packets", "1", "-f", "rawvideo", "-pix_fmt", pix])
         .arg("pipe:1")
-        .args(["-map", "0:v:0", "-fps_mode", "passthrough", "-enc_time_base", "-1", "-c:v", "wrapped_avframe"])
+        .args(["-map", &map, "-fps_mode", "passthrough", "-enc_time_base", "-1", "-c:v", "wrapped_avframe"])
         .args(["-flush_packets", "1", "-f", "framecrc", "pipe:2"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
@@ -693,11 +713,11 @@ struct Decoding {
     height: u32,
 }
 
-/// Starts decoding `source` (16-bit samples when `sixteen`) and waits for its first frame's
+/// Starts decoding `source`'s video stream `stream` (16-bit samples when `sixteen`) and waits for its first frame's
 /// header, at most the source's stall limit: one line when it gives none, cannot be
 /// decoded, or is larger than [`MAX_SIDE`] a side (the decoder then ended and reaped).
-fn start_decoding(source: &Source, sixteen: bool) -> Result<Decoding> {
-    let mut decode = spawn(&mut decoder(source, sixteen)?, "decode")?;
+fn start_decoding(source: &Source, sixteen: bool, stream: usize) -> Result<Decoding> {
+    let mut decode = spawn(&mut decoder(source, sixteen, stream)?, "decode")?;
     let (clock_tx, clock_rx) = mpsc::channel();
     let dec_err = clock(decode.stderr.take().expect("piped"), clock_tx);
     // Stdout is drained from now on, before the first timestamp: see `pump`.
@@ -813,7 +833,7 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
     }
     let started = std::time::Instant::now();
     let Decoding { child: mut decode, clock: clock_rx, stderr: dec_err, frames: from, pumping, tb, width, height } =
-        start_decoding(source, sixteen)?;
+        start_decoding(source, sixteen, probe.as_ref().map_or(0, |p| p.stream))?;
     let bytes_per = if sixteen { 6 } else { 3 };
     let frame_bytes = bytes_per * width as usize * height as usize;
     let work = job.capture.work(width, height);
@@ -1211,6 +1231,26 @@ fn first_line(stderr: &[u8]) -> String {
 
 #[cfg(test)]
 mod tests {
+    /// Cover art stored before the video (an attached picture listed first) is never the
+    /// stream protected; a file of cover art alone has no video to protect.
+    #[test]
+    fn the_protected_stream_skips_attached_pictures() {
+        let v = serde_json::json!({"streams": [
+            {"width": 600, "height": 600, "disposition": {"attached_pic": 1}},
+            {"width": 1920, "height": 1080, "disposition": {"attached_pic": 0}},
+            {"width": 640, "height": 360, "disposition": {"attached_pic": 0}},
+        ]});
+        let (i, s) = super::protected_stream(&v).unwrap();
+        assert_eq!((i, s["width"].as_u64()), (1, Some(1920)));
+        let plain = serde_json::json!({"streams": [{"width": 8, "height": 8}]});
+        assert_eq!(super::protected_stream(&plain).unwrap().0, 0);
+        let covers = serde_json::json!({"streams": [{"disposition": {"attached_pic": 1}}]});
+        assert!(super::protected_stream(&covers).unwrap_err().to_string().contains("attached pictures"));
+        assert_eq!(
+            super::protected_stream(&serde_json::json!({"streams": []})).unwrap_err().to_string(),
+            "no video stream"
+        );
+    }
 
     /// 4K is enhanced a frame at a time and 1080p two at once on two cores, under the
     /// 768 MiB budget (hand-derived: a 4K frame 24,883,200 bytes, its work at auto scale

@@ -261,12 +261,20 @@ pub fn md_text(text: &str) -> String {
 }
 
 /// Text as one CSV field: quoted (quotes doubled) when it holds a comma, a quote or a line
-/// break.
+/// break. Text that a spreadsheet would run as a formula (starting with `=`, `+`, `-`, `@`, a
+/// tab or a carriage return: a person-folder name such as `=HYPERLINK(...)`) is written with
+/// a leading `'`, which spreadsheets show as text (OWASP's CSV-injection rule). Numbers are
+/// never text cells, so no figure changes.
 pub fn csv_field(text: &str) -> String {
+    let text = if text.starts_with(['=', '+', '-', '@', '\t', '\r']) {
+        std::borrow::Cow::Owned(format!("'{text}"))
+    } else {
+        std::borrow::Cow::Borrowed(text)
+    };
     if text.contains([',', '"', '\n', '\r']) {
         format!("\"{}\"", text.replace('"', "\"\""))
     } else {
-        text.to_string()
+        text.into_owned()
     }
 }
 
@@ -280,6 +288,19 @@ mod tests {
         t.push(vec![Cell::Text { text: "a|b,\"c\"\nd".into(), note: Some("x".into()) }, Cell::Missing]);
         t.push(vec![Cell::text("m"), Cell::MeanStd(12.345, 0.5)]);
         t
+    }
+
+    #[test]
+    fn csv_never_hands_a_spreadsheet_a_formula() {
+        assert_eq!(csv_field("=HYPERLINK(\"http://x\",\"a\")"), "\"'=HYPERLINK(\"\"http://x\"\",\"\"a\"\")\"");
+        assert_eq!(csv_field("+1"), "'+1");
+        assert_eq!(csv_field("-cmd"), "'-cmd");
+        assert_eq!(csv_field("@SUM(A1)"), "'@SUM(A1)");
+        assert_eq!(csv_field("\tx"), "'\tx");
+        assert_eq!(csv_field("Ann_Person"), "Ann_Person");
+        let mut t = Table::new([Column::new("person", "person", 0), Column::new("n", "n", 0)]);
+        t.push(vec![Cell::text("=1+1"), Cell::Num(-0.5)]);
+        assert_eq!(t.csv(), "person,n\n'=1+1,-0.5\n");
     }
 
     #[test]

@@ -529,6 +529,32 @@ fn face_models_of(asked: &[String], models: &Path, notes: &mut Vec<String>) -> R
     Ok(found)
 }
 
+/// The report folder is never a photo folder nor inside one, `--force` or not: the next run
+/// would read the report's face crops as a person's photos.
+fn outside_the_photos(out: &Path, photos: &[PathBuf]) -> Result<()> {
+    // Where `out` is or would be: the folder resolved (links and `..`), its name appended.
+    let resolved = |p: &Path| -> Option<PathBuf> {
+        if let Ok(c) = std::fs::canonicalize(p) {
+            return Some(c);
+        }
+        let parent = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        Some(std::fs::canonicalize(parent).ok()?.join(p.file_name()?))
+    };
+    let Some(at) = resolved(out) else { return Ok(()) };
+    for photos in photos.iter().filter(|p| p.is_dir()) {
+        if let Ok(folder) = std::fs::canonicalize(photos) {
+            if at.starts_with(&folder) {
+                bail!(
+                    "--output {}: is inside the photo folder {}; the next check would read the report's face crops as photos: write it elsewhere",
+                    crate::shown(out),
+                    crate::shown(photos)
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 /// `campro check`.
 pub fn run(a: CheckArgs) -> Result<i32> {
     if let Some(record) = &a.record {
@@ -538,6 +564,7 @@ pub fn run(a: CheckArgs) -> Result<i32> {
     let params = a.params.clone().ok_or_else(|| anyhow!("PARAMS: required"))?;
     let p = crate::load_params(&params)?;
     if let Some(out) = &a.output {
+        outside_the_photos(out, &a.photos)?;
         crate::check_output_folder(out, a.force, "--output")?;
     }
     let out_for_inputs = a.output.clone().unwrap_or_else(|| PathBuf::from(".campro-check-no-output"));

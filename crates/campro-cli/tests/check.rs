@@ -175,6 +175,16 @@ fn bad_check_arguments_get_one_line() {
     let params = bundled("campro-omega-0.5.json");
     fails_with(campro().arg("check").arg(&params).args(["--person", "nobody"]), "--person");
     fails_with(campro().arg("check").arg(&params).args(["x.jpg", "--fail-above", "0.5"]), "must be 1e-3 or 1e-2");
+    // The report never goes into a photo folder, --force or not: the next run would take its
+    // crops as a person's photos.
+    let photos = tempfile::tempdir().unwrap();
+    std::fs::create_dir(photos.path().join("ann")).unwrap();
+    for out in [photos.path().to_path_buf(), photos.path().join("report"), photos.path().join("ann/../x")] {
+        fails_with(
+            campro().arg("check").arg(&params).arg(photos.path()).arg("-o").arg(&out).arg("--force"),
+            "is inside the photo folder",
+        );
+    }
     let Some(shared) = shared() else { return };
     // A face model whose manifest has no thresholds is named, with the command that calibrates it.
     let dir = tempfile::tempdir().unwrap();

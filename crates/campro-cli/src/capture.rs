@@ -103,7 +103,7 @@ impl std::error::Error for GreyRefused {}
 /// Why a grey picture is refused (colour `spread` in 8-bit codes).
 pub fn grey_message(spread: f64) -> String {
     format!(
-        "the picture is grey or near grey (colour spread {spread:.1} < {} codes) and this preset is not rated for grey input: a restoration that knows the camera gives grey faces back (--allow-grey writes it anyway, not protected)",
+        "the picture is black and white or nearly so (its colours differ from grey by {spread:.1} levels out of 255 on average, under the {} that protection needs), and this preset does not protect grey pictures: a restoration that knows the camera gives grey faces back (--allow-grey writes it anyway, unprotected)",
         campro::chroma::GREY_SPREAD
     )
 }

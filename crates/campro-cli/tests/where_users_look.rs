@@ -30,7 +30,7 @@ fn a_grey_picture_is_refused_by_a_preset_not_rated_for_grey() {
     let img = grey(dir.path());
     fails_with(
         campro().arg("simulate").arg("campro-omega-0.5").arg(&img).arg("-o").arg(dir.path().join("out")),
-        "not rated for grey input",
+        "does not protect grey pictures",
     );
     assert!(!dir.path().join("out/grey.png").exists());
 }
@@ -74,7 +74,7 @@ fn a_grey_video_frame_is_refused_too() {
     assert!(made.success());
     fails_with(
         campro().arg("simulate").arg("campro-omega-0.5").arg(&clip).arg("-o").arg(dir.path().join("out")),
-        "not rated for grey input",
+        "does not protect grey pictures",
     );
     assert!(!dir.path().join("out/grey.mp4").exists());
 }

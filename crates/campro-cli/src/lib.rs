@@ -60,10 +60,21 @@ pub fn main_with(args: impl IntoIterator<Item = std::ffi::OsString>) -> ! {
         eprintln!("interrupted");
         std::process::exit(130);
     });
-    let cli = match Cli::try_parse_from(args) {
+    let args: Vec<std::ffi::OsString> = args.into_iter().collect();
+    let cli = match Cli::try_parse_from(&args) {
         Ok(cli) => cli,
         // --help and --version print as clap writes them.
         Err(e) if !e.use_stderr() => e.exit(),
+        Err(e) if e.kind() == clap::error::ErrorKind::MissingRequiredArgument && preset_forgotten(&args).is_some() => {
+            let given = preset_forgotten(&args).unwrap_or_default();
+            eprintln!(
+                "error: {}: is not a preset; the parameter set comes first: campro {} PRESET {} ... (campro presets lists them)",
+                short(&escape(&given), MAX_ERROR_CHARS),
+                args[1].to_string_lossy(),
+                short(&escape(&given), MAX_ERROR_CHARS)
+            );
+            std::process::exit(2);
+        }
         Err(e) => {
             // A usage error is printed whole, as clap words it: the flag and the rule, a
             // "did you mean", the valid values, the usage line. Every line escaped and cut.
@@ -79,6 +90,33 @@ pub fn main_with(args: impl IntoIterator<Item = std::ffi::OsString>) -> ! {
         std::process::exit(1);
     }
     std::process::exit(0)
+}
+
+/// The photos a command was given in place of its preset (`campro simulate photos/ -o out`):
+/// the first operand of `simulate`, `inspect` or `check`, when it is an existing file or
+/// folder and no bundled preset's name, and nothing else was left to be the photos.
+fn preset_forgotten(args: &[std::ffi::OsString]) -> Option<String> {
+    let command = args.get(1)?.to_str()?;
+    if !matches!(command, "simulate" | "inspect" | "check") {
+        return None;
+    }
+    // Operands: not flags, and not the value after -o / --output.
+    let mut operands = Vec::new();
+    let mut skip = false;
+    for a in &args[2..] {
+        let t = a.to_string_lossy();
+        if skip {
+            skip = false;
+        } else if t == "-o" || t == "--output" {
+            skip = true;
+        } else if !t.starts_with('-') {
+            operands.push(a);
+        }
+    }
+    let [only] = operands[..] else { return None };
+    let path = std::path::Path::new(only);
+    (path.exists() && presets::named(path).is_none() && !path.extension().is_some_and(|e| e == "json"))
+        .then(|| path.display().to_string())
 }
 
 fn run(cli: Cli) -> Result<()> {

@@ -421,3 +421,20 @@ fn a_record_of_a_stream_is_refused_not_skipped() {
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn photos_given_where_the_preset_goes_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let photos = dir.path().join("photos");
+    std::fs::create_dir(&photos).unwrap();
+    for command in ["simulate", "inspect"] {
+        let out = campro().arg(command).arg(&photos).arg("-o").arg(dir.path().join("out")).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains("photos: is not a preset; the parameter set comes first"), "{err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+    }
+    // A preset with its photos missing keeps clap's own line.
+    let out = campro().args(["simulate", "campro-omega-0.5", "-o"]).arg(dir.path().join("out")).output().unwrap();
+    assert!(String::from_utf8_lossy(&out.stderr).contains("required"), "{}", String::from_utf8_lossy(&out.stderr));
+}

@@ -115,7 +115,7 @@ fn preset_forgotten(args: &[std::ffi::OsString]) -> Option<String> {
     }
     let [only] = operands[..] else { return None };
     let path = std::path::Path::new(only);
-    (path.exists() && presets::named(path).is_none() && !path.extension().is_some_and(|e| e == "json"))
+    (path.exists() && presets::named(path).is_none() && path.extension().is_none_or(|e| e != "json"))
         .then(|| path.display().to_string())
 }
 

@@ -18,39 +18,7 @@ pub use crate::metadata::Policy;
 pub use crate::simulate::ImageFormat as Format;
 pub use campro::pipeline::Depth as BitDepth;
 
-/// A bundled preset, as `campro presets --format json` lists it.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct PresetInfo {
-    pub name: &'static str,
-    /// What to pick it for, in plain words.
-    pub pick: &'static str,
-    /// It ships an image enhancer (`Camera::enhance`).
-    pub enhancer: bool,
-    /// It is rated for grey input (grey pictures are refused otherwise).
-    pub rated_for_grey: bool,
-    /// It protects faces ([`campro::Params::protective`]).
-    pub protective: bool,
-    /// Its measured privacy and utility, one line.
-    pub description: String,
-}
-
-/// Every bundled preset, sorted by name.
-pub fn presets() -> Result<Vec<PresetInfo>> {
-    crate::presets::PRESETS
-        .iter()
-        .map(|p| {
-            let params = Params::from_json(p.json)?;
-            Ok(PresetInfo {
-                name: p.name,
-                pick: p.pick,
-                enhancer: p.enhancer.is_some(),
-                rated_for_grey: params.rated_for_grey(),
-                protective: params.protective(),
-                description: params.description,
-            })
-        })
-        .collect()
-}
+pub use crate::presets::{infos as presets, PresetInfo};
 
 /// Where a camera's parameter set came from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -89,6 +57,8 @@ pub struct Camera {
     grey: GreyPolicy,
     /// The guarded enhancer, loaded on the first [`Camera::enhance`] (or its error).
     enhancer: OnceLock<std::result::Result<GuardedEnhancer, String>>,
+    /// SHA-256 of the enhancer's file, for records: read and hashed once, not per photo.
+    enhancer_sha256: OnceLock<std::result::Result<String, String>>,
 }
 
 impl Camera {
@@ -115,7 +85,7 @@ impl Camera {
             p8: Prepared::new(p, Depth::Eight),
             p16: OnceLock::new(),
         });
-        Ok(Self { source, preset_sha256, built, grey, enhancer: OnceLock::new() })
+        Ok(Self { source, preset_sha256, built, grey, enhancer: OnceLock::new(), enhancer_sha256: OnceLock::new() })
     }
 
     /// Where the parameter set came from.
@@ -143,24 +113,18 @@ impl Camera {
     /// grey picture let through; a grey one is refused unless allowed. The rows run on the
     /// calling thread's rayon pool (every core).
     pub fn capture(&self, src: Frame, w: u32, h: u32, depth: Depth) -> Result<(Pixels, bool)> {
-        let n = 3 * w as usize * h as usize;
         let len = match src {
             Frame::Eight(s) => s.len(),
             Frame::Sixteen(s) => s.len(),
         };
-        if len != n || w == 0 || h == 0 {
-            bail!("a {w} x {h} RGB frame holds {n} samples, got {len}");
-        }
+        whole(w, h, &[len])?;
         self.with_capture(None, |capture| capture.picture(src, w, h, depth, &|_| {}))
     }
 
     /// [`Camera::capture`] of an 8-bit frame at 8 bits, written into `dst` (as long as
     /// `src`): the same exact path, no allocation. A grey picture is refused unless allowed.
     pub fn capture_into(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32) -> Result<()> {
-        let n = 3 * w as usize * h as usize;
-        if src.len() != n || dst.len() != n || w == 0 || h == 0 {
-            bail!("a {w} x {h} RGB frame holds {n} samples, got {} in and {} out", src.len(), dst.len());
-        }
+        whole(w, h, &[src.len(), dst.len()])?;
         self.with_capture(None, |capture| capture.run(src, dst, w, h)).map(drop)
     }
 
@@ -213,31 +177,32 @@ impl Camera {
 
     /// What every record of `job` shares.
     fn run_record(&self, job: &Job) -> Result<crate::record::RunRecord> {
-        let p = self.params();
-        let enhancer_sha256 = if job.enhance {
-            let Source::Path(path) = &self.source else {
-                bail!("enhance: a parameter set given as JSON text has no enhancer")
-            };
-            Some(crate::record::sha256(&crate::record::enhancer_bytes(path, p)?))
-        } else {
-            None
-        };
-        let depth = if job.enhance || job.depth == Depth::Eight { 8 } else { 16 };
+        let enhancer = if job.enhance { Some(self.enhancer_sha256()?) } else { None };
         let given = match &self.source {
             Source::Path(path) => path.display().to_string(),
             Source::Json(_) => "JSON text".to_string(),
         };
-        Ok(crate::record::RunRecord {
-            preset: crate::record::PresetRecord {
-                name: p.name.clone(),
-                given,
-                sha256: self.preset_sha256.clone(),
-                best_round: p.provenance_fields().ok().and_then(|f| f.best_round),
-            },
-            enhancer_sha256,
-            bit_depth: depth,
-            metadata: serde_json::to_value(job.metadata)?.as_str().unwrap_or_default().to_string(),
-        })
+        crate::record::RunRecord::new(
+            given,
+            self.params(),
+            self.preset_sha256.clone(),
+            enhancer,
+            job.depth,
+            job.metadata,
+        )
+    }
+
+    /// SHA-256 of the enhancer's file (hashed on first use).
+    fn enhancer_sha256(&self) -> Result<String> {
+        let sha = self.enhancer_sha256.get_or_init(|| {
+            let Source::Path(path) = &self.source else {
+                return Err("enhance: a parameter set given as JSON text has no enhancer".to_string());
+            };
+            crate::record::enhancer_bytes(path, self.params())
+                .map(|b| crate::record::sha256(&b))
+                .map_err(|e| crate::one_line(&e))
+        });
+        sha.clone().map_err(|line| anyhow!("{line}"))
     }
 
     /// Whether `output` already is the protected output of the input `bytes` made by this
@@ -297,10 +262,17 @@ impl Camera {
             bail!("capture_result: the device transform is singular: no camera applies it");
         }
         let v = camera2::convert(p, &m, &Default::default()).map_err(|e| anyhow!("{e}"))?;
-        let mut j = v.to_json();
-        j["colorCorrectionGains"] = gains.map_or(serde_json::Value::Null, |g| serde_json::json!(g));
-        Ok(serde_json::to_string(&j)?)
+        Ok(serde_json::to_string(&crate::convert::camera2_json(&v, gains))?)
     }
+}
+
+/// Refuses buffers (of `lens` samples) that are not one whole `w` x `h` RGB frame each.
+fn whole(w: u32, h: u32, lens: &[usize]) -> Result<()> {
+    let n = 3 * w as usize * h as usize;
+    if w == 0 || h == 0 || lens.iter().any(|&l| l != n) {
+        bail!("a {w} x {h} RGB frame holds {n} samples, got {lens:?}");
+    }
+    Ok(())
 }
 
 /// How [`Camera::protect`] writes: `simulate`'s flags.
@@ -344,7 +316,7 @@ pub fn read(path: &Path) -> Result<Photo> {
         &|_| {},
     )?;
     let (width, height) = (img.width(), img.height());
-    let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
+    let sixteen = crate::capture::sixteen_bit(&img);
     let pixels =
         if sixteen { Pixels::Sixteen(img.into_rgb16().into_raw()) } else { Pixels::Eight(img.into_rgb8().into_raw()) };
     Ok(Photo { width, height, pixels })
@@ -372,14 +344,14 @@ pub fn write(path: &Path, pixels: &Pixels, w: u32, h: u32, o: &Write) -> Result<
         bail!("quality must be 1..=100, got {}", o.quality);
     }
     let samples = pixels.samples();
-    let n = 3 * w as usize * h as usize;
-    let len = match &samples {
-        Samples::Eight(s) => s.len(),
-        Samples::Sixteen(s) => s.len(),
-    };
-    if len != n || w == 0 || h == 0 {
-        bail!("a {w} x {h} RGB image holds {n} samples, got {len}");
-    }
+    whole(
+        w,
+        h,
+        &[match &samples {
+            Samples::Eight(s) => s.len(),
+            Samples::Sixteen(s) => s.len(),
+        }],
+    )?;
     if matches!(samples, Samples::Sixteen(_)) && matches!(format, ImageFormat::Jpeg | ImageFormat::Webp) {
         bail!("{}: 16-bit samples are written to PNG or TIFF only", crate::shown(path));
     }

@@ -165,6 +165,11 @@ pub enum Frame<'a> {
     Sixteen(&'a [u16]),
 }
 
+/// Whether a decoded image holds 16-bit samples (taken as [`Frame::Sixteen`]), else 8.
+pub fn sixteen_bit(img: &image::DynamicImage) -> bool {
+    matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4)
+}
+
 /// What the camera gives for a [`Frame`]: 8-bit or 16-bit samples (codes of the output depth).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Pixels {

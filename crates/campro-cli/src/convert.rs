@@ -40,16 +40,20 @@ pub fn convert(a: ConvertArgs) -> Result<()> {
     }
     let gains = device_gains(&device)?;
     let text = match format {
-        Format::Json => {
-            let mut j = v.to_json();
-            j["colorCorrectionGains"] = gains.map_or(serde_json::Value::Null, |g| serde_json::json!(g));
-            serde_json::to_string(&j)? + "\n"
-        }
+        Format::Json => serde_json::to_string(&camera2_json(&v, gains))? + "\n",
         Format::Kotlin => v.to_kotlin(gains),
     };
     write_or_print(output.as_deref(), text.as_bytes(), force)?;
     note_assumed_identity(&device);
     Ok(())
+}
+
+/// The Camera2 values as `convert --format json` prints them: with the device's
+/// white-balance gains (`colorCorrectionGains`, null when none are known).
+pub(crate) fn camera2_json(v: &camera2::Camera2Values, gains: Option<[f32; 4]>) -> serde_json::Value {
+    let mut j = v.to_json();
+    j["colorCorrectionGains"] = gains.map_or(serde_json::Value::Null, |g| serde_json::json!(g));
+    j
 }
 
 /// `campro convert --target` of a file-based stack: the stack's file, checked on its

@@ -65,17 +65,18 @@ pub fn main_with(args: impl IntoIterator<Item = std::ffi::OsString>) -> ! {
         Ok(cli) => cli,
         // --help and --version print as clap writes them.
         Err(e) if !e.use_stderr() => e.exit(),
-        Err(e) if e.kind() == clap::error::ErrorKind::MissingRequiredArgument && preset_forgotten(&args).is_some() => {
-            let given = preset_forgotten(&args).unwrap_or_default();
-            eprintln!(
-                "error: {}: is not a preset; the parameter set comes first: campro {} PRESET {} ... (campro presets lists them)",
-                short(&escape(&given), MAX_ERROR_CHARS),
-                args[1].to_string_lossy(),
-                short(&escape(&given), MAX_ERROR_CHARS)
-            );
-            std::process::exit(2);
-        }
         Err(e) => {
+            // Photos where the preset goes: said so, rather than "required arguments".
+            if let Some(given) =
+                preset_forgotten(&args).filter(|_| e.kind() == clap::error::ErrorKind::MissingRequiredArgument)
+            {
+                let given = short(&escape(&given), MAX_ERROR_CHARS);
+                eprintln!(
+                    "error: {given}: is not a preset; the parameter set comes first: campro {} PRESET {given} ... (campro presets lists them)",
+                    args[1].to_string_lossy(),
+                );
+                std::process::exit(2);
+            }
             // A usage error is printed whole, as clap words it: the flag and the rule, a
             // "did you mean", the valid values, the usage line. Every line escaped and cut.
             let text = e.render().to_string();

@@ -95,31 +95,50 @@ fn closest(typed: &str) -> Option<&'static str> {
         .map(|(_, n)| n)
 }
 
+/// A bundled preset as `campro presets` lists it (`--format json`: these keys in camelCase).
+#[derive(Debug, Clone, serde::Serialize)]
+#[serde(rename_all = "camelCase")]
+pub struct PresetInfo {
+    pub name: &'static str,
+    /// What to pick it for, in plain words.
+    pub pick: &'static str,
+    /// It ships an image enhancer.
+    pub enhancer: bool,
+    /// It is rated for grey input (grey pictures are refused otherwise).
+    pub rated_for_grey: bool,
+    /// It protects faces ([`campro::Params::protective`]).
+    pub protective: bool,
+    /// Its measured privacy and utility, one line.
+    pub description: String,
+}
+
+/// Every bundled preset, sorted by name.
+pub fn infos() -> Result<Vec<PresetInfo>> {
+    PRESETS
+        .iter()
+        .map(|p| {
+            let params = campro::Params::from_json(p.json)?;
+            Ok(PresetInfo {
+                name: p.name,
+                pick: p.pick,
+                enhancer: p.enhancer.is_some(),
+                rated_for_grey: params.rated_for_grey(),
+                protective: params.protective(),
+                description: params.description,
+            })
+        })
+        .collect()
+}
+
 /// `campro presets`: each bundled preset's name, whether it ships an enhancer, and its
 /// one-line privacy and utility description.
 pub fn list(json: bool) -> Result<()> {
-    let mut rows = Vec::new();
-    for p in PRESETS {
-        let params = campro::Params::from_json(p.json)?;
-        rows.push((
-            p.name,
-            p.pick,
-            p.enhancer.is_some(),
-            params.rated_for_grey(),
-            params.protective(),
-            params.description,
-        ));
-    }
+    let rows = infos()?;
     if json {
-        let v: Vec<_> = rows
-            .iter()
-            .map(|(n, pick, e, g, protective, d)| {
-                serde_json::json!({ "name": n, "pick": pick, "enhancer": e, "ratedForGrey": g, "protective": protective, "description": d })
-            })
-            .collect();
-        crate::say!("{}", serde_json::to_string_pretty(&v)?);
+        // Through a Value, so that the keys come sorted as before.
+        crate::say!("{}", serde_json::to_string_pretty(&serde_json::to_value(&rows)?)?);
     } else {
-        for (n, pick, e, g, protective, d) in rows {
+        for PresetInfo { name: n, pick, enhancer: e, rated_for_grey: g, protective, description: d } in rows {
             let grey = if g {
                 ""
             } else {

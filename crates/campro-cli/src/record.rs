@@ -81,25 +81,28 @@ pub struct RunRecord {
 }
 
 impl RunRecord {
-    /// The run's part of the records: the preset `given` (read again to hash it) and `p`.
+    /// The run's part of the records: the set `p` as `given` names it and its file's
+    /// SHA-256, the enhancer's SHA-256 when the run enhances, the bit depth written (8
+    /// whenever it enhances: the enhancer takes the camera's 8 bits) and the metadata policy.
     pub fn new(
-        given: &Path,
+        given: String,
         p: &campro::Params,
-        enhancer: Option<&[u8]>,
-        bit_depth: u8,
-        metadata: String,
+        preset_sha256: String,
+        enhancer_sha256: Option<String>,
+        depth: campro::pipeline::Depth,
+        metadata: crate::metadata::Policy,
     ) -> Result<Self> {
-        let bytes = preset_bytes(given)?;
+        let bit_depth = if enhancer_sha256.is_some() || depth == campro::pipeline::Depth::Eight { 8 } else { 16 };
         Ok(Self {
             preset: PresetRecord {
                 name: p.name.clone(),
-                given: given.display().to_string(),
-                sha256: sha256(&bytes),
+                given,
+                sha256: preset_sha256,
                 best_round: p.provenance_fields().ok().and_then(|f| f.best_round),
             },
-            enhancer_sha256: enhancer.map(sha256),
+            enhancer_sha256,
             bit_depth,
-            metadata,
+            metadata: serde_json::to_value(metadata)?.as_str().unwrap_or_default().to_string(),
         })
     }
 

@@ -538,19 +538,20 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     let p = crate::load_params(&params)?;
     let enhancer =
         if enhance { Some(crate::capture::enhancer_of(&params, &p, scale, &data.models_dir())?) } else { None };
+    let depth = match bit_depth {
+        BitDepth::Eight => Depth::Eight,
+        BitDepth::Sixteen => Depth::Sixteen,
+    };
     let record = if record {
-        let enhancer_bytes = if enhance { Some(crate::record::enhancer_bytes(&params, &p)?) } else { None };
-        let depth = if enhance || matches!(bit_depth, BitDepth::Eight) { 8 } else { 16 };
-        let policy = serde_json::to_value(metadata)?.as_str().unwrap_or_default().to_string();
-        Some(crate::record::RunRecord::new(&params, &p, enhancer_bytes.as_deref(), depth, policy)?)
+        use crate::record::{enhancer_bytes, preset_bytes, sha256};
+        let enhancer = if enhance { Some(sha256(&enhancer_bytes(&params, &p)?)) } else { None };
+        let preset = sha256(&preset_bytes(&params)?);
+        Some(crate::record::RunRecord::new(params.display().to_string(), &p, preset, enhancer, depth, metadata)?)
     } else {
         None
     };
     let options = Options {
-        depth: match bit_depth {
-            BitDepth::Eight => Depth::Eight,
-            BitDepth::Sixteen => Depth::Sixteen,
-        },
+        depth,
         existing: match (force, skip_existing) {
             (true, _) => Existing::Replace,
             (_, true) => Existing::Skip,
@@ -740,7 +741,7 @@ impl Paths<'_, '_> {
         )?;
         let kept = crate::metadata::kept(self.metadata, meta.exif.as_deref(), meta.icc, warn);
         let (w, h) = (img.width(), img.height());
-        let sixteen = matches!(img.color().bytes_per_pixel() / img.color().channel_count(), 2 | 4);
+        let sixteen = crate::capture::sixteen_bit(&img);
         let format = ImageFormat::of(output).unwrap_or(ImageFormat::Png);
         let (pixels, grey) = if sixteen && self.capture.enhancer.is_some() {
             warn("--enhance: read as 8 bits (the enhancer takes the camera's 8-bit output)");

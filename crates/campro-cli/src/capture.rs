@@ -273,21 +273,22 @@ impl Network {
 }
 
 /// The enhancer a parameter set names (`provenance.enhancer.onnx`, beside the file at
-/// `params_path`), behind the face guard whose detector is YuNet from `models`: what a
+/// `params_path`), behind the face guard of the detectors in `models`: what a
 /// person is shown. Without the detector nothing is enhanced (an error).
 pub fn enhancer_of(params_path: &Path, p: &Params, args: EnhanceArgs, models: &Path) -> Result<GuardedEnhancer> {
     let enhancer = network_of(params_path, p, Network::Enhancer)?.with_scale(args.enhance_scale);
     Ok(GuardedEnhancer { enhancer, guard: face_guard(models, args.faces.into())? })
 }
 
-/// The enhanced view's face guard, its detector YuNet from `models`.
+/// The enhanced view's face guard: every face detector of `models` that it runs
+/// ([`crate::models::face_guard_detectors`]), their finds joined.
 pub fn face_guard(models: &Path, hide: Hide) -> Result<FaceGuard> {
-    let detector = crate::models::load("yunet", models).map_err(|e| {
+    let detectors = crate::models::face_guard_detectors(models).map_err(|e| {
         anyhow!(
             "--enhance: the enhanced view hides every face it finds, and its face detector could not be loaded ({e:#}); nothing is enhanced without it"
         )
     })?;
-    Ok(FaceGuard::new(campro_eval::face::FaceDetector::new(detector)?, hide))
+    Ok(FaceGuard::of(detectors, hide)?)
 }
 
 /// The network `which` a parameter set names (`provenance.KEY.onnx`, a file name beside the

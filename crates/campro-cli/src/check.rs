@@ -222,6 +222,8 @@ fn device_condition(p: &campro::Params, a: &CheckArgs) -> Result<(Condition, Str
 #[derive(Serialize)]
 struct CheckReport<'a> {
     params: String,
+    /// The face detector that found the faces (its manifest's name).
+    face_detector: &'a str,
     models: Vec<ModelRow>,
     views: Vec<String>,
     /// Identities in the re-identification gallery (persons or loose faces, and distractors).
@@ -576,7 +578,8 @@ pub fn run(a: CheckArgs) -> Result<i32> {
             crate::shown(&models)
         );
     }
-    let detector = FaceDetector::new(crate::models::load(&a.face_detector, &models)?)?;
+    let detector =
+        FaceDetector::new(crate::models::load(crate::models::face_detector(&a.face_detector, &models), &models)?)?;
     let mut notes = Vec::new();
     let face_models = face_models_of(&a.face_models, &models, &mut notes)?;
     let embedders: Vec<Embedder> =
@@ -637,6 +640,7 @@ pub fn run(a: CheckArgs) -> Result<i32> {
     let s = summary(&checked, &judges, &views);
     let report = CheckReport {
         params: format!("{} ({})", crate::shown(&params), p.name),
+        face_detector: detector.name(),
         models: judges
             .iter()
             .map(|j| ModelRow { name: j.embedder.name().to_string(), thresholds: j.thresholds })

@@ -1,5 +1,5 @@
 //! `campro inspect`: per-image results people can look at. For each image, raw | protected
-//! side by side with the faces YuNet finds (magenta, with its five landmarks) and the people
+//! side by side with the faces the face detector finds (magenta, with its five landmarks) and the people
 //! the person detector finds (green) drawn on each panel, a JSON of the detections, and an
 //! `index.html` (with `index.json`) linking them all.
 //!
@@ -161,7 +161,14 @@ fn one(
 /// The index page: the summary first, then a section per image (those that still show faces
 /// after the camera first, most faces first), each panel a captioned figure at a useful size
 /// that opens the whole picture in a lightbox.
-fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, String)], out: &Path) -> String {
+/// `by` names the (face, person) detectors.
+fn index_html(
+    params: &str,
+    by: (&str, &str),
+    items: &[(PathBuf, Value)],
+    failed: &[(PathBuf, String)],
+    out: &Path,
+) -> String {
     let panels: Vec<String> = items
         .first()
         .and_then(|(_, v)| v["panels"].as_array())
@@ -195,12 +202,14 @@ fn index_html(params: &str, items: &[(PathBuf, Value)], failed: &[(PathBuf, Stri
         }
     );
     s += &format!(
-        "<p>Parameters: {}. Panels, left to right: {}. <span class=\"face\">Faces</span> (YuNet) and \
-         <span class=\"person\">people</span> (the person detector) found on each are boxed around, never over, \
+        "<p>Parameters: {}. Panels, left to right: {}. <span class=\"face\">Faces</span> ({}) and \
+         <span class=\"person\">people</span> ({}) found on each are boxed around, never over, \
          what was found. Click a panel for the whole picture at full size; the JSON beside each image has the \
          boxes, scores and face landmarks.</p>\n",
         page::html_escape(params),
-        panels.join(", ")
+        panels.join(", "),
+        page::html_escape(by.0),
+        page::html_escape(by.1)
     );
     // Flagged images first, the most faces after the camera first; then in input order.
     let mut order: Vec<(usize, &(PathBuf, Value))> = items.iter().enumerate().collect();
@@ -273,6 +282,7 @@ pub fn run(a: InspectArgs) -> Result<()> {
         output,
         data,
         person_detector,
+        face_detector,
         own_detector,
         confidence,
         force,
@@ -292,7 +302,7 @@ pub fn run(a: InspectArgs) -> Result<()> {
             crate::shown(&models)
         );
     }
-    let people = crate::models::load(&person_detector, &models)?;
+    let people = crate::models::load(crate::models::person_detector(&person_detector, &models), &models)?;
     let own = if own_detector {
         let own = crate::eval::own_detectors(std::slice::from_ref(&params))?;
         let detector = own.values().next().ok_or_else(|| {
@@ -304,7 +314,10 @@ pub fn run(a: InspectArgs) -> Result<()> {
         None
     };
     let det = Detectors {
-        faces: campro_eval::face::FaceDetector::new(crate::models::load("yunet", &models)?)?,
+        faces: campro_eval::face::FaceDetector::new(crate::models::load(
+            crate::models::face_detector(&face_detector, &models),
+            &models,
+        )?)?,
         people: (people.manifest.name.clone(), campro_eval::person::PersonDetector::new(people)?),
         own,
         confidence: confidence as f32,
@@ -363,7 +376,7 @@ pub fn inspect(
         if enhancer.is_some() { &["raw", "protected", "enhanced"] } else { &["raw", "protected"] };
     let index = json!({
         "params": params_name,
-        "face_detector": "yunet",
+        "face_detector": det.faces.name(),
         "person_detector": det.people.0,
         "own_detector": det.own.as_ref().map(|o| o.0.clone()),
         "confidence": det.confidence,
@@ -375,7 +388,11 @@ pub fn inspect(
         })).collect::<Vec<_>>(),
         "failed": failed.iter().map(|(i, e)| json!({"input": i.display().to_string(), "error": e})).collect::<Vec<_>>(),
     });
-    write_atomic(&out.join("index.html"), index_html(&params_name, &done, &failed, out).as_bytes(), true)?;
+    write_atomic(
+        &out.join("index.html"),
+        index_html(&params_name, (det.faces.name(), &det.people.0), &done, &failed, out).as_bytes(),
+        true,
+    )?;
     write_atomic(&out.join("index.json"), (serde_json::to_string_pretty(&index)? + "\n").as_bytes(), true)?;
     if json_out {
         say!("{}", serde_json::to_string(&index)?);
@@ -453,7 +470,7 @@ mod tests {
             )
         };
         let items = [item("portrait", [1, 0, 0]), item("class", [31, 0, 32]), item("street", [0, 0, 0])];
-        let html = index_html("p", &items, &[], Path::new("/o"));
+        let html = index_html("p", ("yunet", "yolox-nano"), &items, &[], Path::new("/o"));
         // Totals per panel, and the one image that still shows faces named in the summary.
         assert!(html.contains("3 images. Faces found, raw &rarr; protected &rarr; enhanced: <b class=\"face\">32 &rarr; 0 &rarr; 32</b>"), "{html}");
         assert!(html.contains("1 image still shows faces after the camera"), "{html}");
@@ -466,7 +483,7 @@ mod tests {
         assert_eq!(html.matches("<figure>").count(), 9);
         assert!(html.contains("<b>enhanced</b>: <span class=\"face warn\">32 faces</span>"), "{html}");
         assert_eq!(html.matches("class=\"lb\"").count(), 3);
-        let clean = index_html("p", &items[..1], &[], Path::new("/o"));
+        let clean = index_html("p", ("yunet", "yolox-nano"), &items[..1], &[], Path::new("/o"));
         assert!(clean.contains("No face is found in any picture after the camera."), "{clean}");
     }
 }

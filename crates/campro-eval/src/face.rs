@@ -1,9 +1,9 @@
-//! Faces: YuNet-style detection with 5 landmarks, similarity alignment onto an embedder's
+//! Faces: detection with 5 landmarks (YuNet's and CenterFace's heads), similarity alignment onto an embedder's
 //! template, and L2-normalised embeddings compared by cosine similarity.
 
 use crate::error::{EvalError, Result};
 use crate::geometry::{self, letterbox, nms, similarity, warp_affine};
-use crate::manifest::Task;
+use crate::manifest::{Head, Task};
 use crate::model::Model;
 use image::RgbImage;
 
@@ -54,10 +54,48 @@ pub fn decode_yunet_stride(
     }
 }
 
+/// The stride of CenterFace's maps: a quarter of the input's size.
+pub const CENTERFACE_STRIDE: usize = 4;
+
+/// Decodes CenterFace's maps (`cols` x `rows` cells, each [`CENTERFACE_STRIDE`] input
+/// pixels; `scale`, `offset` two planes, `landmarks` ten) into `out`: a cell scoring at
+/// least `threshold` is a face of height exp(scale₀)·4 and width exp(scale₁)·4 centred at
+/// ((col + offset₁ + ½)·4, (row + offset₀ + ½)·4); landmark k is (landmarks₂ₖ₊₁ · width,
+/// landmarks₂ₖ · height) from the box's top-left corner.
+pub fn decode_centerface(
+    cols: usize,
+    heatmap: &[f32],
+    scale: &[f32],
+    offset: &[f32],
+    landmarks: &[f32],
+    threshold: f32,
+    out: &mut Vec<Face>,
+) {
+    let n = heatmap.len();
+    let s = CENTERFACE_STRIDE as f32;
+    for (i, &score) in heatmap.iter().enumerate() {
+        if score < threshold || !score.is_finite() {
+            continue;
+        }
+        let (col, row) = ((i % cols) as f32, (i / cols) as f32);
+        let (h, w) = (scale[i].exp() * s, scale[n + i].exp() * s);
+        let (cx, cy) = ((col + offset[n + i] + 0.5) * s, (row + offset[i] + 0.5) * s);
+        let (x0, y0) = (cx - w / 2.0, cy - h / 2.0);
+        let lm = std::array::from_fn(|k| [x0 + landmarks[(2 * k + 1) * n + i] * w, y0 + landmarks[2 * k * n + i] * h]);
+        let face = Face { bbox: [x0, y0, x0 + w, y0 + h], score: score.min(1.0), landmarks: lm };
+        if face.bbox.iter().chain(face.landmarks.iter().flatten()).all(|v| v.is_finite()) {
+            out.push(face);
+        }
+    }
+}
+
 /// A face detector (manifest task `face_detector`).
 pub struct FaceDetector {
     model: Model,
     strides: Vec<usize>,
+    head: Head,
+    min_face: f64,
+    guard_threshold: Option<f32>,
     threshold: f32,
     nms_iou: f32,
 }
@@ -65,9 +103,15 @@ pub struct FaceDetector {
 impl FaceDetector {
     pub fn new(model: Model) -> Result<Self> {
         match &model.manifest.task {
-            Task::FaceDetector { strides, score_threshold, nms_iou } => {
-                Ok(Self { strides: strides.clone(), threshold: *score_threshold, nms_iou: *nms_iou, model })
-            }
+            Task::FaceDetector { strides, score_threshold, nms_iou, head, min_face, guard_threshold } => Ok(Self {
+                guard_threshold: *guard_threshold,
+                strides: strides.clone(),
+                head: head.clone(),
+                min_face: *min_face,
+                threshold: *score_threshold,
+                nms_iou: *nms_iou,
+                model,
+            }),
             _ => Err(EvalError::Invalid(format!("model {} is not a face_detector", model.manifest.name))),
         }
     }
@@ -81,9 +125,25 @@ impl FaceDetector {
         Ok(self.suppressed(faces))
     }
 
+    /// The model's name (its manifest's).
+    pub fn name(&self) -> &str {
+        &self.model.manifest.name
+    }
+
     /// The model's input (width, height), pixels.
     pub fn input_size(&self) -> (usize, usize) {
         (self.model.manifest.input.width, self.model.manifest.input.height)
+    }
+
+    /// The face width (pixels at the scale shown) from which it finds faces reliably.
+    pub fn min_face(&self) -> f64 {
+        self.min_face
+    }
+
+    /// The score from which the face guard hides a find: the manifest's `guard_threshold`,
+    /// else `share` of its score threshold.
+    pub fn guard_threshold(&self, share: f32) -> f32 {
+        self.guard_threshold.unwrap_or(self.threshold * share)
     }
 
     /// The manifest's score threshold.
@@ -124,6 +184,20 @@ impl FaceDetector {
     /// The faces of one run on a `cw` x `ch` canvas, in its pixels.
     fn decode(&self, out: &crate::model::Outputs, (cw, ch): (usize, usize), threshold: f32) -> Result<Vec<Face>> {
         let mut faces = Vec::new();
+        if let Head::Centerface { heatmap, scale, offset, landmarks } = &self.head {
+            let (cols, rows) = (cw / CENTERFACE_STRIDE, ch / CENTERFACE_STRIDE);
+            let n = cols * rows;
+            decode_centerface(
+                cols,
+                out.get(heatmap, n)?,
+                out.get(scale, 2 * n)?,
+                out.get(offset, 2 * n)?,
+                out.get(landmarks, 10 * n)?,
+                threshold,
+                &mut faces,
+            );
+            return Ok(faces);
+        }
         for &s in &self.strides {
             let (cols, rows) = (cw / s, ch / s);
             let n = cols * rows;

@@ -46,10 +46,15 @@ pub const OVERLAP: usize = 160;
 /// 1120 x 1152, 198–211 from 2.4 million pixels). YuNet holds about 100 bytes a pixel it runs
 /// on (a 2048 x 1152 input peaked at 236 MB resident), so a tile about 150 MB.
 pub const TILE: (usize, usize) = (2048, 720);
-/// Detection score from which the guard hides a region: below the detector's own
-/// threshold (0.6 for YuNet), since a miss shows a face and a false alarm only pixelates
-/// a patch of background.
-pub const THRESHOLD: f32 = 0.3;
+/// The share of a detector's own score threshold from which the guard hides a region,
+/// unless its manifest sets `guard_threshold` (YuNet 0.6 → 0.3): a miss shows a face and a
+/// false alarm only pixelates a patch of background.
+pub const THRESHOLD_SHARE: f32 = 0.5;
+
+/// The score from which the guard hides what `detector` finds.
+pub fn threshold(detector: &FaceDetector) -> f32 {
+    detector.guard_threshold(THRESHOLD_SHARE)
+}
 /// Each side of a found face's box is widened by this share of its width or height before
 /// it is hidden (hair, ears, chin).
 pub const MARGIN: f32 = 0.25;
@@ -71,9 +76,10 @@ pub enum Hide {
     Solid,
 }
 
-/// A face detector run as the enhanced view's guard.
+/// One or more face detectors run as the enhanced view's guard: every face any of them
+/// finds is hidden (the union), so adding a detector never shows a face another hid.
 pub struct FaceGuard {
-    detector: FaceDetector,
+    detectors: Vec<FaceDetector>,
     hide: Hide,
 }
 
@@ -89,8 +95,22 @@ pub struct Checked {
 }
 
 impl FaceGuard {
+    /// A guard of one detector.
     pub fn new(detector: FaceDetector, hide: Hide) -> Self {
-        Self { detector, hide }
+        Self { detectors: vec![detector], hide }
+    }
+
+    /// A guard of several detectors (at least one), whose finds are joined.
+    pub fn of(detectors: Vec<FaceDetector>, hide: Hide) -> Result<Self> {
+        if detectors.is_empty() {
+            return Err(crate::EvalError::Invalid("the face guard needs at least one face detector".into()));
+        }
+        Ok(Self { detectors, hide })
+    }
+
+    /// The detectors' names, in the order given.
+    pub fn detectors(&self) -> Vec<&str> {
+        self.detectors.iter().map(|d| d.name()).collect()
     }
 
     /// How found faces are hidden.
@@ -98,8 +118,8 @@ impl FaceGuard {
         self.hide
     }
 
-    /// Every face scoring at least [`THRESHOLD`] at any scale of the pyramid (module docs),
-    /// in `img`'s pixels, before suppression (overlapping finds all kept).
+    /// Every face a detector scores at least [`threshold`] at any scale of its pyramid
+    /// (module docs), in `img`'s pixels, before suppression (overlapping finds all kept).
     pub fn find(&self, img: &RgbImage) -> Result<Vec<Face>> {
         self.find_all(&[img])
     }
@@ -115,57 +135,11 @@ impl FaceGuard {
                 )));
             }
         }
-        let (iw, ih) = self.detector.input_size();
-        // (image, scale, whether it is the image's last level)
-        let wanted: Vec<(usize, f64, bool)> = images
-            .iter()
-            .enumerate()
-            .flat_map(|(k, img)| {
-                let scales = pyramid(img.width(), img.height(), iw, ih);
-                let n = scales.len();
-                scales.into_iter().enumerate().map(move |(l, s)| (k, s, l + 1 == n))
-            })
-            .collect();
-        let levels: Vec<RgbImage> = wanted
-            .par_iter()
-            .map(|&(k, s, _)| {
-                let img = images[k];
-                let (lw, lh) = level_size(img.width(), img.height(), s);
-                if (lw, lh) == img.dimensions() {
-                    img.clone()
-                } else {
-                    resize_bilinear(img, lw, lh)
-                }
-            })
-            .collect();
-        let jobs: Vec<(usize, [u32; 4])> = levels
-            .iter()
-            .enumerate()
-            .flat_map(|(l, level)| {
-                let (xs, ys) = (tiles(level.width() as usize, TILE.0), tiles(level.height() as usize, TILE.1));
-                xs.into_iter().flat_map(move |(x, w)| ys.clone().into_iter().map(move |(y, h)| (l, [x, y, w, h])))
-            })
-            .map(|(l, [x, y, w, h])| (l, [x as u32, y as u32, w as u32, h as u32]))
-            .collect();
-        let found = jobs
-            .par_iter()
-            .map(|&(l, region)| {
-                let (_, s, last) = wanted[l];
-                let inv = (1.0 / s) as f32;
-                // A level answers for faces up to OVERLAP pixels (whole in one of its
-                // tiles); bigger ones are the next level's, where they are half as big, and
-                // bigger finds here were textures (300-pixel "faces" on enhanced walls).
-                // The last level, the whole image, answers for every size.
-                Ok(self
-                    .detector
-                    .detect_region(&levels[l], region, THRESHOLD)?
-                    .into_iter()
-                    .filter(|f| last || (f.bbox[2] - f.bbox[0]).max(f.bbox[3] - f.bbox[1]) <= OVERLAP as f32)
-                    .map(|f| f.mapped(|p| [p[0] * inv, p[1] * inv]))
-                    .collect::<Vec<_>>())
-            })
-            .collect::<Result<Vec<_>>>()?;
-        Ok(found.into_iter().flatten().collect())
+        let mut all = Vec::new();
+        for detector in &self.detectors {
+            all.extend(find_with(detector, images)?);
+        }
+        Ok(all)
     }
 
     /// Hides in `shown` (the enhanced image) every face found in it or in `captured` (the
@@ -184,8 +158,62 @@ impl FaceGuard {
         for (f, r) in faces.iter().zip(&hidden) {
             hide_region(shown, *r, f.bbox[2] - f.bbox[0], self.hide);
         }
-        Ok(Checked { faces: self.detector.suppressed(faces).len(), hidden })
+        Ok(Checked { faces: self.detectors[0].suppressed(faces).len(), hidden })
     }
+}
+
+/// [`FaceGuard::find_all`] with one detector.
+fn find_with(detector: &FaceDetector, images: &[&RgbImage]) -> Result<Vec<Face>> {
+    let (iw, ih) = detector.input_size();
+    // (image, scale, whether it is the image's last level)
+    let wanted: Vec<(usize, f64, bool)> = images
+        .iter()
+        .enumerate()
+        .flat_map(|(k, img)| {
+            let scales = pyramid(img.width(), img.height(), iw, ih, detector.min_face());
+            let n = scales.len();
+            scales.into_iter().enumerate().map(move |(l, s)| (k, s, l + 1 == n))
+        })
+        .collect();
+    let levels: Vec<RgbImage> = wanted
+        .par_iter()
+        .map(|&(k, s, _)| {
+            let img = images[k];
+            let (lw, lh) = level_size(img.width(), img.height(), s);
+            if (lw, lh) == img.dimensions() {
+                img.clone()
+            } else {
+                resize_bilinear(img, lw, lh)
+            }
+        })
+        .collect();
+    let jobs: Vec<(usize, [u32; 4])> = levels
+        .iter()
+        .enumerate()
+        .flat_map(|(l, level)| {
+            let (xs, ys) = (tiles(level.width() as usize, TILE.0), tiles(level.height() as usize, TILE.1));
+            xs.into_iter().flat_map(move |(x, w)| ys.clone().into_iter().map(move |(y, h)| (l, [x, y, w, h])))
+        })
+        .map(|(l, [x, y, w, h])| (l, [x as u32, y as u32, w as u32, h as u32]))
+        .collect();
+    let found = jobs
+        .par_iter()
+        .map(|&(l, region)| {
+            let (_, s, last) = wanted[l];
+            let inv = (1.0 / s) as f32;
+            // A level answers for faces up to OVERLAP pixels (whole in one of its
+            // tiles); bigger ones are the next level's, where they are half as big, and
+            // bigger finds here were textures (300-pixel "faces" on enhanced walls).
+            // The last level, the whole image, answers for every size.
+            Ok(detector
+                .detect_region(&levels[l], region, threshold(detector))?
+                .into_iter()
+                .filter(|f| last || (f.bbox[2] - f.bbox[0]).max(f.bbox[3] - f.bbox[1]) <= OVERLAP as f32)
+                .map(|f| f.mapped(|p| [p[0] * inv, p[1] * inv]))
+                .collect::<Vec<_>>())
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(found.into_iter().flatten().collect())
 }
 
 /// An enhancer whose every output has passed the face guard: what a person is shown.
@@ -221,18 +249,18 @@ impl GuardedEnhancer {
     }
 }
 
-/// The pyramid's scales for a `w` x `h` image and a detector input of `iw` x `ih`: from
-/// [`NATIVE_MIN_FACE`] / [`MIN_FACE`], halving, down to the scale at which the image fits
-/// the input (included; never above the first).
-pub fn pyramid(w: u32, h: u32, iw: usize, ih: usize) -> Vec<f64> {
+/// The pyramid's scales for a `w` x `h` image and a detector input of `iw` x `ih` that
+/// finds faces from `native` pixels wide: from `native` / [`MIN_FACE`], halving, down to
+/// the scale at which the image fits the input (included; never above the first).
+pub fn pyramid(w: u32, h: u32, iw: usize, ih: usize, native: f64) -> Vec<f64> {
     let fit = (iw as f64 / w as f64).min(ih as f64 / h as f64);
-    let mut s = NATIVE_MIN_FACE / MIN_FACE;
+    let mut s = native / MIN_FACE;
     let mut out = Vec::new();
     while s > fit {
         out.push(s);
         s /= 2.0;
     }
-    out.push(fit.min(NATIVE_MIN_FACE / MIN_FACE));
+    out.push(fit.min(native / MIN_FACE));
     out
 }
 
@@ -311,12 +339,12 @@ mod tests {
     fn pyramid_starts_enlarged_and_ends_fitting() {
         // 1600 x 800 into 640 x 640: 1.6, 0.8, then the fit 0.4 (0.4 < 0.8 / 2 is not
         // reached: 0.8 > 0.4, so 0.4 is the last).
-        let p = pyramid(1600, 800, 640, 640);
+        let p = pyramid(1600, 800, 640, 640, NATIVE_MIN_FACE);
         assert_eq!(p, vec![1.6, 0.8, 0.4]);
         // An image that fits at the first scale: one level.
-        assert_eq!(pyramid(100, 100, 640, 640), vec![1.6]);
+        assert_eq!(pyramid(100, 100, 640, 640, NATIVE_MIN_FACE), vec![1.6]);
         // 400 x 400 enlarged 1.6 is 640: fits, one level at 1.6.
-        assert_eq!(pyramid(400, 400, 640, 640), vec![1.6]);
+        assert_eq!(pyramid(400, 400, 640, 640, NATIVE_MIN_FACE), vec![1.6]);
     }
 
     #[test]

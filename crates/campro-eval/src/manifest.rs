@@ -44,10 +44,22 @@ fn ones() -> [f32; 3] {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Task {
-    /// YuNet-style face detector: outputs `cls_s`, `obj_s`, `bbox_s`, `kps_s` per stride.
-    /// The image is scaled down to fit (never up) and padded at the bottom/right with 0.
+    /// A face detector with 5 landmarks; `head` says how its outputs are decoded (YuNet's
+    /// per-stride heads by default). The image is scaled down to fit (never up) and padded at
+    /// the bottom/right with 0; a fully convolutional one also runs at other sizes, each
+    /// side a multiple of its largest stride.
     FaceDetector {
         strides: Vec<usize>,
+        #[serde(default)]
+        head: Head,
+        /// The face width (pixels, at the scale it is shown) from which it finds faces
+        /// reliably; the face guard's pyramid enlarges its smallest face to it (2..=256).
+        #[serde(default = "native_min_face")]
+        min_face: f64,
+        /// The score from which the face guard hides a find (0..1; default: half of
+        /// `score_threshold`): a miss there shows a face, a false alarm pixelates a patch.
+        #[serde(default)]
+        guard_threshold: Option<f32>,
         /// Faces with `sqrt(cls·obj)` below this are dropped (0..1).
         score_threshold: f32,
         /// Greedy NMS IoU (0..1).
@@ -98,6 +110,24 @@ pub struct Thresholds {
     pub impostor_pairs: usize,
     /// LFW `pairs.txt` folds whose images were used (1..=10).
     pub folds: usize,
+}
+
+/// How a face detector's outputs are decoded.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Head {
+    /// YuNet: `cls_s`, `obj_s` (N x 1), `bbox_s` (N x 4), `kps_s` (N x 10) per stride `s`.
+    #[default]
+    Yunet,
+    /// CenterFace: four maps at a quarter of the input's size, named by the model: the face
+    /// centre `heatmap` (1 channel, 0..1), the log box `scale` (height, width), the centre's
+    /// sub-cell `offset` (y, x) and the 5 `landmarks` (y, x each, in box units from its
+    /// top-left corner).
+    Centerface { heatmap: String, scale: String, offset: String, landmarks: String },
+}
+
+fn native_min_face() -> f64 {
+    crate::guard::NATIVE_MIN_FACE
 }
 
 fn pad114() -> u8 {
@@ -158,8 +188,22 @@ impl Manifest {
         }
         let unit = |v: f32| (0.0..=1.0).contains(&v);
         match &self.task {
-            Task::FaceDetector { strides, score_threshold, nms_iou } => {
+            Task::FaceDetector { strides, score_threshold, nms_iou, head, min_face, guard_threshold } => {
                 check_strides(strides, i)?;
+                if guard_threshold.is_some_and(|t| !unit(t)) {
+                    return bad("task.guard_threshold", "must be in [0, 1]");
+                }
+                if !(2.0..=256.0).contains(min_face) {
+                    return bad("task.min_face", "must be in 2..=256 pixels");
+                }
+                if matches!(head, Head::Centerface { .. })
+                    && strides.iter().any(|s| s % crate::face::CENTERFACE_STRIDE != 0)
+                {
+                    return bad(
+                        "task.strides",
+                        "a centerface head's strides must be multiples of 4 (its maps are a quarter of the input)",
+                    );
+                }
                 if !unit(*score_threshold) || !unit(*nms_iou) {
                     return bad("task", "score_threshold and nms_iou must be in [0, 1]");
                 }

@@ -7,4 +7,4 @@
 pub mod shared;
 
 pub use campro::{bench, stress};
-pub use shared::{npy, shared, shared_root, workspace_root};
+pub use shared::{npy, registry, shared, shared_root, workspace_root};

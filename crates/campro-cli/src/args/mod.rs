@@ -57,7 +57,7 @@ pub enum Cmd {
     )]
     Demo(DemoArgs),
     /// Look at what a parameter set does to your images: raw | protected side by side with
-    /// the faces (YuNet) and people (person detector) found on each boxed around them, a JSON
+    /// the faces (face detector) and people (person detector) found on each boxed around them, a JSON
     /// of the detections per image, and OUTPUT/index.html: a summary, then the images that
     /// still show faces after the camera first.
     #[command(

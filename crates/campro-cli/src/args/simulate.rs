@@ -157,8 +157,9 @@ pub struct EnhanceArgs {
     #[arg(long = "enhance-scale", default_value = "auto", value_parser = parse_scale)]
     pub enhance_scale: campro_eval::enhance::Scale,
     /// How the enhanced view hides every face its guard finds (a face detector run on the
-    /// enhanced and the captured image at every scale down to 10-pixel faces; needs the
-    /// YuNet model of --models or the shared folder, and nothing is enhanced without it):
+    /// enhanced and the captured image at every scale down to 10-pixel faces: CenterFace,
+    /// which `campro models fetch` installs, and YuNet too when present; nothing is
+    /// enhanced without one):
     /// pixelate (blocks of a sixth of the face's width) or solid (one colour).
     #[arg(long, value_enum, default_value_t = FacesArg::Pixelate)]
     pub faces: FacesArg,

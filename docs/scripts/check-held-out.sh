@@ -11,9 +11,11 @@
 # similarity over models, and the faces whose true person ranks first. The time and peak
 # memory of each run are /usr/bin/time's.
 #
-# Usage: [PRESETS="a b …"] [KEEP=DIR] docs/scripts/check-held-out.sh [N]
+# Usage: [PRESETS="a b …"] [KEEP=DIR] [MODELS=DIR] docs/scripts/check-held-out.sh [N]
 #   PRESETS: the presets to check (default: every bundled one); KEEP: a folder that keeps each
 #   preset's report (`campro check -o`: check.csv, check.json, the HTML page) as DIR/PRESET.
+#   MODELS: the models folder (`--models`; e.g. the data folder `campro models fetch` fills,
+#   for the default set: CenterFace and faceplugin), else SHARED/models.
 # Needs: a release build (cargo build --release -p campro-cli), python3, GNU time, ../shared
 # (or CAMPRO_SHARED) with data/lfw.
 set -euo pipefail
@@ -49,7 +51,7 @@ echo "| preset | view | faces | linkable at 1e-3 | at 1e-2 | median similarity |
 echo "|---|---|---|---|---|---|---|---|"
 for preset in $presets; do
   /usr/bin/time -f "$preset: %e s, %M KB" -a -o "$work/times" \
-    "$campro" check "$preset" "$work/photos" -o "$work/report-$preset" > "$work/lines-$preset" 2>&1
+    "$campro" check "$preset" "$work/photos" -o "$work/report-$preset" ${MODELS:+--models "$MODELS"} > "$work/lines-$preset" 2>&1
   python3 - "$preset" "$work/report-$preset/check.csv" <<'PY'
 import collections, csv, statistics, sys
 preset, path = sys.argv[1], sys.argv[2]

@@ -12,6 +12,7 @@ mod check;
 mod convert;
 mod demo;
 mod eval;
+mod icc;
 mod inspect;
 mod man;
 mod metadata;

@@ -27,6 +27,8 @@ use std::path::{Path, PathBuf};
 
 const WIDTHS: [u32; 6] = [10, 12, 16, 24, 32, 48];
 const ROUNDS: usize = 2;
+/// Held-out COCO people photos searched for real faces.
+const COCO_PHOTOS: usize = 150;
 const SCENES: [&str; 2] = ["000000000802.jpg", "000000000785.jpg"];
 
 fn detector(manifest: &str, models: &Path) -> FaceDetector {
@@ -125,6 +127,50 @@ fn main() {
         }
         eprintln!("width {width} done");
     }
+    // Real faces: the held-out COCO people photos (id % 5 == 0), YuNet's finds at its own
+    // threshold as the reference, and the other way round; each guard searching the photo.
+    let coco = shared.join("data/coco-person/images");
+    let mut names: Vec<String> = std::fs::read_dir(&coco)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.trim_end_matches(".jpg").parse::<u64>().is_ok_and(|id| id % 5 == 0))
+        .collect();
+    names.sort();
+    names.truncate(COCO_PHOTOS);
+    let own = detector("centerface.json", &fetched);
+    let (mut y_ref, mut y_by_c, mut c_ref, mut c_by_y) = (0, 0, 0, 0);
+    let crops = std::env::var_os("CROPS").map(PathBuf::from);
+    for n in &names {
+        let img = read_rgb8(&coco.join(n)).unwrap();
+        let sets: Vec<Vec<[f32; 4]>> =
+            guards.iter().map(|(_, g)| g.find(&img).unwrap().iter().map(|f| f.bbox).collect()).collect();
+        for (d, set, other, (r, by)) in
+            [(&reference, &sets[1], 0, (&mut y_ref, &mut y_by_c)), (&own, &sets[0], 1, (&mut c_ref, &mut c_by_y))]
+        {
+            for f in d.detect(&img).unwrap() {
+                *r += 1;
+                let found = holds(set, &f.bbox);
+                *by += found as usize;
+                if let (false, Some(dir)) = (found, &crops) {
+                    let b = f.bbox.map(|v| v.max(0.0) as u32);
+                    let (w, h) = ((b[2] - b[0]).max(1), (b[3] - b[1]).max(1));
+                    let crop = image::imageops::crop_imm(&img, b[0], b[1], w, h).to_image();
+                    std::fs::create_dir_all(dir).unwrap();
+                    crop.save(dir.join(format!(
+                        "{}-missed-by-{}-{n}-{}.png",
+                        guards[other].0,
+                        guards[other ^ 1].0,
+                        b[0]
+                    )))
+                    .unwrap();
+                }
+            }
+        }
+    }
+    println!(
+        "\n{} held-out COCO people photos: of YuNet's {y_ref} faces (score >= its 0.6) CenterFace's guard found {y_by_c}; of CenterFace's {c_ref} (>= 0.5) YuNet's guard found {c_by_y}",
+        names.len()
+    );
     let pc = |c: u32, n: u32| format!("{c} ({:.1}%)", 100.0 * c as f64 / n.max(1) as f64);
     for (view, name) in ["raw", "enhanced (campro-omega-0.5)"].iter().enumerate() {
         println!("\n{name}:\n\n| face width | faces | YuNet | CenterFace | both |\n|---|---|---|---|---|");

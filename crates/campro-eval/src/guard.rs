@@ -1,17 +1,18 @@
 //! The face guard of the enhanced view: a guarantee the code enforces, not a property a
 //! network learnt. The enhancer's learnt face gate can miss faces it was not trained on
 //! (small, background, tilted, half hidden: a class photo's 15-pixel faces came back
-//! whole), so after the enhancer runs, a face detector searches the enhanced image and
-//! the captured image at every scale down to [`MIN_FACE`] pixels, and every face found in
+//! whole), so after the enhancer runs, one or more face detectors (CenterFace, which the
+//! registries carry, and YuNet when installed) search the enhanced image and the captured
+//! image at every scale down to [`MIN_FACE`] pixels, and every face any of them finds in
 //! either is hidden in the enhanced image: pixelated in blocks of a sixth of its width, or
-//! filled with one colour ([`Hide`]). An image the detector cannot run on is not enhanced
+//! filled with one colour ([`Hide`]). An image a detector cannot run on is not enhanced
 //! (the error is returned; callers show the captured image or nothing).
 //!
-//! Scales: the detector (YuNet: a 640 x 640 input, anchors on strides 8, 16 and 32) finds
-//! faces from about [`NATIVE_MIN_FACE`] pixels wide at the scale it is shown. So the image
-//! is searched on a pyramid: first enlarged so that a [`MIN_FACE`]-pixel face becomes a
-//! [`NATIVE_MIN_FACE`]-pixel one, then halved level after level until the whole image fits
-//! one input. Each level is cut into tiles of at most [`TILE`] pixels overlapping by
+//! Scales: a detector finds faces from about its manifest's `min_face` pixels wide at the
+//! scale it is shown (YuNet [`NATIVE_MIN_FACE`], CenterFace 20). So the image is searched
+//! on a pyramid per detector: first enlarged so that a [`MIN_FACE`]-pixel face becomes a
+//! `min_face`-pixel one, then halved level after level until the whole image fits one
+//! input. Each level is cut into tiles of at most [`TILE`] pixels overlapping by
 //! [`OVERLAP`] pixels, so every face up to that size lies whole in one tile, and larger ones
 //! are whole at a later level (where they are half as big); so a level keeps only its finds
 //! up to that size (the last level, the whole image, keeps every size): larger finds at the

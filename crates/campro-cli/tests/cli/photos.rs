@@ -331,7 +331,9 @@ fn metadata_policy_keeps_the_date_and_camera_and_drops_gps() {
     let mut jpeg = Vec::new();
     let mut enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 95);
     enc.set_exif_metadata(block.into_inner()).unwrap();
-    enc.set_icc_profile(vec![0; 128]).unwrap();
+    let srgb: Vec<u8> =
+        (0..SRGB_ICC.len()).step_by(2).map(|i| u8::from_str_radix(&SRGB_ICC[i..i + 2], 16).unwrap()).collect();
+    enc.set_icc_profile(srgb.clone()).unwrap();
     enc.write_image(img.as_raw(), 24, 16, image::ExtendedColorType::Rgb8).unwrap();
     let input = dir.path().join("IMG_1.jpg");
     std::fs::write(&input, jpeg).unwrap();
@@ -361,9 +363,32 @@ fn metadata_policy_keeps_the_date_and_camera_and_drops_gps() {
         let bytes = std::fs::read(dir.path().join(name)).unwrap();
         image::codecs::jpeg::JpegDecoder::new(std::io::Cursor::new(bytes)).unwrap().icc_profile().unwrap()
     };
-    assert_eq!(icc("safe.jpg"), Some(vec![0; 128]));
+    // The profile is rebuilt from its colour tags: each of lcms's colour tags is there with
+    // its data, its copyright line is not, and the description is campro's.
+    let tags = |p: &[u8]| -> Vec<(String, Vec<u8>)> {
+        let be = |at: usize| u32::from_be_bytes(p[at..at + 4].try_into().unwrap()) as usize;
+        (0..be(128))
+            .map(|i| {
+                let e = 132 + 12 * i;
+                (String::from_utf8_lossy(&p[e..e + 4]).into_owned(), p[be(e + 4)..be(e + 4) + be(e + 8)].to_vec())
+            })
+            .collect()
+    };
+    let (given, out) = (tags(&srgb), tags(&icc("safe.jpg").unwrap()));
+    let names: Vec<&str> = out.iter().map(|t| t.0.as_str()).collect();
+    assert_eq!(names, ["wtpt", "chad", "rXYZ", "bXYZ", "gXYZ", "rTRC", "gTRC", "bTRC", "chrm", "desc"]);
+    for (name, data) in &out[..9] {
+        assert_eq!(Some(data), given.iter().find(|t| &t.0 == name).map(|t| &t.1), "{name}");
+    }
+    assert!(!icc("safe.jpg").unwrap().windows(6).any(|w| w == b"N\0o\0 \0c"), "lcms's copyright line is gone");
+    assert_eq!(icc("keep.jpg"), icc("safe.jpg"));
     assert_eq!(icc("strip.jpg"), None);
 }
+
+/// The sRGB profile lcms 2 writes (Pillow's `ImageCms.createProfile("sRGB")`, 588 bytes):
+/// desc and cprt (mluc text), wtpt, chad, the primaries, one parametric curve shared by the
+/// three channels, chrm.
+const SRGB_ICC: &str = "0000024c6c636d73044000006d6e74725247422058595a2007ea000c0007001200020011616373704150504c0000000000000000000000000000000000000000000000000000f6d6000100000000d32d6c636d7300000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000b64657363000001080000003663707274000001400000004c777470740000018c0000001463686164000001a00000002c7258595a000001cc000000146258595a000001e0000000146758595a000001f4000000147254524300000208000000206754524300000208000000206254524300000208000000206368726d00000228000000246d6c756300000000000000010000000c656e55530000001a0000001c00730052004700420020006200750069006c0074002d0069006e00006d6c756300000000000000010000000c656e5553000000300000001c004e006f00200063006f0070007900720069006700680074002c002000750073006500200066007200650065006c007958595a20000000000000f6d6000100000000d32d736633320000000000010c42000005defffff325000007930000fd90fffffba1fffffda2000003dc0000c06e58595a200000000000006fa0000038f50000039058595a20000000000000249f00000f840000b6c358595a2000000000000062970000b787000018d9706172610000000000030000000266660000f2a700000d59000013d000000a5b6368726d00000000000300000000a3d70000547b00004ccd0000999a0000266600000f5c";
 
 /// A phone JPEG stored sideways with EXIF orientation 6 (turn 90° clockwise to show) comes
 /// out turned: the output is as tall as the stored picture is wide, and each pixel is the

@@ -454,6 +454,7 @@ fn stream(capture: &Capture, source: &Source, sink: &Sink, o: &Options, pool: &r
         force: o.existing == Existing::Replace,
         sixteen: o.depth == Depth::Sixteen,
         max_frames: o.max_frames,
+        metadata: o.metadata,
     };
     let warn = |w: &str| eprintln!("warning: {}: {w}", source.shown());
     let run = || pool.install(|| video::simulate(&job, source, sink, &warn));
@@ -674,8 +675,14 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
             );
         }
         let warn = |w: &str| eprintln!("warning: {}: {w}", crate::shown(i));
-        let job =
-            video::Job { capture: &capture, enc, force, sixteen: o.depth == Depth::Sixteen, max_frames: o.max_frames };
+        let job = video::Job {
+            capture: &capture,
+            enc,
+            force,
+            sixteen: o.depth == Depth::Sixteen,
+            max_frames: o.max_frames,
+            metadata: o.metadata,
+        };
         let (mut outcome, done) = settle(i, &out, o.existing, o.record, None, || {
             pool.install(|| video::simulate(&job, &Source::File(i.clone()), &Sink::File(out.clone()), &warn))
         });

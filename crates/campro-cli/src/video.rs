@@ -1,15 +1,16 @@
 //! Video through `campro simulate`: ffmpeg decodes (a process, raw RGB on a pipe, each
 //! frame's timestamp beside it), every frame goes through the exact pipeline on all cores,
 //! ffmpeg encodes (the frames and their timestamps in on a pipe, as IVF), and a file
-//! input's audio, subtitle and data streams and metadata are copied. Frames stream through:
-//! memory holds a few frames whatever the length.
+//! input's audio is copied, with its metadata, subtitles and chapters as `--metadata` says
+//! ([`metadata_args`]); data streams (GPS telemetry) and attached pictures never. Frames
+//! stream through: memory holds a few frames whatever the length.
 //!
 //! What is kept: the frame size (an odd size is padded by one edge-replicated row or column
 //! for 4:2:0 codecs, with a warning; `ffv1` keeps it exactly), every frame's timestamp (so
 //! variable-frame-rate video keeps its timing and stays in step with its audio), the bit
 //! depth (input of more than 8 bits goes through the 16-bit path and is encoded with 10
-//! bits, or 16 with `ffv1`), the rotation (display matrix), every other stream, the
-//! container metadata. HDR transfer curves are noted: the camera model is SDR.
+//! bits, or 16 with `ffv1`), the rotation (display matrix), the audio. HDR transfer curves
+//! are noted: the camera model is SDR.
 //!
 //! Sources: a file, standard input (`-`: any container ffmpeg reads from a pipe, or raw
 //! RGB frames of a given size), a live V4L2 camera (`/dev/videoN`). Sinks: a file (written
@@ -18,6 +19,7 @@
 //! output device (v4l2loopback).
 
 use crate::capture::Capture;
+use crate::metadata::Policy;
 use anyhow::{anyhow, bail, Context, Result};
 use std::io::{BufRead, Read, Write};
 use std::path::{Path, PathBuf};
@@ -489,6 +491,8 @@ pub struct Job<'a, 'c, 'p> {
     pub sixteen: bool,
     /// Stop after this many frames (`--frames`).
     pub max_frames: Option<u64>,
+    /// What the output keeps of a video file's metadata ([`metadata_args`]).
+    pub metadata: crate::metadata::Policy,
 }
 
 /// The decoder's timestamp stream (`framecrc` on its stderr): its header, then a
@@ -593,6 +597,85 @@ fn decoder(source: &Source, sixteen: bool, stream: usize) -> Result<Command> {
     Ok(c)
 }
 
+/// Format tags `keep-safe` keeps of a video (lower-case keys): the creation time, and the
+/// camera's make and model as QuickTime, Android and plain containers name them.
+const SAFE_TAGS: [&str; 7] = [
+    "creation_time",
+    "make",
+    "model",
+    "com.apple.quicktime.make",
+    "com.apple.quicktime.model",
+    "com.android.manufacturer",
+    "com.android.model",
+];
+
+/// The longest tag value `keep-safe` keeps (characters): a date, a make or a model.
+const MAX_SAFE_TAG: usize = 64;
+
+/// The format tags of `input` that `keep-safe` keeps: [`SAFE_TAGS`] whose value is printable
+/// text of at most [`MAX_SAFE_TAG`] characters (a creation time: digits and `-:.TZ+`).
+fn safe_tags(input: &Path) -> Result<Vec<(String, String)>> {
+    let out = Command::new("ffprobe")
+        .args(["-hide_banner", "-v", "error", "-of", "json", "-show_entries", "format_tags"])
+        .arg(file_url(input)?)
+        .stdin(Stdio::null())
+        .output()?;
+    if !out.status.success() {
+        bail!("ffprobe: {}", first_line(&out.stderr));
+    }
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).context("ffprobe printed no JSON")?;
+    Ok(safe_of(v.pointer("/format/tags")))
+}
+
+/// [`safe_tags`] of ffprobe's `format.tags` object.
+fn safe_of(tags: Option<&serde_json::Value>) -> Vec<(String, String)> {
+    let Some(tags) = tags.and_then(|t| t.as_object()) else { return Vec::new() };
+    let mut kept: Vec<(String, String)> = Vec::new();
+    for (k, v) in tags {
+        let key = k.to_ascii_lowercase();
+        let Some(v) = v.as_str() else { continue };
+        let fits = v.chars().count() <= MAX_SAFE_TAG
+            && if key == "creation_time" {
+                !v.is_empty() && v.chars().all(|c| c.is_ascii_digit() || "-:.TZ+ ".contains(c))
+            } else {
+                v.chars().all(|c| !c.is_control())
+            };
+        if SAFE_TAGS.contains(&key.as_str()) && fits && !kept.iter().any(|(k, _)| *k == key) {
+            kept.push((key, v.to_string()));
+        }
+    }
+    kept
+}
+
+/// The encoder's streams and metadata from the source file (input 1) under `policy`:
+/// - every policy: the protected video (input 0) and the audio; never a data stream (GPS
+///   telemetry such as GoPro's) or an attached picture (cover art, a thumbnail);
+/// - `strip`: no global, stream or chapter metadata, no subtitles;
+/// - `keep-safe`: only `safe` (the creation time, make and model), no subtitles or chapters
+///   (their text can name people); `mov` outputs write them as QuickTime metadata keys;
+/// - `keep`: the global metadata, the chapters and the subtitles too.
+fn metadata_args(policy: Policy, safe: &[(String, String)], mov: bool) -> Vec<String> {
+    let mut a: Vec<String> = ["-map", "0:v", "-map", "1:a?", "-c:a", "copy"].map(String::from).to_vec();
+    match policy {
+        Policy::Keep => {
+            a.extend(["-map", "1:s?", "-c:s", "copy", "-map_metadata", "1", "-map_chapters", "1"].map(String::from));
+        }
+        Policy::KeepSafe | Policy::Strip => {
+            a.extend(["-map_metadata", "-1", "-map_chapters", "-1"].map(String::from));
+            if policy == Policy::KeepSafe {
+                for (k, v) in safe {
+                    a.push("-metadata".into());
+                    a.push(format!("{k}={v}"));
+                }
+                if mov && !safe.is_empty() {
+                    a.extend(["-movflags", "+use_metadata_tags"].map(String::from));
+                }
+            }
+        }
+    }
+    a
+}
+
 /// The encoder's command: IVF frames (raw RGB with timestamps) on stdin, `source`'s other
 /// streams beside them when it is a file, into `target`.
 fn encoder(
@@ -612,8 +695,12 @@ fn encoder(
     c.args(["-f", "ivf", "-c:v", "rawvideo", "-i", "pipe:0"]);
     if let Source::File(path) = source {
         c.arg("-i").arg(file_url(path)?);
-        c.args(["-map", "0:v", "-map", "1:a?", "-map", "1:s?", "-map", "1:d?", "-map_metadata", "1"]);
-        c.args(["-c:a", "copy", "-c:s", "copy", "-c:d", "copy"]);
+        let safe = if job.metadata == Policy::KeepSafe { safe_tags(path)? } else { Vec::new() };
+        let mov = target
+            .and_then(|t| t.extension())
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| ["mp4", "mov", "m4v"].contains(&e.to_ascii_lowercase().as_str()));
+        c.args(metadata_args(job.metadata, &safe, mov));
     } else {
         c.args(["-map", "0:v"]);
     }

@@ -669,3 +669,181 @@ fn a_network_stream_is_a_live_source() {
         "http://",
     );
 }
+
+/// `--metadata` on video, a container of each kind with every kind of field: the global
+/// tags (title, artist, comment, location, make and model, creation time), a subtitle
+/// track naming a person, chapter titles, a data track (a timecode), cover art stored before
+/// the video. `strip` keeps nothing, `keep-safe` the creation time, make and model, `keep`
+/// the rest but never the data track or the cover; the file's bytes are searched too.
+#[test]
+fn metadata_policy_applies_to_video_containers() {
+    if !ffmpeg_present() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    std::fs::write(d("s.srt"), "1\n00:00:00,000 --> 00:00:00,900\nAlice Example waves\n").unwrap();
+    std::fs::write(d("ch.txt"), ";FFMETADATA1\n[CHAPTER]\nTIMEBASE=1/1000\nSTART=0\nEND=500\ntitle=Alice at home\n")
+        .unwrap();
+    let cover = d("cover.png");
+    ffmpeg(&["-f", "lavfi", "-i", "color=c=red:size=32x32", "-frames:v", "1", &cover]);
+    let tags = [
+        "title=Alice's birthday",
+        "artist=Alice Example",
+        "comment=at Alice's home",
+        "location=+48.8577+002.2950/",
+        "creation_time=2026-05-01T10:11:12Z",
+    ];
+    let base = |out: &str, extra: &[&str]| {
+        let mut a: Vec<String> = "-f lavfi -i testsrc=size=64x48:rate=10:duration=1 -f lavfi -i sine=duration=1"
+            .split(' ')
+            .map(String::from)
+            .collect();
+        a.extend(["-i".into(), d("s.srt"), "-i".into(), d("ch.txt"), "-i".into(), cover.clone()]);
+        a.extend(extra.iter().map(|s| s.to_string()));
+        for t in tags {
+            a.extend(["-metadata".into(), t.into()]);
+        }
+        a.push(d(out));
+        ffmpeg(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    };
+    // MP4: cover art first, then the video, audio and a subtitle track.
+    base(
+        "in.mp4",
+        &[
+            "-map",
+            "4",
+            "-map",
+            "0",
+            "-map",
+            "1",
+            "-map",
+            "2",
+            "-map_chapters",
+            "3",
+            "-c:v:0",
+            "png",
+            "-disposition:v:0",
+            "attached_pic",
+            "-c:v:1",
+            "libx264",
+            "-c:a",
+            "aac",
+            "-c:s",
+            "mov_text",
+        ],
+    );
+    // MOV: QuickTime make and model keys, and a timecode data track.
+    base(
+        "in.mov",
+        &[
+            "-map",
+            "0",
+            "-map",
+            "1",
+            "-map_chapters",
+            "3",
+            "-c:v",
+            "libx264",
+            "-c:a",
+            "aac",
+            "-timecode",
+            "00:00:10:00",
+            "-movflags",
+            "use_metadata_tags",
+            "-metadata",
+            "com.apple.quicktime.make=Apple",
+            "-metadata",
+            "com.apple.quicktime.model=iPhone 15",
+        ],
+    );
+    // MKV: free-form make and model, a subtitle track, the cover as a second video stream.
+    base(
+        "in.mkv",
+        &[
+            "-map",
+            "0",
+            "-map",
+            "1",
+            "-map",
+            "2",
+            "-map",
+            "4",
+            "-map_chapters",
+            "3",
+            "-c:v:0",
+            "libx264",
+            "-c:v:1",
+            "png",
+            "-disposition:v:1",
+            "attached_pic",
+            "-c:a",
+            "aac",
+            "-c:s",
+            "srt",
+            "-metadata",
+            "make=Google",
+            "-metadata",
+            "model=Pixel 9",
+        ],
+    );
+    let fields = |f: &str| -> String {
+        let out = Command::new("ffprobe")
+            .args([
+                "-v",
+                "error",
+                "-of",
+                "json",
+                "-show_entries",
+                "format_tags:stream=codec_type,disposition:chapter_tags",
+            ])
+            .arg(d(f))
+            .output()
+            .unwrap();
+        String::from_utf8_lossy(&out.stdout).to_lowercase()
+    };
+    for ext in ["mp4", "mov", "mkv"] {
+        let input = format!("in.{ext}");
+        let given = fields(&input);
+        for t in ["alice example", "48.8577", "alice at home", "2026-05-01"] {
+            assert!(given.contains(t), "{ext}: the input lacks {t}: {given}");
+        }
+        for policy in ["strip", "keep-safe", "keep"] {
+            let out = format!("{policy}.{ext}");
+            let run = campro()
+                .args(["simulate", "identity", &d(&input), "-o", &d(&out), "--metadata", policy])
+                .output()
+                .unwrap();
+            assert!(run.status.success(), "{ext} {policy}: {}", String::from_utf8_lossy(&run.stderr));
+            let got = fields(&out);
+            let bytes = std::fs::read(d(&out)).unwrap();
+            let holds = |t: &str| bytes.windows(t.len()).any(|w| w.eq_ignore_ascii_case(t.as_bytes()));
+            let streams = |kind: &str| got.matches(&format!("\"codec_type\": \"{kind}\"")).count();
+            // Never the cover (one video stream) nor the input's timecode data track.
+            assert_eq!(streams("video"), 1, "{ext} {policy}: {got}");
+            assert_eq!(streams("audio"), 1, "{ext} {policy}: {got}");
+            let names = ["alice's birthday", "alice example", "48.8577", "alice at home", "at alice's home"];
+            match policy {
+                "strip" | "keep-safe" => {
+                    for t in names {
+                        assert!(!got.contains(t) && !holds(t), "{ext} {policy} keeps {t}: {got}");
+                    }
+                    assert_eq!(streams("subtitle") + streams("data"), 0, "{ext} {policy}: {got}");
+                    let dated = got.contains("2026-05-01");
+                    assert_eq!(dated, policy == "keep-safe", "{ext} {policy}: the creation time: {got}");
+                    let camera = got.contains("iphone 15") || got.contains("pixel 9");
+                    assert_eq!(camera, policy == "keep-safe" && ext != "mp4", "{ext} {policy}: make and model: {got}");
+                }
+                _ => {
+                    for t in ["alice example", "alice's birthday"] {
+                        assert!(got.contains(t), "{ext} keep lost {t}: {got}");
+                    }
+                    assert!(got.contains("alice at home"), "{ext} keep lost the chapters: {got}");
+                    if ext != "mov" {
+                        assert_eq!(streams("subtitle"), 1, "{ext} keep lost the subtitles: {got}");
+                    }
+                }
+            }
+        }
+    }
+}

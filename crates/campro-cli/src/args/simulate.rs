@@ -77,12 +77,15 @@ pub struct SimulateArgs {
     /// said on stderr and in the JSON record, and is not protected.
     #[arg(long)]
     pub allow_grey: bool,
-    /// What image outputs keep of their inputs' metadata. keep-safe: date and time, camera
-    /// and lens, exposure, colour space and colour profile; never GPS, maker notes, serial
-    /// numbers, names, comments or thumbnails (a thumbnail is the unprotected picture).
-    /// keep: every field of the main image, GPS too, but never a thumbnail or maker note.
-    /// strip: nothing. Pixels are turned by the input's orientation, so outputs say
-    /// orientation 1. (Videos keep their container's metadata.)
+    /// What outputs keep of their inputs' metadata. Photos: keep-safe: date and time, camera
+    /// and lens, exposure, colour space and the colour profile's colour tags; never GPS,
+    /// maker notes, serial numbers, names, comments or thumbnails (a thumbnail is the
+    /// unprotected picture). keep: every standard field of the main image, GPS too, but
+    /// never a thumbnail, maker note or embedded container. Videos: keep-safe: the creation
+    /// time, make and model only (no title, artist, location, comment, subtitles or
+    /// chapters); keep: the container's metadata, subtitles and chapters. Every policy
+    /// drops a video's data streams (GPS telemetry) and attached pictures. strip: nothing.
+    /// Pixels are turned by the input's orientation, so photos say orientation 1.
     #[arg(long, value_enum, default_value_t = crate::metadata::Policy::KeepSafe)]
     pub metadata: crate::metadata::Policy,
     /// Leave outputs that exist and skip their inputs (re-runs do only what is missing).

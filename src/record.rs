@@ -88,7 +88,7 @@ pub struct Record {
     /// JPEG quality (1..=100) where the output is a JPEG.
     pub jpeg_quality: Option<u8>,
     /// What the output kept of the input's metadata (`strip`, `keep-safe`, `keep`; a phone's
-    /// still: `orientation`, its only tag).
+    /// still: `orientation`, its only tag; a phone's recording: `orientation+summary`).
     pub metadata: String,
     /// The raw input; `None` for a phone's capture (the raw never leaves the camera).
     #[serde(default)]
@@ -169,6 +169,79 @@ impl Record {
         if !(self.bound_lsb.is_finite() && self.bound_lsb >= 0.0) {
             return Err(bad("bound_lsb", "must be finite and >= 0"));
         }
+        self.check_fields()
+    }
+
+    /// Each field in its range and against the others: what a writer can have written.
+    fn check_fields(&self) -> Result<(), BadRecord> {
+        let text = |field: &str, v: &str, max: usize| {
+            if v.is_empty() || v.len() > max || v.chars().any(char::is_control) {
+                return Err(bad(field, format!("must be 1 to {max} bytes of text")));
+            }
+            Ok(())
+        };
+        text("campro_version", &self.campro_version, 64)?;
+        text("preset.name", &self.preset.name, 128)?;
+        text("preset.given", &self.preset.given, 4096)?;
+        let files = [("output", Some(&self.output)), ("input", self.input.as_ref())];
+        for (what, f) in files {
+            let Some(f) = f else { continue };
+            text(&format!("{what}.name"), &f.name, 255)?;
+            if f.name.contains(['/', '\\']) || f.name == "." || f.name == ".." {
+                return Err(bad(&format!("{what}.name"), "must be a file name, no folder"));
+            }
+            if f.bytes == 0 {
+                return Err(bad(&format!("{what}.bytes"), "must be at least 1"));
+            }
+        }
+        if self.bit_depth != 8 && self.bit_depth != 16 {
+            return Err(bad("bit_depth", format!("must be 8 or 16, got {}", self.bit_depth)));
+        }
+        if self.bound_lsb > 1.0 * f64::from(1u32 << self.bit_depth) {
+            return Err(bad("bound_lsb", "must be at most the output's range"));
+        }
+        let jpeg = {
+            let n = self.output.name.to_ascii_lowercase();
+            n.ends_with(".jpg") || n.ends_with(".jpeg")
+        };
+        match self.jpeg_quality {
+            Some(q) if !(1..=100).contains(&q) => {
+                return Err(bad("jpeg_quality", format!("must be in 1..=100, got {q}")))
+            }
+            Some(_) if !jpeg => return Err(bad("jpeg_quality", "only a JPEG output has a quality")),
+            None if jpeg && self.path != PATH_CAMERA2 => {
+                return Err(bad("jpeg_quality", "a JPEG output's record gives its quality"))
+            }
+            _ => {}
+        }
+        match (self.path.as_str(), &self.enhancer_sha256) {
+            (PATH_CAMERA_ENHANCER, Some(h)) if is_sha256(h) => {}
+            (PATH_CAMERA_ENHANCER, _) => {
+                return Err(bad("enhancer_sha256", "a camera+enhancer record names its enhancer (64 hex digits)"))
+            }
+            (_, Some(_)) => {
+                return Err(bad("enhancer_sha256", format!("only a {PATH_CAMERA_ENHANCER} record names an enhancer")))
+            }
+            _ => {}
+        }
+        let policies: &[&str] = if self.path == PATH_CAMERA2 {
+            &["orientation", "orientation+summary"]
+        } else {
+            &["strip", "keep-safe", "keep"]
+        };
+        if !policies.contains(&self.metadata.as_str()) {
+            return Err(bad("metadata", format!("must be {} for a {} record", policies.join(" or "), self.path)));
+        }
+        if let Some(d) = &self.device {
+            text("device.camera_id", &d.camera_id, 64)?;
+            if !(2..=4096).contains(&d.curve_points) {
+                return Err(bad("device.curve_points", "must be in 2..=4096"));
+            }
+            let w = d.worst_reported_deviation_lsb;
+            if !(w.is_finite() && w >= 0.0 && w <= self.bound_lsb) {
+                return Err(bad("device.worst_reported_deviation_lsb", "must be finite, >= 0 and within bound_lsb"));
+            }
+        }
         Ok(())
     }
 
@@ -223,6 +296,7 @@ mod tests {
         let mut r = phone();
         r.path = PATH_CAMERA.into();
         r.device = None;
+        r.metadata = "keep-safe".into();
         r.input = Some(FileRecord { name: "raw.png".into(), sha256: "ef".repeat(32), bytes: 9 });
         let text = r.to_json();
         assert!(!text.contains("device"), "a desktop record has no device key: {text}");
@@ -246,5 +320,45 @@ mod tests {
         let text = phone().to_json().replacen("\"bit_depth\"", "\"extra\": 1, \"bit_depth\"", 1);
         assert!(Record::from_json(&text).unwrap_err().rule.contains("unknown field"));
         assert_eq!(Record::from_json(&" ".repeat(70_000)).unwrap_err().field, "(record)");
+    }
+
+    /// Contradictory or out-of-range fields, each refused by name (what a hand-edited
+    /// record tries).
+    #[test]
+    fn fields_out_of_range_or_contradicting_each_other_are_refused() {
+        let desktop = || {
+            let mut r = phone();
+            r.path = PATH_CAMERA.into();
+            r.device = None;
+            r.metadata = "keep-safe".into();
+            r.input = Some(FileRecord { name: "raw.jpg".into(), sha256: "ef".repeat(32), bytes: 9 });
+            r
+        };
+        assert!(Record::from_json(&desktop().to_json()).is_ok());
+        let cases: [(&str, fn(&mut Record)); 12] = [
+            ("enhancer_sha256", |r| r.path = PATH_CAMERA_ENHANCER.into()),
+            ("enhancer_sha256", |r| r.enhancer_sha256 = Some("ab".repeat(32))),
+            ("bit_depth", |r| r.bit_depth = 3),
+            ("jpeg_quality", |r| r.jpeg_quality = Some(0)),
+            ("jpeg_quality", |r| r.jpeg_quality = None),
+            ("jpeg_quality", |r| r.output.name = "photo.png".into()),
+            ("output.bytes", |r| r.output.bytes = 0),
+            ("preset.name", |r| r.preset.name = String::new()),
+            ("output.name", |r| r.output.name = "../photo.jpg".into()),
+            ("metadata", |r| r.metadata = "orientation".into()),
+            ("bound_lsb", |r| r.bound_lsb = 1e9),
+            ("campro_version", |r| r.campro_version = "x\u{7}".into()),
+        ];
+        for (field, edit) in cases {
+            let mut r = desktop();
+            edit(&mut r);
+            assert_eq!(Record::from_json(&r.to_json()).unwrap_err().field, field, "{r:?}");
+        }
+        let mut r = phone();
+        r.device.as_mut().unwrap().worst_reported_deviation_lsb = 2.0;
+        assert_eq!(Record::from_json(&r.to_json()).unwrap_err().field, "device.worst_reported_deviation_lsb");
+        let mut r = phone();
+        r.metadata = "keep".into();
+        assert_eq!(Record::from_json(&r.to_json()).unwrap_err().field, "metadata");
     }
 }

@@ -393,12 +393,36 @@ fn summary_line(s: &Summary, judges: &[Judge], gallery: usize) -> String {
 /// `campro check --record RECORD FILE`: FILE is the output its record names (same
 /// SHA-256), or its raw input (then the camera runs again with the record's settings and the
 /// new output's SHA-256 must be the record's). 0 when it verifies, [`LINKABLE_EXIT`] when not.
+///
+/// What each proves, said in the output: a hash match proves only that FILE is the file the
+/// record names; how it was made (the preset, the path) is the record's word, unproven, since
+/// anyone can write a record. Only the raw input run through the camera again proves it. A
+/// record whose bundled preset's SHA-256 is not that preset's is refused as edited.
 fn verify_record(a: &CheckArgs, record: &Path) -> Result<i32> {
     let files: Vec<&PathBuf> = a.params.iter().chain(&a.photos).collect();
     let [file] = files[..] else {
         bail!("--record: give one file to verify (the output or its raw input), got {}", files.len())
     };
     let r = crate::record::read(record)?;
+    // A bundled preset is known here: its name and SHA-256 must be its own.
+    if let Some(preset) = crate::presets::named(Path::new(&r.preset.given)) {
+        if crate::record::sha256(preset.json.as_bytes()) != r.preset.sha256 {
+            bail!(
+                "{}: preset.sha256: is not the SHA-256 of the bundled preset {} that preset.given names (an edited or forged record)",
+                crate::shown(record),
+                preset.name
+            );
+        }
+        let name = crate::load_params(Path::new(&r.preset.given))?.name;
+        if name != r.preset.name {
+            bail!(
+                "{}: preset.name: {} is not the name of the bundled preset {} (an edited or forged record)",
+                crate::shown(record),
+                escape(&r.preset.name),
+                escape(&name)
+            );
+        }
+    }
     let (h, _) = crate::record::sha256_file(file)?;
     let what = format!(
         "preset {} (SHA-256 {}), campro {}, path {}, {}-bit, bound {} LSB",
@@ -419,7 +443,14 @@ fn verify_record(a: &CheckArgs, record: &Path) -> Result<i32> {
         None => what,
     };
     if h == r.output.sha256 {
-        say!("{}: the output its record names: {what}", crate::shown(file));
+        let prove = match &r.input {
+            Some(i) => format!("give its raw input ({}) to run the camera again", escape(&i.name)),
+            None => "a phone's raw never leaves the camera: only the camera's own record vouches for it".into(),
+        };
+        say!(
+            "{}: the output its record names (the same SHA-256). That proves which file it is, not how it was made: the record says {what}, unproven ({prove})",
+            crate::shown(file)
+        );
         return Ok(0);
     }
     if r.input.as_ref().is_none_or(|i| i.sha256 != h) {

@@ -87,6 +87,11 @@ pub fn main_with(args: impl IntoIterator<Item = std::ffi::OsString>) -> ! {
             std::process::exit(2);
         }
     };
+    // The memory budget is decided once, before any file is read.
+    if let Err(e) = campro_eval::image_file::budget_from_env() {
+        eprintln!("error: {e}");
+        std::process::exit(2);
+    }
     if let Err(e) = run(cli) {
         eprintln!("error: {}", one_line(&e));
         std::process::exit(1);

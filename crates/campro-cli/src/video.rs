@@ -423,13 +423,24 @@ pub fn deep_pixel_format(name: &str) -> bool {
 /// attached pictures (an MP4's cover art can come before its video).
 pub fn probe(input: &Path) -> Result<Probe> {
     installed("ffprobe")?;
+    // ffprobe decodes a frame to learn the stream's format: the same pixel limit as the
+    // decoder's bounds that too.
+    let max_pixels = max_decoded_pixels(campro_eval::image_file::Budget::global().total());
     let out = Command::new("ffprobe")
-        .args(["-hide_banner", "-v", "error", "-select_streams", "v", "-of", "json", "-show_entries"])
+        .args(["-hide_banner", "-v", "error", "-max_pixels", &max_pixels.to_string()])
+        .args(["-select_streams", "v", "-of", "json", "-show_entries"])
         .arg("stream=width,height,nb_frames,pix_fmt,bits_per_raw_sample,color_transfer:stream_disposition=attached_pic:stream_side_data=rotation")
         .arg(file_url(input)?)
         .stdin(Stdio::null())
         .output()?;
     if !out.status.success() {
+        if String::from_utf8_lossy(&out.stderr).contains("max pixel count") {
+            bail!(
+                "its frames are larger than {max_pixels} pixels, what the {} MiB memory limit lets the decoder hold ({} raises it)",
+                campro_eval::image_file::Budget::global().total() >> 20,
+                campro_eval::image_file::MEMORY_ENV
+            );
+        }
         bail!("ffprobe: {}", first_line(&out.stderr));
     }
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).context("ffprobe printed no JSON")?;
@@ -555,8 +566,10 @@ fn clock(stderr: std::process::ChildStderr, tx: mpsc::Sender<Clock>) -> std::thr
 
 /// The decoder's command: `source`'s video stream `stream` (`0:v:N`) as raw RGB (`rgb24`, or
 /// `rgb48le` when `sixteen`) on stdout and each frame's timestamp as `framecrc` on stderr.
-fn decoder(source: &Source, sixteen: bool, stream: usize) -> Result<Command> {
+fn decoder(source: &Source, sixteen: bool, stream: usize, max_pixels: u64) -> Result<Command> {
     let mut c = ffmpeg()?;
+    // The decoder refuses frames larger than the budget holds before allocating them.
+    c.args(["-max_pixels", &max_pixels.to_string()]);
     match source {
         Source::File(path) => {
             // Original timestamps, so that the encoder's copy of the other streams lines up.
@@ -674,6 +687,19 @@ fn metadata_args(policy: Policy, safe: &[(String, String)], mov: bool) -> Vec<St
         }
     }
     a
+}
+
+/// Bytes a pixel that ffmpeg's decoder may hold at most (its reference frames: H.264 and
+/// HEVC keep up to 16 of 1.5 bytes a pixel, and the converted RGB frame), the ratio that
+/// sets its pixel limit from the budget.
+const DECODER_BYTES_PER_PIXEL: u64 = 24;
+
+/// The largest frame (pixels) the decoder is let decode within a budget of `total` bytes:
+/// about 33 million (8K UHD) at the default 768 MiB. A stream whose frames are larger is
+/// refused by ffmpeg itself before it allocates them (`-max_pixels`), whatever its header
+/// declared.
+fn max_decoded_pixels(total: u64) -> u64 {
+    (total / DECODER_BYTES_PER_PIXEL).clamp(1, MAX_SIDE as u64 * MAX_SIDE as u64)
 }
 
 /// The encoder's command: IVF frames (raw RGB with timestamps) on stdin, `source`'s other
@@ -803,8 +829,8 @@ struct Decoding {
 /// Starts decoding `source`'s video stream `stream` (16-bit samples when `sixteen`) and waits for its first frame's
 /// header, at most the source's stall limit: one line when it gives none, cannot be
 /// decoded, or is larger than [`MAX_SIDE`] a side (the decoder then ended and reaped).
-fn start_decoding(source: &Source, sixteen: bool, stream: usize) -> Result<Decoding> {
-    let mut decode = spawn(&mut decoder(source, sixteen, stream)?, "decode")?;
+fn start_decoding(source: &Source, sixteen: bool, stream: usize, max_pixels: u64) -> Result<Decoding> {
+    let mut decode = spawn(&mut decoder(source, sixteen, stream, max_pixels)?, "decode")?;
     let (clock_tx, clock_rx) = mpsc::channel();
     let dec_err = clock(decode.stderr.take().expect("piped"), clock_tx);
     // Stdout is drained from now on, before the first timestamp: see `pump`.
@@ -919,32 +945,53 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         warn("--codec rawvideo writes 16-bit frames as rgb48le");
     }
     let started = std::time::Instant::now();
-    let Decoding { child: mut decode, clock: clock_rx, stderr: dec_err, frames: from, pumping, tb, width, height } =
-        start_decoding(source, sixteen, probe.as_ref().map_or(0, |p| p.stream))?;
-    let bytes_per = if sixteen { 6 } else { 3 };
-    let frame_bytes = bytes_per * width as usize * height as usize;
-    let work = job.capture.work(width, height);
-    let held = |batch: usize| held_bytes(frame_bytes as u64, work, sixteen, batch);
     let budget = campro_eval::image_file::Budget::global();
-    // The enhancer runs a frame a core where the budget holds that many (720p and 1080p on
-    // two cores; 4K one at a time, its pyramid and planes spread over the cores instead),
-    // the camera alone one frame on every core.
-    let batch_max = if job.capture.enhancer.is_some() && !sixteen {
-        frames_at_once(rayon::current_num_threads(), budget.total(), held)
-    } else {
-        1
+    let bytes_per = if sixteen { 6 } else { 3 };
+    // Frames in one batch and the bytes held for a `width` x `height` video: the enhancer
+    // runs a frame a core where the budget holds that many (720p and 1080p on two cores; 4K
+    // one at a time, its pyramid and planes spread over the cores instead), the camera
+    // alone one frame on every core.
+    let plan = |width: u32, height: u32| {
+        let work = job.capture.work(width, height);
+        let held =
+            |batch: usize| held_bytes((bytes_per * width as usize * height as usize) as u64, work, sixteen, batch);
+        let batch_max = if job.capture.enhancer.is_some() && !sixteen {
+            frames_at_once(rayon::current_num_threads(), budget.total(), held)
+        } else {
+            1
+        };
+        (batch_max, held(batch_max), work)
+    };
+    let lease = |(width, height): (u32, u32)| {
+        let (batch_max, held, work) = plan(width, height);
+        budget.take(held).map(|l| (l, batch_max)).ok_or_else(|| {
+            anyhow!(
+                "the video is {width} x {height} pixels; its {} frames in flight{} need {} MiB, over the {} MiB limit ({} raises it)",
+                in_flight(batch_max) + batch_max,
+                if work > 0 { " and the enhancer's work" } else { "" },
+                held >> 20,
+                budget.total() >> 20,
+                campro_eval::image_file::MEMORY_ENV
+            )
+        })
+    };
+    // A file's size is known from its header: the lease is taken before anything is
+    // decoded, and frames of another size are refused (a header that lies).
+    let declared = probe.as_ref().map(|p| (p.width, p.height));
+    let early = declared.map(lease).transpose()?;
+    let Decoding { child: mut decode, clock: clock_rx, stderr: dec_err, frames: from, pumping, tb, width, height } =
+        start_decoding(source, sixteen, probe.as_ref().map_or(0, |p| p.stream), max_decoded_pixels(budget.total()))?;
+    if declared.is_some_and(|d| d != (width, height)) {
+        let (w, h) = declared.expect("checked");
+        drop(decode);
+        bail!("its frames are {width} x {height} pixels, not the {w} x {h} its header declares");
+    }
+    let frame_bytes = bytes_per * width as usize * height as usize;
+    let (_lease, batch_max) = match early {
+        Some(l) => l,
+        None => lease((width, height))?,
     };
     let in_flight = in_flight(batch_max);
-    let held = held(batch_max);
-    let Some(_lease) = budget.take(held) else {
-        bail!(
-            "the video is {width} x {height} pixels; its {} frames in flight{} need {} MiB, over the {} MiB limit",
-            in_flight + batch_max,
-            if work > 0 { " and the enhancer's work" } else { "" },
-            held >> 20,
-            budget.total() >> 20
-        );
-    };
     let Encoder { child: encode, to, stderr: enc_err, tmp, ext } =
         start_encoder(job, source, sink, (width, height), sixteen, raw_out, warn)?;
     let bar = match probe.as_ref().and_then(|p| p.frames) {

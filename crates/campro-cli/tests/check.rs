@@ -248,7 +248,7 @@ fn a_record_beside_each_output_verifies_the_output_and_its_raw_input() {
     };
     let (code, text) = verify(&out);
     assert_eq!(code, Some(0), "{text}");
-    assert!(text.contains("the output its record names"), "{text}");
+    assert!(text.contains("the output its record names") && text.contains("unproven"), "{text}");
     let (code, text) = verify(&raw);
     assert_eq!(code, Some(0), "{text}");
     assert!(text.contains("run again it gives the output its record names"), "{text}");
@@ -270,6 +270,37 @@ fn a_record_beside_each_output_verifies_the_output_and_its_raw_input() {
     extra["surprise"] = 1.into();
     std::fs::write(&bad_path, extra.to_string()).unwrap();
     fails_with(campro().arg("check").arg("--record").arg(&bad_path).arg(&out), "unknown field");
+    // Forgeries. A hand-written record naming the raw photo itself as the preset's output:
+    // the hash matches, and the output says that proves nothing of how it was made.
+    let mut lie = r.clone();
+    lie["output"]["sha256"] = hex_of(&raw).into();
+    lie["output"]["name"] = "raw.png".into();
+    std::fs::write(&bad_path, lie.to_string()).unwrap();
+    let o = campro().arg("check").arg("--record").arg(&bad_path).arg(&raw).output().unwrap();
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("not how it was made") && said.contains("unproven"), "{said}");
+    // An edited preset: the name of another bundled preset, or another preset's hash.
+    let identity = sha2::Sha256::digest(std::fs::read(bundled("identity.json")).unwrap());
+    let identity: String = identity.iter().map(|b| format!("{b:02x}")).collect();
+    for (field, value) in [("name", "identity"), ("sha256", identity.as_str())] {
+        let mut edited = r.clone();
+        edited["preset"][field] = value.into();
+        std::fs::write(&bad_path, edited.to_string()).unwrap();
+        fails_with(campro().arg("check").arg("--record").arg(&bad_path).arg(&out), &format!("preset.{field}:"));
+    }
+    // Fields out of range or against each other.
+    for (field, value) in
+        [("bit_depth", Value::from(3)), ("jpeg_quality", 0.into()), ("metadata", "orientation".into())]
+    {
+        let mut edited = r.clone();
+        edited[field] = value;
+        std::fs::write(&bad_path, edited.to_string()).unwrap();
+        fails_with(campro().arg("check").arg("--record").arg(&bad_path).arg(&out), &format!("{field}:"));
+    }
+    let mut edited = r.clone();
+    edited["path"] = "camera+enhancer".into();
+    std::fs::write(&bad_path, edited.to_string()).unwrap();
+    fails_with(campro().arg("check").arg("--record").arg(&bad_path).arg(&out), "enhancer_sha256:");
     // A second run without --force does not replace the record either.
     fails_with(campro().args(["simulate", "campro-omega-0.5"]).arg(&raw).arg("-o").arg(&out).arg("--record"), "exists");
 }

@@ -199,8 +199,53 @@ fn a_video_whose_frames_would_overrun_the_budget_is_refused_by_its_size() {
             .arg("-o")
             .arg(dir.path().join("o"))
             .timeout(LIMIT),
-        "frames in flight need",
+        "CAMPRO_MEMORY_MIB raises it",
     );
+    // Refused by its header before the decoder runs: the whole tree (campro and ffmpeg)
+    // stays far below one decoded frame (432 MB).
+    let bin = assert_cmd::cargo::cargo_bin("campro");
+    let mut cmd = std::process::Command::new(&bin);
+    cmd.arg("simulate").arg(bundled("identity.json")).arg(&big).arg("-o").arg(dir.path().join("o2"));
+    let (out, peak_kib) = common::run_with_peak(&mut cmd, LIMIT);
+    assert!(!out.status.success());
+    assert!(peak_kib < 200 << 10, "peak {} MiB", peak_kib >> 10);
+    // From a pipe there is no header to read first: ffmpeg's own pixel limit, set from
+    // the budget, refuses the frame before allocating it.
+    let mut cmd = std::process::Command::new(&bin);
+    cmd.arg("simulate").arg(bundled("identity.json")).arg("-").arg("-o").arg(dir.path().join("o3.mkv"));
+    cmd.stdin(std::fs::File::open(&big).unwrap());
+    let (out, peak_kib) = common::run_with_peak(&mut cmd, LIMIT);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(peak_kib < 200 << 10, "peak {} MiB: {err}", peak_kib >> 10);
+    // A smaller budget, set by the environment, refuses smaller videos; a bad value is
+    // one line naming the variable.
+    let hd = dir.path().join("hd.mkv");
+    ffmpeg(&[
+        "-f",
+        "lavfi",
+        "-i",
+        "color=c=black:size=1920x1080:rate=1:duration=1",
+        "-c:v",
+        "ffv1",
+        hd.to_str().unwrap(),
+    ]);
+    let mut c = campro();
+    c.env("CAMPRO_MEMORY_MIB", "64")
+        .arg("simulate")
+        .arg(bundled("identity.json"))
+        .arg(&hd)
+        .arg("-o")
+        .arg(dir.path().join("o4"));
+    fails_with(c.timeout(LIMIT), "CAMPRO_MEMORY_MIB raises it");
+    let mut c = campro();
+    c.env("CAMPRO_MEMORY_MIB", "lots")
+        .arg("simulate")
+        .arg(bundled("identity.json"))
+        .arg(&hd)
+        .arg("-o")
+        .arg(dir.path().join("o5"));
+    fails_with(&mut c, "CAMPRO_MEMORY_MIB: must be a whole number of MiB in 64..=1048576");
 }
 
 #[cfg(unix)]

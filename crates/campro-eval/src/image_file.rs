@@ -12,8 +12,24 @@ use std::sync::{Condvar, Mutex, OnceLock};
 
 /// Largest image file read, bytes.
 pub const MAX_FILE_BYTES: u64 = 256 << 20;
-/// Memory all decoding jobs of the process together may hold, bytes.
+/// Memory all decoding jobs of the process together may hold by default, bytes;
+/// [`MEMORY_ENV`] sets another.
 pub const DECODE_BUDGET: u64 = 768 << 20;
+/// The environment variable that sets the process's budget, in MiB (64..=1048576).
+pub const MEMORY_ENV: &str = "CAMPRO_MEMORY_MIB";
+
+/// The budget [`MEMORY_ENV`] asks for, bytes ([`DECODE_BUDGET`] when it is not set), or the
+/// one line saying what is wrong with it. Commands check it once at start.
+pub fn budget_from_env() -> std::result::Result<u64, String> {
+    match std::env::var(MEMORY_ENV) {
+        Err(std::env::VarError::NotPresent) => Ok(DECODE_BUDGET),
+        Err(_) => Err(format!("{MEMORY_ENV}: must be a whole number of MiB in 64..=1048576")),
+        Ok(v) => match v.trim().parse::<u64>() {
+            Ok(n @ 64..=1_048_576) => Ok(n << 20),
+            _ => Err(format!("{MEMORY_ENV}: must be a whole number of MiB in 64..=1048576, got {v:?}")),
+        },
+    }
+}
 /// What a header (ICC profile, text chunks, EXIF) may allocate before any pixel, bytes.
 pub const HEADER_ALLOC: u64 = 16 << 20;
 /// Peak bytes a job holds per pixel besides the decoded image: the RGB input and output
@@ -33,10 +49,11 @@ impl Budget {
         Self { total: bytes, free: Mutex::new(bytes), freed: Condvar::new() }
     }
 
-    /// The process's budget ([`DECODE_BUDGET`]): every image read draws from it.
+    /// The process's budget ([`budget_from_env`], else [`DECODE_BUDGET`]): every image
+    /// read draws from it.
     pub fn global() -> &'static Budget {
         static B: OnceLock<Budget> = OnceLock::new();
-        B.get_or_init(|| Budget::new(DECODE_BUDGET))
+        B.get_or_init(|| Budget::new(budget_from_env().unwrap_or(DECODE_BUDGET)))
     }
 
     /// The whole budget, bytes.
@@ -264,7 +281,7 @@ fn too_large(path: &Path, w: u32, h: u32, need: u64, budget: &Budget) -> EvalErr
     image_error(
         path,
         format!(
-            "the image is {w} x {h} pixels, needing {} MiB to process; the limit is {} MiB (a decompression bomb, or split it)",
+            "the image is {w} x {h} pixels, needing {} MiB to process; the limit is {} MiB (a decompression bomb? {MEMORY_ENV} raises the limit)",
             need >> 20,
             budget.total() >> 20
         ),

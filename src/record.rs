@@ -335,7 +335,8 @@ mod tests {
             r
         };
         assert!(Record::from_json(&desktop().to_json()).is_ok());
-        let cases: [(&str, fn(&mut Record)); 12] = [
+        type Edit = fn(&mut Record);
+        let cases: [(&str, Edit); 12] = [
             ("enhancer_sha256", |r| r.path = PATH_CAMERA_ENHANCER.into()),
             ("enhancer_sha256", |r| r.enhancer_sha256 = Some("ab".repeat(32))),
             ("bit_depth", |r| r.bit_depth = 3),

@@ -144,8 +144,9 @@ pub fn data_dir() -> Option<PathBuf> {
 
 /// The models folder a command uses: `--models`, else the shared data folder's `models`
 /// when one is named (`--shared` or `$CAMPRO_SHARED`, resolved by the caller), else the
-/// user's data folder when it exists, else `../shared/models` (a checkout beside the
-/// project's data).
+/// user's data folder when it exists, else `../shared/models` when it exists (a checkout
+/// beside the project's data), else the user's data folder (so that a missing model is
+/// named where `campro models fetch` puts it).
 pub fn folder(models: Option<&Path>, named_shared: Option<&Path>) -> PathBuf {
     if let Some(m) = models {
         return m.to_path_buf();
@@ -153,9 +154,10 @@ pub fn folder(models: Option<&Path>, named_shared: Option<&Path>) -> PathBuf {
     if let Some(s) = named_shared {
         return s.join("models");
     }
+    let beside = PathBuf::from("../shared/models");
     match data_dir() {
-        Some(d) if d.is_dir() => d,
-        _ => PathBuf::from("../shared/models"),
+        Some(d) if d.is_dir() || !beside.is_dir() => d,
+        _ => beside,
     }
 }
 

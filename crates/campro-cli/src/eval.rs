@@ -169,6 +169,9 @@ fn run_privacy(
         conds
     };
     let lfw_dir = a.lfw.clone().unwrap_or_else(|| c.shared().join("data/lfw"));
+    if !lfw_dir.is_dir() {
+        bail!("{}: no such folder (--lfw); {DATA_HELP}", crate::shown(&lfw_dir));
+    }
     let lfw = data::Lfw::open(&lfw_dir).with_context(|| "reading LFW (set --lfw or --shared)")?;
     let identities = a.identities.as_deref().map(read_identities).transpose()?;
     if let (Some(names), Some(file)) = (&identities, &a.identities) {
@@ -430,8 +433,14 @@ pub(crate) fn own_detectors(params: &[PathBuf]) -> Result<HashMap<String, OwnDet
     Ok(own)
 }
 
+/// Where the evaluation's data comes from, for a message about a missing data folder.
+pub(crate) const DATA_HELP: &str = "the evaluation reads COCO's people photos (DIR/data/coco-person: COCO 2017 val images with people, YOLO labels and instances_person.json; cocodataset.org, annotations CC BY 4.0) and LFW (DIR/data/lfw/images_deepfunneled: vis-www.cs.umass.edu/lfw) from a shared data folder DIR: pass --shared DIR or set CAMPRO_SHARED (docs/evaluation.md)";
+
 /// The JPEG and PNG files of `dir`, sorted by name; none is an error.
 fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
+    if !dir.is_dir() {
+        bail!("{}: no such folder; {DATA_HELP}", crate::shown(dir));
+    }
     let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot list images", crate::shown(dir)))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -515,6 +524,9 @@ fn run_thresholds(
     folds: usize,
 ) -> Result<()> {
     let lfw_dir = lfw.map(Path::to_path_buf).unwrap_or_else(|| data.shared_dir().join("data/lfw"));
+    if !lfw_dir.is_dir() {
+        bail!("{}: no such folder (--lfw); {DATA_HELP}", crate::shown(&lfw_dir));
+    }
     let lfw = data::Lfw::open(&lfw_dir).with_context(|| "reading LFW (set --lfw or --shared)")?;
     let dir = data.models_dir();
     let det = FaceDetector::new(load(detector, &dir)?)?;

@@ -418,4 +418,9 @@ fn a_newcomer_runs_enhance_check_and_inspect_on_the_fetched_models() {
         assert_eq!((img["faces"][0].as_u64(), img["people"][0].as_u64()), (Some(1), Some(1)), "{img}");
     }
     assert!(work.join("look/index.html").is_file());
+    // The evaluation needs the project's data: where it comes from is said, not a path.
+    fails_with(
+        home.campro().args(["eval", "all", "campro-omega-0.5", "--limit", "2", "-o", "ev/"]),
+        "pass --shared DIR or set CAMPRO_SHARED",
+    );
 }

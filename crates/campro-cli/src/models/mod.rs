@@ -279,6 +279,22 @@ mod tests {
             let m = Manifest::parse(text, Path::new(name), Path::new("")).unwrap();
             assert_eq!(m.file, Path::new(pin.file), "{name}");
             assert_eq!(pin.sha256.len(), 64);
+            // A wheel's member (not in the shared folder): the registry's own wheel.
+            if let Origin::Pypi { package, version, member } = pin.origin {
+                use std::io::Read;
+                let Some(wheel) = campro_testkit::registry(&format!("{package}-{version}-py3-none-any.whl")) else {
+                    continue;
+                };
+                let mut zip = zip::ZipArchive::new(std::fs::File::open(wheel).unwrap()).unwrap();
+                let mut bytes = Vec::new();
+                zip.by_name(member).unwrap().read_to_end(&mut bytes).unwrap();
+                assert_eq!(
+                    (crate::record::sha256(&bytes).as_str(), bytes.len() as u64),
+                    (pin.sha256, pin.bytes),
+                    "{name}"
+                );
+                continue;
+            }
             let Some(path) = campro_testkit::shared(&format!("models/{}", pin.file)) else { continue };
             let (sha, n) = crate::record::sha256_file(&path).unwrap();
             assert_eq!((sha.as_str(), n), (pin.sha256, pin.bytes), "{name}");

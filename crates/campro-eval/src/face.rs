@@ -3,6 +3,7 @@
 
 use crate::error::{EvalError, Result};
 use crate::geometry::{self, letterbox, nms, similarity, warp_affine};
+pub use crate::manifest::CENTERFACE_STRIDE;
 use crate::manifest::{Head, Task};
 use crate::model::Model;
 use image::RgbImage;
@@ -53,9 +54,6 @@ pub fn decode_yunet_stride(
         out.push(Face { bbox: [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0], score, landmarks });
     }
 }
-
-/// The stride of CenterFace's maps: a quarter of the input's size.
-pub const CENTERFACE_STRIDE: usize = 4;
 
 /// Decodes CenterFace's maps (`cols` x `rows` cells, each [`CENTERFACE_STRIDE`] input
 /// pixels; `scale`, `offset` two planes, `landmarks` ten) into `out`: a cell scoring at

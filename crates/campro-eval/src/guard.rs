@@ -36,7 +36,7 @@ pub const MIN_FACE: f64 = 10.0;
 /// faces pasted into a 1280 x 720 COCO scene (`docs/enhancer.md`, "The guard's cost"): at
 /// the image's own scale YuNet found 93.0% of 10-pixel and 94.7% of 11-pixel faces, at 1.6x
 /// all 612 and 525 of 528; from 12 pixels 99.3% and more either way.
-pub const NATIVE_MIN_FACE: f64 = 16.0;
+pub const NATIVE_MIN_FACE: f64 = crate::manifest::DEFAULT_MIN_FACE;
 /// Overlap of neighbouring tiles of a level, pixels of that level.
 pub const OVERLAP: usize = 160;
 /// Largest tile, pixels of its level (width, height): the detector runs on a whole tile at

@@ -126,8 +126,14 @@ pub enum Head {
     Centerface { heatmap: String, scale: String, offset: String, landmarks: String },
 }
 
+/// A face detector's default `min_face`: YuNet's (the face guard's `NATIVE_MIN_FACE`).
+pub const DEFAULT_MIN_FACE: f64 = 16.0;
+
+/// The stride of CenterFace's maps: a quarter of the input's size.
+pub const CENTERFACE_STRIDE: usize = 4;
+
 fn native_min_face() -> f64 {
-    crate::guard::NATIVE_MIN_FACE
+    DEFAULT_MIN_FACE
 }
 
 fn pad114() -> u8 {
@@ -196,9 +202,7 @@ impl Manifest {
                 if !(2.0..=256.0).contains(min_face) {
                     return bad("task.min_face", "must be in 2..=256 pixels");
                 }
-                if matches!(head, Head::Centerface { .. })
-                    && strides.iter().any(|s| s % crate::face::CENTERFACE_STRIDE != 0)
-                {
+                if matches!(head, Head::Centerface { .. }) && strides.iter().any(|s| s % CENTERFACE_STRIDE != 0) {
                     return bad(
                         "task.strides",
                         "a centerface head's strides must be multiples of 4 (its maps are a quarter of the input)",

@@ -179,7 +179,8 @@ fn the_detector_gate_alone_hides_every_face_of_a_group_photo() {
 /// The guard must not eat the scene it guards: on a COCO living room at 1280 x 720 (two
 /// people far back, faces of about 17 pixels) through `campro-omega-0.5` and its bundled
 /// enhancer, whose odd colours once gave 300-pixel "faces" at score 0.5 on the enlarged
-/// levels (half the picture pixelated), it hides at most 1% of the picture.
+/// levels (half the picture pixelated), it hides at most 1% of the picture (the union of its
+/// regions; CenterFace hides the two far faces there, YuNet finds neither).
 #[test]
 fn the_guard_leaves_an_enhanced_scene_alone_but_its_faces() {
     let Some(shared) =
@@ -199,7 +200,11 @@ fn the_guard_leaves_an_enhanced_scene_alone_but_its_faces() {
     for (name, guard) in guards(&shared.join("models"), cf.path()) {
         let mut shown = enhanced.clone();
         let checked = guard.apply(&captured, &mut shown).unwrap();
-        let area: u64 = checked.hidden.iter().map(|r| ((r[2] - r[0]) * (r[3] - r[1])) as u64).sum();
+        // The pixels hidden: the union of the regions (overlapping finds cover one place).
+        let area = (0..720u32)
+            .flat_map(|y| (0..1280u32).map(move |x| (x, y)))
+            .filter(|&(x, y)| checked.hidden.iter().any(|r| x >= r[0] && x < r[2] && y >= r[1] && y < r[3]))
+            .count() as u64;
         eprintln!("{name}: {} faces, {area} pixels hidden", checked.faces);
         assert!(
             area * 100 <= 1280 * 720,

@@ -230,21 +230,14 @@ fn a_video_whose_frames_would_overrun_the_budget_is_refused_by_its_size() {
         "ffv1",
         hd.to_str().unwrap(),
     ]);
-    let mut c = campro();
-    c.env("CAMPRO_MEMORY_MIB", "64")
-        .arg("simulate")
-        .arg(bundled("identity.json"))
-        .arg(&hd)
-        .arg("-o")
-        .arg(dir.path().join("o4"));
-    fails_with(c.timeout(LIMIT), "CAMPRO_MEMORY_MIB raises it");
-    let mut c = campro();
-    c.env("CAMPRO_MEMORY_MIB", "lots")
-        .arg("simulate")
-        .arg(bundled("identity.json"))
-        .arg(&hd)
-        .arg("-o")
-        .arg(dir.path().join("o5"));
+    let with_memory = |mib: &str, out: &str| {
+        let mut c = campro();
+        c.env("CAMPRO_MEMORY_MIB", mib).arg("simulate").arg(bundled("identity.json")).arg(&hd).arg("-o");
+        c.arg(dir.path().join(out)).timeout(LIMIT);
+        c
+    };
+    fails_with(&mut with_memory("64", "o4"), "CAMPRO_MEMORY_MIB raises it");
+    let mut c = with_memory("lots", "o5");
     fails_with(&mut c, "CAMPRO_MEMORY_MIB: must be a whole number of MiB in 64..=1048576");
 }
 

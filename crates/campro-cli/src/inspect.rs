@@ -117,6 +117,7 @@ fn one(
     input: &Path,
     picture: &Path,
     fast: &Exact8,
+    grey_refused: &dyn Fn(&RgbImage) -> bool,
     enhancer: Option<&campro_eval::guard::GuardedEnhancer>,
     det: &Detectors,
     budget: &Budget,
@@ -126,6 +127,11 @@ fn one(
     let work = |w, h| enhancer.map_or(0, |e| e.enhancer.work_bytes(w, h));
     let (img, _lease) = campro_eval::image_file::read(input, budget, &work, warn)?;
     let raw = img.into_rgb8();
+    // A grey picture `simulate` refuses (the preset is not rated for grey): shown, and said.
+    let grey = grey_refused(&raw);
+    if grey {
+        warn("a grey picture: simulate refuses it (this preset does not protect grey pictures); its protected panel is what --allow-grey would write");
+    }
     let mut protected = RgbImage::new(raw.width(), raw.height());
     fast.run(raw.as_raw(), &mut protected);
     let enhanced = enhancer.map(|e| crate::capture::enhance(e, &protected)).transpose()?;
@@ -151,6 +157,7 @@ fn one(
         "width": w,
         "height": h,
         "picture": picture.file_name().map(|n| n.to_string_lossy().into_owned()),
+        "grey_refused": grey,
         "panels": panels.iter().map(panel_json).collect::<Vec<_>>(),
     });
     write_atomic(picture, &png, true)?;
@@ -226,6 +233,9 @@ fn index_html(
             if flag { " flag" } else { "" },
             if flag { " <span class=\"warn\">faces found after the camera</span>" } else { "" },
         );
+        if v["grey_refused"].as_bool() == Some(true) {
+            s += "<p class=\"warn\">A grey picture: <code>campro simulate</code> refuses it, since this preset does not protect grey pictures (a restoration that knows the camera gives grey faces back); the protected panel is what <code>--allow-grey</code> would write.</p>";
+        }
         for (k, p) in panels.iter().enumerate() {
             let (f, n) = (count(v, k, "faces"), count(v, k, "people"));
             let warn = if k > 0 && f > 0 { " warn" } else { "" };
@@ -347,13 +357,15 @@ pub fn inspect(
         bail!("no PNG, JPEG, TIFF or WebP file among the inputs: nothing to inspect");
     }
     let fast = Exact8::new(p);
+    let rated = p.rated_for_grey();
+    let grey_refused = |img: &RgbImage| !rated && campro::chroma::measure(img.as_raw()).is_grey();
     let budget = Budget::global();
     let bar = crate::output::count_bar("inspect", images.len() as u64);
     let results: Vec<Result<Value>> = images
         .par_iter()
         .map(|(i, o)| {
             let warn = |w: &str| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(i)));
-            let r = one(i, o, &fast, enhancer, det, budget, &warn);
+            let r = one(i, o, &fast, &grey_refused, enhancer, det, budget, &warn);
             bar.inc(1);
             r
         })
@@ -469,7 +481,8 @@ mod tests {
                 json!({"panels": [panel(0, faces[0]), panel(1, faces[1]), panel(2, faces[2])]}),
             )
         };
-        let items = [item("portrait", [1, 0, 0]), item("class", [31, 0, 32]), item("street", [0, 0, 0])];
+        let mut items = [item("portrait", [1, 0, 0]), item("class", [31, 0, 32]), item("street", [0, 0, 0])];
+        items[2].1["grey_refused"] = true.into();
         let html = index_html("p", ("yunet", "yolox-nano"), &items, &[], Path::new("/o"));
         // Totals per panel, and the one image that still shows faces named in the summary.
         assert!(html.contains("3 images. Faces found, raw &rarr; protected &rarr; enhanced: <b class=\"face\">32 &rarr; 0 &rarr; 32</b>"), "{html}");
@@ -483,6 +496,8 @@ mod tests {
         assert_eq!(html.matches("<figure>").count(), 9);
         assert!(html.contains("<b>enhanced</b>: <span class=\"face warn\">32 faces</span>"), "{html}");
         assert_eq!(html.matches("class=\"lb\"").count(), 3);
+        // The grey picture is said to be refused by simulate, once.
+        assert_eq!(html.matches("A grey picture: <code>campro simulate</code> refuses it").count(), 1, "{html}");
         let clean = index_html("p", ("yunet", "yolox-nano"), &items[..1], &[], Path::new("/o"));
         assert!(clean.contains("No face is found in any picture after the camera."), "{clean}");
     }

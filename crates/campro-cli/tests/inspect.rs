@@ -154,3 +154,41 @@ fn inspect_names_a_missing_model_folder() {
         "no-models",
     );
 }
+
+/// A grey photo, which `simulate` refuses under a preset not rated for grey, is flagged on
+/// `inspect`'s page and in its JSON, not shown as protected without a word.
+#[test]
+fn inspect_flags_grey_photos_as_simulate_refuses_them() {
+    let Some(shared) = campro_testkit::shared_root(&[
+        "models/yunet_s_640_640.onnx",
+        "models/yolox_nano.onnx",
+        "data/lfw/images_deepfunneled/Aaron_Eckhart/Aaron_Eckhart_0001.jpg",
+    ]) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let face = shared.join("data/lfw/images_deepfunneled/Aaron_Eckhart/Aaron_Eckhart_0001.jpg");
+    let grey = dir.path().join("grey.png");
+    image::DynamicImage::ImageLuma8(image::open(&face).unwrap().to_luma8()).to_rgb8().save(&grey).unwrap();
+    let out = dir.path().join("out");
+    let run = campro()
+        .args(["inspect", "campro-omega-0.5"])
+        .arg(&grey)
+        .arg(&face)
+        .arg("-o")
+        .arg(&out)
+        .arg("--shared")
+        .arg(&shared)
+        .args(["--format", "json"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(err.contains("grey.png") && err.contains("simulate refuses it"), "{err}");
+    let v: Value = serde_json::from_slice(&std::fs::read(out.join("grey.json")).unwrap()).unwrap();
+    assert_eq!(v["grey_refused"], true);
+    let v: Value = serde_json::from_slice(&std::fs::read(out.join("Aaron_Eckhart_0001.json")).unwrap()).unwrap();
+    assert_eq!(v["grey_refused"], false);
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert_eq!(html.matches("A grey picture: <code>campro simulate</code> refuses it").count(), 1);
+}

@@ -627,7 +627,9 @@ pub fn run(a: CheckArgs) -> Result<i32> {
         .par_iter()
         .map(|ph| {
             let warn = |w: &str| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(&ph.path)));
-            let r = campro_eval::image_file::read(&ph.path, budget, &|_, _| 0, &warn)
+            // Each view of the photo (captured, enhanced, restored: 3 bytes a pixel each).
+            let views_bytes = |w: u32, h: u32| w as u64 * h as u64 * 3 * views.len() as u64;
+            let r = campro_eval::image_file::read(&ph.path, budget, &views_bytes, &warn)
                 .map_err(anyhow::Error::from)
                 .and_then(|(img, _lease)| {
                     Ok(check::check_photo(&ph.path, ph.person.clone(), &img.into_rgb8(), &detector, &judges, &views)?)

@@ -123,8 +123,13 @@ fn one(
     budget: &Budget,
     warn: &dyn Fn(&str),
 ) -> Result<Value> {
-    // The lease holds the image's memory and the enhancer's work until this picture is done.
-    let work = |w, h| enhancer.map_or(0, |e| e.enhancer.work_bytes(w, h));
+    // The lease holds the image's memory and the enhancer's work until this picture is done,
+    // and the panels: each image (3 bytes a pixel), its drawn copy (3) and the picture of
+    // them side by side (3), with the PNG written from it.
+    let panels = if enhancer.is_some() { 3 } else { 2 };
+    let work = |w: u32, h: u32| {
+        (w as u64 * h as u64 * 9 * panels).saturating_add(enhancer.map_or(0, |e| e.enhancer.work_bytes(w, h)))
+    };
     let (img, _lease) = campro_eval::image_file::read(input, budget, &work, warn)?;
     let raw = img.into_rgb8();
     // A grey picture `simulate` refuses (the preset is not rated for grey): shown, and said.

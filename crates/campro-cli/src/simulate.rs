@@ -743,7 +743,17 @@ impl Paths<'_, '_> {
             input,
             bytes,
             self.budget,
-            &|w, h| self.capture.work(w, h),
+            // An 8-bit picture written at 16 bits is widened: the difference is this job's.
+            &|w, h| {
+                let wide = if self.depth == Depth::Sixteen {
+                    (w as u64 * h as u64).saturating_mul(
+                        campro_eval::image_file::PEAK_BYTES_PER_PIXEL - campro_eval::image_file::PEAK_BYTES_PER_PIXEL_8,
+                    )
+                } else {
+                    0
+                };
+                self.capture.work(w, h).saturating_add(wide)
+            },
             warn,
         )?;
         let kept = crate::metadata::kept(self.metadata, meta.exif.as_deref(), meta.icc, warn);

@@ -35,6 +35,11 @@ pub const HEADER_ALLOC: u64 = 16 << 20;
 /// Peak bytes a job holds per pixel besides the decoded image: the RGB input and output
 /// buffers of the pipeline (16 bits a sample: 6 bytes each) and the PNG being written (6).
 pub const PEAK_BYTES_PER_PIXEL: u64 = 18;
+/// [`PEAK_BYTES_PER_PIXEL`] of an 8-bit image: its RGB input and output buffers (3 bytes
+/// each) and the file being written (at most 3). An 8160 x 6120 JPEG (50 megapixels) peaked
+/// at 306 MB through `simulate`, 6.1 bytes a pixel with its decoded image. A caller that
+/// widens an 8-bit image to 16 bits adds the difference to its own work.
+pub const PEAK_BYTES_PER_PIXEL_8: u64 = 9;
 
 /// A counting semaphore of bytes.
 pub struct Budget {
@@ -109,12 +114,13 @@ fn image_error(path: &Path, message: impl Into<String>) -> EvalError {
 /// pipeline's [`PEAK_BYTES_PER_PIXEL`] and the caller's own `work` bytes for an image of
 /// that size (the enhancer's, [`crate::enhance::Enhancer::work_bytes`]), saturating.
 pub fn peak_bytes(w: u32, h: u32, decoded: u64, work: u64) -> u64 {
-    (w as u64)
-        .saturating_mul(h as u64)
-        .saturating_mul(PEAK_BYTES_PER_PIXEL)
-        .saturating_add(work)
-        .saturating_add(decoded)
-        .max(1)
+    peak_bytes_at(w, h, decoded, work, PEAK_BYTES_PER_PIXEL)
+}
+
+/// [`peak_bytes`] with the pipeline's `per_pixel` bytes ([`PEAK_BYTES_PER_PIXEL`] or
+/// [`PEAK_BYTES_PER_PIXEL_8`]).
+pub fn peak_bytes_at(w: u32, h: u32, decoded: u64, work: u64, per_pixel: u64) -> u64 {
+    (w as u64).saturating_mul(h as u64).saturating_mul(per_pixel).saturating_add(work).saturating_add(decoded).max(1)
 }
 
 /// What a caller holds for an image besides the pipeline, bytes, by its size (read from
@@ -227,7 +233,11 @@ fn decoded<'b>(
     }
     let mut decoder = header_reader(path, bytes)?.into_decoder().map_err(|e| image_error(path, header_message(&e)))?;
     let (w, h) = decoder.dimensions();
-    let need = peak_bytes(w, h, decoder.total_bytes(), work(w, h));
+    // 8-bit samples go through the 8-bit pipeline unless the caller widens them (its work).
+    let ct = decoder.color_type();
+    let eight = ct.bytes_per_pixel() as u64 <= ct.channel_count() as u64;
+    let per_pixel = if eight { PEAK_BYTES_PER_PIXEL_8 } else { PEAK_BYTES_PER_PIXEL };
+    let need = peak_bytes_at(w, h, decoder.total_bytes(), work(w, h), per_pixel);
     if need > budget.total() {
         return Err(too_large(path, w, h, need, budget));
     }
@@ -267,7 +277,8 @@ fn heif_decoded<'b>(
     let heif = crate::heif::open(path, bytes)?;
     let (w, h) = heif.size;
     let decoded = (w as u64 * h as u64).saturating_mul(crate::heif::DECODE_BYTES_PER_PIXEL);
-    let need = peak_bytes(w, h, decoded, work(w, h));
+    // libheif hands the picture over in 8 bits.
+    let need = peak_bytes_at(w, h, decoded, work(w, h), PEAK_BYTES_PER_PIXEL_8);
     let lease = budget.take(need).ok_or_else(|| too_large(path, w, h, need, budget))?;
     if heif.has_alpha() {
         warn("its alpha channel is dropped (the output is RGB)");
@@ -394,8 +405,8 @@ mod tests {
         let bytes = png(16, 8, 2, 8, &[], None);
         let (img, lease) = decode(Path::new("t.png"), &bytes, &b, &no_work, &no_warn).unwrap();
         assert_eq!((img.width(), img.height()), (16, 8));
-        // 16 x 8 pixels: 18 bytes each plus the 384 decoded bytes.
-        assert_eq!(lease.bytes(), 16 * 8 * 18 + 384);
+        // 16 x 8 pixels of 8 bits: 9 bytes each plus the 384 decoded bytes.
+        assert_eq!(lease.bytes(), 16 * 8 * 9 + 384);
         assert_eq!(b.free(), (1 << 20) - lease.bytes());
         drop(lease);
         assert_eq!(b.free(), 1 << 20);
@@ -403,11 +414,12 @@ mod tests {
 
     #[test]
     fn grey_and_16_bit_images_count_as_what_they_become() {
-        // A 1-byte-per-pixel grey image and an 8-byte RGBA16 one of the same size: both hold
-        // the pipeline's RGB16 buffers, so both cost 18 bytes a pixel beside their own.
+        // A 1-byte-per-pixel grey image becomes RGB8 in the 8-bit pipeline (9 bytes a pixel
+        // beside its own); an 8-byte RGBA16 one of the same size goes through the RGB16
+        // buffers (18).
         let b = Budget::new(64 << 20);
         let (_, grey) = decode(Path::new("g.png"), &png(100, 10, 0, 8, &[], None), &b, &no_work, &no_warn).unwrap();
-        assert_eq!(grey.bytes(), 1000 * 18 + 1000);
+        assert_eq!(grey.bytes(), 1000 * 9 + 1000);
         drop(grey);
         let warned = std::cell::RefCell::new(Vec::new());
         let w = |m: &str| warned.borrow_mut().push(m.to_string());
@@ -508,7 +520,7 @@ mod tests {
         // the network on 1008 x 768 pixels, the full-resolution planes on 4032 x 3024.
         use crate::enhance::{NET_BYTES_PER_PIXEL, WORK_BYTES_PER_PIXEL};
         let work = 1008 * 768 * NET_BYTES_PER_PIXEL + 4032 * 3024 * WORK_BYTES_PER_PIXEL;
-        let one = peak_bytes(4032, 3024, 4032 * 3024 * 3, work);
+        let one = peak_bytes_at(4032, 3024, 4032 * 3024 * 3, work, PEAK_BYTES_PER_PIXEL_8);
         assert!(one <= DECODE_BUDGET && 2 * one > DECODE_BUDGET, "{one}");
         // A UHD frame with the network at full resolution (3840 x 2160 x 170 bytes) does not.
         assert!(peak_bytes(3840, 2160, 3840 * 2160 * 3, 3840 * 2160 * NET_BYTES_PER_PIXEL) > DECODE_BUDGET);

@@ -381,6 +381,8 @@ pub struct Probe {
     pub deep: bool,
     /// The transfer curve, when the stream names one (`smpte2084`, `arib-std-b67`, ...).
     pub transfer: Option<String>,
+    /// The container's tags `keep-safe` keeps ([`safe_of`]).
+    pub safe_tags: Vec<(String, String)>,
 }
 
 /// Fails with a message saying how to install ffmpeg when `name` cannot be run.
@@ -429,7 +431,7 @@ pub fn probe(input: &Path) -> Result<Probe> {
     let out = Command::new("ffprobe")
         .args(["-hide_banner", "-v", "error", "-max_pixels", &max_pixels.to_string()])
         .args(["-select_streams", "v", "-of", "json", "-show_entries"])
-        .arg("stream=width,height,nb_frames,pix_fmt,bits_per_raw_sample,color_transfer:stream_disposition=attached_pic:stream_side_data=rotation")
+        .arg("stream=width,height,nb_frames,pix_fmt,bits_per_raw_sample,color_transfer:stream_disposition=attached_pic:stream_side_data=rotation:format_tags")
         .arg(file_url(input)?)
         .stdin(Stdio::null())
         .output()?;
@@ -458,7 +460,8 @@ pub fn probe(input: &Path) -> Result<Probe> {
     let bits = text("bits_per_raw_sample").and_then(|b| b.parse::<u32>().ok());
     let deep = bits.is_some_and(|b| b > 8) || text("pix_fmt").is_some_and(|f| deep_pixel_format(&f));
     let transfer = text("color_transfer").filter(|t| t != "unknown");
-    Ok(Probe { stream, width, height, frames, rotation, deep, transfer })
+    let safe_tags = safe_of(v.pointer("/format/tags"));
+    Ok(Probe { stream, width, height, frames, rotation, deep, transfer, safe_tags })
 }
 
 /// The video stream `simulate` protects among ffprobe's `streams` (JSON of `-select_streams
@@ -625,22 +628,9 @@ const SAFE_TAGS: [&str; 7] = [
 /// The longest tag value `keep-safe` keeps (characters): a date, a make or a model.
 const MAX_SAFE_TAG: usize = 64;
 
-/// The format tags of `input` that `keep-safe` keeps: [`SAFE_TAGS`] whose value is printable
-/// text of at most [`MAX_SAFE_TAG`] characters (a creation time: digits and `-:.TZ+`).
-fn safe_tags(input: &Path) -> Result<Vec<(String, String)>> {
-    let out = Command::new("ffprobe")
-        .args(["-hide_banner", "-v", "error", "-of", "json", "-show_entries", "format_tags"])
-        .arg(file_url(input)?)
-        .stdin(Stdio::null())
-        .output()?;
-    if !out.status.success() {
-        bail!("ffprobe: {}", first_line(&out.stderr));
-    }
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).context("ffprobe printed no JSON")?;
-    Ok(safe_of(v.pointer("/format/tags")))
-}
-
-/// [`safe_tags`] of ffprobe's `format.tags` object.
+/// The format tags `keep-safe` keeps of ffprobe's `format.tags` object: [`SAFE_TAGS`] whose
+/// value is printable text of at most [`MAX_SAFE_TAG`] characters (a creation time: digits
+/// and `-:.TZ+`).
 fn safe_of(tags: Option<&serde_json::Value>) -> Vec<(String, String)> {
     let Some(tags) = tags.and_then(|t| t.as_object()) else { return Vec::new() };
     let mut kept: Vec<(String, String)> = Vec::new();
@@ -703,10 +693,11 @@ fn max_decoded_pixels(total: u64) -> u64 {
 }
 
 /// The encoder's command: IVF frames (raw RGB with timestamps) on stdin, `source`'s other
-/// streams beside them when it is a file, into `target`.
+/// streams beside them when it is a file (with its probed `safe` tags), into `target`.
 fn encoder(
     job: &Job,
     source: &Source,
+    safe: &[(String, String)],
     sink: &Sink,
     target: Option<&Path>,
     size: (u32, u32),
@@ -721,12 +712,12 @@ fn encoder(
     c.args(["-f", "ivf", "-c:v", "rawvideo", "-i", "pipe:0"]);
     if let Source::File(path) = source {
         c.arg("-i").arg(file_url(path)?);
-        let safe = if job.metadata == Policy::KeepSafe { safe_tags(path)? } else { Vec::new() };
+        let safe = if job.metadata == Policy::KeepSafe { safe } else { &[] };
         let mov = target
             .and_then(|t| t.extension())
             .and_then(|e| e.to_str())
             .is_some_and(|e| ["mp4", "mov", "m4v"].contains(&e.to_ascii_lowercase().as_str()));
-        c.args(metadata_args(job.metadata, &safe, mov));
+        c.args(metadata_args(job.metadata, safe, mov));
     } else {
         c.args(["-map", "0:v"]);
     }
@@ -881,6 +872,7 @@ struct Encoder {
 fn start_encoder(
     job: &Job,
     source: &Source,
+    safe: &[(String, String)],
     sink: &Sink,
     (width, height): (u32, u32),
     sixteen: bool,
@@ -908,7 +900,7 @@ fn start_encoder(
     let mut encode = if raw_out {
         None
     } else {
-        let mut cmd = encoder(job, source, sink, tmp.as_ref().map(|t| t.path()), (width, height), sixteen)?;
+        let mut cmd = encoder(job, source, safe, sink, tmp.as_ref().map(|t| t.path()), (width, height), sixteen)?;
         Some(spawn(&mut cmd, "encode")?)
     };
     let to: Box<dyn Write + Send> = match &mut encode {
@@ -992,8 +984,16 @@ pub fn simulate(job: &Job, source: &Source, sink: &Sink, warn: &dyn Fn(&str)) ->
         None => lease((width, height))?,
     };
     let in_flight = in_flight(batch_max);
-    let Encoder { child: encode, to, stderr: enc_err, tmp, ext } =
-        start_encoder(job, source, sink, (width, height), sixteen, raw_out, warn)?;
+    let Encoder { child: encode, to, stderr: enc_err, tmp, ext } = start_encoder(
+        job,
+        source,
+        probe.as_ref().map_or(&[][..], |p| &p.safe_tags),
+        sink,
+        (width, height),
+        sixteen,
+        raw_out,
+        warn,
+    )?;
     let bar = match probe.as_ref().and_then(|p| p.frames) {
         Some(n) => indicatif::ProgressBar::new(job.max_frames.map_or(n, |m| m.min(n))),
         None => indicatif::ProgressBar::no_length(),

@@ -62,8 +62,8 @@ pub fn rebuilt(icc: &[u8]) -> Result<Vec<u8>, String> {
     if count > MAX_TAGS || HEADER + 4 + 12 * count > icc.len() {
         return Err(format!("a tag table of {count} tags that does not fit the profile"));
     }
-    // (signature, data) of each kept tag.
-    let mut kept: Vec<([u8; 4], &[u8])> = Vec::new();
+    // (signature, its data's range in `icc`) of each kept tag.
+    let mut kept: Vec<([u8; 4], std::ops::Range<usize>)> = Vec::new();
     for i in 0..count {
         let e = HEADER + 4 + 12 * i;
         let sig: [u8; 4] = icc[e..e + 4].try_into().expect("4 bytes");
@@ -71,12 +71,12 @@ pub fn rebuilt(icc: &[u8]) -> Result<Vec<u8>, String> {
         if !COLOUR_TAGS.iter().any(|t| **t == sig) {
             continue;
         }
-        let data = offset
+        let range = offset
             .checked_add(size)
             .filter(|&end| offset >= HEADER + 4 + 12 * count && end <= icc.len() && size >= 8)
-            .map(|end| &icc[offset..end])
+            .map(|end| offset..end)
             .ok_or_else(|| format!("tag {:?} lies outside the profile", String::from_utf8_lossy(&sig)))?;
-        let typ = &data[..4];
+        let typ = &icc[range.start..range.start + 4];
         if !NUMERIC_TYPES.iter().any(|t| t[..] == *typ) {
             return Err(format!(
                 "tag {:?} is of type {:?}, not a colour type",
@@ -87,30 +87,36 @@ pub fn rebuilt(icc: &[u8]) -> Result<Vec<u8>, String> {
         if kept.iter().any(|(s, _)| *s == sig) {
             return Err(format!("tag {:?} is listed twice", String::from_utf8_lossy(&sig)));
         }
-        kept.push((sig, data));
+        kept.push((sig, range));
     }
     if kept.is_empty() {
         return Err("it has no colour-defining tag".into());
     }
-    let version4 = icc[8] >= 4;
-    kept.push((*b"desc", &[]));
-    let desc = description(version4);
-    // The new tag table, then each tag's data at a 4-byte boundary; tags that shared one
-    // block of data (rTRC = gTRC = bTRC) share it again.
-    let table = HEADER + 4 + 12 * kept.len();
+    let desc = description(icc[8] >= 4);
+    // The new tag table (the kept tags, then our description), then each tag's data at a
+    // 4-byte boundary; tags that shared one block of data (rTRC = gTRC = bTRC) share it again.
+    let tags: Vec<([u8; 4], &[u8], Option<usize>)> = kept
+        .iter()
+        .map(|(sig, r)| (*sig, &icc[r.clone()], Some(r.start)))
+        .chain(std::iter::once((*b"desc", &desc[..], None)))
+        .collect();
+    let table = HEADER + 4 + 12 * tags.len();
     let mut out = icc[..HEADER].to_vec();
-    out.extend_from_slice(&(kept.len() as u32).to_be_bytes());
+    out.extend_from_slice(&(tags.len() as u32).to_be_bytes());
     out.resize(table, 0);
-    let mut placed: Vec<(*const u8, usize, usize)> = Vec::new();
-    for (i, (sig, data)) in kept.iter().enumerate() {
-        let data: &[u8] = if sig == b"desc" { &desc } else { data };
-        let offset = match placed.iter().find(|(p, n, _)| *p == data.as_ptr() && *n == data.len()) {
-            Some(&(_, _, at)) => at,
+    // (the source's offset and size, where the data was written)
+    let mut placed: Vec<((usize, usize), usize)> = Vec::new();
+    for (i, (sig, data, from)) in tags.iter().enumerate() {
+        let shared = from.and_then(|f| placed.iter().find(|(k, _)| *k == (f, data.len())).map(|(_, at)| *at));
+        let offset = match shared {
+            Some(at) => at,
             None => {
                 out.resize(out.len().next_multiple_of(4), 0);
                 let at = out.len();
                 out.extend_from_slice(data);
-                placed.push((data.as_ptr(), data.len(), at));
+                if let Some(f) = from {
+                    placed.push(((*f, data.len()), at));
+                }
                 at
             }
         };

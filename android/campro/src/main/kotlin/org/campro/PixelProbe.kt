@@ -4,8 +4,9 @@ package org.campro
  * The pixel probe: proof, from pixels, that the camera applies the colour transform and the
  * tone curve it is sent, before any frame is called Protected. A result only says what the
  * device *reports* it applied; a HAL that echoes the request while applying its own curve
- * passes every result check and leaks every frame. Two short probe phases, on the small
- * metering stream (never the app's), make that impossible to miss:
+ * passes every result check and leaks every frame. Two short probe phases, on the protected
+ * stream itself (the stream the app sees: vendor HALs may process streams of other sizes in
+ * other passes; its probe frames never reach the app), make that impossible to miss:
  *
  * 1. [Step.Curve]: CamPro's transform and gains with a **constant** curve at [CURVE_LEVEL].
  *    A device that applies it gives a flat frame whatever the scene (no scene detail, no
@@ -27,7 +28,17 @@ package org.campro
  * modes, the probe's curve; the near-zero transform for [Step.Matrix]): a device with latency
  * shows earlier settings for a few frames, and those frames say nothing.
  *
- * What it cannot prove: a HAL that recognises probe requests and treats them differently
+ * The probe runs at every start and physical camera, and again every
+ * [CamProPipeline.reprobeInterval] protected frames in the metering slots of the repeating
+ * burst (a mode switch such as HDR or low-light binning happens mid-session), so a device
+ * that stops following is caught within that interval.
+ *
+ * Black frames at both steps (at most [BLACK_MAX]: a device applying the constant curve gives
+ * about 64 whatever the scene) are the camera privacy toggle or a sensor that stopped: the
+ * camera is `Stopped`, not `Unsupported`, and the probe goes on until real frames come.
+ *
+ * What it cannot prove: a per-pixel stage acting between the transform and the curve (the
+ * scene is unknown, so no probe of it can predict the curve's input), and a HAL that recognises probe requests and treats them differently
  * from protected ones (adversarial firmware; out of scope: the camera's firmware is trusted
  * to be what it reports, the probe catches the ones that are not conforming by accident).
  * A scene that is flat to begin with (lens covered) passes step 2 whatever the transform;
@@ -56,6 +67,9 @@ object PixelProbe {
 
     /** The diagonal of [Step.Matrix]'s transform, as a Camera2 rational (1/256; the rest zero). */
     const val MATRIX_DIAGONAL_DENOMINATOR = 256
+
+    /** Highest luma level of a black frame (limited-range black is 16); the constant curve's level is about 64. */
+    const val BLACK_MAX = 24
 
     /** Fewest luma samples a probe frame must carry. */
     const val MIN_SAMPLES = 64

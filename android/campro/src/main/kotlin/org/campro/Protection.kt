@@ -386,6 +386,24 @@ class FrameGate<T>(
         }
     }
 
+    /**
+     * The capture at [timestampNs] was not a protected one (a probe frame of the burst): its
+     * frame is dropped, now if it waits, else when it comes. The guard is not consulted.
+     */
+    fun reject(timestampNs: Long) {
+        val out = ArrayList<Pair<T, Boolean>>(1)
+        synchronized(this) {
+            val frame = waiting.remove(timestampNs)
+            if (frame != null) {
+                out += frame to false
+            } else if (!stopped) {
+                verdicts[timestampNs] = false
+                while (verdicts.size > maxPendingVerdicts) verdicts.remove(verdicts.keys.first())
+            }
+        }
+        release(out)
+    }
+
     /** The result of the protected frame at [timestampNs] arrived: checks it and releases that frame. */
     fun onResult(timestampNs: Long, report: CaptureReport): ProtectionState {
         val out = ArrayList<Pair<T, Boolean>>(1)

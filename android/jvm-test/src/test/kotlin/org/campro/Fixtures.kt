@@ -50,9 +50,9 @@ object Fixtures {
         var failWith: Exception? = null
 
         override fun meter() { failWith?.let { throw it }; calls += "meter" }
-        override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
+        override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, burst: Burst?) {
             failWith?.let { throw it }
-            calls += if (interleaveMetering) "protect+meter$meteringRun/$meteringInterval" else "protect"
+            calls += if (burst == null) "protect" else "protect+meter${burst.meteringRun}/${burst.length}" + if (burst.probes.isEmpty()) "" else "+probe${burst.probes.size}"
             lastTransform = transform; lastCurves = curves; lastGains = gains
         }
         override fun halt() { calls += "halt" }

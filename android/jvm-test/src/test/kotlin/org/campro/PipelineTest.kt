@@ -354,11 +354,13 @@ class PipelineTest {
         p.onProbeFrame(3, ByteArray(4800) { 128.toByte() })
         assertEquals(listOf("meter", "protect"), cam.calls)
         assertFalse(p.isProbing)
-        // Probed once a start: the next metering result goes straight to a protected request.
+        // Metering again (the light changed) probes again: a mode switch may have come with it.
         p.remeter()
         p.onMeteringResult(Fixtures.converged())
+        assertEquals(listOf("meter", "protect", "meter"), cam.calls)
+        assertEquals(3, cam.probes.size)
+        Fixtures.answerProbes(p, cam)
         assertEquals(listOf("meter", "protect", "meter", "protect"), cam.calls)
-        assertEquals(2, cam.probes.size)
     }
 
     @Test
@@ -452,5 +454,150 @@ class PipelineTest {
         assertEquals(320 to 240, StreamSize.choose(listed, 100, 100))
         assertEquals(null, StreamSize.choose(emptyList(), 1280, 720))
         assertEquals(null, StreamSize.choose(listOf(0 to 0, -1 to 5), 1280, 720))
+    }
+
+    /** A pipeline whose frames are luma levels (negative: a frame with scene detail), re-probing every [reprobe] protected results. */
+    private fun levelPipeline(reprobe: Int = 5) = CamProPipeline<Int>(
+        session, cam, app, true, 4, 6, deliver = { shown += it }, drop = { closed += it }, onState = { states += it },
+        lumaOf = { f -> if (f < 0) ByteArray(4800) { (it % 200).toByte() } else ByteArray(4800) { f.toByte() } },
+        reprobeInterval = reprobe,
+    )
+
+    /** What a device reports for a probe step's frame. */
+    private fun probeReport(step: PixelProbe.Step) =
+        CaptureReport(0, 0, 0, PixelProbe.transform(step, session.transform), List(3) { PixelProbe.curve(step) }, Fixtures.GAINS)
+
+    /** A protected pipeline past [n] verified frames (value 7) from [ts]; returns the next timestamp. */
+    private fun protectedFrames(p: CamProPipeline<Int>, ts: Long, n: Int): Long {
+        var t = ts
+        repeat(n) { p.onFrame(t, 7); p.onProtectedResult(t, cam.honoured()); t++ }
+        app.runAll()
+        return t
+    }
+
+    @Test
+    fun theBurstReprobesTheProtectedStreamEveryIntervalWithoutClosingThePreview() {
+        val p = levelPipeline()
+        p.start(Fixtures.supported())
+        meter(p, Fixtures.converged())
+        assertEquals("protect+meter3/30", cam.calls.last())
+        var ts = protectedFrames(p, 1000, 4)
+        assertEquals(ProtectionState.Protected, p.state)
+        ts = protectedFrames(p, ts, 1) // the fifth result: the next burst carries the probe
+        assertEquals("protect+meter3/30+probe2", cam.calls.last())
+        // The probe's frames come to the protected stream: read, dropped, never shown.
+        for ((step, level) in listOf(PixelProbe.Step.Curve to 64, PixelProbe.Step.Matrix to 128)) {
+            p.onProbeCaptureStarted(ts)
+            p.onFrame(ts, level)
+            p.onProbeResult(ts, probeReport(step))
+            ts++
+        }
+        app.runAll()
+        assertEquals(1L, p.reprobes)
+        assertEquals("back to the plain burst", "protect+meter3/30", cam.calls.last())
+        assertTrue(64 in closed && 128 in closed && 64 !in shown && 128 !in shown)
+        assertEquals(ProtectionState.Protected, p.state)
+        assertEquals("the re-probe never closed the preview", listOf("Verifying", "Protected"), names())
+        protectedFrames(p, ts, 2)
+        assertEquals(listOf(7), shown.distinct())
+    }
+
+    @Test
+    fun aReprobeThatSeesTheSceneThroughTheConstantCurveRefusesTheCamera() {
+        val p = levelPipeline()
+        p.start(Fixtures.supported())
+        meter(p, Fixtures.converged())
+        var ts = protectedFrames(p, 1000, 5)
+        // A mode switch: the device now applies its own curve while reporting the request.
+        p.onProbeCaptureStarted(ts)
+        p.onFrame(ts, -1)
+        p.onProbeResult(ts, probeReport(PixelProbe.Step.Curve))
+        val s = p.state
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("pixel probe") && s.reason.contains("TONEMAP_CURVE"))
+        assertEquals("halt", cam.calls.last())
+        ts++
+        p.onFrame(ts, 7)
+        p.onProtectedResult(ts, cam.honoured())
+        app.runAll()
+        assertEquals("nothing after the refusal", 5, shown.size)
+    }
+
+    @Test
+    fun blackProbeFramesStopTheCameraAndTheProbeGoesOnUntilRealFramesCome() {
+        val p = probing()
+        probeFrame(p, 5) { 0 } // the privacy toggle: black whatever the curve
+        val s = p.state
+        assertTrue("$s", s is ProtectionState.Stopped && s.reason.contains("black frames"))
+        assertTrue("still probing, not refused", p.isProbing)
+        probeFrame(p, 6) { 16 } // limited-range black
+        assertTrue(p.state is ProtectionState.Stopped)
+        probeFrame(p, 7) { 64 }
+        probeFrame(p, 8) { 128 }
+        assertEquals(listOf("meter", "protect+meter3/30"), cam.calls)
+        assertEquals(ProtectionState.Verifying, p.state)
+    }
+
+    @Test
+    fun lostBuffersMatchTheirTimestampsInEitherOrder() {
+        val lost = mutableListOf<Long>()
+        val b = LostBuffers { lost += it }
+        b.started(1, 100)
+        b.lost(1) // the usual order
+        b.lost(2) // lost before its capture started
+        assertEquals(listOf(100L), lost)
+        b.started(2, 200)
+        b.started(3, 300)
+        assertEquals(listOf(100L, 200L), lost)
+        b.lost(4)
+        b.lost(4) // twice: once reported
+        b.started(4, 400)
+        b.started(4, 401)
+        assertEquals(listOf(100L, 200L, 400L), lost)
+    }
+
+    @Test
+    fun meteringAdaptsItsRunAndIntervalByHand() {
+        val c = CamProController(session)
+        assertEquals(3 to 30, c.meteringRun to c.meteringInterval)
+        // A run without CONVERGED doubles the run; the interval keeps four runs.
+        assertTrue(c.runEnded(converged = false, rebuilt = false))
+        assertEquals(6 to 30, c.meteringRun to c.meteringInterval)
+        assertTrue(c.runEnded(converged = false, rebuilt = false))
+        assertEquals(12 to 48, c.meteringRun to c.meteringInterval)
+        assertTrue(c.runEnded(converged = false, rebuilt = false)) // 24 is the longest run
+        assertEquals(24 to 96, c.meteringRun to c.meteringInterval)
+        assertFalse(c.runEnded(converged = false, rebuilt = false))
+        // Three converged runs without a rebuild double the interval, up to 240.
+        assertFalse(c.runEnded(converged = true, rebuilt = false))
+        assertFalse(c.runEnded(converged = true, rebuilt = false))
+        assertTrue(c.runEnded(converged = true, rebuilt = false))
+        assertEquals(24 to 192, c.meteringRun to c.meteringInterval)
+        repeat(3) { c.runEnded(converged = true, rebuilt = false) }
+        assertEquals(240, c.meteringInterval)
+        // A rebuild brings it back to the base (at least four runs).
+        assertTrue(c.runEnded(converged = true, rebuilt = true))
+        assertEquals(96, c.meteringInterval)
+        c.resetPlan()
+        assertEquals(3 to 30, c.meteringRun to c.meteringInterval)
+    }
+
+    @Test
+    fun gainsWithinTheBandNeverRebuildAndADriftRebuildsOnce() {
+        val c = CamProController(session)
+        assertTrue(c.onMeteringResult(Fixtures.PHONE, Fixtures.GAINS)) // the first
+        // +-1.9% around what was sent: inside the 2% band.
+        for (f in listOf(1.019f, 0.981f, 1.01f, 0.99f)) assertFalse(c.onMeteringResult(Fixtures.PHONE, FloatArray(4) { Fixtures.GAINS[it] * f }))
+        // A drift past 2% of the sent value rebuilds, and the band moves with it.
+        assertTrue(c.onMeteringResult(Fixtures.PHONE, FloatArray(4) { Fixtures.GAINS[it] * 1.021f }))
+        assertFalse(c.onMeteringResult(Fixtures.PHONE, FloatArray(4) { Fixtures.GAINS[it] * 1.035f }))
+        assertEquals(2L, c.rebuilds)
+    }
+
+    @Test
+    fun theImageQueueFollowsThePipelineDepth() {
+        assertEquals(6, CamProPipeline.imageQueueDepth(4))
+        assertEquals(10, CamProPipeline.imageQueueDepth(8))
+        assertEquals(4, CamProPipeline.imageQueueDepth(1))
+        assertEquals(16, CamProPipeline.imageQueueDepth(100))
     }
 }

@@ -33,6 +33,12 @@ import org.campro.PixelProbe
 import org.campro.ProtectionState
 import java.util.concurrent.Executor
 
+/** The luma samples of a YUV image's Y plane ([PixelProbe.lumaOfPlane]): what the pixel probe reads. */
+fun lumaOfImage(image: Image): ByteArray {
+    val y = image.planes[0]
+    return PixelProbe.lumaOfPlane(y.buffer, image.width, image.height, y.rowStride, y.pixelStride)
+}
+
 /** Whether this camera can run CamPro, with the reasons when not. */
 fun CameraCharacteristics.camproSupport(): DeviceSupport.Result = DeviceSupport.check(
     capabilities = get(CameraCharacteristics.REQUEST_AVAILABLE_CAPABILITIES),
@@ -144,8 +150,11 @@ fun openCamProAsset(
  * in the pipeline's [org.campro.FrameGate] until its own `CaptureResult` verified, and only
  * then reaches [deliver] on [appExecutor] (render it with `ImageWriter.queueInputImage` onto
  * a `SurfaceView`, or with GL; the consumer closes it). Metering frames (auto mode) go to a
- * small reader that drops them unread; the pixel probe's frames ([org.campro.PixelProbe]) go
- * there too, and only their luma is read. No display surface is ever a capture target: a
+ * small reader that drops them unread. The pixel probe's frames ([org.campro.PixelProbe]) go
+ * to the protected stream itself when its format is `YUV_420_888` (read, then dropped: never
+ * delivered), else to a `YUV_420_888` reader of the same size (a PRIVATE stream's pixels
+ * cannot be read; a HAL that splits passes by stream size treats both alike, one that splits
+ * them by format is not seen). No display surface is ever a capture target: a
  * `TextureView`/`SurfaceView` fed straight by the camera would show frames before their
  * results are checked, and is not fail-closed.
  *
@@ -170,6 +179,8 @@ class CamProCamera2(
     onState: (ProtectionState) -> Unit = {},
     /** See [org.campro.ProtectionGuard.trustMissingKeys]: accepting it risks unprotected frames. */
     trustMissingKeys: Boolean = false,
+    /** See [org.campro.CamProPipeline]'s `maxDeviationLsb` (8-bit LSB). */
+    maxDeviationLsb: Double = 0.5,
     /** The protected stream's format: PRIVATE for the screen (zero-copy to ImageWriter), YUV_420_888 to read pixels. */
     format: Int = ImageFormat.PRIVATE,
     /** Its usage flags (API 29): GPU sampling and composition for the screen. */
@@ -178,8 +189,23 @@ class CamProCamera2(
     /** Whether and why CamPro can run on this camera. */
     val support: DeviceSupport.Result = characteristics.camproSupport()
 
+    /** Images the protected reader holds: frames wait there for their results, as many as the camera's pipeline depth asks. */
+    val queueDepth: Int = CamProPipeline.imageQueueDepth(characteristics.pipelineDepth())
+
     /** Protected frames, gated before anyone sees them: private, so no caller can read around the gate. */
-    private val frames: ImageReader = ImageReader.newInstance(width, height, format, QUEUE_DEPTH, usage)
+    private val frames: ImageReader = ImageReader.newInstance(width, height, format, queueDepth, usage)
+
+    /** Whether the protected stream's pixels can be read (YUV_420_888): the probe then runs on it. */
+    private val readable = format == ImageFormat.YUV_420_888
+
+    /** The probe's stream when the protected one cannot be read: same size, YUV_420_888 (`null` otherwise). */
+    private val probeReader: ImageReader? = if (readable) null else ImageReader.newInstance(width, height, ImageFormat.YUV_420_888, 2)
+
+    /** Where probe requests go: the protected stream when readable, else the probe's own (internal: tests check it). */
+    internal val probeSurface: android.view.Surface get() = probeReader?.surface ?: frames.surface
+
+    /** The protected stream's surface (internal: tests compare targets). */
+    internal val protectedSurface: android.view.Surface get() = frames.surface
 
     private val meteringReader: ImageReader = ImageReader.newInstance(METERING_WIDTH, METERING_HEIGHT, ImageFormat.YUV_420_888, 2)
 
@@ -195,7 +221,7 @@ class CamProCamera2(
             s.setRepeatingRequest(meteringRequest(), callback, cameraHandler)
         }
 
-        override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
+        override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, burst: org.campro.Burst?) {
             val s = captureSession ?: error("no capture session")
             val d = device ?: error("no camera device")
             val protected = d.createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply {
@@ -203,9 +229,10 @@ class CamProCamera2(
                 applyCamPro(transform, curves, gains)
                 setTag(PROTECTED)
             }.build()
-            if (interleaveMetering) {
+            if (burst != null) {
                 val metering = meteringRequest()
-                s.setRepeatingBurst(List(meteringRun) { metering } + List(meteringInterval - meteringRun) { protected }, callback, cameraHandler)
+                val probes = burst.probes.map { probeRequest(it.transform, it.curve, gains) }
+                s.setRepeatingBurst(List(burst.protectedFrames) { protected } + probes + List(burst.meteringRun) { metering }, callback, cameraHandler)
             } else {
                 s.setRepeatingRequest(protected, callback, cameraHandler)
             }
@@ -213,13 +240,7 @@ class CamProCamera2(
 
         override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) {
             val s = captureSession ?: error("no capture session")
-            val d = device ?: error("no camera device")
-            val probe = d.createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply {
-                addTarget(meteringReader.surface) // never the app's stream
-                applyCamPro(transform, arrayOf(curve, curve, curve), gains)
-                setTag(PROBE)
-            }.build()
-            s.setRepeatingRequest(probe, callback, cameraHandler)
+            s.setRepeatingRequest(probeRequest(transform, curve, gains), callback, cameraHandler)
         }
 
         override fun halt() {
@@ -233,21 +254,35 @@ class CamProCamera2(
         }
     }
 
+    /** A probe request ([org.campro.PixelProbe]) to the probe's stream: the protected one when readable. */
+    private fun probeRequest(transform: IntArray, curve: FloatArray, gains: FloatArray): CaptureRequest =
+        (device ?: error("no camera device")).createCaptureRequest(CameraDevice.TEMPLATE_PREVIEW).apply {
+            addTarget(probeSurface)
+            applyCamPro(transform, arrayOf(curve, curve, curve), gains)
+            setTag(PROBE)
+        }.build()
+
     /** The loop: states, gate and metering. */
     val pipeline = CamProPipeline<Image>(
         session, requests, appExecutor,
         perFrameControl = characteristics.hasPerFrameControl(),
         pipelineDepth = characteristics.pipelineDepth(),
-        imageQueueDepth = QUEUE_DEPTH,
+        imageQueueDepth = queueDepth,
         trustMissingKeys = trustMissingKeys,
         deliver = deliver,
         drop = { it.close() },
         onState = onState,
+        maxDeviationLsb = maxDeviationLsb,
+        lumaOf = if (readable) { image -> lumaOfImage(image) } else null,
     )
+
+    /** Lost protected buffers matched to their sensor timestamps, in either callback order. */
+    private val lostBuffers = org.campro.LostBuffers { ts -> pipeline.onFrameLost(ts) }
 
     init {
         frames.setOnImageAvailableListener({ r -> acquire(r) }, cameraHandler)
         meteringReader.setOnImageAvailableListener({ r -> drain(r) }, cameraHandler)
+        probeReader?.setOnImageAvailableListener({ r -> drainProbe(r) }, cameraHandler)
     }
 
     /**
@@ -257,7 +292,7 @@ class CamProCamera2(
      * timestamps, which match no result, and the gate would show nothing.
      */
     fun outputs(): List<OutputConfiguration> =
-        listOf(OutputConfiguration(frames.surface), OutputConfiguration(meteringReader.surface)).onEach { o ->
+        listOfNotNull(frames.surface, meteringReader.surface, probeReader?.surface).map { OutputConfiguration(it) }.onEach { o ->
             if (android.os.Build.VERSION.SDK_INT >= 33) o.setTimestampBase(OutputConfiguration.TIMESTAMP_BASE_SENSOR)
         }
 
@@ -294,6 +329,7 @@ class CamProCamera2(
         captureSession = null
         device = null
         meteringReader.close()
+        probeReader?.close()
         val closeFrames = Runnable {
             framesClosed = true
             frames.close()
@@ -303,14 +339,6 @@ class CamProCamera2(
         } catch (e: java.util.concurrent.RejectedExecutionException) {
             closeFrames.run()
         }
-    }
-
-    /**
-     * Sensor timestamps of the protected captures started lately, by frame number (a lost
-     * buffer is named by frame number only). Touched on [cameraHandler]'s thread only.
-     */
-    private val started = object : LinkedHashMap<Long, Long>() {
-        override fun removeEldestEntry(eldest: MutableMap.MutableEntry<Long, Long>?) = size > STARTED_KEPT
     }
 
     private val callback = object : CameraCaptureSession.CaptureCallback() {
@@ -326,7 +354,10 @@ class CamProCamera2(
 
     /** A capture started at sensor time [timestamp] (internal: tests call it). */
     internal fun onStarted(tag: Any?, timestamp: Long, frameNumber: Long) {
-        if (tag == PROTECTED) started[frameNumber] = timestamp
+        when (tag) {
+            PROTECTED -> lostBuffers.started(frameNumber, timestamp)
+            PROBE -> if (readable) pipeline.onProbeCaptureStarted(timestamp)
+        }
     }
 
     /**
@@ -335,9 +366,7 @@ class CamProCamera2(
      * Its result must not count as one whose frame never matched ([CamProPipeline.onFrameLost]).
      */
     internal fun onBufferLost(tag: Any?, frameNumber: Long, toFrames: Boolean) {
-        if (tag != PROTECTED || !toFrames) return
-        val ts = started.remove(frameNumber) ?: return
-        pipeline.onFrameLost(ts)
+        if (tag == PROTECTED && toFrames) lostBuffers.lost(frameNumber)
     }
 
     /** One completed capture, routed by its request's tag (internal: tests feed scripted results). */
@@ -362,15 +391,19 @@ class CamProCamera2(
         }
     }
 
-    /** Metering frames are dropped unread; while the pipeline probes, a frame's luma goes to the probe first. */
+    /** Metering frames are dropped unread. */
     private fun drain(r: ImageReader) {
         try {
-            r.acquireLatestImage()?.use { image ->
-                if (pipeline.isProbing) {
-                    val y = image.planes[0]
-                    pipeline.onProbeFrame(image.timestamp, PixelProbe.lumaOfPlane(y.buffer, image.width, image.height, y.rowStride, y.pixelStride))
-                }
-            }
+            r.acquireLatestImage()?.close()
+        } catch (e: IllegalStateException) {
+            // closed reader
+        }
+    }
+
+    /** The probe's own stream (a PRIVATE protected stream): each frame's luma goes to the probe. */
+    private fun drainProbe(r: ImageReader) {
+        try {
+            r.acquireLatestImage()?.use { image -> pipeline.onProbeFrame(image.timestamp, lumaOfImage(image)) }
         } catch (e: IllegalStateException) {
             // closed reader
         }
@@ -383,14 +416,10 @@ class CamProCamera2(
     }.build()
 
     companion object {
-        /** Images the protected reader holds: frames wait there for their results. */
-        const val QUEUE_DEPTH = 6
         const val METERING_WIDTH = 320
         const val METERING_HEIGHT = 240
         internal const val METERING = "campro-metering"
         internal const val PROTECTED = "campro-protected"
         internal const val PROBE = "campro-probe"
-        /** Started protected captures remembered for [onBufferLost]: more than the pipeline holds in flight. */
-        private const val STARTED_KEPT = 64
     }
 }

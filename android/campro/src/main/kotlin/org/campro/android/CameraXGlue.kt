@@ -62,7 +62,12 @@ class CamProCameraX(
     trustMissingKeys: Boolean = false,
     /** `REQUEST_PIPELINE_MAX_DEPTH` of the bound camera (CameraX hides it; 8 covers current devices). */
     pipelineDepth: Int = 8,
+    /** See [org.campro.CamProPipeline]'s `maxDeviationLsb` (8-bit LSB). */
+    maxDeviationLsb: Double = 0.5,
 ) {
+    /** The analysis queue depth the gate needs for [pipelineDepth] ([CamProPipeline.imageQueueDepth]). */
+    val queueDepth: Int = CamProPipeline.imageQueueDepth(pipelineDepth)
+
     @Volatile
     private var control: Camera2CameraControl? = null
 
@@ -71,7 +76,7 @@ class CamProCameraX(
     private val requests = object : CameraRequests {
         override fun meter() = send(listOf(CaptureRequest.CONTROL_AWB_MODE to CaptureRequest.CONTROL_AWB_MODE_AUTO))
 
-        override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) =
+        override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, burst: org.campro.Burst?) =
             send(camproSettings(transform, curves, gains))
 
         override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) = send(camproSettings(transform, arrayOf(curve, curve, curve), gains))
@@ -86,11 +91,16 @@ class CamProCameraX(
         session, requests, appExecutor,
         perFrameControl = false,
         pipelineDepth = pipelineDepth,
-        imageQueueDepth = QUEUE_DEPTH,
+        imageQueueDepth = queueDepth,
         trustMissingKeys = trustMissingKeys,
         deliver = deliver,
         drop = { it.close() },
         onState = onState,
+        maxDeviationLsb = maxDeviationLsb,
+        lumaOf = { image ->
+            val y = image.planes.firstOrNull()
+            if (y == null) ByteArray(0) else PixelProbe.lumaOfPlane(y.buffer, image.width, image.height, y.rowStride, y.pixelStride)
+        },
     )
 
     /** The current state; frames reach the app only while it is Protected. */
@@ -104,7 +114,7 @@ class CamProCameraX(
     fun extend(builder: ImageAnalysis.Builder) {
         check(!extended) { "CamProCameraX.extend: already extended (one ImageAnalysis use case only)" }
         extended = true
-        builder.setImageQueueDepth(QUEUE_DEPTH)
+        builder.setImageQueueDepth(queueDepth)
         builder.setBackpressureStrategy(ImageAnalysis.STRATEGY_BLOCK_PRODUCER)
         Camera2Interop.Extender(builder).setSessionCaptureCallback(captureCallback)
     }
@@ -112,19 +122,9 @@ class CamProCameraX(
     /**
      * The analyzer to set on that use case: frames go through the gate; while the pipeline
      * probes the device ([org.campro.PixelProbe]), their luma goes to the probe and the
-     * frame is closed unseen.
+     * frame is closed unseen (the pipeline decides).
      */
-    val analyzer: ImageAnalysis.Analyzer = ImageAnalysis.Analyzer { image ->
-        if (pipeline.isProbing) {
-            image.use {
-                val y = it.planes.firstOrNull()
-                val luma = if (y == null) ByteArray(0) else PixelProbe.lumaOfPlane(y.buffer, it.width, it.height, y.rowStride, y.pixelStride)
-                pipeline.onProbeFrame(it.imageInfo.timestamp, luma)
-            }
-        } else {
-            pipeline.onFrame(image.imageInfo.timestamp, image)
-        }
-    }
+    val analyzer: ImageAnalysis.Analyzer = ImageAnalysis.Analyzer { image -> pipeline.onFrame(image.imageInfo.timestamp, image) }
 
     /** The provider and use case of [bind] (`null`: not bound by the library). */
     private var bound: Pair<ProcessCameraProvider, ImageAnalysis>? = null
@@ -261,22 +261,19 @@ class CamProCameraX(
     private fun CaptureRequestOptions.Builder.setAny(key: CaptureRequest.Key<*>, value: Any) =
         setCaptureRequestOption(key as CaptureRequest.Key<Any>, value)
 
-    /** Sensor timestamps of captures started lately, by frame number (a lost buffer is named by frame number only). */
-    private val started = object : LinkedHashMap<Long, Long>() {
-        override fun removeEldestEntry(eldest: MutableMap.MutableEntry<Long, Long>?) = size > STARTED_KEPT
-    }
+    /** Lost buffers matched to sensor timestamps in either callback order; a protected frame's only. */
+    private val lostBuffers = org.campro.LostBuffers { ts -> if (!pipeline.isMetering && !pipeline.isProbing) pipeline.onFrameLost(ts) }
 
     internal val captureCallback = object : CameraCaptureSession.CaptureCallback() {
         override fun onCaptureStarted(s: CameraCaptureSession, request: CaptureRequest, timestamp: Long, frameNumber: Long) {
-            synchronized(started) { started[frameNumber] = timestamp }
+            lostBuffers.started(frameNumber, timestamp)
         }
 
         override fun onCaptureCompleted(s: CameraCaptureSession, request: CaptureRequest, result: TotalCaptureResult) = onResult(result)
 
         // The analysis stream is the only one the library binds: a lost buffer is one of its frames.
         override fun onCaptureBufferLost(s: CameraCaptureSession, request: CaptureRequest, target: android.view.Surface, frameNumber: Long) {
-            val ts = synchronized(started) { started.remove(frameNumber) } ?: return
-            if (!pipeline.isMetering && !pipeline.isProbing) pipeline.onFrameLost(ts)
+            lostBuffers.lost(frameNumber)
         }
     }
 
@@ -289,12 +286,5 @@ class CamProCameraX(
         } else {
             pipeline.onProtectedResult(result.get(CaptureResult.SENSOR_TIMESTAMP) ?: Long.MIN_VALUE, result.camproReport())
         }
-    }
-
-    companion object {
-        /** ImageAnalysis queue depth the gate needs: frames wait there for their results. */
-        const val QUEUE_DEPTH = 6
-        /** Started captures remembered for a lost buffer: more than the pipeline holds in flight. */
-        private const val STARTED_KEPT = 64
     }
 }

@@ -97,15 +97,21 @@ class Camera2Test {
         CaptureResult.SENSOR_TIMESTAMP to ts,
     )
 
+    /** The surfaces a built request targets (Camera2 keeps them in a hidden field). */
+    private fun targets(req: CaptureRequest): Set<*> =
+        req.javaClass.getDeclaredField("mSurfaceSet").apply { isAccessible = true }.get(req) as Set<*>
+
     /**
-     * Answers the pixel probe as an honest device: each probe request (to the metering
-     * reader, never the protected one) gets a result reporting its settings and a flat
-     * frame at its level.
+     * Answers the pixel probe as an honest device: each probe request (to the protected
+     * stream itself, the stream the app sees, when it is readable) gets a result reporting
+     * its settings and a flat frame at its level.
      */
     private fun passProbe(cam: CamProCamera2, fake: FakeSession) {
         for ((i, step) in PixelProbe.Step.values().withIndex()) {
             val req = fake.repeated.last().single()
             assertEquals(CamProCamera2.PROBE, req.tag)
+            assertEquals("the probe runs on the protected stream", setOf(cam.probeSurface), targets(req))
+            assertEquals(cam.protectedSurface, cam.probeSurface)
             val curve = PixelProbe.curve(step)
             val ts = 100L + i
             cam.onResult(
@@ -143,7 +149,7 @@ class Camera2Test {
         passProbe(cam, fake)
         val burst = fake.repeated.last().map { it.tag }
         assertEquals(30, burst.size)
-        assertEquals(List(3) { CamProCamera2.METERING } + List(27) { CamProCamera2.PROTECTED }, burst)
+        assertEquals(List(27) { CamProCamera2.PROTECTED } + List(3) { CamProCamera2.METERING }, burst)
         cam.onResult(CamProCamera2.PROTECTED, honoured(1))
         assertEquals(ProtectionState.Protected, cam.pipeline.state)
         cam.onResult(CamProCamera2.PROTECTED, honoured(2, Array(3) { floatArrayOf(0f, 0f, 1f, 1f) }))

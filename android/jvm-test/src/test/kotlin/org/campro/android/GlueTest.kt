@@ -176,7 +176,7 @@ class GlueTest {
         val x = CamProCameraX(session, direct, deliver = { shown += it.imageInfo.timestamp; it.close() }, onState = { states += it })
         val builder = ImageAnalysis.Builder()
         x.extend(builder)
-        assertEquals(CamProCameraX.QUEUE_DEPTH, builder.queueDepth)
+        assertEquals(CamProPipeline.imageQueueDepth(8), builder.queueDepth)
         assertEquals(ImageAnalysis.STRATEGY_BLOCK_PRODUCER, builder.backpressure)
         assertTrue("the result callback is on the analysis use case", builder.sessionCaptureCallback != null)
         assertTrue("extend twice would check results twice", runCatching { x.extend(ImageAnalysis.Builder()) }.isFailure)
@@ -323,7 +323,7 @@ class GlueTest {
         // Everything the app bound is unbound first; CamPro's analysis is bound alone, extended (its queue, not the app's).
         assertEquals(listOf("unbindAll", "bind 1"), provider.calls)
         val analysis = provider.boundCases.single() as ImageAnalysis
-        assertEquals(CamProCameraX.QUEUE_DEPTH, analysis.builder.queueDepth)
+        assertEquals(CamProPipeline.imageQueueDepth(8), analysis.builder.queueDepth)
         assertTrue(analysis.builder.sessionCaptureCallback != null && analysis.builder.sessionStateCallback != null && analysis.builder.analyzer != null)
         assertTrue("${x.support}", x.support is org.campro.DeviceSupport.Result.Supported)
         assertEquals(CaptureRequest.CONTROL_AWB_MODE_AUTO, control.sent.single().getCaptureRequestOption(CaptureRequest.CONTROL_AWB_MODE))

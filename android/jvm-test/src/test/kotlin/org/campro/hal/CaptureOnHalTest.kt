@@ -120,7 +120,7 @@ class CaptureOnHalTest {
             lateinit var p: CamProPipeline<SimFrame>
             p = CamProPipeline(
                 session, hal, direct, perFrameControl = true, pipelineDepth = 4, imageQueueDepth = 6,
-                deliver = router::deliver, drop = { it.close() },
+                deliver = router::deliver, drop = { it.close() }, lumaOf = { lumaOfRgb(it.pixels) },
             )
             val recording = ProtectedRecording(spy, { it.timestampNs }, { p.gate.dropped })
             router.recording = recording

@@ -17,13 +17,23 @@ import java.io.File
  * output for its scene by more than [App.boundLsb] reaches the app, and the state says the
  * truth: Protected only while frames are delivered; a camera that can protect ends
  * Protected with frames; one that cannot be verified ends Unsupported or Violated with
- * none delivered; a disconnected one ends Stopped; a parameter set that does not protect
+ * none delivered; a disconnected one (or one delivering black frames) ends Stopped; one that
+ * stops following mid-session is caught by the re-probe, within its interval; a parameter set that does not protect
  * (no protection rating: `identity`, an app's own JSON) ends Applied and never says
  * Protected, however faithful the camera.
  */
 class HalScenariosTest {
     /** What a scenario must end in, besides "no frame leaked". */
-    enum class Outcome { Protects, Applies, Refuses, Stops }
+    enum class Outcome {
+        Protects, Applies, Refuses, Stops,
+
+        /**
+         * Stops following mid-session (a mode switch at [Behaviour.echoFrom]) and ends refused:
+         * frames made before the re-probe saw the switch may leak, none after
+         * [CamProPipeline.reprobeInterval] protected frames and two bursts past the switch.
+         */
+        CaughtByReprobe,
+    }
 
     /** What the app does: its settings and how it treats its frames and its lifecycle. */
     data class App(
@@ -35,17 +45,25 @@ class HalScenariosTest {
         /** At this frame the app pauses (`stop()`), at [resumeAt] it starts again (-1: never). */
         val pauseAt: Int = -1,
         val resumeAt: Int = -1,
+        /** Most rebuilds a minute the scenario may cause (a storm closes the preview at each). */
+        val maxRebuildsPerMinute: Double = Double.MAX_VALUE,
     ) {
         /** Largest difference a delivered frame may show from the desktop pipeline: the accepted deviation (at least the conversion's bound, under 0.5) plus 8-bit rounding. */
         val boundLsb: Int get() = kotlin.math.ceil(maxOf(acceptLsb, 0.5)).toInt() + 1
     }
 
-    /** [params]: the parameter set's JSON (default: the bundled `campro-omega-0.5`). */
-    class Scenario(val hal: Behaviour, val outcome: Outcome, val app: App = App(), val params: String? = null) {
+    /** [params]: the parameter set's JSON (default: the bundled `campro-omega-0.5`); [frames]: how long it runs (30 a second). */
+    class Scenario(val hal: Behaviour, val outcome: Outcome, val app: App = App(), val params: String? = null, val frames: Int = FRAMES) {
         val name: String get() = hal.name
     }
 
-    class Row(val name: String, val frames: Int, val delivered: Int, val lost: Int, val leaked: Int, val state: ProtectionState, val held: Boolean, val why: String)
+    class Row(
+        val name: String, val frames: Int, val delivered: Int, val lost: Int, val leaked: Int, val state: ProtectionState, val held: Boolean, val why: String,
+        /** The largest step between frames delivered one after the other (1: none missing), once delivery began. */
+        val maxGap: Int,
+        /** Protected requests rebuilt with new values after the first, a minute at 30 frames a second. */
+        val rebuildsPerMinute: Double,
+    )
 
     private infix fun Behaviour.to(o: Outcome) = Scenario(this, o)
 
@@ -60,7 +78,6 @@ class HalScenariosTest {
         Behaviour("matrices rounded to 1/128 (Q7)", matrixStep = 128) to Outcome.Refuses,
         Behaviour("curve resampled to 17 points", curvePoints = 17) to Outcome.Refuses,
         Behaviour("display timestamp base on the protected stream (image 5 ms after the sensor)", imageTimestampOffsetNs = 5_000_000) to Outcome.Refuses,
-        Behaviour("display timestamp base on every stream", imageTimestampOffsetNs = 5_000_000, offsetOnEveryStream = true) to Outcome.Refuses,
         Behaviour("echoing HAL (reports the request, applies its own curve)", echo = true) to Outcome.Refuses,
         Behaviour("echoing HAL (reports the request, applies its own transform)", ignoreTransform = true) to Outcome.Refuses,
         Behaviour("singular matrices replaced by the identity (the probe's matrix is near zero, not zero)", singularToIdentity = true) to Outcome.Protects,
@@ -84,6 +101,17 @@ class HalScenariosTest {
         Scenario(Behaviour("honest, srgb-passthrough (not protective: faces as a normal camera shows them)"), Outcome.Applies, params = bundled("srgb-passthrough")),
         Scenario(Behaviour("honest, campro-omega-5 (rated, worst top-1 above the threshold)"), Outcome.Applies, params = bundled("campro-omega-5")),
         Scenario(Behaviour("a curve per channel, each resampled to 17 points", curvePoints = 17), Outcome.Refuses, params = PER_CHANNEL),
+        // Issue 75, item 3: the probe proves the stream the app sees, again and again.
+        Behaviour("small stream honest, large stream echoes (the probe runs on the large one)", echo = true) to Outcome.Refuses,
+        Scenario(Behaviour("a mode switch at frame 60: from then on the HAL applies its own curve and echoes the request", echoFrom = 60), Outcome.CaughtByReprobe, frames = 400),
+        Scenario(Behaviour("1.5-code noise/dither after the curve", noiseCodes = 1.5), Outcome.Protects),
+        Scenario(Behaviour("privacy toggle: black frames throughout", blackFrames = 0 until 10_000), Outcome.Stops),
+        Scenario(Behaviour("privacy toggle: black frames until frame 45, then real ones", blackFrames = 0 until 45), Outcome.Protects),
+        // Issue 75, item 6: metering without judder or storms.
+        Scenario(Behaviour("AWB settling over 20 frames, the light changes at frame 150", awbSettleFrames = 20, lightChangeAt = 150), Outcome.Protects, frames = 600),
+        Scenario(Behaviour("AWB gains jitter by +-0.5% every metering result", gainJitter = 0.005), Outcome.Protects, App(maxRebuildsPerMinute = 1.0), frames = 600),
+        Scenario(Behaviour("results 6 to 8 frames after their images (REQUEST_PIPELINE_MAX_DEPTH 8)", resultDelay = 6, resultDelayMax = 8, pipelineMaxDepth = 8), Outcome.Protects),
+        Scenario(Behaviour("the app holds frames 30 to 60, each lost buffer reported before its capture started", bufferLostBeforeStart = true), Outcome.Protects, App(holdFrom = 30, holdUntil = 60)),
     )
 
     /** A scene of 256 linear sensor colours: a grid over the gamut, greys and skin-like tones. */
@@ -113,10 +141,12 @@ class HalScenariosTest {
         val session = CamProSession.fromJson(json, 64)
         val reference = SimulatedHal.reference(json)
         try {
-            val queue = 6 + b.resultDelay
+            val queue = CamProPipeline.imageQueueDepth(b.pipelineDepth)
             val hal = SimulatedHal(b, if (b.flatScene) flat else scene, listOf(Fixtures.PHONE, tele, relit), Fixtures.GAINS, reference, bufferPool = queue)
             var delivered = 0
             var leaked = 0
+            var lastLeak = -1
+            var maxGap = 0
             var lastDelivered = -1
             var worst = 0
             var lastFollows = false
@@ -125,10 +155,12 @@ class HalScenariosTest {
             val states = ArrayList<ProtectionState>()
             val p = CamProPipeline<SimFrame>(
                 session, hal, { it.run() },
-                perFrameControl = b.latency == 0, pipelineDepth = 4 + b.resultDelay, imageQueueDepth = queue,
+                perFrameControl = b.latency == 0, pipelineDepth = b.pipelineDepth, imageQueueDepth = queue,
                 maxDeviationLsb = app.acceptLsb,
+                lumaOf = { lumaOfRgb(it.pixels) },
                 deliver = { f ->
                     delivered++
+                    if (lastDelivered >= 0) maxGap = maxOf(maxGap, f.index - lastDelivered)
                     lastDelivered = f.index
                     fun off(want: ByteArray) = f.pixels.indices.maxOf { kotlin.math.abs((f.pixels[it].toInt() and 255) - (want[it].toInt() and 255)) }
                     val now = off(f.expected)
@@ -136,21 +168,22 @@ class HalScenariosTest {
                     // Frames still made with the values metered before a light change are protected too.
                     val d = minOf(now, f.before?.let { off(it) } ?: Int.MAX_VALUE)
                     worst = maxOf(worst, d)
-                    if (d > app.boundLsb) leaked++
+                    if (d > app.boundLsb) { leaked++; lastLeak = f.index }
                     if (frameNow in app.holdFrom until app.holdUntil) held += f else f.close()
                 },
                 drop = { it.close() },
                 onState = { states += it },
             )
             p.start(Fixtures.supported())
-            hal.run(FRAMES, p) { i ->
+            val frames = sc.frames
+            hal.run(frames, p) { i ->
                 frameNow = i + 1
                 if (i + 1 == app.holdUntil) { held.forEach { it.close() }; held.clear() }
                 if (i + 1 == app.pauseAt) p.stop("paused")
                 if (i + 1 == app.resumeAt) p.start(Fixtures.supported())
             }
             val state = p.state
-            val recent = lastDelivered >= FRAMES - 10
+            val recent = lastDelivered >= frames - 10
             val why = mutableListOf<String>()
             if (leaked > 0) why += "$leaked frames off by up to $worst LSB reached the app"
             if (app.holdFrom >= 0) {
@@ -167,8 +200,18 @@ class HalScenariosTest {
                 Outcome.Applies -> if (!(state == ProtectionState.Applied && recent) || ProtectionState.Protected in states) why += "ends $state with ${delivered} frames (states: ${states.joinToString(" > ") { it.javaClass.simpleName }})"
                 Outcome.Refuses -> if (state == ProtectionState.Protected || state == ProtectionState.Applied || (delivered > 0 && leaked > 0)) why += "ends $state"
                 Outcome.Stops -> if (state !is ProtectionState.Stopped) why += "ends $state"
+                Outcome.CaughtByReprobe -> {
+                    val caughtBy = b.echoFrom + p.reprobeInterval + 2 * p.controller.maxInterval
+                    if (!(state is ProtectionState.Unsupported && state.reason.contains("pixel probe"))) why += "ends $state, not refused by the probe"
+                    if (lastLeak > caughtBy) why += "frame $lastLeak leaked, after the re-probe should have caught the switch (by frame $caughtBy)"
+                    if (delivered > 0 && lastDelivered > caughtBy) why += "frame $lastDelivered delivered after frame $caughtBy"
+                }
             }
-            return Row(b.name, FRAMES, delivered, hal.lostFrames, leaked, state, why.isEmpty(), why.joinToString("; "))
+            // A leak is a failure everywhere but before a mode switch's re-probe (stated in the table).
+            if (sc.outcome == Outcome.CaughtByReprobe && leaked > 0) why.remove("$leaked frames off by up to $worst LSB reached the app")
+            val perMinute = (p.controller.rebuilds - 1).coerceAtLeast(0) * 60.0 * 30.0 / frames
+            if (perMinute > app.maxRebuildsPerMinute) why += "%.1f rebuilds a minute, more than %.1f".format(java.util.Locale.ROOT, perMinute, app.maxRebuildsPerMinute)
+            return Row(b.name, frames, delivered, hal.lostFrames, leaked, state, why.isEmpty(), why.joinToString("; "), maxGap, perMinute)
         } finally {
             CamProNative.close(reference)
             session.close()
@@ -179,9 +222,14 @@ class HalScenariosTest {
     fun everyScenarioHoldsOrIsAKnownGap() {
         val rows = scenarios.map { run(it) }
         val table = buildString {
-            appendLine("| scenario | frames | delivered | buffers lost | leaked | final state | held |")
-            appendLine("|---|---|---|---|---|---|---|")
-            for (r in rows) appendLine("| ${r.name} | ${r.frames} | ${r.delivered} | ${r.lost} | ${r.leaked} | ${r.state} | ${if (r.held) "yes" else "no: ${r.why}"} |")
+            appendLine("| scenario | frames | delivered | largest gap | rebuilds a minute (after the first) | buffers lost | leaked | final state | held |")
+            appendLine("|---|---|---|---|---|---|---|---|---|")
+            for (r in rows) {
+                appendLine(
+                    "| ${r.name} | ${r.frames} | ${r.delivered} | ${r.maxGap} | ${"%.0f".format(java.util.Locale.ROOT, r.rebuildsPerMinute)} | ${r.lost} | ${r.leaked} | ${r.state} | " +
+                        "${if (r.held) "yes" else "no: ${r.why}"} |",
+                )
+            }
         }
         File("target").mkdirs()
         File("target/hal-scenarios.md").writeText(table)
@@ -192,7 +240,7 @@ class HalScenariosTest {
         for (r in rows) {
             assertEquals("${r.name}: ${r.why}", r.name !in KNOWN_GAPS, r.held)
         }
-        assertTrue(rows.size >= 25)
+        assertTrue(rows.size >= 35)
     }
 
     @Test

@@ -1,6 +1,8 @@
 package org.campro.hal
 
+import org.campro.Burst
 import org.campro.CamProNative
+import org.campro.LostBuffers
 import org.campro.CamProPipeline
 import org.campro.CameraRequests
 import org.campro.CaptureReport
@@ -36,16 +38,20 @@ data class Behaviour(
     val curvePoints: Int = 0,
     /** `image.timestamp` minus `SENSOR_TIMESTAMP` on the protected stream (a display or readout timestamp base). */
     val imageTimestampOffsetNs: Long = 0,
-    /** The small (metering and probe) stream's images are offset by [imageTimestampOffsetNs] too. */
-    val offsetOnEveryStream: Boolean = false,
-    /** Results arrive this many frames after their image. */
+    /** Results arrive this many frames after their image (at least; see [resultDelayMax]). */
     val resultDelay: Int = 0,
+    /** Results arrive up to this many frames after their image, varying frame to frame (at most [resultDelay] when smaller). */
+    val resultDelayMax: Int = 0,
+    /** `REQUEST_PIPELINE_MAX_DEPTH` the camera reports (0: 4 more than the largest result delay). */
+    val pipelineMaxDepth: Int = 0,
     /** The results of each pair of frames arrive swapped. */
     val swapResults: Boolean = false,
     /** Every n-th result never arrives (0: none lost). */
     val loseResultEvery: Int = 0,
-    /** Reports the requested transform and curve while applying its own default curve. */
+    /** Reports the requested transform and curve while applying its own default curve (on the protected stream; the small metering stream stays honest). */
     val echo: Boolean = false,
+    /** From this frame on the HAL echoes ([echo]): a mode switch (HDR, low-light binning) mid-session (-1: never). */
+    val echoFrom: Int = -1,
     /**
      * Frames from [faultFrom] until [faultUntil] are made with the device's automatic settings
      * whatever was asked, and their results say so (a passing fault, e.g. a 3A override: the
@@ -71,7 +77,21 @@ data class Behaviour(
     val awbStateAbsent: Boolean = false,
     /** `CONTROL_AWB_STATE` reported for a frame made with AWB off (a conforming HAL says INACTIVE, 0). */
     val offFrameAwbState: Int = 0,
-)
+    /** Frames in this range are black whatever the settings (the camera privacy toggle), their results as usual. */
+    val blackFrames: IntRange = IntRange.EMPTY,
+    /** Every output code moves by up to this much (noise or dither after the curve; deterministic), rounded. */
+    val noiseCodes: Double = 0.0,
+    /** Metering results report gains off by up to this relative amount, frame to frame (AWB jitter). */
+    val gainJitter: Double = 0.0,
+    /** `onCaptureBufferLost` comes before that capture's `onCaptureStarted`. */
+    val bufferLostBeforeStart: Boolean = false,
+) {
+    /** The largest result delay. */
+    val maxDelay: Int get() = maxOf(resultDelay, resultDelayMax)
+
+    /** `REQUEST_PIPELINE_MAX_DEPTH` as the camera reports it. */
+    val pipelineDepth: Int get() = if (pipelineMaxDepth > 0) pipelineMaxDepth else 4 + maxDelay
+}
 
 /**
  * One frame as the app would receive it: its index, its pixels and the pixels CamPro
@@ -139,9 +159,18 @@ class SimulatedHal(
 
     override fun meter() { setRepeating(listOf(Req.Auto)) }
 
-    override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, interleaveMetering: Boolean, meteringInterval: Int, meteringRun: Int) {
+    /** Protected requests sent (each a new repeating request or burst). */
+    var protectRequests = 0
+        private set
+
+    override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, burst: Burst?) {
+        protectRequests++
         val p = Req.Protect(transform.copyOf(), curves.map { it.copyOf() }, gains.copyOf())
-        setRepeating(if (interleaveMetering) List<Req>(meteringRun) { Req.Auto } + List(meteringInterval - meteringRun) { p } else listOf(p))
+        setRepeating(
+            if (burst == null) listOf(p) else List<Req>(burst.protectedFrames) { p } +
+                burst.probes.map { Req.Protect(it.transform.copyOf(), List(3) { _ -> it.curve.copyOf() }, gains.copyOf(), probe = true) } +
+                List(burst.meteringRun) { Req.Auto },
+        )
     }
 
     override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) {
@@ -177,17 +206,35 @@ class SimulatedHal(
         }
     }
 
+    /** The frame being made (for [blackFrames] and the noise pattern). */
+    private var frameNow = 0
+
     private fun render(transform: IntArray, curves: List<FloatArray>, gains: FloatArray): ByteArray {
+        if (frameNow in b.blackFrames) return ByteArray(scene.size)
         val stride = curves.maxOf { it.size }
         val packed = FloatArray(3 * stride)
         for ((c, curve) in curves.withIndex()) curve.copyInto(packed, c * stride)
         val counts = IntArray(3) { curves[it].size }
-        return ByteArray(scene.size).also { HalNative.emulate(transform, packed, stride, counts, gains, scene, it) }
+        val out = ByteArray(scene.size).also { HalNative.emulate(transform, packed, stride, counts, gains, scene, it) }
+        if (b.noiseCodes > 0) {
+            val rng = java.util.Random(frameNow.toLong())
+            for (k in out.indices) out[k] = ((out[k].toInt() and 255) + Math.round((2 * rng.nextDouble() - 1) * b.noiseCodes).toInt()).coerceIn(0, 255).toByte()
+        }
+        return out
     }
+
+    /** The gains a metering result reports: the true ones, jittered by [Behaviour.gainJitter]. */
+    private fun meteredGains(i: Int): FloatArray =
+        if (b.gainJitter == 0.0) autoGains.copyOf() else java.util.Random(31L * i).let { r -> FloatArray(4) { (autoGains[it] * (1 + (2 * r.nextDouble() - 1) * b.gainJitter)).toFloat() } }
+
+    /** Lost protected buffers as the Camera2 glue matches them (either callback order). */
+    private var lostBuffers: LostBuffers? = null
 
     /** Runs [frames] frames into [p]; returns the frames that reached the app (through [delivered]). */
     fun run(frames: Int, p: CamProPipeline<SimFrame>, onFrame: (Int) -> Unit = {}) {
+        lostBuffers = LostBuffers { ts -> p.onFrameLost(ts) }
         for (i in 0 until frames) {
+            frameNow = i
             if (i == b.disconnectAt) {
                 p.onCameraStopped("the camera was disconnected")
                 repeating = emptyList()
@@ -208,8 +255,10 @@ class SimulatedHal(
             val device = if (relit) sensors[2] else sensors[sensor]
             val physicalId = sensor.toString()
             val ts = 1_000_000_000L + i * 33_333_333L
-            val expected = ByteArray(scene.size).also { HalNative.desktop(reference, device, autoGains, scene, it) }
-            val before = if (relit) ByteArray(scene.size).also { HalNative.desktop(reference, sensors[0], autoGains, scene, it) } else null
+            // What CamPro promises for this frame: the desktop pipeline under the gains it was made with.
+            val madeWith = (applied as? Req.Protect)?.gains ?: autoGains
+            val expected = ByteArray(scene.size).also { HalNative.desktop(reference, device, madeWith, scene, it) }
+            val before = if (relit) ByteArray(scene.size).also { HalNative.desktop(reference, sensors[0], madeWith, scene, it) } else null
             when (applied) {
                 is Req.Auto -> {
                     autoRun++
@@ -225,7 +274,8 @@ class SimulatedHal(
                         deliver(p, tagged, i, ts, report, pixels, expected, before)
                     } else {
                         val reported = if (b.awbStateAbsent) null else state
-                        schedule(i) { p.onMeteringResult(MeteringReport(1, reported, device.copyOf(), autoGains.copyOf(), physicalId)) }
+                        val gains = meteredGains(i)
+                        schedule(i) { p.onMeteringResult(MeteringReport(1, reported, device.copyOf(), gains, physicalId)) }
                     }
                 }
                 is Req.Protect -> {
@@ -236,14 +286,15 @@ class SimulatedHal(
                         b.matrixStep > 0 -> rounded(applied.transform, b.matrixStep)
                         else -> applied.transform
                     }
+                    val echoing = b.echo || b.echoFrom in 0..i
                     val c = when {
-                        b.echo -> List(3) { defaultCurve }
+                        echoing -> List(3) { defaultCurve }
                         b.curvePoints > 0 -> applied.curves.map { resample(it, b.curvePoints) }
                         else -> applied.curves
                     }
                     val pixels = render(t, c, applied.gains)
-                    val reportedCurves = if (b.echo) applied.curves else c
-                    val reportedTransform = if (b.echo || b.ignoreTransform) applied.transform else t
+                    val reportedCurves = if (echoing) applied.curves else c
+                    val reportedTransform = if (echoing || b.ignoreTransform) applied.transform else t
                     val report = CaptureReport(0, 0, 0, reportedTransform.copyOf(), reportedCurves.map { it.copyOf() }, applied.gains.copyOf(), physicalId)
                     if (tagged is Req.Protect) {
                         deliver(p, tagged, i, ts, report, pixels, expected, before)
@@ -269,29 +320,39 @@ class SimulatedHal(
     /** The identity as a Camera2 rational transform. */
     private val IDENTITY = IntArray(18) { i -> if (i % 2 == 1) 1 else if ((i / 2) % 4 == 0) 1 else 0 }
 
-    /** A frame of a protected or probe request, with its result: to the app's stream or (probe) the metering stream's luma. */
+    /**
+     * A frame of a protected or probe request, with its result, to the protected stream (the
+     * glue sends the probe there: [CameraRequests.probe]); a probe capture's start is told
+     * first, as Camera2's `onCaptureStarted` comes before its image.
+     */
     private fun deliver(p: CamProPipeline<SimFrame>, tagged: Req.Protect, i: Int, ts: Long, report: CaptureReport, pixels: ByteArray, expected: ByteArray, before: ByteArray?) {
+        val lost = lostBuffers!!
         if (tagged.probe) {
             schedule(i) { p.onProbeResult(ts, report) }
-            p.onProbeFrame(ts + if (b.offsetOnEveryStream) b.imageTimestampOffsetNs else 0L, lumaOfRgb(pixels))
+            p.onProbeCaptureStarted(ts)
         } else {
             schedule(i) { p.onProtectedResult(ts, report) }
-            if (open >= bufferPool) {
-                // No free buffer: the frame is lost, and Camera2 says so (onCaptureBufferLost).
-                lostFrames++
-                p.onFrameLost(ts)
-                return
-            }
-            open++
-            val imageTs = ts + b.imageTimestampOffsetNs
-            p.onFrame(imageTs, SimFrame(i, pixels, expected, before, imageTs) { open-- })
+            if (!(b.bufferLostBeforeStart && open >= bufferPool)) lost.started(i.toLong(), ts)
         }
+        if (open >= bufferPool) {
+            // No free buffer: the frame is lost, and Camera2 says so (onCaptureBufferLost).
+            lostFrames++
+            if (!tagged.probe) {
+                lost.lost(i.toLong())
+                if (b.bufferLostBeforeStart) lost.started(i.toLong(), ts)
+            }
+            return
+        }
+        open++
+        val imageTs = ts + b.imageTimestampOffsetNs
+        p.onFrame(imageTs, SimFrame(i, pixels, expected, before, imageTs) { open-- })
     }
 
     private fun schedule(frame: Int, result: () -> Unit) {
         if (b.loseResultEvery > 0 && frame % b.loseResultEvery == b.loseResultEvery - 1) return
         // Swapped: each even frame's result waits for the next frame's and comes after it.
-        val at = frame + b.resultDelay + if (b.swapResults && frame % 2 == 0) 1 else 0
+        val delay = if (b.resultDelayMax > b.resultDelay) b.resultDelay + frame % (b.resultDelayMax - b.resultDelay + 1) else b.resultDelay
+        val at = frame + delay + if (b.swapResults && frame % 2 == 0) 1 else 0
         pendingResults += Triple(at, frame, result)
     }
 

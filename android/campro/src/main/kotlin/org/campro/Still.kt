@@ -1,5 +1,6 @@
 package org.campro
 
+import androidx.annotation.GuardedBy
 import java.util.concurrent.Executor
 
 /** How a still ended: its JPEG, or why there is none. */
@@ -124,5 +125,85 @@ class FrameRouter<T>(
             val p = preview
             if (p == null) close(frame) else p(frame)
         }
+    }
+}
+
+/**
+ * The preview's own path: the newest verified frame waits in one slot for [show], which
+ * runs on [executor] (one task at a time); a frame that arrives while the slot is full
+ * replaces the one waiting, which is closed unshown. [offer] never blocks: a preview that
+ * stalls (a hidden view, a writer with no free buffer, a view being torn down) costs only
+ * preview frames, never the recording's or a still's, which share the frame thread.
+ *
+ * Ownership: [offer] takes the frame; [show] owns each frame it is given (it must close it,
+ * or hand it on); frames replaced or left at [close] are closed here.
+ */
+class LatestFrame<T>(
+    /** Runs [show] (a thread of the preview's own: never the frame thread). */
+    private val executor: java.util.concurrent.Executor,
+    private val show: (T) -> Unit,
+    private val close: (T) -> Unit,
+) {
+    @GuardedBy("this")
+    private var slot: T? = null
+    @GuardedBy("this")
+    private var scheduled = false
+    @GuardedBy("this")
+    private var closed = false
+
+    /** Frames closed unshown because a newer one replaced them. */
+    @Volatile
+    var replaced = 0L
+        private set
+
+    /** Takes [frame]: it waits for [show], replacing (and closing) the one waiting. */
+    fun offer(frame: T) {
+        var old: T? = null
+        var schedule = false
+        synchronized(this) {
+            if (closed) {
+                old = frame
+            } else {
+                old = slot
+                slot = frame
+                if (!scheduled) { scheduled = true; schedule = true }
+                if (old != null) replaced++
+            }
+        }
+        old?.let(close)
+        if (schedule) {
+            try {
+                executor.execute { drain() }
+            } catch (e: java.util.concurrent.RejectedExecutionException) {
+                close() // the preview's thread is gone: nothing will be shown again
+            }
+        }
+    }
+
+    private fun drain() {
+        while (true) {
+            val frame = synchronized(this) {
+                val f = slot
+                slot = null
+                if (f == null) scheduled = false
+                f
+            } ?: return
+            try {
+                show(frame)
+            } catch (e: RuntimeException) {
+                // show owns the frame; a failing preview must not stop the next one.
+            }
+        }
+    }
+
+    /** Closes the frame waiting and every later one: the preview is gone. */
+    fun close() {
+        val f = synchronized(this) {
+            closed = true
+            val f = slot
+            slot = null
+            f
+        }
+        f?.let(close)
     }
 }

@@ -130,4 +130,52 @@ class CaptureLogicTest {
         )
         assertEquals(65L, s.durationUs)
     }
+
+    /**
+     * A preview that never gives a buffer back (a hidden view: `queueInputImage` blocks for
+     * good) holds its own thread only: the frame thread goes on, every frame reaches the
+     * recording and the still, and the preview keeps at most one frame waiting.
+     */
+    @Test
+    fun aStalledPreviewNeverStallsRecordingOrStills() {
+        val stuck = java.util.concurrent.CountDownLatch(1)
+        val previewThread = java.util.concurrent.Executors.newSingleThreadExecutor()
+        val shown = java.util.concurrent.atomic.AtomicInteger()
+        val closed = java.util.Collections.synchronizedList(ArrayList<Int>())
+        try {
+            val slot = LatestFrame<Int>(previewThread, { f -> shown.incrementAndGet(); stuck.await(); closed += f }, { closed += it })
+            val router = FrameRouter<Int> { closed += it }
+            router.preview = slot::offer
+            val recorded = ArrayList<Int>()
+            val encoder = object : VideoEncoder<Int> {
+                override fun encode(frame: Int, presentationUs: Long): Boolean { recorded += frame; return true }
+                override fun finish(summary: RecordingSummary) {}
+                override fun abandon() {}
+            }
+            router.recording = ProtectedRecording(encoder, { it * 33_333_333L }, { 0L })
+            val stills = StillCapture<Int, Int>({ it }, java.util.concurrent.Executor { it.run() })
+            router.stills = stills
+            val results = ArrayList<StillResult>()
+            // The frame thread (this one) delivers 100 frames; a still is asked for at frame 50.
+            for (f in 1..100) {
+                if (f == 50) stills.request({ n -> StillResult.Taken(byteArrayOf(n.toByte()), n.toLong()) }) { results += it }
+                router.deliver(f)
+            }
+            assertEquals((1..100).toList(), recorded)
+            assertEquals(listOf(50L), results.map { (it as StillResult.Taken).timestampNs })
+            // The preview took one frame and is stuck in it; at most one waits; the rest were replaced and closed.
+            val deadline = System.nanoTime() + 5_000_000_000L
+            while (shown.get() == 0 && System.nanoTime() < deadline) Thread.sleep(5)
+            assertEquals(1, shown.get())
+            assertTrue("${slot.replaced}", slot.replaced in 98L..99L)
+            assertEquals(slot.replaced.toInt(), closed.size)
+            slot.close()
+            assertEquals("the waiting frame closed with the slot", 99, closed.size)
+            stuck.countDown()
+        } finally {
+            previewThread.shutdown()
+            assertTrue(previewThread.awaitTermination(5, java.util.concurrent.TimeUnit.SECONDS))
+        }
+        assertEquals("every frame closed once", (1..100).toList(), closed.sorted())
+    }
 }

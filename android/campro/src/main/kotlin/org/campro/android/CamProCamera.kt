@@ -27,6 +27,7 @@ import org.campro.RecordContext
 import org.campro.Records
 import org.campro.DeviceSupport
 import org.campro.FrameRouter
+import org.campro.LatestFrame
 import org.campro.Orientation
 import org.campro.ProtectedRecording
 import org.campro.applied
@@ -99,6 +100,13 @@ class CamProCamera internal constructor(
     private val frameHandler = Handler(frameThread.looper)
     private val frameExecutor = Executor { if (!frameHandler.post(it)) throw RejectedExecutionException("the camera is closed") }
     private val stillExecutor = Executors.newSingleThreadExecutor { r -> Thread(r, "campro-still") }
+
+    /** The preview's own thread: `ImageWriter.queueInputImage` may block there, never on the frame thread that feeds recordings and stills. */
+    private val previewExecutor = Executors.newSingleThreadExecutor { r -> Thread(r, "campro-preview") }
+
+    /** The preview's latest-frame slot (`null`: no preview); replaced on the main thread, read on the frame thread. */
+    @Volatile
+    private var previewSlot: LatestFrame<Image>? = null
     private val main = Handler(Looper.getMainLooper())
 
     private val mutableState = MutableStateFlow<ProtectionState>(ProtectionState.Stopped("not started: the lifecycle owner has not started"))
@@ -194,7 +202,10 @@ class CamProCamera internal constructor(
         checkMain()
         preview = view
         val v = view
-        router.preview = if (v == null) null else { image -> v.render(image) }
+        val slot = if (v == null) null else LatestFrame<Image>(previewExecutor, { image -> v.render(image) }, { it.close() })
+        previewSlot?.close()
+        previewSlot = slot
+        router.preview = if (slot == null) null else { image -> slot.offer(image) }
         v?.showState(mutableState.value)
         stream?.let { s -> v?.configure(s.width, s.height, s.sensorOrientation, s.front) }
     }
@@ -333,6 +344,8 @@ class CamProCamera internal constructor(
                 // After the frame thread has run what closeCamera queued (the reader's close, the last state).
                 frameHandler.post { frameThread.quitSafely() }
                 stillExecutor.shutdown()
+                previewSlot?.close()
+                previewExecutor.shutdown()
                 cameraThread.quitSafely()
             }
         } catch (e: RuntimeException) {

@@ -27,8 +27,8 @@ import org.campro.applied
  * state change: the cover is the only thing that moves, so the preview comes back on the
  * first verified frame without a flash or a new buffer queue.
  *
- * Threads: [render] runs on the camera's frame thread; everything else on the main thread.
- * The writer is shared between them under [lock].
+ * Threads: [render] runs on the camera's preview thread; everything else on the main thread.
+ * The writer reference is shared between them under [lock], never held across a call into it.
  */
 class CamProPreviewView @JvmOverloads constructor(
     context: Context,
@@ -106,23 +106,26 @@ class CamProPreviewView @JvmOverloads constructor(
     }
 
     /**
-     * One verified frame (frame thread): queued onto the surface, which then owns and
-     * closes it; closed here when there is no surface.
+     * One verified frame (the camera's preview thread, never the frame thread: the camera
+     * hands frames over through a latest-frame slot, [org.campro.LatestFrame]): queued onto
+     * the surface, which then owns and closes it; closed here when there is no surface.
+     * `queueInputImage` blocks while the writer has no free buffer (a hidden or stopped
+     * view), so it runs outside [lock]: tearing the view down meanwhile closes the writer
+     * under the call, which then throws and the frame is closed, and the main thread never
+     * waits for it.
      */
     fun render(image: Image) {
-        synchronized(lock) {
-            val w = writer
-            if (w != null) {
-                try {
-                    w.queueInputImage(image)
-                    framesShown++
-                    return
-                } catch (e: RuntimeException) {
-                    // The surface went away under us (IllegalStateException) or the format was refused.
-                }
+        val w = synchronized(lock) { writer }
+        if (w != null) {
+            try {
+                w.queueInputImage(image)
+                framesShown++
+                return
+            } catch (e: RuntimeException) {
+                // The surface went away under us (IllegalStateException) or the format was refused.
             }
-            framesDropped++
         }
+        framesDropped++
         image.close()
     }
 

@@ -3,9 +3,10 @@ package org.campro.android
 // CameraX support: CamProPipeline on a CameraX camera. CamPro's values (and the metering
 // switches) are set through Camera2 interop, every result is checked by the same fail-closed
 // ProtectionGuard, and ImageAnalysis frames wait in the FrameGate until their own result
-// verifies. CamPro owns the binding: `bind` binds its gated ImageAnalysis alone (a Preview,
-// ImageCapture or VideoCapture beside it would be fed straight from the camera, before any
-// result is checked, and interop options would reach still captures too):
+// verifies. `bind` binds its gated ImageAnalysis; a Preview, ImageCapture or VideoCapture the
+// app binds to the same camera would be fed straight from the camera, before any result is
+// checked, and CameraX cannot let a library see or refuse them: the path is delicate, opted
+// into with @OptIn(DelicateCameraXPath::class) (CamPro.open, on Camera2, has no such hole):
 //
 //     val campro = CamProCameraX(session, mainExecutor, deliver = { image -> render(image) }, onState = ::show)
 //     campro.bind(provider, owner, CameraSelector.DEFAULT_BACK_CAMERA, cameraManager, cameraExecutor)
@@ -41,7 +42,22 @@ import java.util.concurrent.ExecutionException
 import java.util.concurrent.Executor
 
 /**
- * CamPro on a CameraX camera, fail closed per frame.
+ * The CameraX path can leak: any `Preview`, `ImageCapture` or `VideoCapture` an app binds to
+ * the same camera gets frames before CamPro has verified them, and CameraX gives a library no
+ * way to list or refuse use cases. Use [CamProCameraX] only where the app binds nothing else
+ * to that camera; `CamPro.open` (Camera2, the library owns every stream) has no such hole.
+ */
+@RequiresOptIn(
+    level = RequiresOptIn.Level.ERROR,
+    message = "CamProCameraX cannot stop an app's own Preview, ImageCapture or VideoCapture on the same camera from getting unverified frames: bind nothing else to it, or use CamPro.open",
+)
+@Retention(AnnotationRetention.BINARY)
+@Target(AnnotationTarget.CLASS, AnnotationTarget.FUNCTION)
+annotation class DelicateCameraXPath
+
+/**
+ * CamPro on a CameraX camera, fail closed per frame ([DelicateCameraXPath]: bind nothing else
+ * to the camera).
  *
  * CameraX has no per-request tags or bursts, so metering is phased: [start] (and [remeter])
  * switch the camera to auto white balance until it converges, take the device's transform
@@ -50,6 +66,7 @@ import java.util.concurrent.Executor
  * otherwise frozen at the last metering.
  */
 @OptIn(markerClass = [ExperimentalCamera2Interop::class])
+@DelicateCameraXPath
 class CamProCameraX(
     val session: CamProSession,
     /** The app's executor: frames and states are delivered there. */
@@ -81,8 +98,19 @@ class CamProCameraX(
 
         override fun probe(transform: IntArray, curve: FloatArray, gains: FloatArray) = send(camproSettings(transform, arrayOf(curve, curve, curve), gains))
 
+        /**
+         * CamPro stopped for good (the app stopped it, Unsupported, a failure): its colour
+         * matrix, curve and AWB-off leave the camera (`clearCaptureRequestOptions`), and the
+         * analysis [bind] bound is unbound, so the camera stops streaming and the privacy
+         * indicator goes off. The gate is closed by the pipeline.
+         */
         override fun halt() {
-            // CameraX owns the repeating request; the gate is closed by the pipeline.
+            try {
+                control?.clearCaptureRequestOptions()
+            } catch (e: RuntimeException) {
+                // The camera is gone: nothing of CamPro's is left on it.
+            }
+            onMain { releaseBinding() }
         }
     }
 
@@ -111,7 +139,7 @@ class CamProCameraX(
      * Once only, and only on the use case whose frames are gated: a second callback would
      * check every result twice.
      */
-    fun extend(builder: ImageAnalysis.Builder) {
+    internal fun extend(builder: ImageAnalysis.Builder) {
         check(!extended) { "CamProCameraX.extend: already extended (one ImageAnalysis use case only)" }
         extended = true
         builder.setImageQueueDepth(queueDepth)
@@ -124,18 +152,20 @@ class CamProCameraX(
      * probes the device ([org.campro.PixelProbe]), their luma goes to the probe and the
      * frame is closed unseen (the pipeline decides).
      */
-    val analyzer: ImageAnalysis.Analyzer = ImageAnalysis.Analyzer { image -> pipeline.onFrame(image.imageInfo.timestamp, image) }
+    internal val analyzer: ImageAnalysis.Analyzer = ImageAnalysis.Analyzer { image -> pipeline.onFrame(image.imageInfo.timestamp, image) }
 
-    /** The provider and use case of [bind] (`null`: not bound by the library). */
+    /** The provider and use case of [bind] (`null`: not bound by the library). Main thread. */
+    @Volatile
     private var bound: Pair<ProcessCameraProvider, ImageAnalysis>? = null
 
     /**
-     * Binds CamPro's gated `ImageAnalysis` **alone** to [owner] on the camera [selector]
-     * picks, and starts: the library owns the binding. Everything bound to [provider] is
-     * unbound first: a `Preview`, `ImageCapture` or `VideoCapture` beside the analysis
-     * would get frames straight from the camera (metering frames in auto mode, frames whose
-     * result never verified), and interop options would apply to still captures too. Show
-     * and record the gated frames instead. The camera's support is read from its Camera2
+     * Binds CamPro's gated `ImageAnalysis` to [owner] on the camera [selector] picks, and
+     * starts. The app's other use cases are left alone (an earlier version unbound them all):
+     * a `Preview`, `ImageCapture` or `VideoCapture` on the same camera would get frames
+     * straight from the camera (metering frames in auto mode, frames whose result never
+     * verified), and interop options would apply to still captures too, so bind none
+     * ([DelicateCameraXPath]); show and record the gated frames instead. [unbind], then
+     * [bind] with another selector, switches cameras. The camera's support is read from its Camera2
      * characteristics ([cameras]); an unsupported camera ends Unsupported with nothing
      * delivered. [configure] may set the analysis' resolution or output format; its queue
      * depth, back-pressure and callbacks are CamPro's. Frames are analysed on
@@ -157,13 +187,14 @@ class CamProCameraX(
         configure: (ImageAnalysis.Builder) -> Unit = {},
     ): Camera {
         check(bound == null) { "CamProCameraX.bind: already bound (unbind() first)" }
+        extended = false
+        sessionsConfigured.set(0)
         val builder = ImageAnalysis.Builder()
         configure(builder)
         extend(builder)
         Camera2Interop.Extender(builder).setSessionStateCallback(sessionCallback)
         val analysis = builder.build()
         analysis.setAnalyzer(analysisExecutor, analyzer)
-        provider.unbindAll()
         val camera = provider.bindToLifecycle(owner, selector, analysis)
         bound = provider to analysis
         val support = try {
@@ -176,12 +207,24 @@ class CamProCameraX(
         return camera
     }
 
-    /** Stops CamPro and unbinds its analysis from the provider of [bind]. */
+    /** Stops CamPro (its options cleared from the camera) and unbinds its analysis from the provider of [bind]. Main thread. */
     fun unbind() {
         stop()
+        releaseBinding()
+    }
+
+    /** Unbinds the analysis [bind] bound, once (main thread). */
+    private fun releaseBinding() {
         val (provider, analysis) = bound ?: return
         bound = null
+        control = null
         provider.unbind(analysis)
+    }
+
+    /** Runs [body] on the main thread (CameraX binds there): at once when already on it. */
+    private fun onMain(body: () -> Unit) {
+        val main = android.os.Looper.getMainLooper()
+        if (android.os.Looper.myLooper() == main) body() else android.os.Handler(main).post(body)
     }
 
     /** The support of the camera bound by [bind] (`null` before). */

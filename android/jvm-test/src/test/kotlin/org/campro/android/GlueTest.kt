@@ -1,3 +1,5 @@
+@file:OptIn(DelicateCameraXPath::class)
+
 package org.campro.android
 
 import android.hardware.camera2.CameraCharacteristics
@@ -152,11 +154,21 @@ class GlueTest {
         val futures = mutableListOf<SettableFuture>()
 
         val sent = mutableListOf<CaptureRequestOptions>()
+        /** Calls to clearCaptureRequestOptions: CamPro's settings taken off the camera. */
+        var cleared = 0
         var failWith: RuntimeException? = null
+        override fun clearCaptureRequestOptions(): ListenableFuture<Void?> {
+            cleared++
+            return done()
+        }
         override fun setCaptureRequestOptions(options: CaptureRequestOptions): ListenableFuture<Void?> {
             failWith?.let { throw it }
             sent += options
             if (holdFutures) return SettableFuture().also { futures += it }
+            return done()
+        }
+
+        private fun done(): ListenableFuture<Void?> {
             return object : ListenableFuture<Void?> {
                 override fun addListener(listener: Runnable, executor: Executor) = executor.execute(listener)
                 override fun cancel(mayInterruptIfRunning: Boolean) = false
@@ -320,8 +332,8 @@ class GlueTest {
         val x = CamProCameraX(session, direct, deliver = { it.close() })
         val owner = Fixtures.TestOwner()
         x.bind(provider, owner, CameraSelector.DEFAULT_BACK_CAMERA, cameraManager("7", supportedCharacteristics()), direct) { it.setImageQueueDepth(1) }
-        // Everything the app bound is unbound first; CamPro's analysis is bound alone, extended (its queue, not the app's).
-        assertEquals(listOf("unbindAll", "bind 1"), provider.calls)
+        // The app's other use cases are left alone (DelicateCameraXPath says why); CamPro's analysis is extended (its queue, not the app's).
+        assertEquals(listOf("bind 1"), provider.calls)
         val analysis = provider.boundCases.single() as ImageAnalysis
         assertEquals(CamProPipeline.imageQueueDepth(8), analysis.builder.queueDepth)
         assertTrue(analysis.builder.sessionCaptureCallback != null && analysis.builder.sessionStateCallback != null && analysis.builder.analyzer != null)
@@ -340,6 +352,16 @@ class GlueTest {
         x.unbind()
         assertEquals("unbind 1", provider.calls.last())
         assertTrue(provider.boundCases.isEmpty())
+        assertEquals("CamPro's matrix, curve and AWB-off taken off the camera", 1, control.cleared)
+        // Switching cameras: unbind, then bind another one.
+        val front = RecordingControl()
+        val provider2 = RecordingProvider(cameraOf("9", front))
+        x.bind(provider2, owner, CameraSelector.DEFAULT_FRONT_CAMERA, cameraManager("9", supportedCharacteristics()), direct)
+        assertEquals(listOf("bind 1"), provider2.calls)
+        assertEquals(ProtectionState.Verifying, x.state)
+        assertEquals(CaptureRequest.CONTROL_AWB_MODE_AUTO, front.sent.single().getCaptureRequestOption(CaptureRequest.CONTROL_AWB_MODE))
+        assertEquals("nothing more to the first camera", 2, control.sent.size)
+        x.unbind()
     }
 
     @Test
@@ -347,10 +369,13 @@ class GlueTest {
         val direct = Executor { it.run() }
         val control = RecordingControl()
         val x = CamProCameraX(session, direct, deliver = { it.close() })
-        x.bind(RecordingProvider(cameraOf("8", control)), Fixtures.TestOwner(), CameraSelector.DEFAULT_FRONT_CAMERA, cameraManager("8", supportedCharacteristics(syncLatency = -1)), direct)
+        val provider = RecordingProvider(cameraOf("8", control))
+        x.bind(provider, Fixtures.TestOwner(), CameraSelector.DEFAULT_FRONT_CAMERA, cameraManager("8", supportedCharacteristics(syncLatency = -1)), direct)
         val s = x.state
         assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("SYNC_MAX_LATENCY"))
         assertTrue("nothing sent to an unsupported camera", control.sent.isEmpty())
+        // Unsupported is final: the analysis is unbound, so the camera stops streaming (the privacy indicator goes off).
+        assertEquals(listOf("bind 1", "unbind 1"), provider.calls)
     }
 
     @Test

@@ -27,6 +27,7 @@ class CaptureRequestOptions private constructor(private val options: Map<Capture
 /** Stub of Camera2CameraControl: open so tests can record or fail calls. */
 open class Camera2CameraControl protected constructor() {
     open fun setCaptureRequestOptions(options: CaptureRequestOptions): ListenableFuture<Void?> = throw UnsupportedOperationException("stub")
+    open fun clearCaptureRequestOptions(): ListenableFuture<Void?> = throw UnsupportedOperationException("stub")
 
     companion object {
         /** The stub's way for tests to answer: a [CameraControl] that is also a Camera2CameraControl. */

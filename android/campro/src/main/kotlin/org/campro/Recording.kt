@@ -175,6 +175,21 @@ class RecordContext(
 
 /** Where records lie and the hashes they hold. */
 object Records {
+    /** `MediaFormat.MIMETYPE_VIDEO_AVC` and `MIMETYPE_VIDEO_HEVC`. */
+    const val AVC = "video/avc"
+    const val HEVC = "video/hevc"
+
+    /**
+     * The video codec to record with: [wanted] when the device encodes it at [width] x
+     * [height] ([supports]), else H.264 for HEVC (the one every Android device must encode);
+     * `null` when neither is available at that size.
+     */
+    fun chooseVideoMime(wanted: String, width: Int, height: Int, supports: (String, Int, Int) -> Boolean): String? = when {
+        supports(wanted, width, height) -> wanted
+        wanted == HEVC && supports(AVC, width, height) -> AVC
+        else -> null
+    }
+
     /** The record of [output]: its name with `.campro.json` appended, beside it. */
     fun pathOf(output: java.io.File) = java.io.File(output.path + ".campro.json")
 

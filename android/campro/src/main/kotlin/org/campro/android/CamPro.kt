@@ -115,8 +115,16 @@ data class CamProOptions @JvmOverloads constructor(
      * [org.campro.ProtectionState.Applied], never Protected, and faces are NOT hidden.
      */
     val allowUnprotective: Boolean = false,
+    /**
+     * Largest deviation, in 8-bit LSB, of what the camera reports it applied from what was
+     * sent ([org.campro.ProtectionGuard.maxDeviationLsb]). 0.5 (the default) refuses a HAL
+     * that rounds the matrix to 1/1024; raise it only to a bound the preset was measured to
+     * protect at on that device's grid (docs/android.md, "Grids").
+     */
+    val maxDeviationLsb: Double = 0.5,
 ) {
     init {
+        require(maxDeviationLsb.isFinite() && maxDeviationLsb >= 0.0) { "maxDeviationLsb must be finite and >= 0, got $maxDeviationLsb" }
         require(maxWidth > 0 && maxHeight > 0) { "maxWidth and maxHeight must be positive, got $maxWidth x $maxHeight" }
         require(stillTimeoutMs > 0) { "stillTimeoutMs must be positive, got $stillTimeoutMs" }
         require(jpegQuality in 1..100) { "jpegQuality must be 1..100, got $jpegQuality" }

@@ -81,8 +81,10 @@ class ActiveRecording internal constructor(
  * capture target, so no consumer can see a frame the gate did not pass.
  *
  * Threads and ownership: camera calls and the fields below marked "camera thread" run on
- * `campro-camera`; frames, states and the recording on `campro-frames`; JPEG encoding on
- * `campro-still`; callbacks and the preview on the main thread. [state] may be read anywhere.
+ * `campro-camera`; frames, states and the recording's copies on `campro-frames`; the preview's
+ * writes on `campro-preview` (latest frame only: a stalled view drops preview frames, nothing
+ * else); JPEG encoding and recordings' ends on `campro-background`; callbacks and the view on
+ * the main thread. [state] may be read anywhere.
  */
 class CamProCamera internal constructor(
     private val context: Context,
@@ -99,7 +101,8 @@ class CamProCamera internal constructor(
     private val frameThread = HandlerThread("campro-frames").apply { start() }
     private val frameHandler = Handler(frameThread.looper)
     private val frameExecutor = Executor { if (!frameHandler.post(it)) throw RejectedExecutionException("the camera is closed") }
-    private val stillExecutor = Executors.newSingleThreadExecutor { r -> Thread(r, "campro-still") }
+    /** Stills' encoding and recordings' ends: work that may wait, off the frame thread. */
+    private val backgroundExecutor = Executors.newSingleThreadExecutor { r -> Thread(r, "campro-background") }
 
     /** The preview's own thread: `ImageWriter.queueInputImage` may block there, never on the frame thread that feeds recordings and stills. */
     private val previewExecutor = Executors.newSingleThreadExecutor { r -> Thread(r, "campro-preview") }
@@ -119,7 +122,7 @@ class CamProCamera internal constructor(
     /** Verified frames, in order: stills, the recording, the preview. */
     private val router = FrameRouter<Image> { it.close() }
 
-    private val stills = StillCapture<Image, Pair<ImageSnapshot, RecordContext?>>({ image -> ImageSnapshot.of(image) to recordContext() }, stillExecutor)
+    private val stills = StillCapture<Image, Pair<ImageSnapshot, RecordContext?>>({ image -> ImageSnapshot.of(image) to recordContext() }, backgroundExecutor)
 
     /** The preset's bytes for records, set when the camera opens (camera thread). */
     @Volatile
@@ -224,30 +227,70 @@ class CamProCamera internal constructor(
         deviceOrientation: Int? = null,
         onEnded: (RecordingResult) -> Unit = {},
     ): ActiveRecording {
-        val c = campro ?: throw IllegalStateException("the camera is not open (state: ${mutableState.value})")
-        val s = stream ?: throw IllegalStateException("the camera is not open")
-        check(active == null) { "a recording is under way" }
-        val recordFile = Records.pathOf(output)
-        if (recordFile.exists() && !recordingOptions.overwrite) throw IOException("$recordFile exists: pass RecordingOptions(overwrite = true) to replace it")
-        val rotation = Orientation.stillRotation(s.sensorOrientation, deviceOrientation ?: deviceOrientationFromDisplay(), s.front)
-        val encoder = MediaCodecEncoder(output, s.width, s.height, rotation, recordingOptions)
-        val rec = ProtectedRecording(encoder, Image::getTimestamp) { c.pipeline.gate.dropped }
-        val a = ActiveRecording(output, rec, recordingOptions.overwrite, onEnded, ::stopRecording)
-        active = a
-        router.recording = rec
-        return a
+        // Under the lock closeCamera takes: a recording either starts before the camera closes
+        // (and closing ends it) or finds it closed; it never runs on into the next session.
+        synchronized(recordingLock) {
+            val c = campro ?: throw IllegalStateException("the camera is not open (state: ${mutableState.value})")
+            val s = stream ?: throw IllegalStateException("the camera is not open")
+            check(active == null) { "a recording is under way" }
+            val recordFile = Records.pathOf(output)
+            if (recordFile.exists() && !recordingOptions.overwrite) throw IOException("$recordFile exists: pass RecordingOptions(overwrite = true) to replace it")
+            val rotation = Orientation.stillRotation(s.sensorOrientation, deviceOrientation ?: deviceOrientationFromDisplay(), s.front)
+            val encoder = MediaCodecEncoder(output, s.width, s.height, rotation, recordingOptions)
+            val rec = ProtectedRecording(encoder, Image::getTimestamp) { c.pipeline.gate.dropped }
+            val a = ActiveRecording(output, rec, recordingOptions.overwrite, onEnded, ::stopRecording)
+            active = a
+            router.recording = rec
+            return a
+        }
+    }
+
+    /** Guards the pair (the open camera, the recording under way) between [startRecording] and [closeCamera]. */
+    private val recordingLock = Any()
+
+    /**
+     * Meters the light again now (the scene changed: indoors to outdoors): on a camera with
+     * per-frame control metering also runs in every burst, adaptively; on one without, only
+     * here, with the preview closed meanwhile. The pixel probe runs again too. Any thread.
+     */
+    fun remeter() {
+        try {
+            cameraHandler.post { campro?.pipeline?.remeter() }
+        } catch (e: RuntimeException) {
+            // Closed: nothing to meter.
+        }
     }
 
     /** The recording under way, if any. */
     @Volatile
     private var active: ActiveRecording? = null
 
-    /** Ends [a] on the frame thread (after the frames already queued), then reports on the main thread; once. */
+    /**
+     * Ends [a]: detached on the frame thread (after the frames already queued), finished on
+     * the background thread (the encoder's end of stream may wait for the codec: never on the
+     * frame thread, which feeds the preview and stills), then reported on the main thread; once.
+     */
     private fun stopRecording(a: ActiveRecording, reason: String) {
         val ctx = recordContext() // now, while the camera's values are there
         val task = Runnable {
             if (!a.recording.isActive) return@Runnable
             if (router.recording === a.recording) router.recording = null
+            try {
+                backgroundExecutor.execute { finishRecording(a, reason, ctx) }
+            } catch (e: RejectedExecutionException) {
+                finishRecording(a, reason, ctx)
+            }
+        }
+        try {
+            frameExecutor.execute(task)
+        } catch (e: RejectedExecutionException) {
+            task.run()
+        }
+    }
+
+    /** Finishes [a]'s file and record, then reports on the main thread (background thread). */
+    private fun finishRecording(a: ActiveRecording, reason: String, ctx: RecordContext?) {
+        run {
             if (active === a) active = null
             val result = try {
                 val summary = a.recording.stop(reason)
@@ -272,11 +315,6 @@ class CamProCamera internal constructor(
                 RecordingResult.Failed(e.message ?: "the recording failed")
             }
             main.post { a.onEnded(result) }
-        }
-        try {
-            frameExecutor.execute(task)
-        } catch (e: RejectedExecutionException) {
-            task.run()
         }
     }
 
@@ -343,7 +381,7 @@ class CamProCamera internal constructor(
                 closeCamera("closed by the app")
                 // After the frame thread has run what closeCamera queued (the reader's close, the last state).
                 frameHandler.post { frameThread.quitSafely() }
-                stillExecutor.shutdown()
+                backgroundExecutor.shutdown()
                 previewSlot?.close()
                 previewExecutor.shutdown()
                 cameraThread.quitSafely()
@@ -407,6 +445,7 @@ class CamProCamera internal constructor(
                     deliver = router::deliver,
                     onState = ::publish,
                     trustMissingKeys = options.trustMissingKeys,
+                    maxDeviationLsb = options.maxDeviationLsb,
                     format = ImageFormat.YUV_420_888,
                     usage = HardwareBuffer.USAGE_CPU_READ_OFTEN or HardwareBuffer.USAGE_GPU_SAMPLED_IMAGE,
                 )
@@ -466,14 +505,20 @@ class CamProCamera internal constructor(
 
     /** Closes the camera, stops a recording and fails waiting stills with [reason]; the state becomes Stopped. */
     private fun closeCamera(reason: String) {
-        active?.let { stopRecording(it, reason) } // first: its record needs the camera's values
-        val c = campro
-        campro = null
-        stream = null
-        c?.close()
-        c?.session?.close()
+        val c: CamProCamera2?
+        synchronized(recordingLock) {
+            active?.let { stopRecording(it, reason) } // first: its record needs the camera's values
+            c = campro
+            campro = null
+            stream = null
+        }
+        // The requests stop, then the device (and its session) closes, then the readers: a
+        // reader closed under a running session makes the HAL drop buffers into a dead queue.
+        c?.pipeline?.stop(reason)
         device?.close()
         device = null
+        c?.close()
+        c?.session?.close()
         stills.fail(reason)
         // Queued behind the pipeline's own last state on the frame thread, so this one is final.
         try {

@@ -44,8 +44,17 @@ data class RecordingOptions(
  * 1.4 MB a 720p frame) because one verified image feeds the preview too; the encoder never
  * sees a frame the gate did not pass.
  *
- * Threads: [encode], [finish] and [abandon] on the frame thread; the codec's callbacks on
- * this encoder's own thread. Android only: compiled against the framework in CI, run on phones.
+ * The stream is tagged as the camera's `YUV_420_888` is: full range, BT.601 matrix, SDR video
+ * transfer (`KEY_COLOR_RANGE`/`STANDARD`/`TRANSFER`), so players do not read it as limited
+ * range (crushed blacks, clipped whites). The codec is chosen for the size first: HEVC falls
+ * back to H.264 when the device has no HEVC encoder for [width] x [height] ([mime] says which
+ * was used); neither is an [IOException] before anything is written. A codec or muxer that
+ * fails to configure releases everything it took (the thread, the muxer, the `.part` file).
+ *
+ * Threads: [encode] on the frame thread (it copies the borrowed frame: a few milliseconds);
+ * [finish] and [abandon] on any one thread (the camera runs them off the frame thread: the
+ * end of stream may wait for the codec); the codec's callbacks on this encoder's own thread.
+ * Android only: compiled against the framework in CI, run on phones.
  */
 class MediaCodecEncoder(
     private val output: File,
@@ -54,9 +63,15 @@ class MediaCodecEncoder(
     /** Clockwise degrees a player turns the video (`MediaMuxer.setOrientationHint`). */
     orientationHint: Int,
     private val options: RecordingOptions = RecordingOptions(),
+    /** Whether this device has an encoder of a MIME type for a size (default: `MediaCodecList`; tests script it). */
+    supports: (mime: String, width: Int, height: Int) -> Boolean = ::deviceEncodes,
 ) : VideoEncoder<Image> {
+    /** The codec used: [RecordingOptions.mime], or H.264 where HEVC is not available at this size. */
+    val mime: String = org.campro.Records.chooseVideoMime(options.mime, width, height, supports)
+        ?: throw IOException("this device has no H.264 or HEVC encoder for $width x $height")
+
     private val part = partOf(output)
-    private val thread = HandlerThread("campro-encoder").apply { start() }
+    private val thread: HandlerThread
     private val codec: MediaCodec
     private val muxer: MediaMuxer
     private val freeInputs = LinkedBlockingQueue<Int>()
@@ -69,26 +84,43 @@ class MediaCodecEncoder(
 
     private val ended = CountDownLatch(1)
 
+    /** Why the recording failed (`null`: it has not); the frames after it are refused. */
     @Volatile
-    private var failure: String? = null
+    var failure: String? = null
+        private set
     private var lastUs = 0L
 
     init {
         if (output.exists() && !options.overwrite) throw IOException("$output exists: pass RecordingOptions(overwrite = true) to replace it")
         part.delete()
-        muxer = MediaMuxer(part.path, MediaMuxer.OutputFormat.MUXER_OUTPUT_MPEG_4)
-        muxer.setOrientationHint(((orientationHint % 360) + 360) % 360)
-        codec = MediaCodec.createEncoderByType(options.mime)
-        val bitRate = if (options.bitRate > 0) options.bitRate else (0.2 * width * height * 30).toInt()
-        val format = MediaFormat.createVideoFormat(options.mime, width, height).apply {
-            setInteger(MediaFormat.KEY_COLOR_FORMAT, MediaCodecInfo.CodecCapabilities.COLOR_FormatYUV420Flexible)
-            setInteger(MediaFormat.KEY_BIT_RATE, bitRate)
-            setInteger(MediaFormat.KEY_FRAME_RATE, 30)
-            setInteger(MediaFormat.KEY_I_FRAME_INTERVAL, 1)
+        var t: HandlerThread? = null
+        var m: MediaMuxer? = null
+        var c: MediaCodec? = null
+        try {
+            t = HandlerThread("campro-encoder").apply { start() }
+            m = MediaMuxer(part.path, MediaMuxer.OutputFormat.MUXER_OUTPUT_MPEG_4)
+            m.setOrientationHint(((orientationHint % 360) + 360) % 360)
+            c = MediaCodec.createEncoderByType(mime)
+            c.setCallback(callback(), Handler(t.looper))
+            c.configure(format(mime, width, height, options.bitRate), null, null, MediaCodec.CONFIGURE_FLAG_ENCODE)
+        } catch (e: Exception) {
+            runCatching { c?.release() }
+            runCatching { m?.release() }
+            t?.quitSafely()
+            part.delete()
+            throw IOException("the $mime encoder for $width x $height could not start: ${e.message}", e)
         }
-        codec.setCallback(callback(), Handler(thread.looper))
-        codec.configure(format, null, null, MediaCodec.CONFIGURE_FLAG_ENCODE)
-        codec.start()
+        // Every field the callbacks use is set before the codec starts calling them.
+        thread = t
+        muxer = m
+        codec = c
+        try {
+            c.start()
+        } catch (e: Exception) {
+            release()
+            part.delete()
+            throw IOException("the $mime encoder for $width x $height could not start: ${e.message}", e)
+        }
     }
 
     private fun callback() = object : MediaCodec.Callback() {
@@ -141,7 +173,10 @@ class MediaCodecEncoder(
         return try {
             val dst = codec.getInputImage(index) ?: throw IllegalStateException("no input image")
             copyYuv(frame, dst)
-            codec.queueInputBuffer(index, 0, width * height * 3 / 2, presentationUs, 0)
+            // The size the codec's own layout spans (its buffer, padding and alignment
+            // included), not a packed 4:2:0 size: a codec with aligned rows reads all of it.
+            val size = codec.getInputBuffer(index)?.capacity() ?: (width * height * 3 / 2)
+            codec.queueInputBuffer(index, 0, size, presentationUs, 0)
             lastUs = presentationUs
             true
         } catch (e: RuntimeException) {
@@ -202,7 +237,27 @@ class MediaCodecEncoder(
         thread.quitSafely()
     }
 
-    private companion object {
+    internal companion object {
         const val END_TIMEOUT_MS = 5000L
+
+        /** The encoder's format: flexible YUV in, the camera's colour tags, 0.2 bits a pixel at 30 fps unless [bitRate] is set. */
+        fun format(mime: String, width: Int, height: Int, bitRate: Int): MediaFormat =
+            MediaFormat.createVideoFormat(mime, width, height).apply {
+                setInteger(MediaFormat.KEY_COLOR_FORMAT, MediaCodecInfo.CodecCapabilities.COLOR_FormatYUV420Flexible)
+                setInteger(MediaFormat.KEY_BIT_RATE, if (bitRate > 0) bitRate else (0.2 * width * height * 30).toInt())
+                setInteger(MediaFormat.KEY_FRAME_RATE, 30)
+                setInteger(MediaFormat.KEY_I_FRAME_INTERVAL, 1)
+                // Camera2's YUV_420_888 is JFIF: full range, BT.601 matrix; sRGB-like SDR transfer.
+                setInteger(MediaFormat.KEY_COLOR_RANGE, MediaFormat.COLOR_RANGE_FULL)
+                setInteger(MediaFormat.KEY_COLOR_STANDARD, MediaFormat.COLOR_STANDARD_BT601_PAL)
+                setInteger(MediaFormat.KEY_COLOR_TRANSFER, MediaFormat.COLOR_TRANSFER_SDR_VIDEO)
+            }
+
+        /** Whether `MediaCodecList` has an encoder of [mime] for [width] x [height]. */
+        fun deviceEncodes(mime: String, width: Int, height: Int): Boolean =
+            android.media.MediaCodecList(android.media.MediaCodecList.REGULAR_CODECS).codecInfos.any { info ->
+                info.isEncoder && info.supportedTypes.any { it.equals(mime, ignoreCase = true) } &&
+                    runCatching { info.getCapabilitiesForType(mime).videoCapabilities?.isSizeSupported(width, height) == true }.getOrDefault(false)
+            }
     }
 }

@@ -248,7 +248,7 @@ class CamProCameraTest {
         onCamera(c) { c.glue!!.pipeline.onFrame(2000, frame) }
         assertTrue("waits for its result", stills.isEmpty())
         verify(c, 2000)
-        Thread.sleep(200) // the JPEG is encoded on campro-still
+        Thread.sleep(200) // the JPEG is encoded on campro-background
         settle(c)
         val taken = stills.single() as StillResult.Taken
         assertEquals(2000L, taken.timestampNs)

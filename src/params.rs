@@ -335,6 +335,13 @@ impl Params {
     pub fn protective(&self) -> bool {
         self.provenance_fields().is_ok_and(|p| p.protective())
     }
+
+    /// The grids a phone's HAL may put this set's values on with its protection measured to
+    /// hold (`provenance.protection.device_grids.held`); none for a set that is not
+    /// protective, or whose provenance does not read.
+    pub fn device_grids(&self) -> Vec<crate::provenance::DeviceGrid> {
+        self.provenance_fields().ok().filter(|p| p.protective()).map(|p| p.device_grids).unwrap_or_default()
+    }
 }
 
 /// The provenance key of a set's rating for grey input ([`Params::rated_for_grey`]).

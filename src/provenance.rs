@@ -41,6 +41,49 @@ pub const WORST_TOP1: &str = "worst_top1";
 /// attacks of its Sec. VII (trained/README.md); `campro-omega-1` (19%) and
 /// `campro-omega-5` (39%) are above it.
 pub const PROTECTIVE_TOP1: f64 = 0.15;
+/// `provenance.protection.device_grids`: the grids a phone's HAL may put the values on with
+/// the set's protection measured to hold there (`{"held": ["q10", "lut64"], "refused":
+/// [...], "measured": "..."}`): `qB`, matrix entries rounded to B fractional bits (1..=24);
+/// `lutN`, each curve resampled to N evenly spaced points (2..=4096). Measured by
+/// `campro check` on held-out faces as that HAL applies the values (docs/android.md, "Grids");
+/// the Android guard accepts a device on one of the `held` grids, and no other deviation
+/// beyond half an LSB.
+pub const DEVICE_GRIDS: &str = "device_grids";
+/// `provenance.protection.device_grids.held`.
+pub const HELD: &str = "held";
+
+/// One grid of [`DEVICE_GRIDS`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum DeviceGrid {
+    /// Matrix entries rounded to this many fractional bits.
+    MatrixBits(u8),
+    /// Each curve resampled to this many evenly spaced points.
+    CurvePoints(u16),
+}
+
+impl DeviceGrid {
+    /// Reads `qB` or `lutN`; `None` for anything else or out of range.
+    pub fn parse(s: &str) -> Option<Self> {
+        if let Some(b) = s.strip_prefix('q') {
+            let b: u8 = b.parse().ok()?;
+            (1..=24).contains(&b).then_some(Self::MatrixBits(b))
+        } else if let Some(n) = s.strip_prefix("lut") {
+            let n: u16 = n.parse().ok()?;
+            (2..=4096).contains(&n).then_some(Self::CurvePoints(n))
+        } else {
+            None
+        }
+    }
+}
+
+impl std::fmt::Display for DeviceGrid {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::MatrixBits(b) => write!(f, "q{b}"),
+            Self::CurvePoints(n) => write!(f, "lut{n}"),
+        }
+    }
+}
 
 /// A network's or detector's file field (a bare file name beside the parameter file).
 pub const ONNX: &str = "onnx";
@@ -74,6 +117,8 @@ pub struct Provenance {
     pub grey_rated: bool,
     /// [`WORST_TOP1`] of the set's protection rating, when it has one.
     pub worst_top1: Option<f64>,
+    /// The `held` grids of [`DEVICE_GRIDS`] (empty: none measured).
+    pub device_grids: Vec<DeviceGrid>,
 }
 
 /// A provenance field of the wrong shape: the field's path and the rule.
@@ -145,6 +190,20 @@ impl Provenance {
             Some(Some(Value::Number(n))) if n.as_f64().is_some_and(|t| (0.0..=1.0).contains(&t)) => n.as_f64(),
             Some(_) => return bad("protection.worst_top1", "must be a number in 0..=1"),
         };
+        const GRIDS_RULE: &str = "must be an array of at most 16 grid names: qB (B 1..=24) or lutN (N 2..=4096)";
+        let grids = object(m, PROTECTION, PROTECTION)?
+            .map(|o| object(o, DEVICE_GRIDS, "protection.device_grids"))
+            .transpose()?
+            .flatten();
+        let device_grids = match grids.and_then(|g| g.get(HELD)) {
+            None | Some(Value::Null) => Vec::new(),
+            Some(Value::Array(a)) if a.len() <= 16 => a
+                .iter()
+                .map(|v| v.as_str().and_then(DeviceGrid::parse))
+                .collect::<Option<Vec<_>>>()
+                .map_or_else(|| bad("protection.device_grids.held", GRIDS_RULE), Ok)?,
+            Some(_) => return bad("protection.device_grids.held", GRIDS_RULE),
+        };
         Ok(Self {
             enhancer: named(m, ENHANCER)?,
             restorer: named(m, RESTORER)?,
@@ -153,6 +212,7 @@ impl Provenance {
             best_round,
             grey_rated,
             worst_top1,
+            device_grids,
         })
     }
 
@@ -194,6 +254,32 @@ mod tests {
             read(json!({"enhancer": {"steps": 3}, "validation": {"best_round": null}})).unwrap(),
             Provenance::default()
         );
+    }
+
+    #[test]
+    fn device_grids_by_hand() {
+        let p = read(json!({"protection": {"worst_top1": 0.11, "device_grids": {"held": ["q10", "q7", "lut64"], "refused": ["lut17"]}}})).unwrap();
+        assert_eq!(
+            p.device_grids,
+            [DeviceGrid::MatrixBits(10), DeviceGrid::MatrixBits(7), DeviceGrid::CurvePoints(64)]
+        );
+        assert_eq!(p.device_grids.iter().map(ToString::to_string).collect::<Vec<_>>(), ["q10", "q7", "lut64"]);
+        assert!(read(json!({"protection": {"worst_top1": 0.11}})).unwrap().device_grids.is_empty());
+        for bad_grids in [
+            json!(["q0"]),
+            json!(["q25"]),
+            json!(["lut1"]),
+            json!(["lut4097"]),
+            json!(["Q10"]),
+            json!([10]),
+            json!("q10"),
+            json!(vec!["q10"; 17]),
+        ] {
+            let e = read(json!({"protection": {"worst_top1": 0.1, "device_grids": {"held": bad_grids}}})).unwrap_err();
+            assert_eq!(e.field, "protection.device_grids.held");
+        }
+        let e = read(json!({"protection": {"worst_top1": 0.1, "device_grids": ["q10"]}})).unwrap_err();
+        assert_eq!(e.field, "protection.device_grids");
     }
 
     #[test]

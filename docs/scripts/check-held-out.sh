@@ -11,11 +11,17 @@
 # similarity over models, and the faces whose true person ranks first. The time and peak
 # memory of each run are /usr/bin/time's.
 #
-# Usage: [PRESETS="a b …"] [KEEP=DIR] [MODELS=DIR] docs/scripts/check-held-out.sh [N]
+# Usage: [PRESETS="a b …"] [KEEP=DIR] [MODELS=DIR] [VIEWS="captured …"] [GRIDS="exact q10 …"]
+#        docs/scripts/check-held-out.sh [N]
 #   PRESETS: the presets to check (default: every bundled one); KEEP: a folder that keeps each
 #   preset's report (`campro check -o`: check.csv, check.json, the HTML page) as DIR/PRESET.
 #   MODELS: the models folder (`--models`; e.g. the data folder `campro models fetch` fills,
-#   for the default set: CenterFace and faceplugin), else SHARED/models.
+#   for the default set: CenterFace and faceplugin), else SHARED/models. VIEWS: `--view`s.
+#   GRIDS: check each preset as a phone's HAL applies it (the "grid" column; docs/android.md,
+#   "Grids"): `exact` (the device transform below, values as sent), `q10`/`q7` (matrix entries
+#   rounded to 10 or 7 fractional bits), `lut17`/`lut33`/`lut64` (the curve resampled to that
+#   many points); the device transform is DEVICE_CCM (nine numbers; default a phone's auto-mode
+#   transform, the Android tests' Fixtures.PHONE). Without GRIDS: the ideal camera, as before.
 # Needs: a release build (cargo build --release -p campro-cli), python3, GNU time, ../shared
 # (or CAMPRO_SHARED) with data/lfw.
 set -euo pipefail
@@ -47,14 +53,30 @@ for name in sorted(ids):
 print(f"{kept} identities, {2 * kept} photos", file=sys.stderr)
 PY
 
-echo "| preset | view | faces | linkable at 1e-3 | at 1e-2 | median similarity | worst | rank 1 |"
-echo "|---|---|---|---|---|---|---|---|"
+device_ccm="${DEVICE_CCM:-1.78 -0.62 -0.16 -0.28 1.62 -0.34 0.02 -0.71 1.69}"
+grid_flags() {
+  case "$1" in
+    ideal) ;;
+    exact) echo "--device-ccm $device_ccm" ;;
+    q[0-9]*) echo "--device-ccm $device_ccm --matrix-frac-bits ${1#q}" ;;
+    lut[0-9]*) echo "--device-ccm $device_ccm --lut-size ${1#lut}" ;;
+    *) echo "GRIDS: unknown grid $1 (exact, qN, lutN)" >&2; exit 2 ;;
+  esac
+}
+views=""
+for v in ${VIEWS:-}; do views="$views --view $v"; done
+
+echo "| preset | grid | view | faces | linkable at 1e-3 | at 1e-2 | median similarity | worst | rank 1 |"
+echo "|---|---|---|---|---|---|---|---|---|"
 for preset in $presets; do
-  /usr/bin/time -f "$preset: %e s, %M KB" -a -o "$work/times" \
-    "$campro" check "$preset" "$work/photos" -o "$work/report-$preset" ${MODELS:+--models "$MODELS"} > "$work/lines-$preset" 2>&1
-  python3 - "$preset" "$work/report-$preset/check.csv" <<'PY'
+ for grid in ${GRIDS:-ideal}; do
+  run="$preset${GRIDS:+-$grid}"
+  # shellcheck disable=SC2046 # the flags are words
+  /usr/bin/time -f "$run: %e s, %M KB" -a -o "$work/times" \
+    "$campro" check "$preset" "$work/photos" -o "$work/report-$run" ${MODELS:+--models "$MODELS"} $views $(grid_flags "$grid") > "$work/lines-$run" 2>&1
+  python3 - "$preset" "$grid" "$work/report-$run/check.csv" <<'PY'
 import collections, csv, statistics, sys
-preset, path = sys.argv[1], sys.argv[2]
+preset, grid, path = sys.argv[1], sys.argv[2], sys.argv[3]
 faces = collections.defaultdict(lambda: collections.defaultdict(list))
 for r in csv.DictReader(open(path)):
     faces[r["view"]][(r["photo"], r["face"])].append(r)
@@ -63,17 +85,20 @@ for view, by_face in faces.items():
     l3 = sum(any(x["linkable_far_1e-3"] == "true" for x in rs) for rs in by_face.values())
     l2 = sum(any(x["linkable_far_1e-2"] == "true" for x in rs) for rs in by_face.values())
     r1 = sum(any(x["rank"] == "1" for x in rs) for rs in by_face.values())
-    print(f"| {preset} | {view} | {len(by_face)} | {l3} | {l2} | {statistics.median(worst):.2f} | {max(worst):.2f} | {r1} |")
+    print(f"| {preset} | {grid} | {view} | {len(by_face)} | {l3} | {l2} | {statistics.median(worst):.2f} | {max(worst):.2f} | {r1} |")
 PY
+ done
 done
+runs=""
+for preset in $presets; do for grid in ${GRIDS:-ideal}; do runs="$runs $preset${GRIDS:+-$grid}"; done; done
 if [ -n "${KEEP:-}" ]; then
   mkdir -p "$KEEP"
-  for preset in $presets; do cp -r "$work/report-$preset" "$KEEP/$preset"; done
+  for run in $runs; do cp -r "$work/report-$run" "$KEEP/$run"; done
 fi
 echo
 echo "Summary lines:"
-for preset in $presets; do
-  echo "- $preset: $(grep -E 'faces linkable|face linkable' "$work/lines-$preset" | tail -1)"
+for run in $runs; do
+  echo "- $run: $(grep -E 'faces linkable|face linkable' "$work/lines-$run" | tail -1)"
 done
 echo
 cat "$work/times"

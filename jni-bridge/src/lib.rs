@@ -440,6 +440,23 @@ pub extern "system" fn Java_org_campro_CamProNative_protective<'local>(
         .resolve::<ThrowJava>()
 }
 
+/// `deviceGrids(handle: Long): String`: the grids a HAL may put the values on with the set's
+/// protection measured to hold ([`campro::Params::device_grids`]), comma-separated (`q10,lut64`;
+/// empty: none).
+#[unsafe(no_mangle)]
+pub extern "system" fn Java_org_campro_CamProNative_deviceGrids<'local>(
+    mut env: EnvUnowned<'local>,
+    _class: JClass<'local>,
+    handle: jlong,
+) -> JString<'local> {
+    env.with_env(|env| -> Result<JString<'local>> {
+        let grids = with_loop(handle, |l| Ok(l.params().device_grids()))?;
+        let text = grids.iter().map(ToString::to_string).collect::<Vec<_>>().join(",");
+        Ok(env.new_string(text)?)
+    })
+    .resolve::<ThrowJava>()
+}
+
 /// `setMaxCurvePoints(handle: Long, n: Int)`: the device's `TONEMAP_MAX_CURVE_POINTS`.
 #[unsafe(no_mangle)]
 pub extern "system" fn Java_org_campro_CamProNative_setMaxCurvePoints<'local>(

@@ -68,6 +68,9 @@ object CamProNative {
     @JvmStatic external fun liveHandles(): Int
     /** Whether the session's parameter set is protective (a protection rating within the threshold, `campro::Params::protective`). */
     @JvmStatic external fun protective(handle: Long): Boolean
+
+    /** The grids a HAL may put the values on with the set's protection measured to hold, comma-separated (`q10,lut64`; `campro::Params::device_grids`). */
+    @JvmStatic external fun deviceGrids(handle: Long): String
     @JvmStatic external fun setMaxCurvePoints(handle: Long, n: Int)
     @JvmStatic external fun setDngCalibration(handle: Long, illuminant1: Int, forwardMatrix1: IntArray?, illuminant2: Int, forwardMatrix2: IntArray?)
     @JvmStatic external fun updateFromTransform(handle: Long, deviceTransform: IntArray?, outTransform: IntArray?, outCurve: FloatArray?, outReport: DoubleArray?): Boolean

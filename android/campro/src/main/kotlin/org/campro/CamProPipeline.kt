@@ -125,6 +125,8 @@ class CamProPipeline<T>(
      * mid-session (a mode switch) shows unprotected frames until the next re-probe.
      */
     val reprobeInterval: Int = 90,
+    /** The grids a device may put the values on ([ProtectionGuard.deviceGrids]; `null`: the session's measured ones). */
+    deviceGrids: Set<DeviceGrid>? = null,
 ) {
     init {
         require(pipelineDepth >= 1) { "pipelineDepth must be >= 1, got $pipelineDepth" }
@@ -134,7 +136,7 @@ class CamProPipeline<T>(
     }
 
     /** The fail-closed state. */
-    val guard = ProtectionGuard(session, maxDeviationLsb = maxDeviationLsb, trustMissingKeys = trustMissingKeys)
+    val guard = ProtectionGuard(session, maxDeviationLsb = maxDeviationLsb, trustMissingKeys = trustMissingKeys, deviceGrids = deviceGrids)
 
     /** When to rebuild and with which gains; the metering plan. */
     val controller = CamProController(session)

@@ -57,6 +57,13 @@ class CamProSession private constructor(
      */
     val protective: Boolean @Synchronized get() = CamProNative.protective(live())
 
+    /**
+     * The grids a phone's HAL may put this set's values on with its protection measured to
+     * hold there (the preset's `protection.device_grids.held`; docs/android.md, "Grids"):
+     * none for a set that is not protective.
+     */
+    val deviceGrids: Set<DeviceGrid> @Synchronized get() = DeviceGrid.parseList(CamProNative.deviceGrids(live()))
+
     /** One frame from the device's own `COLOR_CORRECTION_TRANSFORM` (18 ints, as `ColorSpaceTransform.copyElements` gives). Returns whether the values changed. */
     @Synchronized
     fun updateFromTransform(deviceTransform: IntArray): Boolean =

@@ -38,6 +38,95 @@ sealed class ProtectionState {
     data class Stopped(val reason: String) : ProtectionState()
 }
 
+/**
+ * A grid a phone's HAL may put CamPro's values on: matrix entries rounded to [MatrixBits.bits]
+ * fractional bits (`qB`), or each curve resampled to [CurvePoints.points] evenly spaced points
+ * (`lutN`). A preset records the grids its protection was measured to hold on
+ * (`provenance.protection.device_grids.held`, `campro check` with `--matrix-frac-bits` /
+ * `--lut-size`); the guard accepts a device whose reported values differ from the request by
+ * one such grid and nothing else, however large the readback's bound (Q7 states 57 LSB for
+ * `campro-omega-0.5`, yet its faces stay as hidden as with exact values, while a 17-point
+ * curve, 92 LSB, lets 104 of 119 through: the bound says nothing about which).
+ */
+sealed class DeviceGrid {
+    /** Matrix entries rounded to [bits] fractional bits (1..24). */
+    data class MatrixBits(val bits: Int) : DeviceGrid() {
+        override fun toString() = "q$bits"
+    }
+
+    /** Each curve resampled to [points] evenly spaced points (2..4096). */
+    data class CurvePoints(val points: Int) : DeviceGrid() {
+        override fun toString() = "lut$points"
+    }
+
+    companion object {
+        /** `qB` or `lutN`; `null` for anything else or out of range. */
+        @JvmStatic
+        fun parse(s: String): DeviceGrid? = when {
+            s.startsWith("q") -> s.substring(1).toIntOrNull()?.takeIf { it in 1..24 }?.let { MatrixBits(it) }
+            s.startsWith("lut") -> s.substring(3).toIntOrNull()?.takeIf { it in 2..4096 }?.let { CurvePoints(it) }
+            else -> null
+        }
+
+        /** A comma-separated list (what the native side gives); names that do not parse are left out. */
+        fun parseList(s: String): Set<DeviceGrid> = s.split(',').mapNotNull { parse(it.trim()) }.toSet()
+
+        /**
+         * Whether [reported] is [requested] (18 ints: numerator, denominator pairs) with every
+         * entry rounded to a multiple of 2^-[bits]: each reported entry on that grid and within
+         * half a step (and float rounding) of the requested one.
+         */
+        fun matrixOnGrid(requested: IntArray, reported: IntArray, bits: Int): Boolean {
+            if (requested.size != 18 || reported.size != 18) return false
+            val scale = Math.scalb(1.0, bits)
+            for (e in 0 until 9) {
+                if (requested[2 * e + 1] == 0 || reported[2 * e + 1] == 0) return false
+                val want = requested[2 * e].toDouble() / requested[2 * e + 1]
+                val got = reported[2 * e].toDouble() / reported[2 * e + 1]
+                val steps = got * scale
+                if (kotlin.math.abs(steps - Math.rint(steps)) > 1e-9 * maxOf(1.0, kotlin.math.abs(steps))) return false
+                if (kotlin.math.abs(got - want) > 0.5 / scale + 1e-12) return false
+            }
+            return true
+        }
+
+        /**
+         * Whether [reported] (flat (Pin, Pout) pairs) is [requested] ([count] floats of flat
+         * pairs from [offset]) resampled at [points] evenly spaced inputs: exactly that many
+         * points, input i at i/(points-1), each output on the requested curve (within 1e-4).
+         */
+        fun curveOnGrid(requested: FloatArray, offset: Int, count: Int, reported: FloatArray, points: Int): Boolean {
+            if (reported.size != 2 * points || count < 4 || points < 2) return false
+            for (i in 0 until points) {
+                val x = reported[2 * i]
+                if (kotlin.math.abs(x - i.toFloat() / (points - 1)) > 1e-4f) return false
+                if (kotlin.math.abs(reported[2 * i + 1] - interpolate(requested, offset, count, x)) > 1e-4f) return false
+            }
+            return true
+        }
+
+        /** The piecewise-linear curve of [count] floats of flat pairs from [offset] at [x] (clamped at its ends). */
+        private fun interpolate(c: FloatArray, offset: Int, count: Int, x: Float): Float {
+            val n = count / 2
+            if (x <= c[offset]) return c[offset + 1]
+            for (k in 1 until n) {
+                val x1 = c[offset + 2 * k]
+                if (x <= x1) {
+                    val x0 = c[offset + 2 * k - 2]
+                    val y0 = c[offset + 2 * k - 1]
+                    val y1 = c[offset + 2 * k + 1]
+                    return if (x1 > x0) y0 + (y1 - y0) * (x - x0) / (x1 - x0) else y1
+                }
+            }
+            return c[offset + 2 * n - 1]
+        }
+
+        /** Whether [reported] is exactly the requested curve ([count] floats from [offset]), point for point. */
+        fun curveExact(requested: FloatArray, offset: Int, count: Int, reported: FloatArray): Boolean =
+            reported.size == count && reported.indices.all { kotlin.math.abs(reported[it] - requested[offset + it]) <= 1e-6f }
+    }
+}
+
 /** Whether the device applies the values as sent: [ProtectionState.Protected] or [ProtectionState.Applied]; frames flow only then. */
 val ProtectionState.applied: Boolean get() = this == ProtectionState.Protected || this == ProtectionState.Applied
 
@@ -105,6 +194,14 @@ class ProtectionGuard(
      * Such a device never verifies, and saying so beats Violated for ever.
      */
     val deviationLimit: Int = 30,
+    /**
+     * Grids a device may put the values on ([DeviceGrid]): a result whose values differ from
+     * the request beyond [maxDeviationLsb] passes when the difference is exactly one of these
+     * (the transform rounded to an accepted `qB` with the curves as sent, or every curve
+     * resampled to an accepted `lutN` with the transform as sent). `null`: the session's
+     * measured grids ([CamProSession.deviceGrids]).
+     */
+    deviceGrids: Set<DeviceGrid>? = null,
 ) {
     init {
         require(maxDeviationLsb.isFinite() && maxDeviationLsb >= 0.0) { "maxDeviationLsb must be finite and >= 0, got $maxDeviationLsb" }
@@ -117,6 +214,9 @@ class ProtectionGuard(
     @Volatile
     var state: ProtectionState = ProtectionState.Verifying
         private set
+
+    /** The grids accepted ([DeviceGrid]): those asked for, or the session's measured ones. */
+    val deviceGrids: Set<DeviceGrid> = deviceGrids ?: session.deviceGrids
 
     /** Whether the session's parameter set protects faces (read once): verified results read [ProtectionState.Protected] only then, [ProtectionState.Applied] otherwise. */
     val protective: Boolean = session.protective
@@ -249,6 +349,7 @@ class ProtectionGuard(
         if (transform == null || curves == null) return null // trusted: see trustMissingKeys
         if (transform.size != 18) return "COLOR_CORRECTION_TRANSFORM has ${transform.size} values, not 18"
         if (curves.size != 3) return "TONEMAP_CURVE has ${curves.size} channels, not 3"
+        val grid = gridOf(transform, curves)
         var worst = 0.0
         for ((c, curve) in curves.withIndex()) {
             val bound = try {
@@ -264,13 +365,45 @@ class ProtectionGuard(
                 return "the reported values do not read back (${e.message})"
             }
             worst = maxOf(worst, bound)
-            if (!(bound <= maxDeviationLsb)) {
+            if (!(bound <= maxDeviationLsb) && grid == null) {
                 val what = if (out[CamProNative.READBACK_MATRIX_MAX_ABS] * 255.0 > maxDeviationLsb / 2) "transform" else "curve"
                 lastKind = Kind.Deviation
                 return "the reported $what differs from the request (channel ${"RGB"[c]}): up to %.3f LSB, more than %.3f".format(bound, maxDeviationLsb)
             }
         }
         worstDeviationLsb = maxOf(worstDeviationLsb, worst)
+        gridSeen = grid
+        return null
+    }
+
+    /** The grid a passing result's values were on, when they differed from the request by one; `null`: as sent. */
+    @Volatile
+    var gridSeen: DeviceGrid? = null
+        private set
+
+    /**
+     * The one accepted grid the reported values differ from the request by, or `null` when
+     * they are not on one (as sent, or off by something else: the bound then decides).
+     */
+    private fun gridOf(transform: IntArray, curves: List<FloatArray>): DeviceGrid? {
+        if (deviceGrids.isEmpty()) return null
+        synchronized(session) {
+            val want = session.transform
+            val matrixAsSent = (0 until 9).all { e ->
+                transform[2 * e + 1] != 0 && want[2 * e + 1] != 0 &&
+                    kotlin.math.abs(transform[2 * e].toDouble() / transform[2 * e + 1] - want[2 * e].toDouble() / want[2 * e + 1]) <= 1e-9
+            }
+            val curvesAsSent = curves.withIndex().all { (c, curve) -> DeviceGrid.curveExact(session.curve, session.curveOffset(c), 2 * session.curvePoints(c), curve) }
+            for (g in deviceGrids) {
+                when (g) {
+                    is DeviceGrid.MatrixBits -> if (curvesAsSent && DeviceGrid.matrixOnGrid(want, transform, g.bits)) return g
+                    is DeviceGrid.CurvePoints -> if (matrixAsSent && curves.withIndex().all { (c, curve) ->
+                            DeviceGrid.curveOnGrid(session.curve, session.curveOffset(c), 2 * session.curvePoints(c), curve, g.points)
+                        }
+                    ) return g
+                }
+            }
+        }
         return null
     }
 

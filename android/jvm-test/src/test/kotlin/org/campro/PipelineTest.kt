@@ -600,4 +600,25 @@ class PipelineTest {
         assertEquals(4, CamProPipeline.imageQueueDepth(1))
         assertEquals(16, CamProPipeline.imageQueueDepth(100))
     }
+
+    @Test
+    fun gridsByHand() {
+        assertEquals(DeviceGrid.MatrixBits(10), DeviceGrid.parse("q10"))
+        assertEquals(DeviceGrid.CurvePoints(33), DeviceGrid.parse("lut33"))
+        assertEquals(listOf(null, null, null, null), listOf("q0", "lut1", "Q10", "x").map { DeviceGrid.parse(it) })
+        assertEquals(setOf(DeviceGrid.MatrixBits(7), DeviceGrid.CurvePoints(64)), DeviceGrid.parseList("q7,lut64,bad"))
+        // 1.3 and -0.27 rounded to 1/1024: 1331/1024 and -276/1024 (-0.26953); on the grid, within half a step.
+        val want = IntArray(18) { i -> if (i % 2 == 1) 100 else if (i == 0) 130 else if (i == 2) -27 else 0 }
+        val q10 = IntArray(18) { i -> if (i % 2 == 1) 1024 else if (i == 0) 1331 else if (i == 2) -276 else 0 }
+        assertTrue(DeviceGrid.matrixOnGrid(want, q10, 10))
+        assertFalse("not on a 1/128 grid", DeviceGrid.matrixOnGrid(want, q10, 7))
+        val off = q10.copyOf().also { it[0] = 1333 } // on the grid but 1.5 steps away
+        assertFalse(DeviceGrid.matrixOnGrid(want, off, 10))
+        // y = x^2 at 5 points, resampled at 3: (0, 0), (0.5, 0.25 on the chords), (1, 1).
+        val curve = floatArrayOf(0f, 0f, 0.25f, 0.0625f, 0.5f, 0.25f, 0.75f, 0.5625f, 1f, 1f)
+        assertTrue(DeviceGrid.curveOnGrid(curve, 0, curve.size, floatArrayOf(0f, 0f, 0.5f, 0.25f, 1f, 1f), 3))
+        assertFalse("a point off the curve", DeviceGrid.curveOnGrid(curve, 0, curve.size, floatArrayOf(0f, 0f, 0.5f, 0.3f, 1f, 1f), 3))
+        assertFalse("not evenly spaced", DeviceGrid.curveOnGrid(curve, 0, curve.size, floatArrayOf(0f, 0f, 0.25f, 0.0625f, 1f, 1f), 3))
+        assertTrue(DeviceGrid.curveExact(curve, 0, curve.size, curve.copyOf()))
+    }
 }

@@ -122,8 +122,17 @@ data class CamProOptions @JvmOverloads constructor(
      * protect at on that device's grid (docs/android.md, "Grids").
      */
     val maxDeviationLsb: Double = 0.5,
+    /**
+     * The grids a HAL may put the preset's values on (`q10`: matrix entries to 10 fractional
+     * bits; `lut64`: curves resampled to 64 points): each must be one the preset was measured
+     * to protect on (`protection.device_grids.held`; docs/android.md, "Grids"), else the camera
+     * is Unsupported naming it. `null` (the default): every grid the preset holds; empty: none
+     * (values as sent, within [maxDeviationLsb]).
+     */
+    val deviceGrids: Set<String>? = null,
 ) {
     init {
+        deviceGrids?.forEach { require(org.campro.DeviceGrid.parse(it) != null) { "deviceGrids: $it is not a grid (qB with B 1..24, or lutN with N 2..4096)" } }
         require(maxDeviationLsb.isFinite() && maxDeviationLsb >= 0.0) { "maxDeviationLsb must be finite and >= 0, got $maxDeviationLsb" }
         require(maxWidth > 0 && maxHeight > 0) { "maxWidth and maxHeight must be positive, got $maxWidth x $maxHeight" }
         require(stillTimeoutMs > 0) { "stillTimeoutMs must be positive, got $stillTimeoutMs" }

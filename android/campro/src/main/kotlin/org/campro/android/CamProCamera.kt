@@ -438,6 +438,17 @@ class CamProCamera internal constructor(
                     ),
                 )
             }
+            val grids = options.deviceGrids?.mapNotNull { org.campro.DeviceGrid.parse(it) }?.toSet()
+            val unmeasured = grids.orEmpty() - session.deviceGrids
+            if (unmeasured.isNotEmpty()) {
+                val held = session.deviceGrids
+                session.close()
+                return publish(
+                    ProtectionState.Unsupported(
+                        "CamProOptions.deviceGrids ${unmeasured.joinToString()}: the preset ${preset.given} was not measured to protect on ${if (unmeasured.size == 1) "that grid" else "those grids"} (it holds: ${held.joinToString().ifEmpty { "none" }}; docs/android.md, Grids)",
+                    ),
+                )
+            }
             presetBytes = bytes
             val c = try {
                 CamProCamera2(
@@ -446,6 +457,7 @@ class CamProCamera internal constructor(
                     onState = ::publish,
                     trustMissingKeys = options.trustMissingKeys,
                     maxDeviationLsb = options.maxDeviationLsb,
+                    deviceGrids = grids,
                     format = ImageFormat.YUV_420_888,
                     usage = HardwareBuffer.USAGE_CPU_READ_OFTEN or HardwareBuffer.USAGE_GPU_SAMPLED_IMAGE,
                 )

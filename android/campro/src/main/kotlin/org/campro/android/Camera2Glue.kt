@@ -181,6 +181,8 @@ class CamProCamera2(
     trustMissingKeys: Boolean = false,
     /** See [org.campro.CamProPipeline]'s `maxDeviationLsb` (8-bit LSB). */
     maxDeviationLsb: Double = 0.5,
+    /** See [org.campro.ProtectionGuard.deviceGrids] (`null`: the preset's measured grids). */
+    deviceGrids: Set<org.campro.DeviceGrid>? = null,
     /** The protected stream's format: PRIVATE for the screen (zero-copy to ImageWriter), YUV_420_888 to read pixels. */
     format: Int = ImageFormat.PRIVATE,
     /** Its usage flags (API 29): GPU sampling and composition for the screen. */
@@ -273,6 +275,7 @@ class CamProCamera2(
         drop = { it.close() },
         onState = onState,
         maxDeviationLsb = maxDeviationLsb,
+        deviceGrids = deviceGrids,
         lumaOf = if (readable) { image -> lumaOfImage(image) } else null,
     )
 

@@ -107,6 +107,22 @@ class CamProCameraTest {
     }
 
     @Test
+    fun aGridThePresetWasNotMeasuredOnIsRefusedBeforeTheCameraOpens() {
+        shadowOf(manager).addCamera("0", chars())
+        shadowOf(app).grantPermissions(Manifest.permission.CAMERA)
+        Fixtures.load()
+        val owner = Fixtures.TestOwner()
+        val c = CamPro.open(app, owner, Lens.Back, Preset.Json(Fixtures.params()), CamProOptions(deviceGrids = setOf("q10", "lut17"))).also { cam = it }
+        owner.moveTo(Lifecycle.State.RESUMED)
+        settle(c)
+        val s = c.state.value
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("lut17") && !s.reason.contains("deviceGrids q10") && s.reason.contains("it holds: q10"))
+        assertNull("nothing opened", c.glue)
+        val e = runCatching { CamProOptions(deviceGrids = setOf("q0")) }.exceptionOrNull()
+        assertTrue("$e", e is IllegalArgumentException && e.message!!.contains("q0 is not a grid"))
+    }
+
+    @Test
     fun checkDeviceListsEveryCameraAndWhy() {
         shadowOf(manager).addCamera("0", chars())
         shadowOf(manager).addCamera("1", chars(supported = false, facing = CameraCharacteristics.LENS_FACING_FRONT))

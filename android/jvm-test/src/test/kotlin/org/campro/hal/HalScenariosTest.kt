@@ -3,6 +3,7 @@ package org.campro.hal
 import org.campro.CamProNative
 import org.campro.CamProPipeline
 import org.campro.CamProSession
+import org.campro.DeviceGrid
 import org.campro.Fixtures
 import org.campro.ProtectionState
 import org.junit.Assert.assertEquals
@@ -47,6 +48,10 @@ class HalScenariosTest {
         val resumeAt: Int = -1,
         /** Most rebuilds a minute the scenario may cause (a storm closes the preview at each). */
         val maxRebuildsPerMinute: Double = Double.MAX_VALUE,
+        /** Largest step between frames delivered one after the other the scenario may show (judder). */
+        val maxGap: Int = Int.MAX_VALUE,
+        /** The grids the app accepts (`null`: the preset's measured ones; docs/android.md, Grids). */
+        val deviceGrids: Set<DeviceGrid>? = null,
     ) {
         /** Largest difference a delivered frame may show from the desktop pipeline: the accepted deviation (at least the conversion's bound, under 0.5) plus 8-bit rounding. */
         val boundLsb: Int get() = kotlin.math.ceil(maxOf(acceptLsb, 0.5)).toInt() + 1
@@ -74,9 +79,11 @@ class HalScenariosTest {
         Behaviour("results out of order (pairs swapped)", swapResults = true) to Outcome.Protects,
         Behaviour("one result in 7 lost", loseResultEvery = 7) to Outcome.Protects,
         Behaviour("AWB converges over 5 frames", awbSettleFrames = 5) to Outcome.Protects,
-        Behaviour("matrices rounded to 1/1024 (Q10)", matrixStep = 1024) to Outcome.Refuses,
-        Behaviour("matrices rounded to 1/128 (Q7)", matrixStep = 128) to Outcome.Refuses,
-        Behaviour("curve resampled to 17 points", curvePoints = 17) to Outcome.Refuses,
+        Behaviour("matrices rounded to 1/1024 (Q10, a grid the preset holds)", matrixStep = 1024) to Outcome.Protects,
+        Behaviour("matrices rounded to 1/128 (Q7, a grid the preset holds)", matrixStep = 128) to Outcome.Protects,
+        Behaviour("curve resampled to 17 points (a grid that does not protect)", curvePoints = 17) to Outcome.Refuses,
+        Behaviour("curve resampled to 33 points (a grid the preset holds)", curvePoints = 33) to Outcome.Protects,
+        Scenario(Behaviour("matrices rounded to 1/1024 (Q10), the app accepting no grid", matrixStep = 1024), Outcome.Refuses, App(deviceGrids = emptySet())),
         Behaviour("display timestamp base on the protected stream (image 5 ms after the sensor)", imageTimestampOffsetNs = 5_000_000) to Outcome.Refuses,
         Behaviour("echoing HAL (reports the request, applies its own curve)", echo = true) to Outcome.Refuses,
         Behaviour("echoing HAL (reports the request, applies its own transform)", ignoreTransform = true) to Outcome.Refuses,
@@ -109,8 +116,8 @@ class HalScenariosTest {
         Scenario(Behaviour("privacy toggle: black frames until frame 45, then real ones", blackFrames = 0 until 45), Outcome.Protects),
         // Issue 75, item 6: metering without judder or storms.
         Scenario(Behaviour("AWB settling over 20 frames, the light changes at frame 150", awbSettleFrames = 20, lightChangeAt = 150), Outcome.Protects, frames = 600),
-        Scenario(Behaviour("AWB gains jitter by +-0.5% every metering result", gainJitter = 0.005), Outcome.Protects, App(maxRebuildsPerMinute = 1.0), frames = 600),
-        Scenario(Behaviour("results 6 to 8 frames after their images (REQUEST_PIPELINE_MAX_DEPTH 8)", resultDelay = 6, resultDelayMax = 8, pipelineMaxDepth = 8), Outcome.Protects),
+        Scenario(Behaviour("AWB gains jitter by +-0.5% every metering result", gainJitter = 0.005), Outcome.Protects, App(maxRebuildsPerMinute = 1.0, maxGap = 4), frames = 600),
+        Scenario(Behaviour("results 6 to 8 frames after their images (REQUEST_PIPELINE_MAX_DEPTH 8)", resultDelay = 6, resultDelayMax = 8, pipelineMaxDepth = 8), Outcome.Protects, App(maxGap = 10)),
         Scenario(Behaviour("the app holds frames 30 to 60, each lost buffer reported before its capture started", bufferLostBeforeStart = true), Outcome.Protects, App(holdFrom = 30, holdUntil = 60)),
     )
 
@@ -157,6 +164,7 @@ class HalScenariosTest {
                 session, hal, { it.run() },
                 perFrameControl = b.latency == 0, pipelineDepth = b.pipelineDepth, imageQueueDepth = queue,
                 maxDeviationLsb = app.acceptLsb,
+                deviceGrids = app.deviceGrids,
                 lumaOf = { lumaOfRgb(it.pixels) },
                 deliver = { f ->
                     delivered++
@@ -210,6 +218,7 @@ class HalScenariosTest {
             // A leak is a failure everywhere but before a mode switch's re-probe (stated in the table).
             if (sc.outcome == Outcome.CaughtByReprobe && leaked > 0) why.remove("$leaked frames off by up to $worst LSB reached the app")
             val perMinute = (p.controller.rebuilds - 1).coerceAtLeast(0) * 60.0 * 30.0 / frames
+            if (maxGap > app.maxGap) why += "a gap of $maxGap frames between deliveries, more than ${app.maxGap}"
             if (perMinute > app.maxRebuildsPerMinute) why += "%.1f rebuilds a minute, more than %.1f".format(java.util.Locale.ROOT, perMinute, app.maxRebuildsPerMinute)
             return Row(b.name, frames, delivered, hal.lostFrames, leaked, state, why.isEmpty(), why.joinToString("; "), maxGap, perMinute)
         } finally {

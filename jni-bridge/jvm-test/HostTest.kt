@@ -3,6 +3,7 @@
 // Prints "PASS name", "FAIL name: why" and "TIMING key=value"; exits 1 on any failure.
 
 import org.campro.CamProController
+import org.campro.Problem
 import org.campro.CamProNative
 import org.campro.CamProSession
 import org.campro.CaptureReport
@@ -196,20 +197,22 @@ fun readbackAndController(paramsJson: String) {
     }
     check("controller: rebuild on first result, on a moved transform or moved gains, not otherwise") {
         CamProSession.fromJson(paramsJson).use { s ->
-            val ctl = CamProController(s, meteringInterval = 10)
+            val ctl = CamProController(s, baseInterval = 12)
             val g = floatArrayOf(2.0f, 1.0f, 1.0f, 1.6f)
             expect(ctl.onMeteringResult(PHONE, g)) { "first" }
             expect(!ctl.onMeteringResult(PHONE, g)) { "same" }
             expect(!ctl.onMeteringResult(PHONE, floatArrayOf(2.0001f, 1.0f, 1.0f, 1.6f))) { "gain moved 5e-5 relative" }
+            expect(!ctl.onMeteringResult(PHONE, floatArrayOf(2.03f, 1.0f, 1.0f, 1.6f))) { "gain moved 1.5%: inside the 2% band" }
             expect(ctl.onMeteringResult(PHONE, floatArrayOf(2.1f, 1.0f, 1.0f, 1.6f))) { "gain moved 5%" }
             val moved = PHONE.copyOf().also { it[0] = 150 }
             expect(ctl.onMeteringResult(moved, floatArrayOf(2.1f, 1.0f, 1.0f, 1.6f))) { "transform moved" }
-            expect(ctl.rebuilds == 3L && ctl.meteringResults == 5L) { "counts ${ctl.rebuilds}/${ctl.meteringResults}" }
-            // A run of 3 metering frames (the default) at the start of each burst of 10.
-            expect(ctl.isMeteringFrame(20) && ctl.isMeteringFrame(22) && !ctl.isMeteringFrame(23)) { "schedule" }
+            expect(ctl.rebuilds == 3L && ctl.meteringResults == 6L) { "counts ${ctl.rebuilds}/${ctl.meteringResults}" }
+            // A run of 3 metering frames (the default) in a burst of 12; a run without CONVERGED doubles it.
+            expect(ctl.meteringRun == 3 && ctl.meteringInterval == 12) { "plan ${ctl.meteringRun}/${ctl.meteringInterval}" }
+            expect(ctl.runEnded(converged = false, rebuilt = false) && ctl.meteringRun == 6 && ctl.meteringInterval == 24) { "grown ${ctl.meteringRun}/${ctl.meteringInterval}" }
             expect(ctl.status().startsWith("CamPro on")) { ctl.status() }
             throws<IllegalArgumentException>("gains[2]") { ctl.onMeteringResult(PHONE, floatArrayOf(1f, 1f, Float.NaN, 1f)) }
-            throws<IllegalArgumentException>("meteringInterval") { CamProController(s, meteringInterval = 3) }
+            throws<IllegalArgumentException>("baseInterval") { CamProController(s, baseInterval = 3) }
         }
     }
     check("device support follows Camera2's rules") {
@@ -387,7 +390,7 @@ fun failClosed(paramsJson: String) {
             g.requestChanged()
             expect(g.state == ProtectionState.Verifying && !g.framesAllowed) { "${g.state}" }
             g.unsupported("no CONTRAST_CURVE")
-            expect(g.onProtectedResult(honoured(s)) == ProtectionState.Unsupported("no CONTRAST_CURVE")) { "${g.state}" }
+            expect(g.onProtectedResult(honoured(s)) == ProtectionState.Unsupported("no CONTRAST_CURVE", Problem.DeviceCapability)) { "${g.state}" }
             g.requestChanged()
             expect(g.state is ProtectionState.Unsupported) { "${g.state}" }
         }

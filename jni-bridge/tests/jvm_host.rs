@@ -213,6 +213,8 @@ fn kotlin_wrapper_through_jni_on_the_host_jvm() {
         .filter(|p| p.extension().is_some_and(|e| e == "kt"))
         .collect();
     sources.sort();
+    // Its one annotation dependency (androidx.annotation's @GuardedBy, documentation only).
+    sources.push(root.join("android/jvm-test/stubs/kotlin/androidx/annotation/GuardedBy.kt"));
     sources.push(root.join("jni-bridge/jvm-test/TestHooks.kt"));
     sources.push(root.join("jni-bridge/jvm-test/HostTest.kt"));
     let jar = tmp.join("host-test.jar");

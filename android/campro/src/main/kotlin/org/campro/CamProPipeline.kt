@@ -268,7 +268,7 @@ class CamProPipeline<T>(
                     gains == null -> "COLOR_CORRECTION_GAINS"
                     else -> "CONTROL_AWB_STATE"
                 }
-                guard.unsupported("the device reports no $what in auto mode ($meteringMissing results): CamPro's values cannot follow it")
+                guard.unsupported("the device reports no $what in auto mode ($meteringMissing results): CamPro's values cannot follow it", Problem.MissingKey)
                 running = false
                 gate.stop()
                 camera.halt()
@@ -350,7 +350,7 @@ class CamProPipeline<T>(
             // Black (neither step's level is that dark on a device that renders: about 64 and
             // 128): the privacy toggle or a stopped sensor. Closed, not final: the probe goes
             // on from its first step until real frames come.
-            if (!black) guard.stopped("the camera delivers black frames (the camera privacy toggle is on, or the sensor stopped): waiting for real frames")
+            if (!black) guard.stopped("the camera delivers black frames (the camera privacy toggle is on, or the sensor stopped): waiting for real frames", Problem.PrivacyToggle)
             black = true
             probeLevels.clear()
             probeFramesSeen = 0
@@ -382,7 +382,7 @@ class CamProPipeline<T>(
         probing = null
         reprobing = false
         running = false
-        guard.unsupported("pixel probe: $why")
+        guard.unsupported("pixel probe: $why", Problem.PixelProbe)
         gate.stop()
         camera.halt()
     }
@@ -442,13 +442,13 @@ class CamProPipeline<T>(
      */
     fun onFrameLost(timestampNs: Long) = gate.onFrameLost(timestampNs)
 
-    /** The camera failed, was disconnected or closed: closed, nothing waiting survives. */
+    /** The camera failed, was disconnected or closed ([problem]: what kind): closed, nothing waiting survives. */
     @Synchronized
-    fun onCameraStopped(reason: String) {
+    fun onCameraStopped(reason: String, problem: Problem = Problem.CameraClosed) {
         running = false
         probing = null
         reprobing = false
-        guard.stopped(reason)
+        guard.stopped(reason, problem)
         gate.clear()
         publish()
     }
@@ -523,7 +523,7 @@ class CamProPipeline<T>(
             body()
         } catch (e: Exception) {
             running = false
-            guard.stopped("stopped: ${e.javaClass.simpleName}: ${e.message}")
+            guard.stopped("stopped: ${e.javaClass.simpleName}: ${e.message}", Problem.Other)
             gate.clear()
             try {
                 camera.halt()

@@ -36,12 +36,40 @@ object Orientation {
         return if (frontFacing) (s - d + 360) % 360 else (s + d) % 360
     }
 
-    /** The EXIF `Orientation` value for a clockwise turn: 0 -> 1, 90 -> 6, 180 -> 3, 270 -> 8. */
-    fun exifOrientation(rotation: Int): Int = when (quarter("rotation", rotation)) {
-        0 -> 1
-        90 -> 6
-        180 -> 3
-        else -> 8
+    /**
+     * The EXIF `Orientation` value for a clockwise turn: 0 -> 1, 90 -> 6, 180 -> 3, 270 -> 8;
+     * with [mirror] (a front camera's still shown as the preview showed it: turned, then
+     * mirrored left-right) 0 -> 2, 90 -> 5 (transpose), 180 -> 4, 270 -> 7 (transverse).
+     */
+    @JvmOverloads
+    fun exifOrientation(rotation: Int, mirror: Boolean = false): Int = when (quarter("rotation", rotation)) {
+        0 -> if (mirror) 2 else 1
+        90 -> if (mirror) 5 else 6
+        180 -> if (mirror) 4 else 3
+        else -> if (mirror) 7 else 8
+    }
+
+    /** `OrientationEventListener.ORIENTATION_UNKNOWN`: the device lies flat, or the sensor has no reading. */
+    const val UNKNOWN = -1
+
+    /** Degrees past the half-way mark (45) a reading must go before the device counts as turned to the next quarter. */
+    const val HYSTERESIS = 15
+
+    /**
+     * The device's physical orientation, a multiple of 90, from an `OrientationEventListener`
+     * reading ([degrees], 0..359 clockwise, or [UNKNOWN]) and the [previous] one: the reading's
+     * nearest quarter, except that [previous] holds until the reading is more than
+     * 45 + [HYSTERESIS] degrees from it (a phone held near 45 does not flip back and forth).
+     * Apps locked to portrait get stills and videos turned as the device is held, which the
+     * display's rotation (always 0 there) cannot tell.
+     */
+    fun deviceOrientation(degrees: Int, previous: Int): Int {
+        val prev = quarter("previous", previous)
+        if (degrees == UNKNOWN) return prev
+        require(degrees in 0..359) { "degrees must be 0..359 or UNKNOWN, got $degrees" }
+        val away = minOf((degrees - prev + 360) % 360, (prev - degrees + 360) % 360)
+        if (away <= 45 + HYSTERESIS) return prev
+        return ((degrees + 45) / 90 % 4) * 90
     }
 
     /**

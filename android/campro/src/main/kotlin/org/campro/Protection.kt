@@ -25,17 +25,54 @@ sealed class ProtectionState {
         override fun toString() = "Applied"
     }
 
-    /** The last protected result shows the device did not apply CamPro: [reason] says how. */
-    data class Violated(val reason: String) : ProtectionState()
+    /** The last protected result shows the device did not apply CamPro: [reason] says how (for people), [problem] what kind (for code). */
+    data class Violated(val reason: String, val problem: Problem = Problem.Other) : ProtectionState()
 
-    /** The camera cannot run CamPro at all (final): [reason] says why. */
-    data class Unsupported(val reason: String) : ProtectionState()
+    /** The camera cannot run CamPro at all (final): [reason] says why, [problem] what kind. */
+    data class Unsupported(val reason: String, val problem: Problem = Problem.Other) : ProtectionState()
 
     /**
      * The camera is not running: never opened, closed, disconnected, failed, or the
-     * permission was refused; [reason] says which. Not final: a new start verifies again.
+     * permission was refused; [reason] says which, [problem] what kind. Not final: a new
+     * start verifies again.
      */
-    data class Stopped(val reason: String) : ProtectionState()
+    data class Stopped(val reason: String, val problem: Problem = Problem.Other) : ProtectionState()
+}
+
+/** What kind of problem a [ProtectionState] names: for code to act on (the reason is for people). */
+enum class Problem {
+    /** The camera lacks what CamPro needs (MANUAL_POST_PROCESSING, CONTRAST_CURVE, per-frame sync, a YUV size), or there is no such camera. */
+    DeviceCapability,
+
+    /** The pixel probe saw the device's pixels not follow the values it reports. */
+    PixelProbe,
+
+    /** Results leave out a key CamPro must read back (transform, curve, gains, AWB state). */
+    MissingKey,
+
+    /** The device applies other values or modes than sent (off the preset's grids). */
+    Deviation,
+
+    /** The active physical camera of a logical camera changed (metering runs again). */
+    PhysicalCamera,
+
+    /** Frames and results do not match (the images' timestamp base is not the sensor's). */
+    Timestamps,
+
+    /** The preset: not protective without the opt-in, a grid it was not measured on, not found. */
+    Preset,
+
+    /** The camera permission is not granted. */
+    Permission,
+
+    /** Black frames: the camera privacy toggle is on, or the sensor stopped (the probe goes on). */
+    PrivacyToggle,
+
+    /** The camera closed, was disconnected or taken, or the app stopped or paused it. */
+    CameraClosed,
+
+    /** Anything else: an exception from the camera or native code, a refused setting. */
+    Other,
 }
 
 /**
@@ -236,20 +273,28 @@ class ProtectionGuard(
     private var deviatingInARow = 0
     private var unmatched: String? = null
 
-    /** What the last violation was: the counters and the pipeline read this, never the message. */
-    private enum class Kind { Other, Deviation, PhysicalChange }
-    private var lastKind = Kind.Other
+    /** What the last violation was: the counters, the pipeline and the app read this, never the message. */
+    private var lastKind = Problem.Other
 
-    /** The camera cannot run CamPro (from [DeviceSupport.check]): final. */
+    /** Whether the last violation was reported values off the request (the deviation counter's kind; a wrong mode is not). */
+    private var valueDeviation = false
+
+    /** Marks the violation a mode or value deviation ([Problem.Deviation]); returns null so the caller's reason follows. */
+    private fun deviates(): String? {
+        lastKind = Problem.Deviation
+        return null
+    }
+
+    /** The camera cannot run CamPro ([problem]: what kind): final. */
     @Synchronized
-    fun unsupported(reason: String) {
-        state = ProtectionState.Unsupported(reason)
+    fun unsupported(reason: String, problem: Problem = Problem.DeviceCapability) {
+        state = ProtectionState.Unsupported(reason, problem)
     }
 
     /** The camera stopped (closed, disconnected, failed, no permission): closed until a new request verifies. */
     @Synchronized
-    fun stopped(reason: String) {
-        if (state !is ProtectionState.Unsupported) state = ProtectionState.Stopped(reason)
+    fun stopped(reason: String, problem: Problem = Problem.CameraClosed) {
+        if (state !is ProtectionState.Unsupported) state = ProtectionState.Stopped(reason, problem)
     }
 
     /**
@@ -276,49 +321,54 @@ class ProtectionGuard(
     @Synchronized
     fun framesUnmatched(reason: String?) {
         unmatched = reason
-        if (reason != null && state.applied) state = ProtectionState.Violated(reason)
+        if (reason != null && state.applied) state = ProtectionState.Violated(reason, Problem.Timestamps)
     }
 
     /** Whether the last violation was the active physical camera changing (the pipeline meters again). */
-    val physicalCameraChanged: Boolean @Synchronized get() = state is ProtectionState.Violated && lastKind == Kind.PhysicalChange
+    val physicalCameraChanged: Boolean @Synchronized get() = state is ProtectionState.Violated && lastKind == Problem.PhysicalCamera
 
     /** Checks one protected result; returns the new state. */
     @Synchronized
     fun onProtectedResult(r: CaptureReport): ProtectionState {
         // Unsupported is final; Stopped holds until a new request (late results of a stopped camera change nothing).
         if (state is ProtectionState.Unsupported || state is ProtectionState.Stopped) return state
-        val reason = violation(r) ?: unmatched
-        if (reason != null && lastKind == Kind.Deviation) deviatingInARow++ else deviatingInARow = 0
+        val own = violation(r)
+        val reason = own ?: unmatched
+        val kind = if (own != null) lastKind else Problem.Timestamps
+        if (reason != null && own != null && valueDeviation) deviatingInARow++ else deviatingInARow = 0
         state = when {
             reason == null -> if (protective) ProtectionState.Protected else ProtectionState.Applied
             missingInARow >= missingKeyLimit -> ProtectionState.Unsupported(
                 "$reason in $missingInARow results in a row: this device cannot be verified",
+                Problem.MissingKey,
             )
             deviatingInARow >= deviationLimit -> ProtectionState.Unsupported(
                 "$reason in $deviatingInARow results in a row: the device does not apply the values as sent (it rounds or resamples them)",
+                Problem.Deviation,
             )
-            else -> ProtectionState.Violated(reason)
+            else -> ProtectionState.Violated(reason, kind)
         }
         return state
     }
 
     /** Why [r] does not show protection, or null when it does. */
     private fun violation(r: CaptureReport): String? {
-        lastKind = Kind.Other
+        lastKind = Problem.MissingKey
+        valueDeviation = false
         when {
             r.awbMode == null -> return "the result does not report CONTROL_AWB_MODE"
-            r.awbMode != DeviceSupport.CONTROL_AWB_MODE_OFF ->
-                return "auto white balance is on (mode ${r.awbMode}): the device overrides the colour transform"
+            r.awbMode != DeviceSupport.CONTROL_AWB_MODE_OFF -> return deviates()
+                ?: "auto white balance is on (mode ${r.awbMode}): the device overrides the colour transform"
             r.colorCorrectionMode == null -> return "the result does not report COLOR_CORRECTION_MODE"
-            r.colorCorrectionMode != COLOR_CORRECTION_MODE_TRANSFORM_MATRIX ->
-                return "colour correction mode ${r.colorCorrectionMode} instead of TRANSFORM_MATRIX"
+            r.colorCorrectionMode != COLOR_CORRECTION_MODE_TRANSFORM_MATRIX -> return deviates()
+                ?: "colour correction mode ${r.colorCorrectionMode} instead of TRANSFORM_MATRIX"
             r.tonemapMode == null -> return "the result does not report TONEMAP_MODE"
-            r.tonemapMode != DeviceSupport.TONEMAP_MODE_CONTRAST_CURVE ->
-                return "tone-map mode ${r.tonemapMode} instead of CONTRAST_CURVE"
+            r.tonemapMode != DeviceSupport.TONEMAP_MODE_CONTRAST_CURVE -> return deviates()
+                ?: "tone-map mode ${r.tonemapMode} instead of CONTRAST_CURVE"
         }
         val wantPhysical = requestedPhysicalId
         if (wantPhysical != null && r.physicalId != null && r.physicalId != wantPhysical) {
-            lastKind = Kind.PhysicalChange
+            lastKind = Problem.PhysicalCamera
             return "the active physical camera changed from $wantPhysical to ${r.physicalId}: the values were computed for the other sensor"
         }
         val transform = r.transform
@@ -341,7 +391,8 @@ class ProtectionGuard(
             for (i in 0 until 4) {
                 val rel = kotlin.math.abs(gains[i] - wantGains[i]).toDouble() / kotlin.math.max(kotlin.math.abs(wantGains[i]).toDouble(), 1e-6)
                 if (!(rel <= maxGainRelative)) {
-                    lastKind = Kind.Deviation
+                    lastKind = Problem.Deviation
+                valueDeviation = true
                     return "the reported gain ${GAIN_NAMES[i]} is ${gains[i]}, not the requested ${wantGains[i]}"
                 }
             }
@@ -361,13 +412,15 @@ class ProtectionGuard(
                 }
                 out[CamProNative.READBACK_BOUND] * 255.0
             } catch (e: IllegalArgumentException) {
-                lastKind = Kind.Deviation
+                lastKind = Problem.Deviation
+                valueDeviation = true
                 return "the reported values do not read back (${e.message})"
             }
             worst = maxOf(worst, bound)
             if (!(bound <= maxDeviationLsb) && grid == null) {
                 val what = if (out[CamProNative.READBACK_MATRIX_MAX_ABS] * 255.0 > maxDeviationLsb / 2) "transform" else "curve"
-                lastKind = Kind.Deviation
+                lastKind = Problem.Deviation
+                valueDeviation = true
                 return "the reported $what differs from the request (channel ${"RGB"[c]}): up to %.3f LSB, more than %.3f".format(bound, maxDeviationLsb)
             }
         }

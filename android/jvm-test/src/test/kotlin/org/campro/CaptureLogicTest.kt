@@ -27,6 +27,17 @@ class CaptureLogicTest {
         assertEquals(0, Orientation.stillRotation(90, 270, false))
         assertEquals(180, Orientation.stillRotation(270, 90, true))
         assertEquals(listOf(1, 6, 3, 8, 8), listOf(0, 90, 180, 270, -90).map { Orientation.exifOrientation(it) })
+        // Mirrored (a front still as the preview showed it): turned, then flipped left-right.
+        assertEquals(listOf(2, 5, 4, 7), listOf(0, 90, 180, 270).map { Orientation.exifOrientation(it, mirror = true) })
+        // The physical orientation: the nearest quarter, held within 60 degrees of the last one.
+        assertEquals(0, Orientation.deviceOrientation(50, 0)) // past 45, within the hysteresis
+        assertEquals(90, Orientation.deviceOrientation(61, 0))
+        assertEquals(90, Orientation.deviceOrientation(31, 90)) // 59 away from 90: held
+        assertEquals(0, Orientation.deviceOrientation(29, 90))
+        assertEquals(270, Orientation.deviceOrientation(280, 0))
+        assertEquals(0, Orientation.deviceOrientation(350, 270)) // 80 away: the nearest quarter, 0
+        assertEquals(180, Orientation.deviceOrientation(Orientation.UNKNOWN, 180)) // flat: unchanged
+        assertTrue(runCatching { Orientation.deviceOrientation(360, 0) }.isFailure)
         val e = runCatching { Orientation.exifOrientation(45) }.exceptionOrNull()
         assertTrue("$e", e is IllegalArgumentException && e.message!!.startsWith("rotation must be a multiple of 90"))
     }

@@ -136,7 +136,7 @@ class PipelineTest {
         app.runAll()
         assertTrue(shown.isEmpty())
         assertEquals(listOf(2, 3), closed)
-        assertEquals(ProtectionState.Stopped("the camera was disconnected"), p.state)
+        assertEquals(ProtectionState.Stopped("the camera was disconnected", org.campro.Problem.CameraClosed), p.state)
     }
 
     @Test
@@ -513,7 +513,7 @@ class PipelineTest {
         p.onFrame(ts, -1)
         p.onProbeResult(ts, probeReport(PixelProbe.Step.Curve))
         val s = p.state
-        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("pixel probe") && s.reason.contains("TONEMAP_CURVE"))
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("pixel probe") && s.reason.contains("TONEMAP_CURVE") && s.problem == Problem.PixelProbe)
         assertEquals("halt", cam.calls.last())
         ts++
         p.onFrame(ts, 7)
@@ -527,7 +527,7 @@ class PipelineTest {
         val p = probing()
         probeFrame(p, 5) { 0 } // the privacy toggle: black whatever the curve
         val s = p.state
-        assertTrue("$s", s is ProtectionState.Stopped && s.reason.contains("black frames"))
+        assertTrue("$s", s is ProtectionState.Stopped && s.reason.contains("black frames") && s.problem == Problem.PrivacyToggle)
         assertTrue("still probing, not refused", p.isProbing)
         probeFrame(p, 6) { 16 } // limited-range black
         assertTrue(p.state is ProtectionState.Stopped)

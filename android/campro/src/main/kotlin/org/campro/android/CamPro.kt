@@ -130,6 +130,14 @@ data class CamProOptions @JvmOverloads constructor(
      * (values as sent, within [maxDeviationLsb]).
      */
     val deviceGrids: Set<String>? = null,
+    /** Mirror a front camera's preview left-right, as a mirror shows the user (the default). */
+    val mirrorFrontPreview: Boolean = true,
+    /**
+     * Store a front camera's stills mirrored, as the preview showed them (EXIF orientation
+     * 2, 4, 5 or 7: the pixels stay the sensor's; viewers mirror). Off by default, as the
+     * camera's own JPEGs. Recordings are never mirrored (an MP4 has no mirror flag).
+     */
+    val mirrorFrontStills: Boolean = false,
 ) {
     init {
         deviceGrids?.forEach { require(org.campro.DeviceGrid.parse(it) != null) { "deviceGrids: $it is not a grid (qB with B 1..24, or lutN with N 2..4096)" } }

@@ -28,6 +28,7 @@ import org.campro.Records
 import org.campro.DeviceSupport
 import org.campro.FrameRouter
 import org.campro.LatestFrame
+import org.campro.Problem
 import org.campro.Orientation
 import org.campro.ProtectedRecording
 import org.campro.applied
@@ -112,7 +113,7 @@ class CamProCamera internal constructor(
     private var previewSlot: LatestFrame<Image>? = null
     private val main = Handler(Looper.getMainLooper())
 
-    private val mutableState = MutableStateFlow<ProtectionState>(ProtectionState.Stopped("not started: the lifecycle owner has not started"))
+    private val mutableState = MutableStateFlow<ProtectionState>(ProtectionState.Stopped("not started: the lifecycle owner has not started", Problem.CameraClosed))
 
     /** The protection state: frames reach the preview, recordings and stills only while [ProtectionState.Protected] (or [ProtectionState.Applied] for a preset opened with `allowUnprotective`). */
     val state: StateFlow<ProtectionState> = mutableState.asStateFlow()
@@ -155,9 +156,27 @@ class CamProCamera internal constructor(
     @Volatile
     private var closed = false
 
+    /** [Orientation.deviceOrientation] of the last accelerometer reading (`null`: none yet, or no sensor). Main thread writes. */
+    @Volatile
+    internal var sensedOrientation: Int? = null
+
+    /** Readings while the owner is started (main thread). */
+    private val orientationListener = object : android.view.OrientationEventListener(context) {
+        override fun onOrientationChanged(degrees: Int) {
+            if (degrees != ORIENTATION_UNKNOWN) sensedOrientation = Orientation.deviceOrientation(degrees, sensedOrientation ?: 0)
+        }
+    }
+
     private val lifecycleObserver = object : DefaultLifecycleObserver {
-        override fun onStart(owner: LifecycleOwner) = onCamera { wanted = true; lostInARow = 0; openCamera() }
-        override fun onStop(owner: LifecycleOwner) = onCamera { wanted = false; closeCamera("paused: the app is not in the foreground") }
+        override fun onStart(owner: LifecycleOwner) {
+            if (orientationListener.canDetectOrientation()) orientationListener.enable()
+            onCamera { wanted = true; lostInARow = 0; openCamera() }
+        }
+
+        override fun onStop(owner: LifecycleOwner) {
+            orientationListener.disable()
+            onCamera { wanted = false; closeCamera("paused: the app is not in the foreground") }
+        }
         override fun onDestroy(owner: LifecycleOwner) = close()
     }
 
@@ -210,7 +229,7 @@ class CamProCamera internal constructor(
         previewSlot = slot
         router.preview = if (slot == null) null else { image -> slot.offer(image) }
         v?.showState(mutableState.value)
-        stream?.let { s -> v?.configure(s.width, s.height, s.sensorOrientation, s.front) }
+        stream?.let { s -> v?.configure(s.width, s.height, s.sensorOrientation, s.front, s.front && options.mirrorFrontPreview) }
     }
 
     /**
@@ -235,7 +254,7 @@ class CamProCamera internal constructor(
             check(active == null) { "a recording is under way" }
             val recordFile = Records.pathOf(output)
             if (recordFile.exists() && !recordingOptions.overwrite) throw IOException("$recordFile exists: pass RecordingOptions(overwrite = true) to replace it")
-            val rotation = Orientation.stillRotation(s.sensorOrientation, deviceOrientation ?: deviceOrientationFromDisplay(), s.front)
+            val rotation = Orientation.stillRotation(s.sensorOrientation, deviceOrientation ?: currentDeviceOrientation(), s.front)
             val encoder = MediaCodecEncoder(output, s.width, s.height, rotation, recordingOptions)
             val rec = ProtectedRecording(encoder, Image::getTimestamp) { c.pipeline.gate.dropped }
             val a = ActiveRecording(output, rec, recordingOptions.overwrite, onEnded, ::stopRecording)
@@ -339,7 +358,10 @@ class CamProCamera internal constructor(
             main.post { callback(StillResult.Failed(refused ?: "the camera is not open")) }
             return
         }
-        val exif = Orientation.exifOrientation(Orientation.stillRotation(s.sensorOrientation, deviceOrientation ?: deviceOrientationFromDisplay(), s.front))
+        val exif = Orientation.exifOrientation(
+            Orientation.stillRotation(s.sensorOrientation, deviceOrientation ?: currentDeviceOrientation(), s.front),
+            mirror = s.front && options.mirrorFrontStills,
+        )
         val quality = options.jpegQuality
         val request = stills.request({ (snap, ctx) -> saveStill(snap, ctx, output, recordFile, exif, quality, overwrite) }) { r ->
             main.post { callback(r) }
@@ -374,7 +396,10 @@ class CamProCamera internal constructor(
             closed = true
         }
         manager.unregisterAvailabilityCallback(availability)
-        onMain { owner.lifecycle.removeObserver(lifecycleObserver) }
+        onMain {
+            owner.lifecycle.removeObserver(lifecycleObserver)
+            orientationListener.disable()
+        }
         try {
             cameraHandler.post {
                 wanted = false
@@ -418,16 +443,16 @@ class CamProCamera internal constructor(
         if (!wanted || closed || campro != null) return
         try {
             val ids = manager.cameraIdList.map { it to manager.getCameraCharacteristics(it).get(CameraCharacteristics.LENS_FACING) }
-            val id = CamPro.pick(ids, lens) ?: return publish(ProtectionState.Unsupported("this device has no $lens"))
+            val id = CamPro.pick(ids, lens) ?: return publish(ProtectionState.Unsupported("this device has no $lens", Problem.DeviceCapability))
             cameraId = id
             val chars = manager.getCameraCharacteristics(id)
             val support = chars.camproSupport()
-            if (support is DeviceSupport.Result.Unsupported) return publish(ProtectionState.Unsupported(support.reasons.joinToString("; ")))
+            if (support is DeviceSupport.Result.Unsupported) return publish(ProtectionState.Unsupported(support.reasons.joinToString("; "), Problem.DeviceCapability))
             if (context.checkSelfPermission(Manifest.permission.CAMERA) != PackageManager.PERMISSION_GRANTED) {
-                return publish(ProtectionState.Stopped("the camera permission is not granted"))
+                return publish(ProtectionState.Stopped("the camera permission is not granted", Problem.Permission))
             }
             val size = chars.camproStreamSize(ImageFormat.YUV_420_888, options.maxWidth, options.maxHeight)
-                ?: return publish(ProtectionState.Unsupported("the camera lists no YUV_420_888 size"))
+                ?: return publish(ProtectionState.Unsupported("the camera lists no YUV_420_888 size", Problem.DeviceCapability))
             val bytes = preset.bytes(context)
             val session = CamProSession.fromBytes(bytes, (support as DeviceSupport.Result.Supported).maxCurvePoints)
             if (!session.protective && !options.allowUnprotective) {
@@ -435,6 +460,7 @@ class CamProCamera internal constructor(
                 return publish(
                     ProtectionState.Unsupported(
                         "the preset ${preset.given} does not protect faces (no protection rating in its provenance): open it with CamProOptions(allowUnprotective = true) to apply it anyway; the camera then reads Applied, never Protected",
+                        Problem.Preset,
                     ),
                 )
             }
@@ -446,6 +472,7 @@ class CamProCamera internal constructor(
                 return publish(
                     ProtectionState.Unsupported(
                         "CamProOptions.deviceGrids ${unmeasured.joinToString()}: the preset ${preset.given} was not measured to protect on ${if (unmeasured.size == 1) "that grid" else "those grids"} (it holds: ${held.joinToString().ifEmpty { "none" }}; docs/android.md, Grids)",
+                        Problem.Preset,
                     ),
                 )
             }
@@ -468,7 +495,7 @@ class CamProCamera internal constructor(
             campro = c
             val s = Stream(size.width, size.height, chars.get(CameraCharacteristics.SENSOR_ORIENTATION) ?: 0, chars.get(CameraCharacteristics.LENS_FACING) == CameraCharacteristics.LENS_FACING_FRONT)
             stream = s
-            main.post { preview?.configure(s.width, s.height, s.sensorOrientation, s.front) }
+            main.post { preview?.configure(s.width, s.height, s.sensorOrientation, s.front, s.front && options.mirrorFrontPreview) }
             manager.openCamera(id, cameraExecutor, object : CameraDevice.StateCallback() {
                 override fun onOpened(d: CameraDevice) {
                     if (campro !== c) return d.close() // closed or reopened meanwhile: not ours any more
@@ -534,9 +561,9 @@ class CamProCamera internal constructor(
         stills.fail(reason)
         // Queued behind the pipeline's own last state on the frame thread, so this one is final.
         try {
-            frameExecutor.execute { publish(ProtectionState.Stopped(reason)) }
+            frameExecutor.execute { publish(ProtectionState.Stopped(reason, Problem.CameraClosed)) }
         } catch (e: RejectedExecutionException) {
-            publish(ProtectionState.Stopped(reason))
+            publish(ProtectionState.Stopped(reason, Problem.CameraClosed))
         }
     }
 
@@ -575,6 +602,13 @@ class CamProCamera internal constructor(
     private fun checkMain() = check(Looper.myLooper() == Looper.getMainLooper()) { "call on the main thread" }
 
     /** The device's physical orientation as the display's rotation implies it (a portrait-locked app should pass its own). */
+    /**
+     * The device's physical orientation (degrees clockwise, a multiple of 90): from the
+     * accelerometer while the owner is started (an app locked to portrait still gets stills
+     * and videos turned as the phone is held), else from the display's rotation.
+     */
+    internal fun currentDeviceOrientation(): Int = sensedOrientation ?: deviceOrientationFromDisplay()
+
     private fun deviceOrientationFromDisplay(): Int {
         @Suppress("DEPRECATION")
         val rotation = context.getSystemService(WindowManager::class.java)?.defaultDisplay?.rotation ?: Surface.ROTATION_0

@@ -59,9 +59,10 @@ class CamProPreviewView @JvmOverloads constructor(
     private var bufferHeight = 0
     private var sensorOrientation = 0
     private var frontFacing = false
+    private var mirrored = false
 
     /** The state the cover shows (main thread). */
-    var state: ProtectionState = ProtectionState.Stopped("no camera")
+    var state: ProtectionState = ProtectionState.Stopped("no camera", org.campro.Problem.CameraClosed)
         private set
 
     init {
@@ -91,16 +92,19 @@ class CamProPreviewView @JvmOverloads constructor(
     }
 
     /**
-     * The stream this view shows: its buffer size, `SENSOR_ORIENTATION` and whether the
-     * camera faces the user (main thread; the camera calls it when it opens).
+     * The stream this view shows: its buffer size, `SENSOR_ORIENTATION`, whether the camera
+     * faces the user, and whether to mirror it (a front camera's preview, as a mirror shows
+     * the user; `CamProOptions.mirrorFrontPreview`). Main thread; the camera calls it when it opens.
      */
-    fun configure(width: Int, height: Int, sensorOrientationDegrees: Int, front: Boolean) {
+    @JvmOverloads
+    fun configure(width: Int, height: Int, sensorOrientationDegrees: Int, front: Boolean, mirror: Boolean = front) {
         require(width > 0 && height > 0) { "stream size must be positive, got $width x $height" }
         val changed = width != bufferWidth || height != bufferHeight
         bufferWidth = width
         bufferHeight = height
         sensorOrientation = sensorOrientationDegrees
         frontFacing = front
+        mirrored = mirror
         if (changed) texture.surfaceTexture?.let { detach(); attach(it) }
         applyTransform()
     }
@@ -156,7 +160,7 @@ class CamProPreviewView @JvmOverloads constructor(
     private fun applyTransform() {
         if (bufferWidth == 0 || width == 0 || height == 0) return
         val rotation = Orientation.previewRotation(sensorOrientation, displayRotationDegrees(), frontFacing)
-        texture.setTransform(Matrix().apply { setValues(Orientation.fitTransform(bufferWidth, bufferHeight, width, height, rotation, frontFacing)) })
+        texture.setTransform(Matrix().apply { setValues(Orientation.fitTransform(bufferWidth, bufferHeight, width, height, rotation, mirrored)) })
     }
 
     private fun displayRotationDegrees(): Int = when (display?.rotation ?: Surface.ROTATION_0) {
@@ -165,6 +169,32 @@ class CamProPreviewView @JvmOverloads constructor(
         Surface.ROTATION_270 -> 270
         else -> 0
     }
+
+    /**
+     * A turn from landscape to reverse landscape (180 degrees) changes no configuration, so
+     * only the display says so: the picture would show upside down until the next resize.
+     */
+    private val displayListener = object : android.hardware.display.DisplayManager.DisplayListener {
+        override fun onDisplayAdded(displayId: Int) {}
+        override fun onDisplayRemoved(displayId: Int) {}
+        override fun onDisplayChanged(displayId: Int) {
+            if (displayId == display?.displayId) applyTransform()
+        }
+    }
+
+    override fun onAttachedToWindow() {
+        super.onAttachedToWindow()
+        context.getSystemService(android.hardware.display.DisplayManager::class.java)?.registerDisplayListener(displayListener, handler)
+        applyTransform()
+    }
+
+    override fun onDetachedFromWindow() {
+        context.getSystemService(android.hardware.display.DisplayManager::class.java)?.unregisterDisplayListener(displayListener)
+        super.onDetachedFromWindow()
+    }
+
+    /** The texture's current matrix (internal: tests read what the view applies). */
+    internal fun textureTransform(): Matrix = texture.getTransform(null)
 
     override fun onConfigurationChanged(newConfig: android.content.res.Configuration?) {
         super.onConfigurationChanged(newConfig)

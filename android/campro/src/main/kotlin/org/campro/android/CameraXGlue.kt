@@ -296,7 +296,7 @@ class CamProCameraX(
                 e
             }
             val superseded = failure is CameraControl.OperationCanceledException && n != sends.get()
-            if (failure != null && !superseded) pipeline.onCameraStopped("CameraX refused CamPro's settings: ${failure.javaClass.simpleName}: ${failure.message}")
+            if (failure != null && !superseded) pipeline.onCameraStopped("CameraX refused CamPro's settings: ${failure.javaClass.simpleName}: ${failure.message}", org.campro.Problem.Other)
         }, Runnable::run)
     }
 

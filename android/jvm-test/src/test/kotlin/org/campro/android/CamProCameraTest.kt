@@ -15,6 +15,7 @@ import android.view.View
 import androidx.lifecycle.Lifecycle
 import org.campro.Fixtures
 import org.campro.PixelProbe
+import org.campro.Orientation
 import org.campro.ProtectionState
 import org.campro.StillResult
 import org.junit.After
@@ -116,7 +117,7 @@ class CamProCameraTest {
         owner.moveTo(Lifecycle.State.RESUMED)
         settle(c)
         val s = c.state.value
-        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("lut17") && !s.reason.contains("deviceGrids q10") && s.reason.contains("it holds: q10"))
+        assertTrue("$s", s is ProtectionState.Unsupported && s.reason.contains("lut17") && !s.reason.contains("deviceGrids q10") && s.reason.contains("it holds: q10") && s.problem == org.campro.Problem.Preset)
         assertNull("nothing opened", c.glue)
         val e = runCatching { CamProOptions(deviceGrids = setOf("q0")) }.exceptionOrNull()
         assertTrue("$e", e is IllegalArgumentException && e.message!!.contains("q0 is not a grid"))
@@ -157,7 +158,7 @@ class CamProCameraTest {
         owner.moveTo(Lifecycle.State.CREATED)
         settle(c)
         assertNull(c.glue)
-        assertEquals(ProtectionState.Stopped("paused: the app is not in the foreground"), c.state.value)
+        assertEquals(ProtectionState.Stopped("paused: the app is not in the foreground", org.campro.Problem.CameraClosed), c.state.value)
         // Started again: reopened, verifying anew.
         owner.moveTo(Lifecycle.State.STARTED)
         settle(c)
@@ -197,7 +198,7 @@ class CamProCameraTest {
         owner.moveTo(Lifecycle.State.DESTROYED)
         settle(c)
         assertNull(c.glue)
-        assertEquals(ProtectionState.Stopped("closed by the app"), c.state.value)
+        assertEquals(ProtectionState.Stopped("closed by the app", org.campro.Problem.CameraClosed), c.state.value)
         assertEquals(
             listOf("Stopped", "Verifying", "Protected", "Stopped", "Verifying", "Stopped", "Verifying", "Stopped", "Verifying", "Stopped", "Verifying", "Stopped"),
             seen.map { it.javaClass.simpleName }.distinctConsecutive(),
@@ -213,7 +214,7 @@ class CamProCameraTest {
         val c = open(owner)
         owner.moveTo(Lifecycle.State.RESUMED)
         settle(c)
-        assertEquals(ProtectionState.Stopped("the camera permission is not granted"), c.state.value)
+        assertEquals(ProtectionState.Stopped("the camera permission is not granted", org.campro.Problem.Permission), c.state.value)
         assertNull(c.glue)
         val e = runCatching { c.startRecording(File(dir, "a.mp4")) }.exceptionOrNull()
         assertTrue("$e", e is IllegalStateException && e.message!!.startsWith("the camera is not open"))
@@ -306,6 +307,20 @@ class CamProCameraTest {
         val changed = File(dir, "changed.jpg").also { f -> f.writeBytes(out.readBytes().also { it[it.size / 2] = (it[it.size / 2] + 1).toByte() }) }
         val (code2, said2) = cli("check", "--record", record.path, changed.path)
         assertTrue(said2, code2 != 0 && said2.contains("NOT what its record names") && said2.contains("names no raw input"))
+
+        // An app locked to portrait: the display stays at 0, the accelerometer says the phone is
+        // turned 90 clockwise; the still is turned as the phone is held (sensor 90 + device 90: EXIF 3).
+        assertEquals("no reading yet: the display's rotation", 0, c.currentDeviceOrientation())
+        c.sensedOrientation = Orientation.deviceOrientation(100, 0)
+        val turned = File(dir, "turned.jpg")
+        c.takePicture(turned) { stills += it }
+        onCamera(c) { c.glue!!.pipeline.onFrame(3000, FakeImage(64, 48, 3000, closed)) }
+        verify(c, 3000)
+        Thread.sleep(200)
+        settle(c)
+        val t2 = stills.last() as StillResult.Taken
+        val app1b = t2.jpeg.indexOfSequence("Exif\u0000\u0000".toByteArray())
+        assertEquals(3, le16(t2.jpeg, app1b + 6 + 18))
 
         // A second still into the same file is refused without overwrite; the first is left alone.
         c.takePicture(out) { stills += it }

@@ -159,7 +159,7 @@ class Camera2Test {
         // Disconnected mid-stream.
         cam.onCameraStopped("the camera was disconnected")
         cam.onResult(CamProCamera2.PROTECTED, honoured(4))
-        assertEquals(ProtectionState.Stopped("the camera was disconnected"), cam.pipeline.state)
+        assertEquals(ProtectionState.Stopped("the camera was disconnected", org.campro.Problem.CameraClosed), cam.pipeline.state)
         assertEquals(listOf("Verifying", "Protected", "Violated", "Protected", "Stopped"), states.map { it.javaClass.simpleName })
         cam.close()
     }

@@ -34,6 +34,14 @@ class HalScenariosTest {
          * [CamProPipeline.reprobeInterval] protected frames and two bursts past the switch.
          */
         CaughtByReprobe,
+
+        /**
+         * Protects on a grid the preset was measured to hold on ([App.grid]): the state ends
+         * Protected with that grid seen, and a delivered frame may differ from the ideal
+         * camera's by what the guard's readback stated for the grid's values (the grid's
+         * protection is `campro check`'s measurement, docs/android.md "Grids"), no more.
+         */
+        ProtectsOnGrid,
     }
 
     /** What the app does: its settings and how it treats its frames and its lifecycle. */
@@ -52,6 +60,8 @@ class HalScenariosTest {
         val maxGap: Int = Int.MAX_VALUE,
         /** The grids the app accepts (`null`: the preset's measured ones; docs/android.md, Grids). */
         val deviceGrids: Set<DeviceGrid>? = null,
+        /** The grid a [Outcome.ProtectsOnGrid] scenario must end on. */
+        val grid: DeviceGrid? = null,
     ) {
         /** Largest difference a delivered frame may show from the desktop pipeline: the accepted deviation (at least the conversion's bound, under 0.5) plus 8-bit rounding. */
         val boundLsb: Int get() = kotlin.math.ceil(maxOf(acceptLsb, 0.5)).toInt() + 1
@@ -79,10 +89,10 @@ class HalScenariosTest {
         Behaviour("results out of order (pairs swapped)", swapResults = true) to Outcome.Protects,
         Behaviour("one result in 7 lost", loseResultEvery = 7) to Outcome.Protects,
         Behaviour("AWB converges over 5 frames", awbSettleFrames = 5) to Outcome.Protects,
-        Behaviour("matrices rounded to 1/1024 (Q10, a grid the preset holds)", matrixStep = 1024) to Outcome.Protects,
-        Behaviour("matrices rounded to 1/128 (Q7, a grid the preset holds)", matrixStep = 128) to Outcome.Protects,
+        Scenario(Behaviour("matrices rounded to 1/1024 (Q10, a grid the preset holds)", matrixStep = 1024), Outcome.ProtectsOnGrid, App(grid = DeviceGrid.MatrixBits(10))),
+        Scenario(Behaviour("matrices rounded to 1/128 (Q7, a grid the preset holds)", matrixStep = 128), Outcome.ProtectsOnGrid, App(grid = DeviceGrid.MatrixBits(7))),
         Behaviour("curve resampled to 17 points (a grid that does not protect)", curvePoints = 17) to Outcome.Refuses,
-        Behaviour("curve resampled to 33 points (a grid the preset holds)", curvePoints = 33) to Outcome.Protects,
+        Scenario(Behaviour("curve resampled to 33 points (a grid the preset holds)", curvePoints = 33), Outcome.ProtectsOnGrid, App(grid = DeviceGrid.CurvePoints(33))),
         Scenario(Behaviour("matrices rounded to 1/1024 (Q10), the app accepting no grid", matrixStep = 1024), Outcome.Refuses, App(deviceGrids = emptySet())),
         Behaviour("display timestamp base on the protected stream (image 5 ms after the sensor)", imageTimestampOffsetNs = 5_000_000) to Outcome.Refuses,
         Behaviour("echoing HAL (reports the request, applies its own curve)", echo = true) to Outcome.Refuses,
@@ -153,6 +163,7 @@ class HalScenariosTest {
             var delivered = 0
             var leaked = 0
             var lastLeak = -1
+            val offs = ArrayList<Pair<Int, Int>>()
             var maxGap = 0
             var lastDelivered = -1
             var worst = 0
@@ -176,7 +187,7 @@ class HalScenariosTest {
                     // Frames still made with the values metered before a light change are protected too.
                     val d = minOf(now, f.before?.let { off(it) } ?: Int.MAX_VALUE)
                     worst = maxOf(worst, d)
-                    if (d > app.boundLsb) { leaked++; lastLeak = f.index }
+                    offs += f.index to d
                     if (frameNow in app.holdFrom until app.holdUntil) held += f else f.close()
                 },
                 drop = { it.close() },
@@ -191,6 +202,9 @@ class HalScenariosTest {
                 if (i + 1 == app.resumeAt) p.start(Fixtures.supported())
             }
             val state = p.state
+            // On a measured grid, frames are the grid's camera: within the readback's bound for its values.
+            val allowed = if (sc.outcome == Outcome.ProtectsOnGrid) maxOf(app.boundLsb, kotlin.math.ceil(p.guard.worstDeviationLsb).toInt() + 1) else app.boundLsb
+            for ((index, d) in offs) if (d > allowed) { leaked++; lastLeak = index }
             val recent = lastDelivered >= frames - 10
             val why = mutableListOf<String>()
             if (leaked > 0) why += "$leaked frames off by up to $worst LSB reached the app"
@@ -208,6 +222,10 @@ class HalScenariosTest {
                 Outcome.Applies -> if (!(state == ProtectionState.Applied && recent) || ProtectionState.Protected in states) why += "ends $state with ${delivered} frames (states: ${states.joinToString(" > ") { it.javaClass.simpleName }})"
                 Outcome.Refuses -> if (state == ProtectionState.Protected || state == ProtectionState.Applied || (delivered > 0 && leaked > 0)) why += "ends $state"
                 Outcome.Stops -> if (state !is ProtectionState.Stopped) why += "ends $state"
+                Outcome.ProtectsOnGrid -> {
+                    if (!(state == ProtectionState.Protected && recent)) why += "ends $state with $delivered frames"
+                    if (p.guard.gridSeen != app.grid) why += "verified on ${p.guard.gridSeen}, not ${app.grid}"
+                }
                 Outcome.CaughtByReprobe -> {
                     val caughtBy = b.echoFrom + p.reprobeInterval + 2 * p.controller.maxInterval
                     if (!(state is ProtectionState.Unsupported && state.reason.contains("pixel probe"))) why += "ends $state, not refused by the probe"

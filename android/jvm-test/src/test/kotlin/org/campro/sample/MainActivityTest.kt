@@ -95,6 +95,6 @@ class MainActivityTest {
         assertEquals(ProtectionState.Verifying, cam.state.value)
         controller.pause().stop().destroy()
         CameraScript.settle(cam)
-        assertEquals(ProtectionState.Stopped("closed by the app"), cam.state.value)
+        assertEquals(ProtectionState.Stopped("closed by the app", org.campro.Problem.CameraClosed), cam.state.value)
     }
 }

@@ -233,6 +233,10 @@ struct CheckReport<'a> {
     photos: &'a [PhotoCheck],
     failed: Vec<Failed>,
     summary: Summary,
+    /// The sentence printed first: safe to share or not, and what to do ([`verdict`]).
+    verdict: String,
+    /// What it counts.
+    verdict_counts: VerdictCounts,
     seconds: f64,
 }
 
@@ -304,6 +308,82 @@ fn summary(photos: &[PhotoCheck], judges: &[Judge], views: &[Condition]) -> Summ
         photos_without_faces: photos.iter().filter(|p| p.faces.is_empty()).count(),
         grey_photos: photos.iter().filter(|p| p.grey).count(),
     }
+}
+
+/// What the verdict sentence counts: faces as a person would sort them (matched to their own
+/// person, matched no better than to a stranger, set apart with grey photos `simulate`
+/// refuses), at FAR 1e-3.
+#[derive(Debug, Default, Clone, Serialize, PartialEq, Eq)]
+struct VerdictCounts {
+    photos: usize,
+    /// Faces scored outside the refused grey photos (faces at a photo's edge are not scored).
+    scored: usize,
+    /// Of those, linkable by a similarity above every stranger's: matched to their own person.
+    matched: usize,
+    /// Linkable, but no more similar to their own raw face than to a stranger's: low-quality faces.
+    stranger_like: usize,
+    /// Grey photos `simulate` refuses with this preset (it is not rated for grey), and their faces.
+    grey_photos_refused: usize,
+    grey_faces_refused: usize,
+    /// Identities in the gallery a rank is out of.
+    gallery: usize,
+}
+
+fn verdict_counts(photos: &[PhotoCheck], judges: &[Judge], grey_refused: bool, gallery: usize) -> VerdictCounts {
+    let apart = |p: &PhotoCheck| grey_refused && p.grey;
+    let kept: Vec<&FaceCheck> =
+        photos.iter().filter(|p| !apart(p)).flat_map(|p| &p.faces).filter(|f| !f.at_edge).collect();
+    let matched = kept.iter().filter(|f| f.linkable_specifically(judges, FARS[0])).count();
+    let linkable = kept.iter().filter(|f| f.linkable(judges, FARS[0])).count();
+    VerdictCounts {
+        photos: photos.len(),
+        scored: kept.len(),
+        matched,
+        stranger_like: linkable - matched,
+        grey_photos_refused: photos.iter().filter(|p| apart(p)).count(),
+        grey_faces_refused: photos.iter().filter(|p| apart(p)).flat_map(|p| &p.faces).filter(|f| !f.at_edge).count(),
+        gallery,
+    }
+}
+
+/// The one sentence a person can act on, printed first: are these photos safe to share
+/// through this preset, which are not, and what to do. Real links, low-quality matches and
+/// refused grey photos are kept apart; a rank is put beside its chance level.
+fn verdict(c: &VerdictCounts) -> String {
+    let plural = |n: usize, one: &str, many: &str| if n == 1 { format!("{n} {one}") } else { format!("{n} {many}") };
+    let mut v = if c.scored == 0 && c.grey_photos_refused == 0 {
+        format!("No face to check: none was found in {}.", plural(c.photos, "photo", "photos"))
+    } else if c.matched == 0 {
+        format!(
+            "None of the {} could be matched to its own person (at a false-match rate of 1 in 1,000): as far as these face-recognition models can tell, the photos are safe to share through this preset.",
+            plural(c.scored, "face", "faces")
+        )
+    } else {
+        format!(
+            "{} of {} could be matched to their own person (at a false-match rate of 1 in 1,000): do not share the photos whose lines say LINKABLE as they are; `campro simulate --enhance` (it hides every face its guard finds) or a stronger preset such as campro-omega-0.5-hour protects them.",
+            c.matched,
+            plural(c.scored, "face", "faces")
+        )
+    };
+    if c.stranger_like > 0 {
+        let _ = write!(
+            v,
+            " {} matched a stranger just as well as their own person: low-quality faces (small, blurred or dark), not a link to anyone.",
+            if c.stranger_like == 1 { "1 more face".to_string() } else { format!("{} more faces", c.stranger_like) }
+        );
+    }
+    if c.grey_photos_refused > 0 {
+        let _ = write!(
+            v,
+            " {} ({}) set apart: `campro simulate` refuses black-and-white photos with this preset, so they cannot be shared through it.",
+            plural(c.grey_photos_refused, "black-and-white photo", "black-and-white photos"),
+            plural(c.grey_faces_refused, "face", "faces")
+        );
+    }
+    if c.gallery > 1 && c.scored > 0 {
+        let _ = write!(v, " Ranks are out of {} identities: rank 1 by chance is 1 in {}.", c.gallery, c.gallery);
+    }
+    v
 }
 
 /// Two decimals without the leading zero, as similarities are usually written (.21).
@@ -379,7 +459,7 @@ fn summary_line(s: &Summary, judges: &[Judge], gallery: usize) -> String {
         let _ = write!(line, "; worst similarity {} against threshold {}", sim(v), sim(t));
     }
     if let Some(r) = s.worst_rank {
-        let _ = write!(line, "; worst rank {r} of {gallery}");
+        let _ = write!(line, "; worst rank {r} of {gallery} (chance 1 in {gallery})");
     }
     if s.at_edge > 0 {
         let _ = write!(line, "; {} faces at a photo's edge not scored", s.at_edge);
@@ -671,6 +751,7 @@ pub fn run(a: CheckArgs) -> Result<i32> {
     }
     let gallery = check::rank_all(&mut checked, &distractors, judges.len());
     let s = summary(&checked, &judges, &views);
+    let counts = verdict_counts(&checked, &judges, !p.rated_for_grey(), gallery);
     let report = CheckReport {
         params: format!("{} ({})", crate::shown(&params), p.name),
         face_detector: detector.name(),
@@ -685,6 +766,8 @@ pub fn run(a: CheckArgs) -> Result<i32> {
         photos: &checked,
         failed,
         summary: s,
+        verdict: verdict(&counts),
+        verdict_counts: counts,
         seconds: start.elapsed().as_secs_f64(),
     };
     if let Some(out) = &a.output {
@@ -696,6 +779,7 @@ pub fn run(a: CheckArgs) -> Result<i32> {
         for n in &notes {
             eprintln!("note: {n}");
         }
+        say!("{}", report.verdict);
         for ph in &checked {
             say!("{}", photo_line(ph, &judges, &views, gallery));
         }
@@ -794,6 +878,7 @@ fn index_html(r: &CheckReport, judges: &[Judge], views: &[Condition], out: &Path
     h.push_str("<h1>campro check</h1>\n");
     let alarm =
         if r.summary.linkable.iter().any(|&n| n > 0) { " class=\"alarm verdict\"" } else { " class=\"verdict\"" };
+    let _ = writeln!(h, "<p id=\"verdict\"><strong>{}</strong></p>", e(&r.verdict));
     let _ = writeln!(h, "<p id=\"summary\"{alarm}>{}</p>", e(&summary_line(&r.summary, judges, r.gallery)));
     let _ = writeln!(
         h,
@@ -892,4 +977,55 @@ fn index_html(r: &CheckReport, judges: &[Judge], views: &[Condition], out: &Path
     }
     h.push_str("</body></html>\n");
     h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn counts(scored: usize, matched: usize, stranger_like: usize, grey: usize) -> VerdictCounts {
+        VerdictCounts {
+            photos: 25,
+            scored,
+            matched,
+            stranger_like,
+            grey_photos_refused: grey,
+            grey_faces_refused: 3 * grey,
+            gallery: 7,
+        }
+    }
+
+    /// The four kinds of folder a new user brings, one sentence each.
+    #[test]
+    fn the_verdict_says_safe_linkable_refused_and_low_quality_apart() {
+        let safe = verdict(&counts(98, 0, 0, 0));
+        assert!(safe.starts_with("None of the 98 faces could be matched to its own person"), "{safe}");
+        assert!(safe.contains("safe to share through this preset") && !safe.contains("LINKABLE"), "{safe}");
+        assert!(safe.ends_with("rank 1 by chance is 1 in 7."), "{safe}");
+
+        let linkable = verdict(&counts(98, 5, 0, 0));
+        assert!(linkable.starts_with("5 of 98 faces could be matched to their own person"), "{linkable}");
+        assert!(
+            linkable.contains("do not share the photos whose lines say LINKABLE") && linkable.contains("--enhance"),
+            "{linkable}"
+        );
+        assert!(!linkable.contains("safe to share"), "{linkable}");
+
+        let low = verdict(&counts(98, 0, 31, 0));
+        assert!(low.starts_with("None of the 98 faces"), "{low}");
+        assert!(
+            low.contains("31 more faces matched a stranger just as well as their own person: low-quality faces"),
+            "{low}"
+        );
+
+        let refused = verdict(&counts(90, 1, 1, 2));
+        assert!(refused.contains("1 more face matched a stranger"), "{refused}");
+        assert!(
+            refused.contains("2 black-and-white photos (6 faces) set apart: `campro simulate` refuses"),
+            "{refused}"
+        );
+
+        let empty = verdict(&VerdictCounts { photos: 3, ..Default::default() });
+        assert_eq!(empty, "No face to check: none was found in 3 photos.");
+    }
 }

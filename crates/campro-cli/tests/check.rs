@@ -118,8 +118,17 @@ fn a_learnt_preset_hides_faces_as_captured_and_every_photo_gets_its_line() {
     assert!(line("grey.png").contains("grey-scale photo"), "{text}");
     assert!(line("Sophia_Loren_0002").contains("(<b>x</b>\"&)"), "{text}");
     assert!(text.lines().last().unwrap().contains("faces linkable at FAR 1e-3"), "{text}");
+    assert!(text.lines().last().unwrap().contains("(chance 1 in "), "{text}");
 
     let v: Value = serde_json::from_slice(&std::fs::read(out.join("check.json")).unwrap()).unwrap();
+    // The first line is the plain verdict, the same as the JSON's; the grey photo is set apart
+    // when the preset is not rated for grey (simulate refuses it), counted otherwise.
+    let first = text.lines().next().unwrap();
+    assert_eq!(first, v["verdict"].as_str().unwrap());
+    assert!(first.contains("could be matched to") && first.contains("Ranks are out of"), "{first}");
+    let rated = std::fs::read_to_string(&params).unwrap().contains("\"rated\": true");
+    assert_eq!(first.contains("1 black-and-white photo ("), !rated, "{first}");
+    assert_eq!(v["verdict_counts"]["grey_photos_refused"].as_u64().unwrap(), u64::from(!rated));
     let views: Vec<&str> = v["views"].as_array().unwrap().iter().map(|x| x.as_str().unwrap()).collect();
     assert_eq!(views, ["captured", "enhanced", "restored"], "the preset ships an enhancer, no restorer");
     let models = v["models"].as_array().unwrap().len();

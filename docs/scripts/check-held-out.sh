@@ -73,7 +73,7 @@ for preset in $presets; do
   run="$preset${GRIDS:+-$grid}"
   # shellcheck disable=SC2046 # the flags are words
   /usr/bin/time -f "$run: %e s, %M KB" -a -o "$work/times" \
-    "$campro" check "$preset" "$work/photos" -o "$work/report-$run" ${MODELS:+--models "$MODELS"} $views $(grid_flags "$grid") > "$work/lines-$run" 2>&1
+    "$campro" check "$preset" --people "$work/photos" -o "$work/report-$run" ${MODELS:+--models "$MODELS"} $views $(grid_flags "$grid") > "$work/lines-$run" 2>&1
   python3 - "$preset" "$grid" "$work/report-$run/check.csv" <<'PY'
 import collections, csv, statistics, sys
 preset, grid, path = sys.argv[1], sys.argv[2], sys.argv[3]

@@ -25,7 +25,8 @@ struct Photo {
     person: Option<String>,
 }
 
-/// Every photo of `a`: loose files, folders (their subfolders are persons), `--person`.
+/// Every photo of `a`: files and folders given (recursive, each face its own identity),
+/// `--people` folders (each subfolder one person) and `--person NAME=DIR`.
 fn photos_of(a: &CheckArgs, out: &Path) -> Result<Vec<Photo>> {
     let which =
         crate::simulate::Reads { reads: &crate::simulate::is_image, otherwise: "not a PNG, JPEG, TIFF or WebP file" };
@@ -36,20 +37,22 @@ fn photos_of(a: &CheckArgs, out: &Path) -> Result<Vec<Photo>> {
         }
         Ok(found.jobs.into_iter().map(|(i, _)| i).collect())
     };
-    let mut photos = Vec::new();
-    for input in &a.photos {
-        if !input.is_dir() {
-            photos.extend(list(std::slice::from_ref(input))?.into_iter().map(|path| Photo { path, person: None }));
-            continue;
+    let mut photos: Vec<Photo> = list(&a.photos)?.into_iter().map(|path| Photo { path, person: None }).collect();
+    for people in &a.people {
+        if !people.is_dir() {
+            bail!(
+                "--people {}: not a folder (a folder whose subfolders hold one person's photos each)",
+                crate::shown(people)
+            );
         }
-        let mut entries: Vec<PathBuf> = std::fs::read_dir(input)
-            .with_context(|| crate::shown(input))?
+        let mut dirs: Vec<PathBuf> = std::fs::read_dir(people)
+            .with_context(|| crate::shown(people))?
             .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_dir())
             .collect();
-        entries.sort();
-        let (dirs, files): (Vec<PathBuf>, Vec<PathBuf>) = entries.into_iter().partition(|p| p.is_dir());
-        if !files.is_empty() {
-            photos.extend(list(&files)?.into_iter().map(|path| Photo { path, person: None }));
+        dirs.sort();
+        if dirs.is_empty() {
+            bail!("--people {}: no subfolder (each subfolder is one person's photos)", crate::shown(people));
         }
         for d in dirs {
             let name = d.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -677,7 +680,9 @@ pub fn run(a: CheckArgs) -> Result<i32> {
     let params = a.params.clone().ok_or_else(|| anyhow!("PARAMS: required"))?;
     let p = crate::load_params(&params)?;
     if let Some(out) = &a.output {
-        outside_the_photos(out, &a.photos)?;
+        let folders: Vec<PathBuf> =
+            a.photos.iter().chain(&a.people).chain(a.persons.iter().map(|(_, d)| d)).cloned().collect();
+        outside_the_photos(out, &folders)?;
         crate::check_output_folder(out, a.force, "--output")?;
     }
     let out_for_inputs = a.output.clone().unwrap_or_else(|| PathBuf::from(".campro-check-no-output"));

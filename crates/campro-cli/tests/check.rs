@@ -50,6 +50,7 @@ fn presets_that_do_not_protect_are_said_to() {
         let (code, v, err) = json_run(&[
             "check".as_ref(),
             params.as_os_str(),
+            "--people".as_ref(),
             photos.as_os_str(),
             "--shared".as_ref(),
             shared.as_os_str(),
@@ -194,7 +195,46 @@ fn bad_check_arguments_get_one_line() {
             "is inside the photo folder",
         );
     }
+    // Nor into a --people or --person folder.
+    fails_with(
+        campro().arg("check").arg(&params).arg("--people").arg(photos.path()).arg("-o").arg(photos.path().join("r")),
+        "is inside the photo folder",
+    );
+    fails_with(
+        campro()
+            .arg("check")
+            .arg(&params)
+            .arg("--person")
+            .arg(format!("ann={}", photos.path().join("ann").display()))
+            .arg("-o")
+            .arg(photos.path().join("ann/r")),
+        "is inside the photo folder",
+    );
+    // --people is a folder of people's folders.
+    let file = photos.path().join("ann/x.jpg");
+    std::fs::write(&file, b"x").unwrap();
+    fails_with(campro().arg("check").arg(&params).arg("--people").arg(&file), "--people");
     let Some(shared) = shared() else { return };
+    // A folder given plainly is never taken for persons (events and years are folders too);
+    // a --people folder's subfolders are.
+    let trip = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(trip.path().join("2024")).unwrap();
+    std::fs::copy(shared.join(FACES[0]), trip.path().join("2024/a.jpg")).unwrap();
+    for (flag, person) in [(None, Value::Null), (Some("--people"), Value::from("2024"))] {
+        let mut args: Vec<&std::ffi::OsStr> = vec!["check".as_ref(), params.as_os_str()];
+        args.extend(flag.map(std::ffi::OsStr::new));
+        args.extend([
+            trip.path().as_os_str(),
+            "--shared".as_ref(),
+            shared.as_os_str(),
+            "--view".as_ref(),
+            "captured".as_ref(),
+            "--distractors".as_ref(),
+            "0".as_ref(),
+        ]);
+        let (_, v, err) = json_run(&args);
+        assert_eq!(v["photos"][0]["person"], person, "{flag:?}: {err}");
+    }
     // A face model whose manifest has no thresholds is named, with the command that calibrates it.
     let dir = tempfile::tempdir().unwrap();
     let manifest = dir.path().join("mine.json");
@@ -320,7 +360,8 @@ fn a_device_is_checked_as_its_hal_applies_the_values() {
     let dir = tempfile::tempdir().unwrap();
     let photos = persons(&shared, dir.path());
     let similarities = |extra: &[&str]| -> (Vec<f64>, Value) {
-        let mut args: Vec<&std::ffi::OsStr> = vec!["check".as_ref(), "campro-omega-0.5".as_ref(), photos.as_os_str()];
+        let mut args: Vec<&std::ffi::OsStr> =
+            vec!["check".as_ref(), "campro-omega-0.5".as_ref(), "--people".as_ref(), photos.as_os_str()];
         args.extend([
             "--shared".as_ref(),
             shared.as_os_str(),

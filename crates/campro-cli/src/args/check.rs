@@ -9,10 +9,15 @@ use std::path::PathBuf;
 pub struct CheckArgs {
     #[arg(help = PARAMS_HELP, required_unless_present = "record")]
     pub params: Option<PathBuf>,
-    /// Photos or folders (recursive). A folder with subfolders counts each subfolder as one
-    /// person's photos (re-identified among everyone's); loose photos are each their own.
-    #[arg(required_unless_present_any = ["persons", "record"])]
+    /// Photos or folders (recursive). Every face in them is its own identity: subfolders are
+    /// not taken as persons (events, years and places are folders too); say who is who with
+    /// --people or --person.
+    #[arg(required_unless_present_any = ["persons", "people", "record"])]
     pub photos: Vec<PathBuf>,
+    /// A folder of people: each subfolder holds one person's photos, named after the
+    /// subfolder (re-identified among everyone's); repeatable.
+    #[arg(long, value_name = "DIR", conflicts_with = "record")]
+    pub people: Vec<PathBuf>,
     /// Verify a file against the record `simulate --record` (or the Android library, for a
     /// phone's photo or video) wrote beside it: `campro check --record OUT.jpg.campro.json
     /// FILE` (FILE the output: its hash; FILE the raw input of a desktop record: the camera

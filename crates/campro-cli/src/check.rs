@@ -885,6 +885,7 @@ fn index_html(r: &CheckReport, judges: &[Judge], views: &[Condition], out: &Path
         if r.summary.linkable.iter().any(|&n| n > 0) { " class=\"alarm verdict\"" } else { " class=\"verdict\"" };
     let _ = writeln!(h, "<p id=\"verdict\"><strong>{}</strong></p>", e(&r.verdict));
     let _ = writeln!(h, "<p id=\"summary\"{alarm}>{}</p>", e(&summary_line(&r.summary, judges, r.gallery)));
+    let _ = writeln!(h, "<p id=\"one-story\">{}</p>", e(crate::page::ONE_STORY));
     let _ = writeln!(
         h,
         "<p>Preset {}. A face is <span class=\"link\">linkable</span> when a model's cosine similarity of the raw face and a view is above its threshold at the false-accept rate (FAR): a face-recognition system would then say “same person”. Rank: where the true person comes in a gallery of {} raw identities ({} LFW distractors); 1 is found first.</p>",

@@ -223,6 +223,7 @@ fn index_html(
         page::html_escape(by.0),
         page::html_escape(by.1)
     );
+    s += &format!("<p id=\"one-story\">{}</p>\n", page::html_escape(page::ONE_STORY));
     // Flagged images first, the most faces after the camera first; then in input order.
     let mut order: Vec<(usize, &(PathBuf, Value))> = items.iter().enumerate().collect();
     order.sort_by_key(|(_, (_, v))| std::cmp::Reverse(faces_after(v, panels.len())));

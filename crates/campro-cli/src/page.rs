@@ -92,6 +92,10 @@ pub fn href(path: &Path, root: &Path) -> String {
         .join("/")
 }
 
+/// What `inspect` and `check` each count, said on both pages so their numbers tell one story
+/// (plain text; escape it for HTML).
+pub const ONE_STORY: &str = "inspect and check look at the same photos from two sides. inspect (campro inspect, inspect/index.html) counts the faces a face detector still finds after the camera: a face found is a face a system could try to recognise. check (campro check, report/index.html) asks the next question: can a face-recognition model match each face to its own person? So inspect's count is the larger one: a face can still be found and yet match no one, and a face no detector finds is still scored by check, which looks where the raw face was.";
+
 /// `text` safe inside HTML text and double-quoted attributes.
 pub fn html_escape(text: &str) -> String {
     let mut s = String::with_capacity(text.len());

@@ -158,6 +158,10 @@ fn a_learnt_preset_hides_faces_as_captured_and_every_photo_gets_its_line() {
     // The page: the name escaped, every image present in the report folder.
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
     assert!(html.contains("&lt;b&gt;x&lt;/b&gt;&quot;&amp;") && !html.contains(hostile), "name not escaped");
+    assert!(
+        html.contains("<p id=\"verdict\"><strong>") && html.contains("<p id=\"one-story\">inspect and check"),
+        "verdict and one story"
+    );
     let srcs = sources(&html);
     assert_eq!(
         srcs.len(),

@@ -70,6 +70,8 @@ fn inspect_writes_pictures_json_and_an_index_whose_links_open() {
     // Every link of the page opens a file inside the output folder: per image its picture
     // twice (a panel each) and once in the lightbox, and its JSON.
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    // One story with check: the page says what each command counts.
+    assert!(html.contains("<p id=\"one-story\">inspect and check look at the same photos"), "one story");
     let links = links(&html);
     assert_eq!(links.len(), 8, "{links:?}");
     assert_eq!(html.matches("<figcaption>").count(), 4, "a captioned figure per panel");

@@ -195,6 +195,12 @@ pub struct Heif<'a> {
 
 /// Reads `bytes` (the file `path`, named in errors) up to its primary picture.
 pub fn open<'a>(path: &'a Path, bytes: &'a [u8]) -> Result<Heif<'a>> {
+    // What the HEVC streams code, checked against what the file declares before libheif,
+    // which trusts the declaration, decodes anything (crate::hvcc).
+    let sizes = crate::hvcc::sizes(bytes).map_err(|e| image_error(path, format!("its HEIF boxes do not read: {e}")))?;
+    if let Some(why) = sizes.mismatch() {
+        return Err(image_error(path, why));
+    }
     let api = api().map_err(|e| image_error(path, e))?;
     let fail = |what: &str, e: &HeifError| image_error(path, format!("{what}: {}", message(e)));
     // SAFETY: every call follows heif.h: the context outlives the handle and image (`Owned`
@@ -326,6 +332,15 @@ unsafe fn icc(api: &Api, handle: *const Handle) -> Option<Vec<u8>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A file that declares 64 x 64 and codes 60000 x 60000 is refused by name before libheif
+    /// (which trusts the declaration) is asked for anything: no libheif needed.
+    #[test]
+    fn a_lying_declaration_is_refused_before_libheif() {
+        let bomb = crate::hvcc::tests::heif_declaring((64, 64), (60000, 60000));
+        let e = open(Path::new("bomb.heic"), &bomb).map(|_| ()).unwrap_err().to_string();
+        assert!(e.contains("codes 60000 x 60000 pictures, more than the 64 x 64 it declares"), "{e}");
+    }
 
     #[test]
     fn heif_files_are_told_by_their_brand() {

@@ -21,6 +21,7 @@ pub mod frontier;
 pub mod geometry;
 pub mod guard;
 pub mod heif;
+pub mod hvcc;
 pub mod image_file;
 pub mod linear;
 pub mod manifest;

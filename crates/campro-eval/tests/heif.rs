@@ -96,3 +96,18 @@ fn broken_heic_files_get_one_line_not_a_crash() {
     }
     assert_eq!(budget.free(), budget.total(), "every lease given back");
 }
+
+/// The fixture's HEVC stream codes the 64 x 64 its `ispe` declares (its `clap` then crops it to
+/// 64 x 48): it reads; a file cut short gets a reason.
+#[test]
+fn the_coded_size_is_read_before_decoding() {
+    let bytes = std::fs::read(FIXTURE).unwrap();
+    let sizes = campro_eval::hvcc::sizes(&bytes).unwrap();
+    assert_eq!(sizes.declared, [(64, 64)]);
+    assert_eq!(sizes.coded, [(64, 64)]);
+    assert_eq!(sizes.mismatch(), None);
+    let mut cut = bytes.clone();
+    cut.truncate(300);
+    let e = heif::open(Path::new("cut.heic"), &cut).map(|_| ()).unwrap_err().to_string();
+    assert!(e.contains("HEIF boxes do not read"), "{e}");
+}

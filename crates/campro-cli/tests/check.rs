@@ -32,6 +32,18 @@ fn persons(shared: &Path, dir: &Path) -> PathBuf {
     root
 }
 
+/// The flags of a quick check: the shared data, the captured view alone, no distractors.
+fn captured_only(shared: &Path) -> [&std::ffi::OsStr; 6] {
+    [
+        "--shared".as_ref(),
+        shared.as_os_str(),
+        "--view".as_ref(),
+        "captured".as_ref(),
+        "--distractors".as_ref(),
+        "0".as_ref(),
+    ]
+}
+
 fn json_run(args: &[&std::ffi::OsStr]) -> (Option<i32>, Value, String) {
     let out = campro().args(args).args(["--format", "json"]).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
@@ -227,15 +239,8 @@ fn bad_check_arguments_get_one_line() {
     for (flag, person) in [(None, Value::Null), (Some("--people"), Value::from("2024"))] {
         let mut args: Vec<&std::ffi::OsStr> = vec!["check".as_ref(), params.as_os_str()];
         args.extend(flag.map(std::ffi::OsStr::new));
-        args.extend([
-            trip.path().as_os_str(),
-            "--shared".as_ref(),
-            shared.as_os_str(),
-            "--view".as_ref(),
-            "captured".as_ref(),
-            "--distractors".as_ref(),
-            "0".as_ref(),
-        ]);
+        args.push(trip.path().as_os_str());
+        args.extend(captured_only(&shared));
         let (_, v, err) = json_run(&args);
         assert_eq!(v["photos"][0]["person"], person, "{flag:?}: {err}");
     }
@@ -366,14 +371,7 @@ fn a_device_is_checked_as_its_hal_applies_the_values() {
     let similarities = |extra: &[&str]| -> (Vec<f64>, Value) {
         let mut args: Vec<&std::ffi::OsStr> =
             vec!["check".as_ref(), "campro-omega-0.5".as_ref(), "--people".as_ref(), photos.as_os_str()];
-        args.extend([
-            "--shared".as_ref(),
-            shared.as_os_str(),
-            "--view".as_ref(),
-            "captured".as_ref(),
-            "--distractors".as_ref(),
-            "0".as_ref(),
-        ]);
+        args.extend(captured_only(&shared));
         args.extend(extra.iter().map(std::ffi::OsStr::new));
         let (code, v, err) = json_run(&args);
         assert!(code == Some(0) || code == Some(3), "{err}");

@@ -8,6 +8,11 @@ use image::RgbImage;
 use serde_json::Value;
 use std::path::Path;
 
+/// The detectors inspect runs and an LFW face, under the shared data folder.
+const YUNET: &str = "models/yunet_s_640_640.onnx";
+const YOLOX: &str = "models/yolox_nano.onnx";
+const FACE: &str = "data/lfw/images_deepfunneled/Aaron_Eckhart/Aaron_Eckhart_0001.jpg";
+
 /// Every `href="..."` and `src="..."` value of an HTML page but links inside it (`#id`).
 fn links(html: &str) -> Vec<String> {
     let mut out = Vec::new();
@@ -41,17 +46,13 @@ fn near_drawing(panel: &Value, x: f32, y: f32, margin: f32) -> bool {
 
 #[test]
 fn inspect_writes_pictures_json_and_an_index_whose_links_open() {
-    let Some(shared) = campro_testkit::shared_root(&[
-        "models/yunet_s_640_640.onnx",
-        "models/yolox_nano.onnx",
-        "data/lfw/images_deepfunneled/Aaron_Eckhart/Aaron_Eckhart_0001.jpg",
-        "data/coco-person/images/000000000785.jpg",
-    ]) else {
+    let Some(shared) = campro_testkit::shared_root(&[YUNET, YOLOX, FACE, "data/coco-person/images/000000000785.jpg"])
+    else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("inspect out");
-    let face = shared.join("data/lfw/images_deepfunneled/Aaron_Eckhart/Aaron_Eckhart_0001.jpg");
+    let face = shared.join(FACE);
     let street = shared.join("data/coco-person/images/000000000785.jpg");
     let params = bundled("campro-omega-0.5.json");
     let run = campro()
@@ -161,15 +162,11 @@ fn inspect_names_a_missing_model_folder() {
 /// `inspect`'s page and in its JSON, not shown as protected without a word.
 #[test]
 fn inspect_flags_grey_photos_as_simulate_refuses_them() {
-    let Some(shared) = campro_testkit::shared_root(&[
-        "models/yunet_s_640_640.onnx",
-        "models/yolox_nano.onnx",
-        "data/lfw/images_deepfunneled/Aaron_Eckhart/Aaron_Eckhart_0001.jpg",
-    ]) else {
+    let Some(shared) = campro_testkit::shared_root(&[YUNET, YOLOX, FACE]) else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let face = shared.join("data/lfw/images_deepfunneled/Aaron_Eckhart/Aaron_Eckhart_0001.jpg");
+    let face = shared.join(FACE);
     let grey = dir.path().join("grey.png");
     image::DynamicImage::ImageLuma8(image::open(&face).unwrap().to_luma8()).to_rgb8().save(&grey).unwrap();
     let out = dir.path().join("out");

@@ -400,7 +400,10 @@ class ProtectionGuard(
         if (transform == null || curves == null) return null // trusted: see trustMissingKeys
         if (transform.size != 18) return "COLOR_CORRECTION_TRANSFORM has ${transform.size} values, not 18"
         if (curves.size != 3) return "TONEMAP_CURVE has ${curves.size} channels, not 3"
-        val grid = gridOf(transform, curves)
+        // Which accepted grid the values are on: asked only of a result beyond the bound (the
+        // interpolation is not free, and almost every result reads back as sent).
+        val grid by lazy(LazyThreadSafetyMode.NONE) { gridOf(transform, curves) }
+        var beyond = false
         var worst = 0.0
         for ((c, curve) in curves.withIndex()) {
             val bound = try {
@@ -417,19 +420,22 @@ class ProtectionGuard(
                 return "the reported values do not read back (${e.message})"
             }
             worst = maxOf(worst, bound)
-            if (!(bound <= maxDeviationLsb) && grid == null) {
-                val what = if (out[CamProNative.READBACK_MATRIX_MAX_ABS] * 255.0 > maxDeviationLsb / 2) "transform" else "curve"
-                lastKind = Problem.Deviation
-                valueDeviation = true
-                return "the reported $what differs from the request (channel ${"RGB"[c]}): up to %.3f LSB, more than %.3f".format(bound, maxDeviationLsb)
+            if (!(bound <= maxDeviationLsb)) {
+                beyond = true
+                if (grid == null) {
+                    val what = if (out[CamProNative.READBACK_MATRIX_MAX_ABS] * 255.0 > maxDeviationLsb / 2) "transform" else "curve"
+                    lastKind = Problem.Deviation
+                    valueDeviation = true
+                    return "the reported $what differs from the request (channel ${"RGB"[c]}): up to %.3f LSB, more than %.3f".format(bound, maxDeviationLsb)
+                }
             }
         }
         worstDeviationLsb = maxOf(worstDeviationLsb, worst)
-        gridSeen = grid
+        gridSeen = if (beyond) grid else null
         return null
     }
 
-    /** The grid a passing result's values were on, when they differed from the request by one; `null`: as sent. */
+    /** The grid a passing result's values were on, when they differed from the request beyond [maxDeviationLsb] by one; `null`: within it. */
     @Volatile
     var gridSeen: DeviceGrid? = null
         private set

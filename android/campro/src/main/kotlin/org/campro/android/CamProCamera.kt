@@ -465,9 +465,9 @@ class CamProCamera internal constructor(
                 )
             }
             val grids = options.deviceGrids?.mapNotNull { org.campro.DeviceGrid.parse(it) }?.toSet()
-            val unmeasured = grids.orEmpty() - session.deviceGrids
+            val held = session.deviceGrids
+            val unmeasured = grids.orEmpty() - held
             if (unmeasured.isNotEmpty()) {
-                val held = session.deviceGrids
                 session.close()
                 return publish(
                     ProtectionState.Unsupported(

@@ -159,12 +159,7 @@ class SimulatedHal(
 
     override fun meter() { setRepeating(listOf(Req.Auto)) }
 
-    /** Protected requests sent (each a new repeating request or burst). */
-    var protectRequests = 0
-        private set
-
     override fun protect(transform: IntArray, curves: Array<FloatArray>, gains: FloatArray, burst: Burst?) {
-        protectRequests++
         val p = Req.Protect(transform.copyOf(), curves.map { it.copyOf() }, gains.copyOf())
         setRepeating(
             if (burst == null) listOf(p) else List<Req>(burst.protectedFrames) { p } +

@@ -28,6 +28,7 @@ pub mod manifest;
 pub mod model;
 pub mod person;
 pub mod place;
+pub mod plans;
 pub mod plot;
 pub mod privacy;
 pub mod quality;

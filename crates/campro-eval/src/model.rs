@@ -2,20 +2,14 @@
 
 use crate::error::{EvalError, Result};
 use crate::manifest::{Channels, Manifest};
+use crate::plans::Plans;
 use image::RgbImage;
 use std::path::Path;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use tract_onnx::prelude::*;
 
 /// Largest model file read (bytes): the bundled manifests' models are at most 5 MB.
 pub const MAX_FILE: u64 = 64 << 20;
-
-/// Plans kept per model for sizes other than the manifest's ([`Model::run_sized`]): a video
-/// has one size a pyramid level, a photo folder a few; beyond this the oldest is dropped.
-pub const SIZED_PLANS: usize = 12;
-
-/// A plan for one input (height, width).
-type SizedPlan = ((usize, usize), Arc<TypedSimplePlan>);
 
 /// A loaded, optimised model plus its manifest. Cheap to share across threads (`run` takes
 /// `&self`).
@@ -26,8 +20,8 @@ pub struct Model {
     /// The graph without its recorded intermediate shapes, planned for the manifest's size
     /// and again for other input sizes by [`Model::run_sized`] (fully convolutional models).
     source: InferenceModel,
-    /// Plans by input (height, width), oldest first, at most [`SIZED_PLANS`].
-    sized: Mutex<Vec<SizedPlan>>,
+    /// Plans by input (height, width) other than the manifest's.
+    sized: Plans<(usize, usize)>,
 }
 
 impl Model {
@@ -68,7 +62,7 @@ impl Model {
             Ok((model, outputs))
         })?;
         let plan = plan_at(&path, source.clone(), manifest.input.height, manifest.input.width)?;
-        Ok(Self { manifest, plan, outputs, source, sized: Mutex::new(Vec::new()) })
+        Ok(Self { manifest, plan, outputs, source, sized: Plans::default() })
     }
 
     /// The input tensor for an image of exactly the manifest's size.
@@ -115,7 +109,7 @@ impl Model {
 
     /// Runs the model on a `1 x 3 x h x w` input of any size its graph accepts (a fully
     /// convolutional detector: sides multiples of its largest stride), planned once a size
-    /// and kept ([`SIZED_PLANS`]); the manifest's size uses the plan made at loading.
+    /// and kept ([`crate::plans::KEPT`]); the manifest's size uses the plan made at loading.
     pub fn run_sized(&self, input: Tensor) -> Result<Outputs> {
         let path = &self.manifest.file;
         let shape = input.shape().to_vec();
@@ -128,25 +122,7 @@ impl Model {
         let plan = if (h, w) == (self.manifest.input.height, self.manifest.input.width) {
             self.plan.clone()
         } else {
-            let known = self
-                .sized
-                .lock()
-                .map_err(|_| poisoned(path))?
-                .iter()
-                .find(|(k, _)| *k == (h, w))
-                .map(|(_, p)| p.clone());
-            match known {
-                Some(p) => p,
-                None => {
-                    let p = plan_at(path, self.source.clone(), h, w)?;
-                    let mut sized = self.sized.lock().map_err(|_| poisoned(path))?;
-                    if sized.len() >= SIZED_PLANS {
-                        sized.remove(0);
-                    }
-                    sized.push(((h, w), p.clone()));
-                    p
-                }
-            }
+            self.sized.get_or_make((h, w), || plan_at(path, self.source.clone(), h, w))?
         };
         let out = guarded(path, || plan.run(tvec!(input.into())))?;
         release_freed_memory();
@@ -179,10 +155,6 @@ fn guarded<T>(path: &Path, f: impl FnOnce() -> TractResult<T>) -> Result<T> {
             message: "tract failed on it (the shapes disagree)".into(),
         }),
     }
-}
-
-fn poisoned(path: &Path) -> EvalError {
-    EvalError::Model { path: path.to_path_buf(), message: "a run of it failed on another thread".into() }
 }
 
 /// Hands the memory freed by a model run back to the system. tract allocates every
@@ -249,6 +221,7 @@ impl Outputs {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plans::KEPT;
     use tract_onnx::pb;
 
     /// A one-`Relu` graph whose recorded shapes (input, an intermediate value, output) all
@@ -317,14 +290,18 @@ mod tests {
             assert_eq!(v, (i as f32 - 90.0).max(0.0));
         }
         // The manifest's size uses the plan made at loading; the others are kept, the
-        // oldest dropped beyond SIZED_PLANS.
+        // least recently used dropped beyond KEPT.
         m.run_sized(input(4, 4)).unwrap();
-        assert_eq!(m.sized.lock().unwrap().len(), 1);
-        for w in 1..=SIZED_PLANS + 3 {
+        assert_eq!(m.sized.keys(), [(6, 10)]);
+        for w in 1..=KEPT + 3 {
             m.run_sized(input(2, w)).unwrap();
         }
-        let kept: Vec<(usize, usize)> = m.sized.lock().unwrap().iter().map(|(k, _)| *k).collect();
-        assert_eq!(kept, (4..=SIZED_PLANS + 3).map(|w| (2, w)).collect::<Vec<_>>());
+        assert_eq!(m.sized.keys(), (4..=KEPT + 3).map(|w| (2, w)).collect::<Vec<_>>());
+        // A size used again is kept over one used less recently.
+        m.run_sized(input(2, 4)).unwrap();
+        m.run_sized(input(2, 100)).unwrap();
+        let kept = m.sized.keys();
+        assert_eq!((kept.len(), kept[0], kept[KEPT - 2..].to_vec()), (KEPT, (2, 6), vec![(2, 4), (2, 100)]));
         // A tensor of another rank is refused by name, not a panic.
         let bad = m.run_sized(Tensor::from_shape(&[3, 4, 4], &[0f32; 48]).unwrap()).err().unwrap();
         assert!(bad.to_string().contains("not 1x3xHxW"), "{bad}");

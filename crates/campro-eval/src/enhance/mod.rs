@@ -7,6 +7,7 @@
 //! is cropped back. The output is rounded to 8 bits (clamped to 0..=255).
 
 use crate::error::{EvalError, Result};
+use crate::plans::{Plan, Plans};
 use image::RgbImage;
 use std::path::{Path, PathBuf};
 use tract_onnx::prelude::*;
@@ -41,11 +42,11 @@ pub const MAX_FILE: u64 = 64 << 20;
 
 /// A loaded enhancer; `enhance` takes `&self`, so one can serve several threads. tract
 /// cannot prove that the U-Net's strided and upsampled shapes agree for a symbolic size, so
-/// the graph is optimised once per padded image size and kept (a video or LFW has one
-/// size; COCO has a few dozen).
+/// the graph is optimised once per padded image size, the most recent few kept
+/// ([`crate::plans`]: a video or LFW has one size; a photo folder may have hundreds).
 pub struct Enhancer {
     model: InferenceModel,
-    plans: std::sync::Mutex<std::collections::HashMap<(usize, usize, Outputs), std::sync::Arc<TypedSimplePlan>>>,
+    plans: Plans<(usize, usize, Outputs)>,
     multiple: usize,
     path: PathBuf,
     parts: Parts,
@@ -196,11 +197,11 @@ impl Enhancer {
     }
 
     /// The plan for a padded `w` x `h` input (built on first use).
-    fn plan(&self, w: usize, h: usize, outputs: Outputs) -> Result<std::sync::Arc<TypedSimplePlan>> {
-        let mut plans = self.plans.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some(p) = plans.get(&(w, h, outputs)) {
-            return Ok(p.clone());
-        }
+    fn plan(&self, w: usize, h: usize, outputs: Outputs) -> Result<Plan> {
+        self.plans.get_or_make((w, h, outputs), || self.make_plan(w, h, outputs))
+    }
+
+    fn make_plan(&self, w: usize, h: usize, outputs: Outputs) -> Result<Plan> {
         let mut model = match (outputs, &self.unet) {
             (Outputs::Enhanced, _) => self.model.clone(),
             (Outputs::Network, Some(u)) => u.clone(),
@@ -217,40 +218,28 @@ impl Enhancer {
         let limit = tensor_limit(w, h);
         // The model is a fresh copy, dropped on a panic. Its shapes are checked before
         // tract optimises it (constant folding would compute every constant tensor).
-        let built = std::panic::catch_unwind(std::panic::AssertUnwindSafe(
-            || -> TractResult<std::sync::Arc<TypedSimplePlan>> {
-                let typed = model.with_input_fact(0, f32::fact([1, 3, h, w]).into())?.into_typed()?;
-                if let Some((name, bytes)) = largest_tensor(&typed).filter(|&(_, b)| b > limit) {
-                    bail!(
-                        "its tensor {name:?} would take {} MiB at input 1x3x{h}x{w}; an enhancer may use {} MiB a tensor",
-                        bytes >> 20,
-                        limit >> 20
-                    );
-                }
-                typed.into_optimized()?.into_runnable()
-            },
-        ));
-        let plan = match built {
-            Ok(r) => r.map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") })?,
-            Err(_) => {
-                return Err(EvalError::Model {
-                    path: self.path.clone(),
-                    message: format!("cannot be run at input 1x3x{h}x{w} (tract refused the shapes)"),
-                })
+        let built = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> TractResult<Plan> {
+            let typed = model.with_input_fact(0, f32::fact([1, 3, h, w]).into())?.into_typed()?;
+            if let Some((name, bytes)) = largest_tensor(&typed).filter(|&(_, b)| b > limit) {
+                bail!(
+                    "its tensor {name:?} would take {} MiB at input 1x3x{h}x{w}; an enhancer may use {} MiB a tensor",
+                    bytes >> 20,
+                    limit >> 20
+                );
             }
-        };
-        plans.insert((w, h, outputs), plan.clone());
-        Ok(plan)
+            typed.into_optimized()?.into_runnable()
+        }));
+        match built {
+            Ok(r) => r.map_err(|e| EvalError::Model { path: self.path.clone(), message: format!("{e:#}") }),
+            Err(_) => Err(EvalError::Model {
+                path: self.path.clone(),
+                message: format!("cannot be run at input 1x3x{h}x{w} (tract refused the shapes)"),
+            }),
+        }
     }
 
     /// Runs `plan` on a (1, 3, `ph`, `pw`) input, returning its outputs as float vectors.
-    fn run(
-        &self,
-        plan: &std::sync::Arc<TypedSimplePlan>,
-        data: &[f32],
-        (pw, ph): (usize, usize),
-        threads: usize,
-    ) -> Result<Vec<Vec<f32>>> {
+    fn run(&self, plan: &Plan, data: &[f32], (pw, ph): (usize, usize), threads: usize) -> Result<Vec<Vec<f32>>> {
         let input = Tensor::from_shape(&[1, 3, ph, pw], data).expect("shape matches data");
         let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             on_threads(threads, || plan.run(tvec!(input.into())))
@@ -534,6 +523,20 @@ mod tests {
                 if stripe { 40 } else { 180 } ^ (y as u8 & 0x1f),
             ])
         })
+    }
+
+    #[test]
+    fn plans_are_kept_for_the_most_recent_sizes_only() {
+        let ok = Enhancer::from_bytes(&tile_bomb(INPUT, [1, 1, 1, 1]), Path::new("ok.onnx")).unwrap();
+        let m = ok.multiple();
+        // The smallest size, planned at loading, then KEPT + 3 more: the oldest go.
+        for k in 1..=crate::plans::KEPT + 3 {
+            let out =
+                ok.enhance(&image::RgbImage::from_pixel((k * m) as u32, m as u32, image::Rgb([1, 0, 0]))).unwrap();
+            assert_eq!(out.dimensions(), ((k * m) as u32, m as u32));
+        }
+        let widths: Vec<usize> = ok.plans.keys().iter().map(|&(w, _, _)| w).collect();
+        assert_eq!(widths, (4..=crate::plans::KEPT + 3).map(|k| k * m).collect::<Vec<_>>());
     }
 
     #[test]

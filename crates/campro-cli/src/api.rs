@@ -79,7 +79,10 @@ impl Camera {
             (Source::Path(path), p, bytes)
         };
         let preset_sha256 = crate::record::sha256(&bytes);
-        let grey = GreyPolicy::new(&params, allow_grey);
+        // As `simulate`: a mostly colourless photo's faces are looked at with the face
+        // detectors of the commands' models folder.
+        let models = crate::models::folder(None, crate::args::named_shared_dir(None).as_deref());
+        let grey = GreyPolicy::new(&params, allow_grey).with_faces(&models);
         let built = Built::new(params, |p| Tables {
             fast8: Exact8::new(p),
             p8: Prepared::new(p, Depth::Eight),

@@ -592,7 +592,9 @@ fn verify_record(a: &CheckArgs, record: &Path) -> Result<i32> {
         image_format: crate::simulate::ImageFormat::of(&out),
         frames: crate::video::FrameFormat { size: None, rate: None, stall: None },
         max_frames: None,
+        // Grey input is written as it was: the output's bytes are what is compared.
         allow_grey: true,
+        models: None,
         metadata,
         record: None,
     };

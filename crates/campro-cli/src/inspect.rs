@@ -127,15 +127,14 @@ fn one(
     // and the panels: each image (3 bytes a pixel), its drawn copy (3) and the picture of
     // them side by side (3), with the PNG written from it.
     let panels = if enhancer.is_some() { 3 } else { 2 };
-    let work = |w: u32, h: u32| {
-        (w as u64 * h as u64 * 9 * panels).saturating_add(enhancer.map_or(0, |e| e.enhancer.work_bytes(w, h)))
-    };
+    let work =
+        |w: u32, h: u32| (w as u64 * h as u64 * 9 * panels).saturating_add(enhancer.map_or(0, |e| e.work_bytes(w, h)));
     let (img, _lease) = campro_eval::image_file::read(input, budget, &work, warn)?;
     let raw = img.into_rgb8();
     // A grey picture `simulate` refuses (the preset is not rated for grey): shown, and said.
     let grey = grey_refused(&raw);
     if grey {
-        warn("a grey picture: simulate refuses it (this preset does not protect grey pictures); its protected panel is what --allow-grey would write");
+        warn("a grey picture, or grey faces in a mostly colourless one: simulate refuses it (this preset does not protect grey faces); its protected panel is what --allow-grey would write");
     }
     let mut protected = RgbImage::new(raw.width(), raw.height());
     fast.run(raw.as_raw(), &mut protected);
@@ -240,7 +239,7 @@ fn index_html(
             if flag { " <span class=\"warn\">faces found after the camera</span>" } else { "" },
         );
         if v["grey_refused"].as_bool() == Some(true) {
-            s += "<p class=\"warn\">A grey picture: <code>campro simulate</code> refuses it, since this preset does not protect grey pictures (a restoration that knows the camera gives grey faces back); the protected panel is what <code>--allow-grey</code> would write.</p>";
+            s += "<p class=\"warn\">A grey picture, or grey faces in a mostly colourless one: <code>campro simulate</code> refuses it, since this preset does not protect grey faces (a restoration that knows the camera gives them back); the protected panel is what <code>--allow-grey</code> would write.</p>";
         }
         for (k, p) in panels.iter().enumerate() {
             let (f, n) = (count(v, k, "faces"), count(v, k, "people"));
@@ -338,12 +337,13 @@ pub fn run(a: InspectArgs) -> Result<()> {
         own,
         confidence: confidence as f32,
     };
-    inspect(&params, &p, &inputs, &output, &det, enhancer.as_ref(), matches!(format, Report::Json))
+    inspect(&params, &p, &inputs, &output, &det, enhancer.as_ref(), &models, matches!(format, Report::Json))
 }
 
 /// Runs the inspection of every image under `inputs` into `out` (checked by the caller:
 /// new, empty or forced); prints a line per image, or (`json_out`) the index as one JSON
-/// object.
+/// object. `models`: where `simulate`'s grey check finds its face detectors.
+#[allow(clippy::too_many_arguments)]
 pub fn inspect(
     params_file: &Path,
     p: &Params,
@@ -351,6 +351,7 @@ pub fn inspect(
     out: &Path,
     det: &Detectors,
     enhancer: Option<&campro_eval::guard::GuardedEnhancer>,
+    models: &Path,
     json_out: bool,
 ) -> Result<()> {
     let which = simulate::Reads { reads: &simulate::is_image, otherwise: "not a PNG, JPEG, TIFF or WebP file" };
@@ -363,8 +364,9 @@ pub fn inspect(
         bail!("no PNG, JPEG, TIFF or WebP file among the inputs: nothing to inspect");
     }
     let fast = Exact8::new(p);
-    let rated = p.rated_for_grey();
-    let grey_refused = |img: &RgbImage| !rated && campro::chroma::measure(img.as_raw()).is_grey();
+    // What simulate refuses as grey: the whole picture, or a face of a mostly colourless one.
+    let grey = crate::capture::GreyPolicy::new(p, false).with_faces(models);
+    let grey_refused = |img: &RgbImage| grey.check_picture(img.as_raw(), img.width(), img.height()).is_err();
     let budget = Budget::global();
     let bar = crate::output::count_bar("inspect", images.len() as u64);
     let results: Vec<Result<Value>> = images
@@ -503,7 +505,14 @@ mod tests {
         assert!(html.contains("<b>enhanced</b>: <span class=\"face warn\">32 faces</span>"), "{html}");
         assert_eq!(html.matches("class=\"lb\"").count(), 3);
         // The grey picture is said to be refused by simulate, once.
-        assert_eq!(html.matches("A grey picture: <code>campro simulate</code> refuses it").count(), 1, "{html}");
+        assert_eq!(
+            html.matches(
+                "A grey picture, or grey faces in a mostly colourless one: <code>campro simulate</code> refuses it"
+            )
+            .count(),
+            1,
+            "{html}"
+        );
         let clean = index_html("p", ("yunet", "yolox-nano"), &items[..1], &[], Path::new("/o"));
         assert!(clean.contains("No face is found in any picture after the camera."), "{clean}");
     }

@@ -343,6 +343,9 @@ pub struct Options<'a> {
     pub max_frames: Option<u64>,
     /// Write grey input although the preset is not rated for it (`--allow-grey`).
     pub allow_grey: bool,
+    /// Where the face detectors are that look at the faces of mostly colourless photos
+    /// ([`crate::capture::GreyPolicy::check_picture`]); None: the whole frame only.
+    pub models: Option<PathBuf>,
     /// What image outputs keep of their inputs' metadata.
     pub metadata: crate::metadata::Policy,
     /// Write a record beside each output (`--record`).
@@ -567,6 +570,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         frames: video::FrameFormat { size, rate, stall },
         max_frames: frames,
         allow_grey,
+        models: Some(data.models_dir()),
         metadata,
         record: record.as_ref(),
     };
@@ -584,7 +588,10 @@ pub fn simulate(p: &Params, inputs: &[PathBuf], out: &Path, o: &Options) -> Resu
     let prepared8 = Prepared::new(p, Depth::Eight);
     let fast8 = Exact8::new(p);
     let prepared16 = std::sync::OnceLock::new();
-    let grey = crate::capture::GreyPolicy::new(p, o.allow_grey);
+    let mut grey = crate::capture::GreyPolicy::new(p, o.allow_grey);
+    if let Some(models) = &o.models {
+        grey = grey.with_faces(models);
+    }
     let capture = Capture { fast8: &fast8, p8: &prepared8, p16: &prepared16, enhancer: o.enhancer, grey: &grey };
     if let Some((source, sink)) = stream_job(inputs, out, o)? {
         return stream(&capture, &source, &sink, o, &pool);
@@ -760,16 +767,14 @@ impl Paths<'_, '_> {
         let (w, h) = (img.width(), img.height());
         let sixteen = crate::capture::sixteen_bit(&img);
         let format = ImageFormat::of(output).unwrap_or(ImageFormat::Png);
-        let (pixels, grey) = if sixteen && self.capture.enhancer.is_some() {
-            warn("--enhance: read as 8 bits (the enhancer takes the camera's 8-bit output)");
-            let src = img.into_rgb8().into_raw();
-            self.capture.picture(Frame::Eight(&src), w, h, self.depth, warn)?
-        } else if sixteen {
+        let (pixels, grey) = if sixteen && self.capture.enhancer.is_none() {
             let src = img.into_rgb16().into_raw();
             self.capture.picture(Frame::Sixteen(&src), w, h, self.depth, warn)?
         } else {
-            let src = img.into_rgb8().into_raw();
-            self.capture.picture(Frame::Eight(&src), w, h, self.depth, warn)?
+            if sixteen {
+                warn("--enhance: read as 8 bits (the enhancer takes the camera's 8-bit output)");
+            }
+            self.capture.picture8(img.into_rgb8().into_raw(), w, h, self.depth, warn)?
         };
         Ok((encode(format, pixels.samples(), w, h, self.quality, &kept)?, grey))
     }

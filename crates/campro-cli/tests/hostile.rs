@@ -483,8 +483,8 @@ fn training_outputs_are_checked_before_the_run() {
 
 /// Class D: the enhancer's memory is bounded by the pixels it works on, padding and scale
 /// included: a strip of 1 x 100,000 (16 x 100,000 once padded, and a face guard tiling its
-/// length), a picture just under 12.6 megapixels that padding takes over it, and UHD with
-/// the network at full resolution are refused by size, before the network or the guard runs.
+/// length) and a picture wider than 16384 are refused by their side, and UHD with the
+/// network at full resolution by the budget, before the network or the guard runs.
 #[test]
 fn enhance_bounds_the_padded_picture_and_its_longest_side() {
     let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx"]) else { return };
@@ -494,9 +494,7 @@ fn enhance_bounds_the_padded_picture_and_its_longest_side() {
         image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(x % 251) as u8, (y % 241) as u8, 90])).save(&p).unwrap();
         p
     };
-    for (img, size) in
-        [(colour(1, 100_000, "strip.png"), "1 x 100000"), (colour(4097, 3070, "wide.png"), "4097 x 3070")]
-    {
+    for (img, size) in [(colour(1, 100_000, "strip.png"), "1 x 100000"), (colour(16385, 2, "wide.png"), "16385 x 2")] {
         fails_with(
             campro()
                 .args(["simulate", "campro-omega-0.5"])

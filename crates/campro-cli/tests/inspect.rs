@@ -189,5 +189,11 @@ fn inspect_flags_grey_photos_as_simulate_refuses_them() {
     let v: Value = serde_json::from_slice(&std::fs::read(out.join("Aaron_Eckhart_0001.json")).unwrap()).unwrap();
     assert_eq!(v["grey_refused"], false);
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
-    assert_eq!(html.matches("A grey picture: <code>campro simulate</code> refuses it").count(), 1);
+    assert_eq!(
+        html.matches(
+            "A grey picture, or grey faces in a mostly colourless one: <code>campro simulate</code> refuses it"
+        )
+        .count(),
+        1
+    );
 }

@@ -97,3 +97,68 @@ fn the_enhanced_view_is_not_shown_without_its_face_guard() {
     fails_with(&mut c, "nothing is enhanced without it");
     assert!(!dir.path().join("out").exists());
 }
+
+/// An LFW portrait (250 x 250, one face in the middle) made grey but for what `keep` says,
+/// with a vivid striped patch in its bottom-left corner: a selective-colour photo.
+fn selective(dir: &Path, shared: &Path, name: &str, keep: impl Fn(u32, u32) -> bool) -> std::path::PathBuf {
+    let face = shared.join("data/lfw/images_deepfunneled/Aaron_Peirsol/Aaron_Peirsol_0001.jpg");
+    let img = image::open(face).unwrap().into_rgb8();
+    let out = image::RgbImage::from_fn(img.width(), img.height(), |x, y| {
+        if x < 80 && y >= 170 {
+            return if (x / 8) % 2 == 0 { image::Rgb([220, 30, 40]) } else { image::Rgb([30, 160, 60]) };
+        }
+        let p = *img.get_pixel(x, y);
+        if keep(x, y) {
+            return p;
+        }
+        let l = campro::chroma::luma(p.0);
+        image::Rgb([l, l, l])
+    });
+    let p = dir.join(name);
+    out.save(&p).unwrap();
+    p
+}
+
+/// A photo grey but for one object passes the whole-frame measure (its colour spread is
+/// above 4), and its grey face would be restored: its faces are looked at, and a grey face
+/// is refused as a grey photo is; the same photo with its face in colour (a grey scene
+/// around a colour face, as snow or overcast is) goes through; with no face detector to
+/// look, a mostly colourless photo is refused (fail closed).
+#[test]
+fn a_selective_colour_photo_is_judged_by_its_faces() {
+    let Some(shared) = campro_testkit::shared_root(&["models/yunet_s_640_640.onnx", "data/lfw/images_deepfunneled"])
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let grey_face = selective(dir.path(), &shared, "bw.png", |_, _| false);
+    let px = image::open(&grey_face).unwrap().into_rgb8().into_raw();
+    let (spread, share) = (campro::chroma::measure(&px).spread, campro::chroma::neutral_share(&px));
+    assert!(spread >= campro::chroma::GREY_SPREAD && share >= 0.6, "spread {spread}, neutral share {share}");
+    let simulate = |input: &Path, out: &str, extra: &[&str]| {
+        let mut c = campro();
+        c.args(["simulate", "campro-omega-0.5"]).arg(input).arg("-o").arg(dir.path().join(out)).args(extra);
+        c
+    };
+    let models = shared.join("models");
+    let with_models = ["--models", models.to_str().unwrap()];
+    fails_with(&mut simulate(&grey_face, "a.png", &with_models), "a face in the picture is black and white");
+    assert!(!dir.path().join("a.png").exists());
+    // --allow-grey writes it and says so.
+    let allowed = simulate(&grey_face, "b.png", &[&with_models[..], &["--allow-grey"]].concat()).output().unwrap();
+    assert!(allowed.status.success() && String::from_utf8_lossy(&allowed.stderr).contains("--allow-grey"));
+    // The face in colour, the scene around it grey: looked at, and let through.
+    let colour_face =
+        selective(dir.path(), &shared, "face.png", |x, y| (95..155).contains(&x) && (90..170).contains(&y));
+    let share = campro::chroma::neutral_share(&image::open(&colour_face).unwrap().into_rgb8().into_raw());
+    assert!(share >= 0.6, "not looked at: neutral share {share}");
+    let ok = simulate(&colour_face, "c.png", &with_models).output().unwrap();
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    // No detector to look with: refused, naming why.
+    let empty = dir.path().join("no-models");
+    std::fs::create_dir(&empty).unwrap();
+    fails_with(
+        &mut simulate(&grey_face, "d.png", &["--models", empty.to_str().unwrap()]),
+        "no face detector could be loaded",
+    );
+}

@@ -133,6 +133,11 @@ impl FaceDetector {
         (self.model.manifest.input.width, self.model.manifest.input.height)
     }
 
+    /// Bytes it holds a pixel of its input while it runs ([`Head::bytes_per_pixel`]).
+    pub fn bytes_per_pixel(&self) -> u64 {
+        self.head.bytes_per_pixel()
+    }
+
     /// The face width (pixels at the scale shown) from which it finds faces reliably.
     pub fn min_face(&self) -> f64 {
         self.min_face

@@ -54,15 +54,24 @@ fn to_u8_fast(v: f64) -> u8 {
 /// each source row's horizontal interpolation (`a + (b - a) fx`) once, kept while output
 /// rows use it, then the vertical one per output byte (loops the compiler vectorises).
 pub fn resize_bilinear(img: &RgbImage, width: u32, height: u32) -> RgbImage {
+    resize_bilinear_region(img, (width, height), [0, 0, width, height])
+}
+
+/// The `[x, y, w, h]` window (clipped to the output) of [`resize_bilinear`]`(img, width,
+/// height)`, the same bytes, computed from the source rows it needs only: a tile of a
+/// large image's enlarged pyramid level without the level (the face guard's).
+pub fn resize_bilinear_region(img: &RgbImage, (width, height): (u32, u32), [x, y, w, h]: [u32; 4]) -> RgbImage {
+    let (x, y) = (x.min(width), y.min(height));
+    let (w, h) = (w.min(width - x), h.min(height - y));
     let (iw, ih) = (img.width() as usize, img.height() as usize);
-    if iw == 0 || ih == 0 {
-        return RgbImage::new(width, height);
+    if iw == 0 || ih == 0 || w == 0 || h == 0 {
+        return RgbImage::new(w, h);
     }
     // Along one axis: the first source index, the next one (the same at the far edge,
     // where the weight is 0) and the weight of the next.
-    let taps = |out: u32, len: usize| -> Vec<(usize, usize, f64)> {
+    let taps = |out: u32, len: usize, from: u32, n: u32| -> Vec<(usize, usize, f64)> {
         let (scale, max) = (len as f64 / out as f64, len as f64 - 1.0);
-        (0..out)
+        (from..from + n)
             .map(|o| {
                 let u = ((o as f64 + 0.5) * scale - 0.5).clamp(0.0, max);
                 let i = u.floor();
@@ -70,8 +79,8 @@ pub fn resize_bilinear(img: &RgbImage, width: u32, height: u32) -> RgbImage {
             })
             .collect()
     };
-    let (xs, ys) = (taps(width, iw), taps(height, ih));
-    let (raw, stride, row_len) = (img.as_raw(), iw * 3, width as usize * 3);
+    let (xs, ys) = (taps(width, iw, x, w), taps(height, ih, y, h));
+    let (raw, stride, row_len) = (img.as_raw(), iw * 3, w as usize * 3);
     // Per output byte: the source bytes of its two columns and the weight.
     let (mut at0, mut at1, mut wx) =
         (Vec::with_capacity(row_len), Vec::with_capacity(row_len), Vec::with_capacity(row_len));
@@ -92,7 +101,7 @@ pub fn resize_bilinear(img: &RgbImage, width: u32, height: u32) -> RgbImage {
     };
     // The horizontal rows of the last source rows used, by source row index.
     let (mut top, mut bot) = ((usize::MAX, Vec::with_capacity(row_len)), (usize::MAX, Vec::with_capacity(row_len)));
-    let mut out = vec![0u8; row_len * height as usize];
+    let mut out = vec![0u8; row_len * h as usize];
     for (row, &(y0, y1, fy)) in out.chunks_exact_mut(row_len).zip(&ys) {
         // Moving down, the last row's bottom is often this one's top.
         if top.0 != y0 {
@@ -111,7 +120,7 @@ pub fn resize_bilinear(img: &RgbImage, width: u32, height: u32) -> RgbImage {
             *o = to_u8_fast(t + (b - t) * fy);
         }
     }
-    RgbImage::from_raw(width, height, out).expect("width x height x 3 bytes")
+    RgbImage::from_raw(w, h, out).expect("w x h x 3 bytes")
 }
 
 /// The size (width, height) the image of `dims` takes on a [`letterbox`] canvas.
@@ -296,6 +305,26 @@ mod tests {
                 let v = ((y as f64 + 0.5) * sy - 0.5).clamp(0.0, 22.0);
                 assert_eq!(p.0, sample_bilinear(&img, u, v, [0; 3]).map(to_u8), "{w} x {h} at ({x}, {y})");
             }
+        }
+    }
+
+    #[test]
+    fn a_resized_window_is_that_window_of_the_whole_resize() {
+        let img = RgbImage::from_fn(41, 29, |x, y| Rgb([(x * 7 + y) as u8, (x * y) as u8, (3 * y) as u8 ^ x as u8]));
+        for (size, window) in [
+            ((82, 58), [0, 0, 82, 58]),
+            ((82, 58), [13, 7, 30, 21]),
+            ((82, 58), [70, 50, 40, 40]), // clipped at the far edges
+            ((20, 15), [5, 0, 15, 15]),
+            ((82, 58), [90, 0, 4, 4]), // wholly outside: empty
+        ] {
+            let whole = resize_bilinear(&img, size.0, size.1);
+            let got = resize_bilinear_region(&img, size, window);
+            let [x, y, w, h] = window;
+            let (w, h) = (w.min(size.0.saturating_sub(x)), h.min(size.1.saturating_sub(y)));
+            assert_eq!(got.dimensions(), (w, h), "{size:?} {window:?}");
+            let want = image::imageops::crop_imm(&whole, x.min(size.0), y.min(size.1), w, h).to_image();
+            assert!(got == want, "{size:?} {window:?}");
         }
     }
 }

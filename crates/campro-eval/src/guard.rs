@@ -12,11 +12,14 @@
 //! scale it is shown (YuNet [`NATIVE_MIN_FACE`], CenterFace 20). So the image is searched
 //! on a pyramid per detector: first enlarged so that a [`MIN_FACE`]-pixel face becomes a
 //! `min_face`-pixel one, then halved level after level until the whole image fits one
-//! input. Each level is cut into tiles of at most [`TILE`] pixels overlapping by
-//! [`OVERLAP`] pixels, so every face up to that size lies whole in one tile, and larger ones
-//! are whole at a later level (where they are half as big); so a level keeps only its finds
-//! up to that size (the last level, the whole image, keeps every size): larger finds at the
-//! fine levels were textures, not faces. The detector is fully convolutional and runs on a
+//! input. Each level is cut into tiles of at most [`TILE`] pixels (narrower for a detector
+//! that holds more a pixel: [`tile_for`]) overlapping by [`OVERLAP`] pixels, so every face
+//! up to that size lies whole in one tile, and larger ones are whole at a later level (where
+//! they are half as big); so a level keeps only its finds up to that size (the last level,
+//! the whole image, keeps every size): larger finds at the fine levels were textures, not
+//! faces. Each tile is resized from the image on its own (no level is ever held whole) and
+//! at most [`TILES_AT_ONCE`] run at once, so the guard's memory does not grow with the
+//! image or the machine's cores. The detector is fully convolutional and runs on a
 //! whole tile at once, at the tile's size rounded up to a multiple of its largest stride.
 //! Edges: tiles are placed inside the level image, the last of a row or column aligned to
 //! its far edge; the rounding pads a tile with black (the detector's own letterbox).
@@ -24,7 +27,7 @@
 use crate::enhance::Enhancer;
 use crate::error::Result;
 use crate::face::{Face, FaceDetector};
-use crate::geometry::resize_bilinear;
+use crate::geometry::resize_bilinear_region;
 use image::{Rgb, RgbImage};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -46,7 +49,14 @@ pub const OVERLAP: usize = 160;
 /// million pixels for 1104 x 672 to 2048 x 720; 255–265 for tiles taller than wide such as
 /// 1120 x 1152, 198–211 from 2.4 million pixels). YuNet holds about 100 bytes a pixel it runs
 /// on (a 2048 x 1152 input peaked at 236 MB resident), so a tile about 150 MB.
+/// A detector that holds more a pixel than YuNet gets narrower tiles ([`tile_for`]), so a
+/// tile takes at most [`TILE_BYTES`].
 pub const TILE: (usize, usize) = (2048, 720);
+/// Most bytes one tile's run may hold: YuNet's on a whole [`TILE`].
+pub const TILE_BYTES: u64 = 2048 * 720 * 100;
+/// Tiles run at once: the guard holds at most this many [`TILE_BYTES`] whatever the
+/// image's size and the machine's cores ([`FaceGuard::work_bytes`]).
+pub const TILES_AT_ONCE: usize = 2;
 /// The share of a detector's own score threshold from which the guard hides a region,
 /// unless its manifest sets `guard_threshold` (YuNet 0.6 → 0.3): a miss shows a face and a
 /// false alarm only pixelates a patch of background.
@@ -62,9 +72,10 @@ pub const MARGIN: f32 = 0.25;
 /// Pixelation blocks across a face's width: each block is a sixth of the face's width
 /// (at least 2 pixels), so no more than six blocks span a face.
 pub const BLOCKS_ACROSS: f32 = 6.0;
-/// Largest image the guard checks, pixels (the detector's pyramid is bounded by it: its
-/// first level of a 48-megapixel image holds 75 million pixels, 225 MB).
-pub const MAX_PIXELS: u64 = 48_000_000;
+/// Largest image the guard checks, pixels (16384 x 12288: a 200-megapixel photo fits).
+/// Its levels are never held whole (tiles are resized from the image one at a time), so
+/// this bounds the time, about a minute of detector work a 10 megapixels on two cores.
+pub const MAX_PIXELS: u64 = 16384 * 12288;
 
 /// How a found face is hidden.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
@@ -112,6 +123,12 @@ impl FaceGuard {
     /// The detectors' names, in the order given.
     pub fn detectors(&self) -> Vec<&str> {
         self.detectors.iter().map(|d| d.name()).collect()
+    }
+
+    /// Bytes the guard holds beside the images it searches: [`TILES_AT_ONCE`] tiles'
+    /// runs ([`TILE_BYTES`] each). Its levels are never held whole.
+    pub fn work_bytes(&self) -> u64 {
+        TILES_AT_ONCE as u64 * TILE_BYTES
     }
 
     /// How found faces are hidden.
@@ -176,42 +193,54 @@ fn find_with(detector: &FaceDetector, images: &[&RgbImage]) -> Result<Vec<Face>>
             scales.into_iter().enumerate().map(move |(l, s)| (k, s, l + 1 == n))
         })
         .collect();
-    let levels: Vec<RgbImage> = wanted
-        .par_iter()
-        .map(|&(k, s, _)| {
-            let img = images[k];
-            let (lw, lh) = level_size(img.width(), img.height(), s);
-            if (lw, lh) == img.dimensions() {
-                img.clone()
-            } else {
-                resize_bilinear(img, lw, lh)
-            }
-        })
-        .collect();
-    let jobs: Vec<(usize, [u32; 4])> = levels
+    // Levels are never made whole: each tile is resized from its image on its own (the
+    // same bytes as the level's window, `resize_bilinear_region`), so what the guard holds
+    // is a few tiles whatever the image's size (a 50-megapixel photo's first level would
+    // be 200 million pixels).
+    let tile = tile_for(detector);
+    let jobs: Vec<(usize, (u32, u32), [u32; 4])> = wanted
         .iter()
         .enumerate()
-        .flat_map(|(l, level)| {
-            let (xs, ys) = (tiles(level.width() as usize, TILE.0), tiles(level.height() as usize, TILE.1));
-            xs.into_iter().flat_map(move |(x, w)| ys.clone().into_iter().map(move |(y, h)| (l, [x, y, w, h])))
+        .flat_map(|(l, &(k, s, _))| {
+            let (lw, lh) = level_size(images[k].width(), images[k].height(), s);
+            let (xs, ys) = (tiles(lw as usize, tile.0), tiles(lh as usize, tile.1));
+            xs.into_iter().flat_map(move |(x, w)| {
+                ys.clone().into_iter().map(move |(y, h)| (l, (lw, lh), [x as u32, y as u32, w as u32, h as u32]))
+            })
         })
-        .map(|(l, [x, y, w, h])| (l, [x as u32, y as u32, w as u32, h as u32]))
         .collect();
+    // At most TILES_AT_ONCE tiles at once, however many cores there are.
     let found = jobs
-        .par_iter()
-        .map(|&(l, region)| {
-            let (_, s, last) = wanted[l];
-            let inv = (1.0 / s) as f32;
-            // A level answers for faces up to OVERLAP pixels (whole in one of its
-            // tiles); bigger ones are the next level's, where they are half as big, and
-            // bigger finds here were textures (300-pixel "faces" on enhanced walls).
-            // The last level, the whole image, answers for every size.
-            Ok(detector
-                .detect_region(&levels[l], region, threshold(detector))?
-                .into_iter()
-                .filter(|f| last || (f.bbox[2] - f.bbox[0]).max(f.bbox[3] - f.bbox[1]) <= OVERLAP as f32)
-                .map(|f| f.mapped(|p| [p[0] * inv, p[1] * inv]))
-                .collect::<Vec<_>>())
+        .chunks(TILES_AT_ONCE)
+        .flat_map(|at_once| {
+            at_once
+                .par_iter()
+                .map(|&(l, size, region)| {
+                    let (k, s, last) = wanted[l];
+                    let img = images[k];
+                    let faces = if size == img.dimensions() {
+                        detector.detect_region(img, region, threshold(detector))?
+                    } else {
+                        let tile = resize_bilinear_region(img, size, region);
+                        let (x, y) = (region[0] as f32, region[1] as f32);
+                        detector
+                            .detect_region(&tile, [0, 0, tile.width(), tile.height()], threshold(detector))?
+                            .into_iter()
+                            .map(|f| f.mapped(|p| [p[0] + x, p[1] + y]))
+                            .collect()
+                    };
+                    let inv = (1.0 / s) as f32;
+                    // A level answers for faces up to OVERLAP pixels (whole in one of its
+                    // tiles); bigger ones are the next level's, where they are half as big, and
+                    // bigger finds here were textures (300-pixel "faces" on enhanced walls).
+                    // The last level, the whole image, answers for every size.
+                    Ok(faces
+                        .into_iter()
+                        .filter(|f| last || (f.bbox[2] - f.bbox[0]).max(f.bbox[3] - f.bbox[1]) <= OVERLAP as f32)
+                        .map(|f| f.mapped(|p| [p[0] * inv, p[1] * inv]))
+                        .collect::<Vec<_>>())
+                })
+                .collect::<Vec<_>>()
         })
         .collect::<Result<Vec<_>>>()?;
     Ok(found.into_iter().flatten().collect())
@@ -224,6 +253,13 @@ pub struct GuardedEnhancer {
 }
 
 impl GuardedEnhancer {
+    /// Bytes an enhancement of a `w` x `h` image holds besides the captured and the
+    /// enhanced image: the enhancer's ([`Enhancer::work_bytes`]), then the guard's; the
+    /// enhancer's are freed before the guard runs, so the larger of the two.
+    pub fn work_bytes(&self, w: u32, h: u32) -> u64 {
+        self.enhancer.work_bytes(w, h).max(self.guard.work_bytes())
+    }
+
     /// The enhanced image of a captured one with every face the guard finds hidden, and
     /// what the guard did; an error (the image is then not to be shown enhanced) when the
     /// enhancer or the guard cannot run.
@@ -268,6 +304,13 @@ pub fn pyramid(w: u32, h: u32, iw: usize, ih: usize, native: f64) -> Vec<f64> {
 /// The size of the pyramid level at scale `s` (at least a pixel a side).
 fn level_size(w: u32, h: u32, s: f64) -> (u32, u32) {
     (((w as f64 * s).round() as u32).max(1), ((h as f64 * s).round() as u32).max(1))
+}
+
+/// The largest tile for `detector`: [`TILE`], narrowed (to a multiple of 32, wider than
+/// twice [`OVERLAP`]) until its run holds at most [`TILE_BYTES`].
+pub fn tile_for(detector: &FaceDetector) -> (usize, usize) {
+    let fits = (TILE_BYTES / (TILE.1 as u64 * detector.bytes_per_pixel().max(1))) as usize;
+    ((fits / 32 * 32).clamp(2 * OVERLAP + 32, TILE.0), TILE.1)
 }
 
 /// Tiles along a side of `len` pixels, as (origin, length): as few as fit in `max` pixels

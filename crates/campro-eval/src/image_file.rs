@@ -35,11 +35,13 @@ pub const HEADER_ALLOC: u64 = 16 << 20;
 /// Peak bytes a job holds per pixel besides the decoded image: the RGB input and output
 /// buffers of the pipeline (16 bits a sample: 6 bytes each) and the PNG being written (6).
 pub const PEAK_BYTES_PER_PIXEL: u64 = 18;
-/// [`PEAK_BYTES_PER_PIXEL`] of an 8-bit image: its RGB input and output buffers (3 bytes
-/// each) and the file being written (at most 3). An 8160 x 6120 JPEG (50 megapixels) peaked
-/// at 306 MB through `simulate`, 6.1 bytes a pixel with its decoded image. A caller that
-/// widens an 8-bit image to 16 bits adds the difference to its own work.
-pub const PEAK_BYTES_PER_PIXEL_8: u64 = 9;
+/// [`PEAK_BYTES_PER_PIXEL`] of an 8-bit image: an RGB output buffer (3 bytes: `simulate`
+/// captures in place, so its input is the decoded image, and with `--enhance` the enhanced
+/// image is this buffer) and the file being written (at most 3). An 8160 x 6120 JPEG (50
+/// megapixels) peaked at 176 MB through `simulate`, 3.5 bytes a pixel with its decoded
+/// image. A caller that widens an 8-bit image to 16 bits, or holds more copies, adds the
+/// difference to its own work.
+pub const PEAK_BYTES_PER_PIXEL_8: u64 = 6;
 
 /// A counting semaphore of bytes.
 pub struct Budget {
@@ -405,8 +407,8 @@ mod tests {
         let bytes = png(16, 8, 2, 8, &[], None);
         let (img, lease) = decode(Path::new("t.png"), &bytes, &b, &no_work, &no_warn).unwrap();
         assert_eq!((img.width(), img.height()), (16, 8));
-        // 16 x 8 pixels of 8 bits: 9 bytes each plus the 384 decoded bytes.
-        assert_eq!(lease.bytes(), 16 * 8 * 9 + 384);
+        // 16 x 8 pixels of 8 bits: 6 bytes each plus the 384 decoded bytes.
+        assert_eq!(lease.bytes(), 16 * 8 * 6 + 384);
         assert_eq!(b.free(), (1 << 20) - lease.bytes());
         drop(lease);
         assert_eq!(b.free(), 1 << 20);
@@ -414,12 +416,12 @@ mod tests {
 
     #[test]
     fn grey_and_16_bit_images_count_as_what_they_become() {
-        // A 1-byte-per-pixel grey image becomes RGB8 in the 8-bit pipeline (9 bytes a pixel
-        // beside its own); an 8-byte RGBA16 one of the same size goes through the RGB16
-        // buffers (18).
+        // A 1-byte-per-pixel grey image becomes RGB8 in the 8-bit pipeline (6 bytes a pixel
+        // beside its own: the RGB buffer and the file); an 8-byte RGBA16 one of the same
+        // size goes through the RGB16 buffers (18).
         let b = Budget::new(64 << 20);
         let (_, grey) = decode(Path::new("g.png"), &png(100, 10, 0, 8, &[], None), &b, &no_work, &no_warn).unwrap();
-        assert_eq!(grey.bytes(), 1000 * 9 + 1000);
+        assert_eq!(grey.bytes(), 1000 * 6 + 1000);
         drop(grey);
         let warned = std::cell::RefCell::new(Vec::new());
         let w = |m: &str| warned.borrow_mut().push(m.to_string());
@@ -518,8 +520,8 @@ mod tests {
         // they wait for each other instead of adding up.
         // Its enhancer work at the automatic scale (a quarter a side, padded to 16):
         // the network on 1008 x 768 pixels, the full-resolution planes on 4032 x 3024.
-        use crate::enhance::{NET_BYTES_PER_PIXEL, WORK_BYTES_PER_PIXEL};
-        let work = 1008 * 768 * NET_BYTES_PER_PIXEL + 4032 * 3024 * WORK_BYTES_PER_PIXEL;
+        use crate::enhance::NET_BYTES_PER_PIXEL;
+        let work = 1008 * 768 * NET_BYTES_PER_PIXEL + 4032 * 3024 * 30;
         let one = peak_bytes_at(4032, 3024, 4032 * 3024 * 3, work, PEAK_BYTES_PER_PIXEL_8);
         assert!(one <= DECODE_BUDGET && 2 * one > DECODE_BUDGET, "{one}");
         // A UHD frame with the network at full resolution (3840 x 2160 x 170 bytes) does not.

@@ -126,6 +126,19 @@ pub enum Head {
     Centerface { heatmap: String, scale: String, offset: String, landmarks: String },
 }
 
+impl Head {
+    /// Bytes a detector of this head holds a pixel of its input while it runs (tract, one
+    /// run): YuNet's 2048 x 1152 input peaked at 236 MB resident (100 a pixel); CenterFace's
+    /// guard over a 50-megapixel photo, two 2048 x 720 tiles at once, added 736 MB to
+    /// YuNet's run of the same (250 a pixel).
+    pub fn bytes_per_pixel(&self) -> u64 {
+        match self {
+            Head::Yunet => 100,
+            Head::Centerface { .. } => 250,
+        }
+    }
+}
+
 /// A face detector's default `min_face`: YuNet's (the face guard's `NATIVE_MIN_FACE`).
 pub const DEFAULT_MIN_FACE: f64 = 16.0;
 

@@ -154,9 +154,10 @@ fn parse_rate(s: &str) -> Result<String, String> {
 /// network and how its face guard hides the faces it finds.
 #[derive(clap::Args, Debug, Clone, Copy)]
 pub struct EnhanceArgs {
-    /// The enhancer's network at full resolution (1), at half or a quarter of it (2, 4:
-    /// colours stay per-pixel, the network's correction is upsampled; about 4 and 16 times
-    /// less work), or auto: 1 below 1280x720, 2 from there, 4 from 2560x1440.
+    /// The enhancer's network at full resolution (1), at half, a quarter or an eighth of it
+    /// (2, 4, 8: colours stay per-pixel, the network's correction is upsampled; about 4, 16
+    /// and 64 times less work), or auto: 1 below 1280x720, 2 from there, 4 from 2560x1440,
+    /// 8 from 5120x2880 (a 50-megapixel photo).
     #[arg(long = "enhance-scale", default_value = "auto", value_parser = parse_scale)]
     pub enhance_scale: campro_eval::enhance::Scale,
     /// How the enhanced view hides every face its guard finds (a face detector run on the
@@ -188,7 +189,7 @@ fn parse_scale(s: &str) -> Result<campro_eval::enhance::Scale, String> {
     use campro_eval::enhance::Scale;
     match s {
         "auto" => Ok(Scale::Auto),
-        "1" | "2" | "4" => Ok(Scale::Factor(s.parse().expect("a digit"))),
-        _ => Err(format!("must be auto, 1, 2 or 4, got {}", super::shown_arg(s))),
+        "1" | "2" | "4" | "8" => Ok(Scale::Factor(s.parse().expect("a digit"))),
+        _ => Err(format!("must be auto, 1, 2, 4 or 8, got {}", super::shown_arg(s))),
     }
 }

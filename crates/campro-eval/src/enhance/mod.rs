@@ -23,14 +23,10 @@ pub use planes::{cropped_rgb8, padded_chw};
 use table::RestoreTable;
 use threads::on_threads;
 
-/// Bytes a pixel an enhancement holds at full resolution at [`Scale::Auto`] on images
-/// from 2560 x 1440 (the network at a quarter of each side), the face guard included,
-/// beyond what the memory budget already counts for the pipeline and the decoded image
-/// (21 bytes a pixel for 8-bit RGB): `simulate --enhance --jobs 1` on one 4032 x 3024
-/// photo peaked at 582 MB resident (47.7 bytes a pixel all told; 83 MB without
-/// `--enhance`), so 30 more counts 621 MB for it. Images are read under the budget with
-/// it ([`crate::image_file::read`]): two such photos are not enhanced at once.
-pub const WORK_BYTES_PER_PIXEL: u64 = 30;
+/// Bytes a pixel of a strip the reduced path holds at once ([`Enhancer::enhance_reduced`]):
+/// three f32 planes for the ungated result and three for the gate's target, a gate plane,
+/// and a little for the parallel rows' scratch.
+pub const STRIP_BYTES_PER_PIXEL: u64 = 32;
 
 /// Bytes the network holds a pixel it runs on (padded, at its working resolution): a
 /// 960 x 540 and a 1920 x 1080 frame at `--enhance-scale 1` peaked at 209 and 471 MB
@@ -67,10 +63,12 @@ pub struct Enhancer {
 /// falls about `f²` times. Measured quality and speed: `docs/enhancer.md`, "Speed".
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Scale {
-    /// Full resolution below 1280 x 720 pixels, half from there, a quarter from 2560 x 1440.
+    /// Full resolution below 1280 x 720 pixels, half from there, a quarter from 2560 x 1440,
+    /// an eighth from 5120 x 2880 (so the network runs on at most about 1.3 megapixels
+    /// below 10240 x 5760, where a sixteenth holds it there).
     #[default]
     Auto,
-    /// The network at 1/f of the image's width and height (1: full resolution; 2 or 4).
+    /// The network at 1/f of the image's width and height (1: full resolution; 2, 4, 8).
     Factor(usize),
 }
 
@@ -79,6 +77,8 @@ impl Scale {
     pub fn factor(self, w: usize, h: usize) -> usize {
         match self {
             Scale::Factor(f) => f.max(1),
+            Scale::Auto if w * h >= 10240 * 5760 => 16,
+            Scale::Auto if w * h >= 5120 * 2880 => 8,
             Scale::Auto if w * h >= 2560 * 1440 => 4,
             Scale::Auto if w * h >= 1280 * 720 => 2,
             Scale::Auto => 1,
@@ -274,20 +274,27 @@ impl Enhancer {
         (w as u64).div_ceil(m).saturating_mul(m).saturating_mul((h as u64).div_ceil(m).saturating_mul(m))
     }
 
-    /// Bytes [`Self::enhance`] holds for a `w` x `h` image besides the image itself: the
-    /// network's pixels (padded to the multiple, at its working scale) at
-    /// [`NET_BYTES_PER_PIXEL`], and at a reduced scale the full-resolution planes at
-    /// [`WORK_BYTES_PER_PIXEL`]. Saturating.
+    /// Bytes [`Self::enhance`] holds for a `w` x `h` image besides the image itself and
+    /// the enhanced image: the network's pixels (padded to the multiple, at its working
+    /// scale) at [`NET_BYTES_PER_PIXEL`], and at a reduced scale one strip's planes
+    /// ([`STRIP_BYTES_PER_PIXEL`]). Saturating.
     pub fn work_bytes(&self, w: u32, h: u32) -> u64 {
         let (w, h) = (w as usize, h as usize);
         let f = self.scale.factor(w, h);
         if f > 1 && w >= f * self.multiple && h >= f * self.multiple && self.unet.is_some() {
-            self.padded_pixels(w.div_ceil(f), h.div_ceil(f))
-                .saturating_mul(NET_BYTES_PER_PIXEL)
-                .saturating_add(self.padded_pixels(w, h).saturating_mul(WORK_BYTES_PER_PIXEL))
+            let strip = self.padded_pixels(w, self.strip_rows(f)).saturating_mul(STRIP_BYTES_PER_PIXEL);
+            self.padded_pixels(w.div_ceil(f), h.div_ceil(f)).saturating_mul(NET_BYTES_PER_PIXEL).saturating_add(strip)
         } else {
             self.padded_pixels(w, h).saturating_mul(NET_BYTES_PER_PIXEL)
         }
+    }
+
+    /// Rows of a strip of the reduced path at factor `f`: [`STRIP_ROWS`] rounded up to a
+    /// multiple of `f` (its low rows are whole) and of the gate's blocks (its pixelation
+    /// bands are the whole image's).
+    fn strip_rows(&self, f: usize) -> usize {
+        let unit = lcm(f, self.parts.gate.unwrap_or(0).max(1));
+        STRIP_ROWS.div_ceil(unit) * unit
     }
 
     /// The enhanced image of a captured 8-bit image (same size), on the calling thread.
@@ -315,19 +322,27 @@ impl Enhancer {
     /// [`Self::enhance`] with the network at 1/`f` of the resolution ([`Scale`]): its
     /// input (the restoration, or the captured image) at full resolution, averaged down;
     /// the network's residual over that input upsampled and added back; the gate's map
-    /// upsampled and its blend made at full resolution.
+    /// upsampled and its blend made at full resolution. Everything at full resolution is
+    /// made a strip of [`STRIP_ROWS`] rows at a time (twice: once to average down, once to
+    /// finish), so what this holds beside the input and the output is the network's at
+    /// 1/`f` and a strip's planes, whatever the image's height.
     fn enhance_reduced(&self, img: &RgbImage, f: usize, threads: usize) -> Result<RgbImage> {
         use rayon::prelude::*;
         let (w, h) = (img.width() as usize, img.height() as usize);
         let (pw, ph) = (w.div_ceil(self.multiple) * self.multiple, h.div_ceil(self.multiple) * self.multiple);
-        let captured = || padded_chw(img, self.multiple).0;
-        let mut base = match &self.parts.table {
-            Some(t) => t.restore(img, pw, ph),
-            None => captured(),
-        };
         let (sw, sh) = (w.div_ceil(f), h.div_ceil(f));
         let (lpw, lph) = (sw.div_ceil(self.multiple) * self.multiple, sh.div_ceil(self.multiple) * self.multiple);
-        let low = averaged_down(&base, pw, ph, (w, h), f, (lpw, lph));
+        let rows = self.strip_rows(f);
+        let input = |r: std::ops::Range<usize>| match &self.parts.table {
+            Some(t) => t.restore_rows(img, pw, r),
+            None => chw_rows(img, pw, r),
+        };
+        let mut low = vec![0f32; 3 * lpw * lph];
+        for y0 in (0..h).step_by(rows) {
+            let n = rows.min(ph - y0);
+            average_strip_into(&input(y0..y0 + n), pw, (y0, n), (w, h), f, (lpw, lph), &mut low);
+        }
+        padded_low(&mut low, (lpw, lph), (sw, sh));
         let mut out = self.run(&self.plan(lpw, lph, Outputs::Network)?, &low, (lpw, lph), threads)?.into_iter();
         let (Some(ungated_low), gate_low) = (out.next(), out.next()) else {
             return Err(EvalError::Model { path: self.path.clone(), message: "the network gave no output".into() });
@@ -336,30 +351,58 @@ impl Enhancer {
         // fitted at low resolution, He et al.), applied to the full-resolution input: the
         // edges the input has at full resolution stay sharp.
         let (gain, offset) = guided_coefficients(&low, &ungated_low, (sw, sh), lpw, lph);
-        let plane = pw * ph;
-        let (cols, rows) = (taps(pw, sw, f), taps(ph, sh, f));
-        let scratch = || (vec![0f32; pw], vec![0f32; pw]);
-        base.par_chunks_mut(pw).enumerate().for_each_init(scratch, |(g, o), (row, line)| {
-            let (c, y) = (row / ph, row % ph);
-            let at = c * lpw * lph..(c + 1) * lpw * lph;
-            upsample_row(&gain[at.clone()], lpw, rows[y], &cols, g, |v, x| *v = x);
-            upsample_row(&offset[at], lpw, rows[y], &cols, o, |v, x| *v = x);
-            for ((v, g), o) in line.iter_mut().zip(g.iter()).zip(o.iter()) {
-                *v = g * *v + o;
-            }
-        });
-        let ungated = base;
-        let Some((blocks, gate_low)) = self.parts.gate.zip(gate_low) else {
-            return Ok(cropped_rgb8(&ungated, pw, ph, w as u32, h as u32));
-        };
-        // The gate's blend at full resolution, toward the pixelated result (or the capture).
-        let toward = if blocks > 0 { pixelated(&ungated, pw, ph, blocks) } else { captured() };
-        let mut gate = vec![0f32; plane];
-        gate.par_chunks_mut(pw).enumerate().for_each(|(y, line)| {
-            upsample_row(&gate_low, lpw, rows[y], &cols, line, |v, g| *v = g.clamp(0.0, 1.0));
-        });
-        Ok(cropped_rgb8(&blended(ungated, &gate, &toward, pw * ph), pw, ph, w as u32, h as u32))
+        drop(low);
+        let (cols, taps_y) = (taps(pw, sw, f), taps(ph, sh, f));
+        let gated = self.parts.gate.zip(gate_low);
+        let mut enhanced = RgbImage::new(w as u32, h as u32);
+        for (k, rows_out) in enhanced.chunks_mut(3 * w * rows).enumerate() {
+            let y0 = k * rows;
+            let n = rows.min(ph - y0);
+            let mut ungated = input(y0..y0 + n);
+            let scratch = || (vec![0f32; pw], vec![0f32; pw]);
+            ungated.par_chunks_mut(pw).enumerate().for_each_init(scratch, |(g, o), (row, line)| {
+                let (c, y) = (row / n, y0 + row % n);
+                let at = c * lpw * lph..(c + 1) * lpw * lph;
+                upsample_row(&gain[at.clone()], lpw, taps_y[y], &cols, g, |v, x| *v = x);
+                upsample_row(&offset[at], lpw, taps_y[y], &cols, o, |v, x| *v = x);
+                for ((v, g), o) in line.iter_mut().zip(g.iter()).zip(o.iter()) {
+                    *v = g * *v + o;
+                }
+            });
+            let done = match &gated {
+                None => ungated,
+                Some((blocks, gate_low)) => {
+                    // The gate's blend at full resolution, toward the pixelated result (or
+                    // the capture).
+                    let toward =
+                        if *blocks > 0 { pixelated(&ungated, pw, n, *blocks) } else { chw_rows(img, pw, y0..y0 + n) };
+                    let mut gate = vec![0f32; pw * n];
+                    gate.par_chunks_mut(pw).enumerate().for_each(|(r, line)| {
+                        upsample_row(gate_low, lpw, taps_y[y0 + r], &cols, line, |v, g| *v = g.clamp(0.0, 1.0));
+                    });
+                    blended(ungated, &gate, &toward, pw * n)
+                }
+            };
+            put_rgb8_rows(&done, pw, n, w, rows_out);
+        }
+        Ok(enhanced)
     }
+}
+
+/// Full-resolution rows the reduced path makes at once (rounded up to a multiple of its
+/// factor and of the gate's blocks): a strip's planes are about 60 bytes a pixel of it, so
+/// 2 MB a 1,000 pixels of width.
+pub const STRIP_ROWS: usize = 128;
+
+/// Least common multiple.
+fn lcm(a: usize, b: usize) -> usize {
+    let gcd = |mut a: usize, mut b: usize| {
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        a
+    };
+    a / gcd(a, b) * b
 }
 
 /// Widest activation an enhancer may hold at full resolution, channels: a campro U-Net's
@@ -608,6 +651,9 @@ mod tests {
         assert_eq!(Scale::Auto.factor(640, 480), 1);
         assert_eq!(Scale::Auto.factor(1280, 720), 2);
         assert_eq!(Scale::Auto.factor(3840, 2160), 4);
+        assert_eq!(Scale::Auto.factor(4032, 3024), 4);
+        assert_eq!(Scale::Auto.factor(8160, 6120), 8);
+        assert_eq!(Scale::Auto.factor(12000, 9000), 16);
         assert_eq!(Scale::Factor(1).factor(3840, 2160), 1);
         let (_, e) = shipped();
         let img = picture(256, 160);

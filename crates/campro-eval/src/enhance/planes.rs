@@ -8,41 +8,72 @@ use image::RgbImage;
 /// The top-left `w` x `h` of a (3, `ph`, `pw`) float image in [0, 1] (the enhancer's
 /// output on [`padded_chw`]'s input), rounded to 8 bits and clamped.
 pub fn cropped_rgb8(v: &[f32], pw: usize, ph: usize, w: u32, h: u32) -> RgbImage {
-    let q = |f: f32| (f * 255.0).round().clamp(0.0, 255.0) as u8;
-    RgbImage::from_fn(w, h, |x, y| {
-        let i = y as usize * pw + x as usize;
-        image::Rgb([q(v[i]), q(v[pw * ph + i]), q(v[2 * pw * ph + i])])
-    })
+    let mut out = RgbImage::new(w, h);
+    put_rgb8_rows(v, pw, ph, w as usize, &mut out);
+    out
 }
 
-/// A (3, `ph`, `pw`) image whose top-left `size` is real, averaged down `f` times a side
-/// (the last block of a row or column averages what it has) into (3, `low.1`, `low.0`),
-/// padded past its own size by repeating its last row and column.
-pub(super) fn averaged_down(
-    img: &[f32],
+/// Writes the first `w` columns of a (3, `n`, `pw`) float strip in [0, 1], rounded to 8 bits
+/// and clamped, into `rows` (packed RGB rows `w` pixels wide; as many as it holds, at most n).
+pub(super) fn put_rgb8_rows(v: &[f32], pw: usize, n: usize, w: usize, rows: &mut [u8]) {
+    let q = |f: f32| (f * 255.0).round().clamp(0.0, 255.0) as u8;
+    let plane = pw * n;
+    for (y, row) in rows.chunks_exact_mut(3 * w).take(n).enumerate() {
+        for (x, px) in row.chunks_exact_mut(3).enumerate() {
+            let i = y * pw + x;
+            px.copy_from_slice(&[q(v[i]), q(v[plane + i]), q(v[2 * plane + i])]);
+        }
+    }
+}
+
+/// The low-resolution rows a strip of a (3, H, `pw`) image gives when averaged down `f`
+/// times a side: the strip holds the image's rows `y0..y0 + n` (y0 a multiple of `f`) and
+/// the image's top-left `size` is real (the last block of a row or column averages what it
+/// has); each low row `y0 / f ..` that the strip's real rows make is written, all three
+/// channels, into the (3, `low.1`, `low.0`) `out`. [`padded_low`] then pads it.
+pub(super) fn average_strip_into(
+    strip: &[f32],
     pw: usize,
-    ph: usize,
+    (y0, n): (usize, usize),
     size: (usize, usize),
     f: usize,
     low: (usize, usize),
-) -> Vec<f32> {
+    out: &mut [f32],
+) {
     use rayon::prelude::*;
     let (w, h) = size;
-    let (sw, sh) = (w.div_ceil(f), h.div_ceil(f));
+    let sw = w.div_ceil(f);
     let (lpw, lph) = low;
-    let mut out = vec![0f32; 3 * lpw * lph];
-    out.par_chunks_mut(lpw).enumerate().for_each(|(row, line)| {
-        let (c, sy) = (row / lph, (row % lph).min(sh - 1));
-        let plane = &img[c * pw * ph..(c + 1) * pw * ph];
-        let (y0, y1) = (sy * f, (sy * f + f).min(h));
-        for (sx, v) in line.iter_mut().enumerate() {
-            let sx = sx.min(sw - 1);
-            let (x0, x1) = (sx * f, (sx * f + f).min(w));
-            let sum: f32 = (y0..y1).map(|y| plane[y * pw + x0..y * pw + x1].iter().sum::<f32>()).sum();
-            *v = sum / ((y1 - y0) * (x1 - x0)) as f32;
+    let real = (y0 + n).min(h);
+    let (first, end) = (y0 / f, real.div_ceil(f));
+    out.par_chunks_mut(lpw).enumerate().filter(|(row, _)| (first..end).contains(&(row % lph))).for_each(
+        |(row, line)| {
+            let (c, sy) = (row / lph, row % lph);
+            let plane = &strip[c * pw * n..(c + 1) * pw * n];
+            let (r0, r1) = (sy * f, (sy * f + f).min(h));
+            for (sx, v) in line.iter_mut().enumerate().take(sw) {
+                let (x0, x1) = (sx * f, (sx * f + f).min(w));
+                let sum: f32 =
+                    (r0..r1).map(|y| plane[(y - y0) * pw + x0..(y - y0) * pw + x1].iter().sum::<f32>()).sum();
+                *v = sum / ((r1 - r0) * (x1 - x0)) as f32;
+            }
+        },
+    );
+}
+
+/// Pads a (3, `lph`, `lpw`) image whose top-left `sw` x `sh` is real by repeating its last
+/// real column and row.
+pub(super) fn padded_low(out: &mut [f32], (lpw, lph): (usize, usize), (sw, sh): (usize, usize)) {
+    for c in 0..3 {
+        let plane = &mut out[c * lpw * lph..(c + 1) * lpw * lph];
+        for y in 0..sh {
+            let last = plane[y * lpw + sw - 1];
+            plane[y * lpw + sw..(y + 1) * lpw].fill(last);
         }
-    });
-    out
+        for y in sh..lph {
+            plane.copy_within((sh - 1) * lpw..sh * lpw, y * lpw);
+        }
+    }
 }
 
 /// The face gate's blend, as the file makes it: `ungated + gate · (toward − ungated)`, on
@@ -175,14 +206,21 @@ pub(super) fn pixelated(img: &[f32], pw: usize, ph: usize, n: usize) -> Vec<f32>
 pub fn padded_chw(img: &RgbImage, multiple: usize) -> (Vec<f32>, usize, usize) {
     let (w, h) = (img.width() as usize, img.height() as usize);
     let (pw, ph) = (w.div_ceil(multiple) * multiple, h.div_ceil(multiple) * multiple);
-    let mut data = vec![0f32; 3 * pw * ph];
-    for y in 0..ph {
+    (chw_rows(img, pw, 0..ph), pw, ph)
+}
+
+/// Rows `rows` of [`padded_chw`]'s image `pw` wide, as (3, rows, `pw`) floats.
+pub(super) fn chw_rows(img: &RgbImage, pw: usize, rows: std::ops::Range<usize>) -> Vec<f32> {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let plane = pw * rows.len();
+    let mut data = vec![0f32; 3 * plane];
+    for (r, y) in rows.enumerate() {
         for x in 0..pw {
             let p = img.get_pixel(x.min(w - 1) as u32, y.min(h - 1) as u32).0;
             for c in 0..3 {
-                data[c * pw * ph + y * pw + x] = p[c] as f32 / 255.0;
+                data[c * plane + r * pw + x] = p[c] as f32 / 255.0;
             }
         }
     }
-    (data, pw, ph)
+    data
 }

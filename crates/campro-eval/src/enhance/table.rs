@@ -2,6 +2,8 @@
 //! full resolution.
 
 use super::names::{RESTORE_BINS, RESTORE_TABLE};
+#[cfg(doc)]
+use super::padded_chw;
 use image::RgbImage;
 
 /// campro's per-pixel restoration stage read from its graph's constants
@@ -38,17 +40,25 @@ impl RestoreTable {
     }
 
     /// The restored image as (3, `ph`, `pw`) floats, padded as [`padded_chw`] pads.
+    #[cfg(test)]
     pub(super) fn restore(&self, img: &RgbImage, pw: usize, ph: usize) -> Vec<f32> {
+        self.restore_rows(img, pw, 0..ph)
+    }
+
+    /// Rows `rows` of [`Self::restore`]'s image, as (3, rows, `pw`) floats.
+    pub(super) fn restore_rows(&self, img: &RgbImage, pw: usize, rows: std::ops::Range<usize>) -> Vec<f32> {
         use rayon::prelude::*;
         let (w, h) = (img.width() as usize, img.height() as usize);
-        let plane = pw * ph;
+        let (y0, n) = (rows.start, rows.len());
+        let plane = pw * n;
         let inv = 1.0f32 / 255.0;
         // Each row's entries, channel after channel (one row of each plane), then the rows
         // put in their planes.
-        let mut rows = vec![0f32; 3 * plane];
-        rows.par_chunks_mut(3 * pw).enumerate().for_each(|(y, row)| {
+        let mut packed = vec![0f32; 3 * plane];
+        packed.par_chunks_mut(3 * pw).enumerate().for_each(|(r, row)| {
+            let y = (y0 + r).min(h - 1) as u32;
             for x in 0..pw {
-                let p = img.get_pixel(x.min(w - 1) as u32, y.min(h - 1) as u32).0;
+                let p = img.get_pixel(x.min(w - 1) as u32, y).0;
                 let i = (self.bins[p[0] as usize] + self.bins[256 + p[1] as usize] + self.bins[512 + p[2] as usize])
                     as usize
                     * 3;
@@ -58,9 +68,9 @@ impl RestoreTable {
             }
         });
         let mut out = vec![0f32; 3 * plane];
-        for (y, row) in rows.chunks_exact(3 * pw).enumerate() {
+        for (r, row) in packed.chunks_exact(3 * pw).enumerate() {
             for c in 0..3 {
-                out[c * plane + y * pw..][..pw].copy_from_slice(&row[c * pw..(c + 1) * pw]);
+                out[c * plane + r * pw..][..pw].copy_from_slice(&row[c * pw..(c + 1) * pw]);
             }
         }
         out

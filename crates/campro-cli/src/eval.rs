@@ -473,7 +473,19 @@ fn run_quality(
             bail!("--held-out: no image of {} is named by a held-out COCO id", crate::shown(&dir));
         }
     }
-    let r = quality::evaluate(&paths, conds, c.limit)?;
+    // With the enhanced view, colour fidelity leaves out the faces the face guard's
+    // detectors find in the raw image (widened as the guard widens them): the enhanced
+    // view pixelates them on purpose.
+    let guard = if c.enhanced {
+        Some(crate::capture::face_guard(&c.models_dir(), campro_eval::guard::Hide::Pixelate)?)
+    } else {
+        None
+    };
+    let faces = |img: &image::RgbImage| -> campro_eval::Result<Vec<[u32; 4]>> {
+        let found = guard.as_ref().map(|g| g.find(img)).transpose()?.unwrap_or_default();
+        Ok(found.iter().filter_map(|f| campro_eval::guard::widened(f.bbox, img.width(), img.height())).collect())
+    };
+    let r = quality::evaluate(&paths, conds, c.limit, guard.as_ref().map(|_| &faces as &quality::FacesFn<'_>))?;
     report::write_quality(&r, &c.output)?;
     eprintln!("quality: {} images, {:.0} s -> {}", r.images, r.seconds, crate::shown(&c.output.join("quality.md")));
     Ok(r)

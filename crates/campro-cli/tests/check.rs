@@ -404,15 +404,15 @@ fn a_device_is_checked_as_its_hal_applies_the_values() {
 #[test]
 fn a_view_that_fails_refuses_the_check_instead_of_scoring_another_picture() {
     let Some(shared) = shared() else { return };
-    // A face on a strip wider than the enhancer takes (8,192 pixels a side; the detector
-    // sees it at 640 wide, the face about 90 pixels): the enhanced
+    // A face on a strip wider than the enhancer takes (16,384 pixels a side; the detector
+    // sees it at 640 wide, the face about 45 pixels): the enhanced
     // view cannot run on it, and the check says so instead of scoring the captured picture
     // under the enhanced view's name.
     let dir = tempfile::tempdir().unwrap();
     let face =
         image::open(shared.join(FACES[0])).unwrap().resize(1200, 1200, image::imageops::FilterType::Triangle).to_rgb8();
-    let mut strip = image::RgbImage::from_pixel(8300, 1200, image::Rgb([120, 110, 100]));
-    image::imageops::replace(&mut strip, &face, 3500, 0);
+    let mut strip = image::RgbImage::from_pixel(16400, 1200, image::Rgb([120, 110, 100]));
+    image::imageops::replace(&mut strip, &face, 7600, 0);
     let photo = dir.path().join("strip.png");
     strip.save(&photo).unwrap();
     fails_with(

@@ -13,6 +13,7 @@
 pub mod ap;
 pub mod baselines;
 pub mod check;
+pub mod colour;
 pub mod data;
 pub mod enhance;
 pub mod error;

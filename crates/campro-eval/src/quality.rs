@@ -6,6 +6,10 @@
 //! (0.0448, 0.2856, 0.3001, 0.2363, 0.1333), the contrast-structure term at scales 1-4 and
 //! the full SSIM at scale 5, each scale halved by 2x2 averaging (an odd last row or column
 //! is dropped); per channel, then averaged. It needs both sides ≥ 176 px (11 px at the fifth scale).
+//!
+//! Colour fidelity is CIEDE2000 ([`crate::colour`]) per pixel, outside the faces a caller
+//! names (the enhanced view pixelates faces on purpose): its mean, 95th percentile and the
+//! share of pixels above 5, each averaged over the images.
 
 use crate::data::read_rgb8;
 use crate::error::{EvalError, Result};
@@ -26,7 +30,13 @@ pub struct Quality {
     pub ssim: f64,
     /// None when the image is smaller than [`MS_SSIM_MIN_SIDE`].
     pub ms_ssim: Option<f64>,
+    /// ΔE00 outside the faces; None when faces cover every pixel.
+    pub colour: Option<crate::colour::Fidelity>,
 }
+
+/// The face regions (`[x0, y0, x1, y1)` pixels) of a raw image that colour fidelity leaves
+/// out.
+pub type FacesFn<'a> = dyn Fn(&RgbImage) -> Result<Vec<[u32; 4]>> + Sync + 'a;
 
 /// A single-channel image in f64.
 #[derive(Clone)]
@@ -163,10 +173,16 @@ fn ssim_and_ms_ssim(a: &RgbImage, b: &RgbImage) -> (f64, Option<f64>) {
     (ssim / 3.0, multi.then_some(ms / 3.0))
 }
 
-/// All four metrics.
+/// All four metrics, and colour fidelity over every pixel.
 pub fn quality(a: &RgbImage, b: &RgbImage) -> Quality {
+    quality_outside(a, b, &[])
+}
+
+/// [`quality`] with colour fidelity outside the `faces` regions (`[x0, y0, x1, y1)`).
+pub fn quality_outside(a: &RgbImage, b: &RgbImage, faces: &[[u32; 4]]) -> Quality {
     let (ssim, ms_ssim) = ssim_and_ms_ssim(a, b);
-    Quality { rmse: rmse(a, b), psnr: psnr(a, b), ssim, ms_ssim }
+    let outside = |x: u32, y: u32| !faces.iter().any(|r| (r[0]..r[2]).contains(&x) && (r[1]..r[3]).contains(&y));
+    Quality { rmse: rmse(a, b), psnr: psnr(a, b), ssim, ms_ssim, colour: crate::colour::compare(a, b, outside) }
 }
 
 /// Mean metrics of one condition over a set of images (PSNR: mean of per-image dB, identical
@@ -178,6 +194,11 @@ pub struct QualityRow {
     pub psnr: f64,
     pub ssim: f64,
     pub ms_ssim: f64,
+    /// Mean ΔE00 outside faces, its 95th percentile and the share above 5 (each the mean
+    /// over the images).
+    pub delta_e: f64,
+    pub delta_e_p95: f64,
+    pub delta_e_over5: f64,
     pub images: usize,
     pub ms_ssim_images: usize,
 }
@@ -189,8 +210,14 @@ pub struct QualityReport {
     pub seconds: f64,
 }
 
-/// Scores every protected condition (raw ones are skipped) against the raw images.
-pub fn evaluate(paths: &[PathBuf], conds: &[Condition], limit: Option<usize>) -> Result<QualityReport> {
+/// Scores every protected condition (raw ones are skipped) against the raw images; colour
+/// fidelity outside the regions `faces` finds in each raw image (every pixel without it).
+pub fn evaluate(
+    paths: &[PathBuf],
+    conds: &[Condition],
+    limit: Option<usize>,
+    faces: Option<&FacesFn<'_>>,
+) -> Result<QualityReport> {
     let start = std::time::Instant::now();
     let paths = &paths[..limit.unwrap_or(paths.len()).min(paths.len())];
     let conds: Vec<&Condition> = conds.iter().filter(|c| c.protect.is_some()).collect();
@@ -204,7 +231,8 @@ pub fn evaluate(paths: &[PathBuf], conds: &[Condition], limit: Option<usize>) ->
                 img.height()
             )));
         }
-        Ok(conds.iter().map(|c| quality(&img, &c.apply(&img))).collect())
+        let regions = faces.map(|f| f(&img)).transpose()?.unwrap_or_default();
+        Ok(conds.iter().map(|c| quality_outside(&img, &c.apply(&img), &regions)).collect())
     })?;
     let rows = conds
         .iter()
@@ -214,12 +242,18 @@ pub fn evaluate(paths: &[PathBuf], conds: &[Condition], limit: Option<usize>) ->
             let col = || per.iter().map(move |q| q[c]);
             let finite: Vec<f64> = col().map(|q| q.psnr).filter(|v| v.is_finite()).collect();
             let ms: Vec<f64> = col().filter_map(|q| q.ms_ssim).collect();
+            let colour: Vec<crate::colour::Fidelity> = col().filter_map(|q| q.colour).collect();
+            let mean_of =
+                |f: fn(&crate::colour::Fidelity) -> f64| colour.iter().map(f).sum::<f64>() / colour.len().max(1) as f64;
             QualityRow {
                 condition: cond.name.clone(),
                 rmse: col().map(|q| q.rmse).sum::<f64>() / n,
                 psnr: if finite.is_empty() { f64::INFINITY } else { finite.iter().sum::<f64>() / finite.len() as f64 },
                 ssim: col().map(|q| q.ssim).sum::<f64>() / n,
                 ms_ssim: ms.iter().sum::<f64>() / ms.len().max(1) as f64,
+                delta_e: mean_of(|f| f.mean),
+                delta_e_p95: mean_of(|f| f.p95),
+                delta_e_over5: mean_of(|f| f.over5),
                 images: per.len(),
                 ms_ssim_images: ms.len(),
             }

@@ -339,6 +339,9 @@ pub fn quality_table(r: &QualityReport) -> Table {
         Column::new("PSNR (dB)", "PSNR", 2),
         Column::new("SSIM", "SSIM", 3),
         Column::new("MS-SSIM", "MS-SSIM", 3),
+        Column::new("ΔE00 outside faces", "delta_e", 2),
+        Column::new("ΔE00 p95", "delta_e_p95", 2),
+        Column::new("share ΔE00 > 5", "delta_e_over5", 3),
         Column::new("images", "images", 0),
         Column::new("MS-SSIM images", "ms_ssim_images", 0),
     ]);
@@ -349,6 +352,9 @@ pub fn quality_table(r: &QualityReport) -> Table {
             x.psnr.into(),
             x.ssim.into(),
             x.ms_ssim.into(),
+            x.delta_e.into(),
+            x.delta_e_p95.into(),
+            x.delta_e_over5.into(),
             x.images.into(),
             x.ms_ssim_images.into(),
         ]);
@@ -451,6 +457,9 @@ mod tests {
                 psnr: 40.0,
                 ssim: 0.98765,
                 ms_ssim: 0.5,
+                delta_e: 2.5,
+                delta_e_p95: 6.25,
+                delta_e_over5: 0.125,
                 images: 3,
                 ms_ssim_images: 2,
             }],
@@ -458,8 +467,13 @@ mod tests {
             seconds: 1.0,
         };
         let t = quality_table(&r);
-        assert_eq!(t.csv(), "image_type,RMSE,PSNR,SSIM,MS-SSIM,images,ms_ssim_images\na|b,1.234,40,0.98765,0.5,3,2\n");
-        assert!(quality_markdown(&r).contains("| a\\|b | 1.23 | 40.00 | 0.988 | 0.500 | 3 | 2 |\n"));
+        assert_eq!(
+            t.csv(),
+            "image_type,RMSE,PSNR,SSIM,MS-SSIM,delta_e,delta_e_p95,delta_e_over5,images,ms_ssim_images\na|b,1.234,40,0.98765,0.5,2.5,6.25,0.125,3,2\n"
+        );
+        assert!(
+            quality_markdown(&r).contains("| a\\|b | 1.23 | 40.00 | 0.988 | 0.500 | 2.50 | 6.25 | 0.125 | 3 | 2 |\n")
+        );
         assert_eq!(t.json()[0]["SSIM"], 0.98765);
     }
 }

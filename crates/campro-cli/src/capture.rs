@@ -53,9 +53,10 @@ pub struct GreyPolicy {
 }
 
 /// Share of a photo's mid-tones that are neutral ([`campro::chroma::neutral_share`]) from
-/// which its faces are looked at for colour: a selective-colour photo measured 0.79 to 0.93,
-/// snow and overcast scenes 0.77 to 0.90 (their faces are in colour).
-pub const SUSPECT_NEUTRAL_SHARE: f64 = 0.6;
+/// which its faces are looked at for colour: selective-colour photos measured 0.79 to 0.96,
+/// snow and overcast scenes 0.77 to 0.90 (their faces are in colour); no LFW photo is over
+/// 0.47, and 2 colour photos of 300 from COCO are over it (0.76 and 0.81).
+pub const SUSPECT_NEUTRAL_SHARE: f64 = 0.75;
 
 /// Longest side (pixels) a suspect photo is searched for faces at: one detector run of at
 /// most 1280 x 1280, faces from about 16 pixels there.
@@ -277,16 +278,25 @@ impl<'p> Capture<'_, 'p> {
         Ok(grey)
     }
 
-    /// `dst` = the capture of the `w` x `h` RGB frame `src`; returns whether the frame was
-    /// grey and let through ([`GreyPolicy::check`]). The enhancer, if any, on this thread.
+    /// `dst` = the capture of the `w` x `h` RGB photo `src`; returns whether it was grey
+    /// and let through ([`GreyPolicy::check_picture`]: its faces looked at when it is mostly
+    /// colourless). The enhancer, if any, on this thread.
     pub fn run(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32) -> Result<bool> {
-        self.run_on(src, dst, w, h, 1)
+        let grey = self.grey.check_picture(src, w, h)?;
+        self.camera(src, dst, w, h, 1)?;
+        Ok(grey)
     }
 
-    /// [`Capture::run`] with the enhancer's network on `threads` threads (one frame at a
-    /// time: video).
+    /// [`Capture::run`] of a video frame, with the enhancer's network on `threads` threads
+    /// (one frame at a time): grey judged on the whole frame ([`GreyPolicy::check`]).
     pub fn run_on(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32, threads: usize) -> Result<bool> {
         let grey = self.grey.check(src)?;
+        self.camera(src, dst, w, h, threads)?;
+        Ok(grey)
+    }
+
+    /// `dst` = the camera's (and the enhancer's, if any) picture of `src`.
+    fn camera(&self, src: &[u8], dst: &mut [u8], w: u32, h: u32, threads: usize) -> Result<()> {
         let row = 3 * w as usize;
         src.par_chunks(row * 16).zip(dst.par_chunks_mut(row * 16)).for_each(|(s, d)| {
             self.fast8.run(s, d);
@@ -295,7 +305,7 @@ impl<'p> Capture<'_, 'p> {
             let captured = image::RgbImage::from_raw(w, h, dst.to_vec()).expect("a whole frame");
             dst.copy_from_slice(enhance_on(e, &captured, threads)?.as_raw());
         }
-        Ok(grey)
+        Ok(())
     }
 }
 

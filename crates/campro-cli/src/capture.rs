@@ -91,9 +91,9 @@ impl FaceLook {
         Self { models: models.to_path_buf(), detectors: Default::default() }
     }
 
-    /// The smallest colour spread of a face found in the `w` x `h` RGB picture `rgb` (8-bit
-    /// codes; [`campro::chroma::measure`] of the face's box) when that face is grey, else
-    /// None; an error naming why no detector could look.
+    /// The colour spread (8-bit codes, [`campro::chroma::measure`]) of the greyest face
+    /// found in the `w` x `h` RGB picture `rgb` whose centre is grey ([`FACE_NEUTRAL_SHARE`]),
+    /// else None; an error naming why no detector could look.
     pub fn grey_face(&self, rgb: &[u8], w: u32, h: u32) -> std::result::Result<Option<f64>, String> {
         let detectors = self
             .detectors
@@ -255,9 +255,9 @@ pub const GREY_ALLOWED: &str =
     "--allow-grey: grey input written; this preset is not rated for grey, so the output is not protected against a restoration that knows the camera";
 
 impl<'p> Capture<'_, 'p> {
-    /// Bytes this capture holds for a `w` x `h` image besides the pipeline's (the
-    /// enhancer's, [`campro_eval::enhance::Enhancer::work_bytes`]), for the memory budget
-    /// images are read under.
+    /// Bytes this capture holds for a `w` x `h` image besides the pipeline's (the guarded
+    /// enhancer's, [`GuardedEnhancer::work_bytes`]), for the memory budget images are read
+    /// under.
     pub fn work(&self, w: u32, h: u32) -> u64 {
         self.enhancer.map_or(0, |e| e.work_bytes(w, h))
     }

@@ -23,7 +23,7 @@ pub use planes::{cropped_rgb8, padded_chw};
 use table::RestoreTable;
 use threads::on_threads;
 
-/// Bytes a pixel of a strip the reduced path holds at once ([`Enhancer::enhance_reduced`]):
+/// Bytes a pixel of a strip the reduced path holds at once (at [`Scale`] factors above 1):
 /// three f32 planes for the ungated result and three for the gate's target, a gate plane,
 /// and a little for the parallel rows' scratch.
 pub const STRIP_BYTES_PER_PIXEL: u64 = 32;

@@ -158,8 +158,9 @@ fn inspect_names_a_missing_model_folder() {
     );
 }
 
-/// A grey photo, which `simulate` refuses under a preset not rated for grey, is flagged on
-/// `inspect`'s page and in its JSON, not shown as protected without a word.
+/// A grey photo, which `simulate` refuses under a preset not rated for grey, and a
+/// selective-colour one (refused by its grey face), are flagged on `inspect`'s page and in
+/// its JSON, not shown as protected without a word.
 #[test]
 fn inspect_flags_grey_photos_as_simulate_refuses_them() {
     let Some(shared) = campro_testkit::shared_root(&[YUNET, YOLOX, FACE]) else {
@@ -168,11 +169,24 @@ fn inspect_flags_grey_photos_as_simulate_refuses_them() {
     let dir = tempfile::tempdir().unwrap();
     let face = shared.join(FACE);
     let grey = dir.path().join("grey.png");
-    image::DynamicImage::ImageLuma8(image::open(&face).unwrap().to_luma8()).to_rgb8().save(&grey).unwrap();
+    let luma = image::DynamicImage::ImageLuma8(image::open(&face).unwrap().to_luma8()).to_rgb8();
+    luma.save(&grey).unwrap();
+    // Selective colour: grey but for a vivid patch, colour enough for the whole-frame
+    // measure; simulate refuses it by its grey face, and inspect says so too.
+    let mut patched = luma.clone();
+    for (x, y, p) in patched.enumerate_pixels_mut() {
+        if x < 80 && y >= 170 {
+            *p = if (x / 8) % 2 == 0 { image::Rgb([220, 30, 40]) } else { image::Rgb([30, 160, 60]) };
+        }
+    }
+    assert!(!campro::chroma::measure(patched.as_raw()).is_grey());
+    let selective = dir.path().join("selective.png");
+    patched.save(&selective).unwrap();
     let out = dir.path().join("out");
     let run = campro()
         .args(["inspect", "campro-omega-0.5"])
         .arg(&grey)
+        .arg(&selective)
         .arg(&face)
         .arg("-o")
         .arg(&out)
@@ -186,6 +200,8 @@ fn inspect_flags_grey_photos_as_simulate_refuses_them() {
     assert!(err.contains("grey.png") && err.contains("simulate refuses it"), "{err}");
     let v: Value = serde_json::from_slice(&std::fs::read(out.join("grey.json")).unwrap()).unwrap();
     assert_eq!(v["grey_refused"], true);
+    let v: Value = serde_json::from_slice(&std::fs::read(out.join("selective.json")).unwrap()).unwrap();
+    assert_eq!(v["grey_refused"], true);
     let v: Value = serde_json::from_slice(&std::fs::read(out.join("Aaron_Eckhart_0001.json")).unwrap()).unwrap();
     assert_eq!(v["grey_refused"], false);
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
@@ -194,6 +210,6 @@ fn inspect_flags_grey_photos_as_simulate_refuses_them() {
             "A grey picture, or grey faces in a mostly colourless one: <code>campro simulate</code> refuses it"
         )
         .count(),
-        1
+        2
     );
 }

@@ -81,8 +81,7 @@ impl Camera {
         let preset_sha256 = crate::record::sha256(&bytes);
         // As `simulate`: a mostly colourless photo's faces are looked at with the face
         // detectors of the commands' models folder.
-        let models = crate::models::folder(None, crate::args::named_shared_dir(None).as_deref());
-        let grey = GreyPolicy::new(&params, allow_grey).with_faces(&models);
+        let grey = GreyPolicy::new(&params, allow_grey).with_faces(&models_folder(None));
         let built = Built::new(params, |p| Tables {
             fast8: Exact8::new(p),
             p8: Prepared::new(p, Depth::Eight),
@@ -240,7 +239,7 @@ impl Camera {
         let Source::Path(path) = &self.source else {
             bail!("enhance: a parameter set given as JSON text names no enhancer file beside it; give its path or a preset's name")
         };
-        let models = crate::models::folder(models, crate::args::named_shared_dir(None).as_deref());
+        let models = models_folder(models);
         let scale = crate::args::EnhanceArgs {
             enhance_scale: campro_eval::enhance::Scale::Auto,
             faces: crate::args::FacesArg::Pixelate,
@@ -294,6 +293,12 @@ pub struct Job {
     pub record: bool,
     /// `--force`: replace an existing output (and record).
     pub force: bool,
+}
+
+/// The models folder: `given`, else the commands' default (`$CAMPRO_SHARED`'s, the data
+/// folder `campro models fetch` fills, or `../shared/models`).
+fn models_folder(given: Option<&Path>) -> PathBuf {
+    crate::models::folder(given, crate::args::named_shared_dir(None).as_deref())
 }
 
 /// Where `simulate` writes the input at `input` (a path relative to the input folder, or

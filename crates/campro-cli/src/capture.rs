@@ -159,12 +159,12 @@ impl GreyPolicy {
         if self.rated {
             return Ok(false);
         }
-        if self.check(rgb)? {
-            return Ok(true);
+        let m = campro::chroma::measure(rgb);
+        if m.is_grey() {
+            return self.refused_unless_allowed(GreyRefused { spread: m.spread, faces: false }.into());
         }
         let Some(look) = &self.faces else { return Ok(false) };
         // Too small or too flat to show a face, as for the whole-frame measure.
-        let m = campro::chroma::measure(rgb);
         if m.pixels < campro::chroma::MIN_PIXELS || m.detail < campro::chroma::FLAT_DETAIL {
             return Ok(false);
         }
@@ -180,11 +180,7 @@ impl GreyPolicy {
                 100.0 * share
             ),
         };
-        if !self.allow {
-            return Err(refused);
-        }
-        self.allowed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        Ok(true)
+        self.refused_unless_allowed(refused)
     }
 
     /// Ok(true) for a grey picture let through (`allow`), Ok(false) for a colour one or a
@@ -197,8 +193,13 @@ impl GreyPolicy {
         if !m.is_grey() {
             return Ok(false);
         }
+        self.refused_unless_allowed(GreyRefused { spread: m.spread, faces: false }.into())
+    }
+
+    /// `refused` as the error, or under `allow` Ok(true), counted.
+    fn refused_unless_allowed(&self, refused: anyhow::Error) -> Result<bool> {
         if !self.allow {
-            return Err(GreyRefused { spread: m.spread, faces: false }.into());
+            return Err(refused);
         }
         self.allowed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         Ok(true)
@@ -338,9 +339,7 @@ impl<'p> Capture<'_, 'p> {
         let row = 3 * w as usize;
         let (pixels, grey) = match src {
             Frame::Eight(s) if self.enhancer.is_some() || depth == Depth::Eight => {
-                let mut dst = vec![0u8; s.len()];
-                let grey = self.run(s, &mut dst, w, h)?;
-                (Pixels::Eight(dst), grey)
+                return self.picture8(s.to_vec(), w, h, depth, warn);
             }
             // The enhancer reads what an 8-bit camera gives: the caller converts first.
             Frame::Sixteen(_) if self.enhancer.is_some() => bail!("the enhancer takes 8-bit frames"),

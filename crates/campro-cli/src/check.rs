@@ -332,10 +332,11 @@ struct VerdictCounts {
     gallery: usize,
 }
 
-fn verdict_counts(photos: &[PhotoCheck], judges: &[Judge], grey_refused: bool, gallery: usize) -> VerdictCounts {
-    let apart = |p: &PhotoCheck| grey_refused && p.grey;
+/// `refused`: per photo, whether `simulate` refuses it as grey with this preset.
+fn verdict_counts(photos: &[PhotoCheck], refused: &[bool], judges: &[Judge], gallery: usize) -> VerdictCounts {
+    let apart: Vec<&PhotoCheck> = photos.iter().zip(refused).filter(|(_, &r)| r).map(|(p, _)| p).collect();
     let kept: Vec<&FaceCheck> =
-        photos.iter().filter(|p| !apart(p)).flat_map(|p| &p.faces).filter(|f| !f.at_edge).collect();
+        photos.iter().zip(refused).filter(|(_, &r)| !r).flat_map(|(p, _)| &p.faces).filter(|f| !f.at_edge).collect();
     let matched = kept.iter().filter(|f| f.linkable_specifically(judges, FARS[0])).count();
     let linkable = kept.iter().filter(|f| f.linkable(judges, FARS[0])).count();
     VerdictCounts {
@@ -343,8 +344,8 @@ fn verdict_counts(photos: &[PhotoCheck], judges: &[Judge], grey_refused: bool, g
         scored: kept.len(),
         matched,
         stranger_like: linkable - matched,
-        grey_photos_refused: photos.iter().filter(|p| apart(p)).count(),
-        grey_faces_refused: photos.iter().filter(|p| apart(p)).flat_map(|p| &p.faces).filter(|f| !f.at_edge).count(),
+        grey_photos_refused: apart.len(),
+        grey_faces_refused: apart.iter().flat_map(|p| &p.faces).filter(|f| !f.at_edge).count(),
         gallery,
     }
 }
@@ -709,8 +710,11 @@ pub fn run(a: CheckArgs) -> Result<i32> {
         bail!("--view: no view to check");
     }
     let budget = Budget::global();
+    // What `simulate` refuses as grey (the whole photo, or its faces when it is mostly
+    // colourless): those photos are set apart in the verdict.
+    let grey = crate::capture::GreyPolicy::new(&p, false).with_faces(&models);
     let bar = crate::output::count_bar("check", photos.len() as u64);
-    let results: Vec<Result<PhotoCheck>> = photos
+    let results: Vec<Result<(PhotoCheck, bool)>> = photos
         .par_iter()
         .map(|ph| {
             let warn = |w: &str| bar.suspend(|| eprintln!("warning: {}: {w}", crate::shown(&ph.path)));
@@ -719,7 +723,9 @@ pub fn run(a: CheckArgs) -> Result<i32> {
             let r = campro_eval::image_file::read(&ph.path, budget, &views_bytes, &warn)
                 .map_err(anyhow::Error::from)
                 .and_then(|(img, _lease)| {
-                    Ok(check::check_photo(&ph.path, ph.person.clone(), &img.into_rgb8(), &detector, &judges, &views)?)
+                    let img = img.into_rgb8();
+                    let refused = grey.check_picture(img.as_raw(), img.width(), img.height()).is_err();
+                    Ok((check::check_photo(&ph.path, ph.person.clone(), &img, &detector, &judges, &views)?, refused))
                 });
             bar.inc(1);
             r
@@ -728,11 +734,14 @@ pub fn run(a: CheckArgs) -> Result<i32> {
     bar.finish_and_clear();
     // A view that failed on a photo scored another picture under its name: no report.
     failures.check()?;
-    let mut checked = Vec::new();
+    let (mut checked, mut refused) = (Vec::new(), Vec::new());
     let mut failed = Vec::new();
     for (ph, r) in photos.iter().zip(results) {
         match r {
-            Ok(c) => checked.push(c),
+            Ok((c, r)) => {
+                checked.push(c);
+                refused.push(r);
+            }
             Err(e) => {
                 let line = crate::about(&ph.path, &e);
                 eprintln!("error: {line}");
@@ -758,7 +767,7 @@ pub fn run(a: CheckArgs) -> Result<i32> {
     }
     let gallery = check::rank_all(&mut checked, &distractors, judges.len());
     let s = summary(&checked, &judges, &views);
-    let counts = verdict_counts(&checked, &judges, !p.rated_for_grey(), gallery);
+    let counts = verdict_counts(&checked, &refused, &judges, gallery);
     let report = CheckReport {
         params: format!("{} ({})", crate::shown(&params), p.name),
         face_detector: detector.name(),
